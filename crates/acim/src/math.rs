@@ -1,0 +1,138 @@
+//! Small f32 helpers that `core` lacks on `no_std` targets (no `sqrt`, no `floor`).
+//!
+//! Everything here is branch-light, allocation-free, panic-free and f32-only, so it can run
+//! in the control step on a Cortex-M4F without pulling in f64 or `libm`.
+
+use core::f32::consts::PI;
+
+/// 2 pi.
+pub const TAU: f32 = 2.0 * PI;
+
+/// True when `x` is neither NaN nor infinite (bit test, no float compare tricks).
+#[inline(always)]
+pub fn is_finite(x: f32) -> bool {
+    (x.to_bits() & 0x7f80_0000) != 0x7f80_0000
+}
+
+/// 1/sqrt(x) for x > 0 by an exponent-halving seed and three Newton steps
+/// (relative error below 2e-7 over the normal range). Returns 0 for x <= 0 or NaN, and
+/// 0 for +inf. No division.
+#[inline]
+pub fn rsqrt(x: f32) -> f32 {
+    if !(x > 0.0) || !is_finite(x) {
+        return 0.0;
+    }
+    let mut y = f32::from_bits(0x5f37_5a86_u32.wrapping_sub(x.to_bits() >> 1));
+    let hx = 0.5 * x;
+    y *= 1.5 - hx * y * y;
+    y *= 1.5 - hx * y * y;
+    y *= 1.5 - hx * y * y;
+    y
+}
+
+/// sqrt(x) for x >= 0 (returns 0 for x <= 0 or NaN), relative error below 2e-7.
+#[inline]
+pub fn sqrt(x: f32) -> f32 {
+    let r = rsqrt(x);
+    if r > 0.0 {
+        x * r
+    } else {
+        0.0
+    }
+}
+
+/// Wraps an angle (rad) into [-pi, pi). Exact for |x| < 3 pi (one correction); larger
+/// inputs are reduced by an integer number of turns first. NaN maps to 0.
+#[inline]
+pub fn wrap_angle(x: f32) -> f32 {
+    if !is_finite(x) {
+        return 0.0;
+    }
+    let mut a = x;
+    if !(-3.0 * PI..3.0 * PI).contains(&a) {
+        // Work in turns: the fractional part of a/TAU is exact in f32. Beyond 2^23 turns
+        // there is no fractional part left to keep. `as i32` saturates, never panics.
+        let turns = a * (1.0 / TAU);
+        a = if turns.abs() < 8_388_608.0 {
+            (turns - (turns as i32) as f32) * TAU
+        } else {
+            0.0
+        };
+    }
+    if a >= PI {
+        a -= TAU;
+    } else if a < -PI {
+        a += TAU;
+    }
+    if a >= PI {
+        a -= TAU;
+    } else if a < -PI {
+        a += TAU;
+    }
+    a
+}
+
+/// Clamps to [lo, hi] (requires lo <= hi); a NaN input returns 0 clamped into range.
+#[inline(always)]
+pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x > hi {
+        hi
+    } else if x >= lo {
+        x
+    } else if x < lo {
+        lo
+    } else {
+        // NaN
+        0.0f32.clamp(lo, hi)
+    }
+}
+
+/// Radians per second to revolutions per minute.
+pub const RAD_S_TO_RPM: f32 = 60.0 / TAU;
+/// Revolutions per minute to radians per second.
+pub const RPM_TO_RAD_S: f32 = TAU / 60.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn sqrt_is_exact_enough() {
+        for &x in &[1e-12f32, 1e-6, 0.01, 0.5, 1.0, 2.0, 3.0, 1e3, 1e9, 3.3e38] {
+            let r = sqrt(x);
+            let e = (r as f64 - (x as f64).sqrt()).abs() / (x as f64).sqrt();
+            assert!(e < 3e-7, "sqrt({x}) = {r}, rel err {e}");
+        }
+        assert_eq!(sqrt(0.0), 0.0);
+        assert_eq!(sqrt(-1.0), 0.0);
+        assert_eq!(sqrt(f32::NAN), 0.0);
+    }
+
+    #[test]
+    fn wrap_handles_edges() {
+        assert_eq!(wrap_angle(PI), -PI);
+        assert_eq!(wrap_angle(-PI), -PI);
+        assert_eq!(wrap_angle(f32::NAN), 0.0);
+        assert!((wrap_angle(7.0) - (7.0 - TAU)).abs() < 1e-6);
+        assert!(wrap_angle(1e9).abs() <= PI);
+        assert_eq!(clamp(f32::NAN, -1.0, 1.0), 0.0);
+        assert_eq!(clamp(f32::NAN, 0.5, 1.0), 0.5);
+    }
+
+    proptest! {
+        #[test]
+        fn wrap_stays_in_range_and_preserves_angle(x in -1e4f32..1e4) {
+            let w = wrap_angle(x);
+            prop_assert!((-PI..PI).contains(&w));
+            let d = (x as f64 - w as f64) / core::f64::consts::TAU;
+            prop_assert!((d - d.round()).abs() < 1e-3 * (1.0 + x.abs() as f64 / 1e3));
+        }
+
+        #[test]
+        fn sqrt_matches_std(x in 1e-20f32..1e30) {
+            let e = (sqrt(x) as f64 - (x as f64).sqrt()).abs() / (x as f64).sqrt();
+            prop_assert!(e < 3e-7);
+        }
+    }
+}

@@ -1,0 +1,301 @@
+//! Machine parameters (paper section 2b, Table 1) and the quantities derived from them.
+//!
+//! All values are SI: ohm, henry, kg m^2, N m s/rad. The derived quantities follow the
+//! design notes (section 2): sigma = 1 - Lm^2/(Ls Lr), tau_r = Lr/Rr,
+//! Rseq = Rs + (Lm/Lr)^2 Rr, and the inverse-Gamma magnetising inductance
+//! L_M = (1 - sigma) Ls = Lm^2/Lr, which is the `(1 - sigma) Ls` of eqs. (4), (8), (13).
+
+use crate::math::is_finite;
+
+/// Why a set of machine parameters was rejected by [`MachineParams::new`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ParamError {
+    /// A value that must be finite and strictly positive is not (the field is named).
+    NotPositive(&'static str),
+    /// A value that must be finite and non-negative is not (the field is named).
+    Negative(&'static str),
+    /// Lm^2 >= Ls Lr: the leakage factor sigma would be zero or negative, which no real
+    /// machine has.
+    NoLeakage,
+    /// The pole-pair count must be between 1 and 32.
+    PolePairs,
+}
+
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ParamError::NotPositive(name) => {
+                write!(f, "{name} must be finite and > 0")
+            }
+            ParamError::Negative(name) => write!(f, "{name} must be finite and >= 0"),
+            ParamError::NoLeakage => {
+                write!(f, "mutual inductance too large: need Lm^2 < Ls*Lr")
+            }
+            ParamError::PolePairs => write!(f, "pole_pairs must be in 1..=32"),
+        }
+    }
+}
+
+/// Electrical and mechanical parameters of an induction machine (paper Table 1, eq. 1-3).
+///
+/// Construct with [`MachineParams::new`], which validates them; the fields are read-only
+/// through accessors so that a validated value cannot be made non-physical afterwards.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MachineParams {
+    stator_resistance: f32,
+    rotor_resistance: f32,
+    stator_inductance: f32,
+    rotor_inductance: f32,
+    mutual_inductance: f32,
+    pole_pairs: u8,
+    inertia: f32,
+    viscous_friction: f32,
+}
+
+/// Raw, unvalidated machine data: the argument of [`MachineParams::new`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MachineData {
+    /// Stator resistance Rs, ohm.
+    pub stator_resistance: f32,
+    /// Rotor resistance Rr (referred to the stator), ohm.
+    pub rotor_resistance: f32,
+    /// Stator self-inductance Ls, H.
+    pub stator_inductance: f32,
+    /// Rotor self-inductance Lr, H.
+    pub rotor_inductance: f32,
+    /// Mutual inductance Lm, H.
+    pub mutual_inductance: f32,
+    /// Pole pairs p.
+    pub pole_pairs: u8,
+    /// Rotor plus load inertia J, kg m^2.
+    pub inertia: f32,
+    /// Viscous friction coefficient B, N m s/rad (may be zero).
+    pub viscous_friction: f32,
+}
+
+fn positive(v: f32, name: &'static str) -> Result<f32, ParamError> {
+    if is_finite(v) && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(ParamError::NotPositive(name))
+    }
+}
+
+impl MachineParams {
+    /// Validates raw data: every value finite, resistances/inductances/inertia > 0,
+    /// friction >= 0, 1 <= p <= 32 and Lm^2 < Ls Lr (sigma > 0).
+    pub fn new(d: MachineData) -> Result<Self, ParamError> {
+        let rs = positive(d.stator_resistance, "stator_resistance")?;
+        let rr = positive(d.rotor_resistance, "rotor_resistance")?;
+        let ls = positive(d.stator_inductance, "stator_inductance")?;
+        let lr = positive(d.rotor_inductance, "rotor_inductance")?;
+        let lm = positive(d.mutual_inductance, "mutual_inductance")?;
+        let j = positive(d.inertia, "inertia")?;
+        if !(is_finite(d.viscous_friction) && d.viscous_friction >= 0.0) {
+            return Err(ParamError::Negative("viscous_friction"));
+        }
+        if d.pole_pairs == 0 || d.pole_pairs > 32 {
+            return Err(ParamError::PolePairs);
+        }
+        // sigma must be clearly positive; a relative margin keeps 1/(sigma Ls) finite.
+        if lm * lm >= ls * lr * (1.0 - 1e-6) {
+            return Err(ParamError::NoLeakage);
+        }
+        Ok(Self {
+            stator_resistance: rs,
+            rotor_resistance: rr,
+            stator_inductance: ls,
+            rotor_inductance: lr,
+            mutual_inductance: lm,
+            pole_pairs: d.pole_pairs,
+            inertia: j,
+            viscous_friction: d.viscous_friction,
+        })
+    }
+
+    /// The paper's Table 1 machine (750 W, 4 poles, 230 V, 3.3 A, 1500 rpm) with the
+    /// project's documented mechanical defaults: J = [`DEFAULT_INERTIA`],
+    /// B = [`DEFAULT_VISCOUS_FRICTION`] (the paper gives neither).
+    pub fn paper_table1() -> Self {
+        Self {
+            stator_resistance: 10.5,
+            rotor_resistance: 8.4,
+            stator_inductance: 0.56,
+            rotor_inductance: 0.56,
+            mutual_inductance: 0.54,
+            pole_pairs: 2,
+            inertia: DEFAULT_INERTIA,
+            viscous_friction: DEFAULT_VISCOUS_FRICTION,
+        }
+    }
+
+    /// The raw data of these parameters, e.g. to change one field and re-validate.
+    pub fn data(&self) -> MachineData {
+        MachineData {
+            stator_resistance: self.stator_resistance,
+            rotor_resistance: self.rotor_resistance,
+            stator_inductance: self.stator_inductance,
+            rotor_inductance: self.rotor_inductance,
+            mutual_inductance: self.mutual_inductance,
+            pole_pairs: self.pole_pairs,
+            inertia: self.inertia,
+            viscous_friction: self.viscous_friction,
+        }
+    }
+
+    /// Stator resistance Rs, ohm.
+    pub fn stator_resistance(&self) -> f32 {
+        self.stator_resistance
+    }
+    /// Rotor resistance Rr, ohm.
+    pub fn rotor_resistance(&self) -> f32 {
+        self.rotor_resistance
+    }
+    /// Stator inductance Ls, H.
+    pub fn stator_inductance(&self) -> f32 {
+        self.stator_inductance
+    }
+    /// Rotor inductance Lr, H.
+    pub fn rotor_inductance(&self) -> f32 {
+        self.rotor_inductance
+    }
+    /// Mutual inductance Lm, H.
+    pub fn mutual_inductance(&self) -> f32 {
+        self.mutual_inductance
+    }
+    /// Pole pairs p.
+    pub fn pole_pairs(&self) -> u8 {
+        self.pole_pairs
+    }
+    /// Pole pairs p as f32.
+    pub fn pole_pairs_f32(&self) -> f32 {
+        self.pole_pairs as f32
+    }
+    /// Inertia J, kg m^2.
+    pub fn inertia(&self) -> f32 {
+        self.inertia
+    }
+    /// Viscous friction B, N m s/rad.
+    pub fn viscous_friction(&self) -> f32 {
+        self.viscous_friction
+    }
+
+    /// Leakage factor sigma = 1 - Lm^2/(Ls Lr) (section 2b), dimensionless, in (0, 1).
+    pub fn sigma(&self) -> f32 {
+        1.0 - self.mutual_inductance * self.mutual_inductance
+            / (self.stator_inductance * self.rotor_inductance)
+    }
+    /// Transient (leakage) inductance sigma Ls, H.
+    pub fn transient_inductance(&self) -> f32 {
+        self.sigma() * self.stator_inductance
+    }
+    /// Rotor time constant tau_r = Lr/Rr, s.
+    pub fn rotor_time_constant(&self) -> f32 {
+        self.rotor_inductance / self.rotor_resistance
+    }
+    /// Rotor resistance referred to the inverse-Gamma model, R_R = (Lm/Lr)^2 Rr, ohm.
+    pub fn referred_rotor_resistance(&self) -> f32 {
+        let k = self.mutual_inductance / self.rotor_inductance;
+        k * k * self.rotor_resistance
+    }
+    /// Equivalent stator resistance Rseq = Rs + (Lm/Lr)^2 Rr (section 2b), ohm.
+    pub fn equivalent_resistance(&self) -> f32 {
+        self.stator_resistance + self.referred_rotor_resistance()
+    }
+    /// Inverse-Gamma magnetising inductance L_M = (1 - sigma) Ls = Lm^2/Lr, H:
+    /// the factor of i_sd in the flux model (13) and of i_sq in the slip law (8).
+    pub fn magnetizing_inductance(&self) -> f32 {
+        self.mutual_inductance * self.mutual_inductance / self.rotor_inductance
+    }
+    /// Transient stator time constant sigma tau_s = sigma Ls / Rseq, s.
+    pub fn transient_time_constant(&self) -> f32 {
+        self.transient_inductance() / self.equivalent_resistance()
+    }
+    /// Steady rotor flux lambda_r (Wb, referred to the stator) produced by a d-axis
+    /// current i_sd (A): lambda_r = L_M i_sd (eq. 13 at equilibrium).
+    pub fn rotor_flux_for(&self, i_sd: f32) -> f32 {
+        self.magnetizing_inductance() * i_sd
+    }
+    /// Torque constant at rotor flux `rotor_flux` (Wb): k_t = 1.5 p lambda_r, N m/A, so that
+    /// Te = k_t i_sq in field orientation (eq. 3 with amplitude-invariant scaling).
+    pub fn torque_constant(&self, rotor_flux: f32) -> f32 {
+        1.5 * self.pole_pairs_f32() * rotor_flux
+    }
+}
+
+/// Default inertia, kg m^2 (not given by the paper; the bench had variable inertia disks).
+pub const DEFAULT_INERTIA: f32 = 0.01;
+/// Default viscous friction, N m s/rad. With zero friction and zero load the scheme's
+/// orientation is only neutrally stable (design notes, issue 7).
+pub const DEFAULT_VISCOUS_FRICTION: f32 = 2e-3;
+/// Default DC-bus voltage, V (rectified 230 V mains).
+pub const DEFAULT_DC_BUS: f32 = 325.0;
+/// Default d-axis (flux) current reference, A peak.
+pub const DEFAULT_FLUX_CURRENT: f32 = 1.5;
+/// Default stator current limit, A peak (3.3 A rms rated current).
+pub const DEFAULT_CURRENT_LIMIT: f32 = 4.67;
+/// Default control (sampling and PWM) period, s: 5 kHz as in the paper.
+pub const DEFAULT_CONTROL_PERIOD: f32 = 200e-6;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f32, b: f32, rel: f32) -> bool {
+        (a - b).abs() <= rel * b.abs()
+    }
+
+    #[test]
+    fn table1_derived_values_match_design_notes() {
+        let m = MachineParams::paper_table1();
+        // design notes section 4: L_M = 0.52071 H, sigma Ls = 0.03929 H, R_R = 7.8107 ohm
+        assert!(close(m.magnetizing_inductance(), 0.52071, 1e-4));
+        assert!(close(m.transient_inductance(), 0.03929, 1e-3));
+        assert!(close(m.referred_rotor_resistance(), 7.8107, 1e-4));
+        assert!(close(m.equivalent_resistance(), 18.3107, 1e-4));
+        assert!(close(m.rotor_time_constant(), 0.0666667, 1e-4));
+        assert!(close(m.sigma(), 1.0 - 0.54 * 0.54 / (0.56 * 0.56), 1e-5));
+        assert!(close(m.torque_constant(1.0), 3.0, 1e-6));
+        assert_eq!(MachineParams::new(m.data()), Ok(m));
+    }
+
+    #[test]
+    fn rejects_non_physical_input() {
+        let base = MachineParams::paper_table1().data();
+        let mut d = base;
+        d.stator_resistance = 0.0;
+        assert_eq!(
+            MachineParams::new(d),
+            Err(ParamError::NotPositive("stator_resistance"))
+        );
+        d = base;
+        d.rotor_inductance = f32::NAN;
+        assert_eq!(
+            MachineParams::new(d),
+            Err(ParamError::NotPositive("rotor_inductance"))
+        );
+        d = base;
+        d.inertia = f32::INFINITY;
+        assert_eq!(
+            MachineParams::new(d),
+            Err(ParamError::NotPositive("inertia"))
+        );
+        d = base;
+        d.viscous_friction = -1e-3;
+        assert_eq!(
+            MachineParams::new(d),
+            Err(ParamError::Negative("viscous_friction"))
+        );
+        d = base;
+        d.mutual_inductance = 0.56;
+        assert_eq!(MachineParams::new(d), Err(ParamError::NoLeakage));
+        d = base;
+        d.pole_pairs = 0;
+        assert_eq!(MachineParams::new(d), Err(ParamError::PolePairs));
+        d = base;
+        d.viscous_friction = 0.0;
+        assert!(MachineParams::new(d).is_ok());
+    }
+}
