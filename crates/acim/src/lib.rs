@@ -18,3 +18,6 @@ pub mod math;
 pub mod params;
 
 pub use params::{MachineData, MachineParams, ParamError};
+pub mod flux;
+pub mod frames;
+pub mod pi;
