@@ -20,4 +20,7 @@ pub mod params;
 pub use params::{MachineData, MachineParams, ParamError};
 pub mod flux;
 pub mod frames;
+pub mod observer;
 pub mod pi;
+pub mod rs_estimator;
+pub mod svpwm;

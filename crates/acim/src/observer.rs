@@ -1,0 +1,444 @@
+//! Reduced-order linear observer of q-axis current, rotor speed and load torque
+//! (paper eq. 10-12), with gains by pole placement on the error dynamics (eq. 14).
+//!
+//! ## Model (re-derived with this library's conventions)
+//!
+//! In field orientation (eq. 9b, amplitude-invariant scaling, friction B kept apart from
+//! the load):
+//!
+//! ```text
+//! sigma Ls di_sq/dt = v_sq - Rseq i_sq - sigma Ls w_s i_sd - p lambda_r Omega
+//! J dOmega/dt       = k_t i_sq - B Omega - T_L,          k_t = 1.5 p lambda_r
+//! dT_L/dt           = 0                                   (eq. 10)
+//! ```
+//!
+//! The observer (eq. 12) copies this model and adds K1, K2, K3 times the current error
+//! e = i_sq_hat - i_sq. The error dynamics (eq. 14, with the 1.5 and the friction) are
+//!
+//! ```text
+//! de/dt      = a e - b Omega~            a = -Rseq/(sigma Ls) + K1, b = p lambda_r/(sigma Ls)
+//! dOmega~/dt = c e - f Omega~ - d T~     c = k_t/J + K2,  f = B/J,  d = 1/J
+//! dT~/dt     = K3 e
+//! ```
+//!
+//! with characteristic polynomial s^3 + (f - a) s^2 + (b c - a f) s - b d K3. Matching
+//! (s + p1)(s + p2)(s + p3) = s^3 + c2 s^2 + c1 s + c0 gives, in closed form,
+//!
+//! ```text
+//! a  = f - c2                     ->  K1 = a + Rseq/(sigma Ls)
+//! c  = (c1 + a f)/b               ->  K2 = (c1 + a f) sigma Ls/(p lambda_r) - 1.5 p lambda_r/J
+//! K3 = -c0 J/b                    ->  K3 = -c0 J sigma Ls/(p lambda_r)
+//! ```
+//!
+//! (With B = 0 and no 1.5 this is the design notes' s^3 - a s^2 + b c s - b d K3.)
+//!
+//! ## Following the flux and the resistance cheaply
+//!
+//! b, K2 and K3 depend on lambda_r. The step receives 1/lambda_r, which the flux model
+//! computes anyway for the slip law (eq. 8), so K2 = g2/lambda_r - (1.5 p/J) lambda_r and
+//! K3 = g3/lambda_r cost three multiplications and the poles stay where they were placed
+//! at every flux level. K1 enters only as K1 e - (Rseq/(sigma Ls)) i_sq_hat =
+//! a e - (Rseq/(sigma Ls)) i_sq, so the step uses the measured i_sq in the resistive term
+//! and an updated Rseq (from the stator-resistance estimator) needs no re-design.
+//!
+//! ## Discretisation
+//!
+//! Forward Euler at the control period Ts: the discrete error matrix is I + Ts A, whose
+//! eigenvalues are 1 - Ts p_i. [`ObserverConfig::new`] therefore requires 0 < p_i Ts < 1
+//! and [`ObserverConfig::discrete_stable`] checks the discrete characteristic polynomial
+//! built from the actual gains with Jury's test.
+
+use crate::math::is_finite;
+use crate::params::MachineParams;
+
+/// The three requested observer poles, given as positive rates p_i (rad/s): the
+/// continuous error dynamics have eigenvalues -p1, -p2, -p3.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObserverPoles {
+    /// First pole rate, rad/s.
+    pub p1: f32,
+    /// Second pole rate, rad/s.
+    pub p2: f32,
+    /// Third pole rate, rad/s.
+    pub p3: f32,
+}
+
+impl ObserverPoles {
+    /// The project default: 120, 160 and 200 rad/s, several times faster than the speed
+    /// loop and below the electrical pole Rseq/(sigma Ls) = 466 rad/s of Table 1, so the
+    /// observer filters current noise and its Euler discretisation at 5 kHz is accurate
+    /// (p Ts <= 0.04).
+    pub const DEFAULT: Self = Self {
+        p1: 120.0,
+        p2: 160.0,
+        p3: 200.0,
+    };
+
+    /// Coefficients (c2, c1, c0) of (s + p1)(s + p2)(s + p3) = s^3 + c2 s^2 + c1 s + c0.
+    pub fn polynomial(&self) -> (f32, f32, f32) {
+        let (p1, p2, p3) = (self.p1, self.p2, self.p3);
+        (p1 + p2 + p3, p1 * p2 + p1 * p3 + p2 * p3, p1 * p2 * p3)
+    }
+}
+
+/// Why an observer design was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ObserverDesignError {
+    /// A pole rate is not finite and positive.
+    PoleNotPositive,
+    /// A pole rate times Ts is 1 or more: Euler at this period would not be accurate or
+    /// stable.
+    PoleTooFast,
+    /// The control period is not finite and positive.
+    BadPeriod,
+}
+
+/// Precomputed observer coefficients (configuration).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObserverConfig {
+    /// Control period Ts, s.
+    pub ts: f32,
+    /// 1/(sigma Ls), 1/H.
+    pub inv_transient_inductance: f32,
+    /// Pole pairs p.
+    pub pole_pairs: f32,
+    /// 1.5 p / J: torque per (flux x current) over inertia, 1/(kg m^2).
+    pub torque_per_inertia: f32,
+    /// 1/J, 1/(kg m^2).
+    pub inv_inertia: f32,
+    /// B/J, 1/s.
+    pub friction_rate: f32,
+    /// a = B/J - (p1 + p2 + p3), 1/s: the diagonal of the current-error dynamics.
+    pub a: f32,
+    /// K2 numerator: (c1 + a f) sigma Ls / p; K2 = g2/lambda_r - (1.5 p/J) lambda_r.
+    pub g2: f32,
+    /// K3 numerator: -c0 J sigma Ls / p; K3 = g3/lambda_r.
+    pub g3: f32,
+    /// The requested poles.
+    pub poles: ObserverPoles,
+}
+
+impl ObserverConfig {
+    /// Designs the observer for the controller's machine model `m` (its J and B are the
+    /// ones the observer assumes) at period `ts` (s).
+    pub fn new(
+        m: &MachineParams,
+        poles: ObserverPoles,
+        ts: f32,
+    ) -> Result<Self, ObserverDesignError> {
+        if !(is_finite(ts) && ts > 0.0) {
+            return Err(ObserverDesignError::BadPeriod);
+        }
+        for p in [poles.p1, poles.p2, poles.p3] {
+            if !(is_finite(p) && p > 0.0) {
+                return Err(ObserverDesignError::PoleNotPositive);
+            }
+            if p * ts >= 1.0 {
+                return Err(ObserverDesignError::PoleTooFast);
+            }
+        }
+        let (c2, c1, c0) = poles.polynomial();
+        let sigma_ls = m.transient_inductance();
+        let pp = m.pole_pairs_f32();
+        let j = m.inertia();
+        let f = m.viscous_friction() / j;
+        let a = f - c2;
+        Ok(Self {
+            ts,
+            inv_transient_inductance: 1.0 / sigma_ls,
+            pole_pairs: pp,
+            torque_per_inertia: 1.5 * pp / j,
+            inv_inertia: 1.0 / j,
+            friction_rate: f,
+            a,
+            g2: (c1 + a * f) * sigma_ls / pp,
+            g3: -c0 * j * sigma_ls / pp,
+            poles,
+        })
+    }
+
+    /// Gains (K1, K2, K3) at rotor flux `rotor_flux` (Wb > 0) and equivalent resistance
+    /// `rseq` (ohm), in the paper's form (eq. 12). Units: 1/s, rad/(s^2 A), N m/(s A).
+    pub fn gains(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
+        let inv = 1.0 / rotor_flux;
+        (
+            self.a + rseq * self.inv_transient_inductance,
+            self.g2 * inv - self.torque_per_inertia * rotor_flux,
+            self.g3 * inv,
+        )
+    }
+
+    /// Continuous error-dynamics characteristic polynomial (q2, q1, q0) of
+    /// s^3 + q2 s^2 + q1 s + q0, rebuilt from the gains at `rotor_flux` (eq. 14).
+    pub fn error_polynomial(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
+        let (k1, k2, k3) = self.gains(rotor_flux, rseq);
+        let a = -rseq * self.inv_transient_inductance + k1;
+        let b = self.pole_pairs * rotor_flux * self.inv_transient_inductance;
+        let c = self.torque_per_inertia * rotor_flux + k2;
+        let f = self.friction_rate;
+        let d = self.inv_inertia;
+        (f - a, b * c - a * f, -b * d * k3)
+    }
+
+    /// Discrete characteristic polynomial z^3 + a2 z^2 + a1 z + a0 of the Euler error
+    /// matrix I + Ts A at `rotor_flux`, from the gains.
+    pub fn discrete_polynomial(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
+        let (q2, q1, q0) = self.error_polynomial(rotor_flux, rseq);
+        let t = self.ts;
+        (
+            -3.0 + q2 * t,
+            3.0 - 2.0 * q2 * t + q1 * t * t,
+            -1.0 + q2 * t - q1 * t * t + q0 * t * t * t,
+        )
+    }
+
+    /// Jury's stability test on the discrete error dynamics at `rotor_flux`: true when all
+    /// three eigenvalues of I + Ts A lie strictly inside the unit circle.
+    pub fn discrete_stable(&self, rotor_flux: f32, rseq: f32) -> bool {
+        let (a2, a1, a0) = self.discrete_polynomial(rotor_flux, rseq);
+        jury_cubic(a2, a1, a0)
+    }
+}
+
+/// Jury's test for z^3 + a2 z^2 + a1 z + a0: all roots strictly inside the unit circle.
+pub fn jury_cubic(a2: f32, a1: f32, a0: f32) -> bool {
+    let p1 = 1.0 + a2 + a1 + a0;
+    let pm1 = -1.0 + a2 - a1 + a0;
+    p1 > 0.0 && pm1 < 0.0 && a0.abs() < 1.0 && (a0 * a0 - 1.0).abs() > (a0 * a2 - a1).abs()
+}
+
+/// Measured and model inputs of one observer step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObserverInputs {
+    /// Measured q-axis current i_sq, A.
+    pub i_sq: f32,
+    /// Measured d-axis current i_sd, A.
+    pub i_sd: f32,
+    /// dq-frame frequency w_s, rad/s electrical.
+    pub stator_frequency: f32,
+    /// q-axis voltage applied over the period (the command), V.
+    pub v_sq: f32,
+    /// Rotor flux from the flux model (eq. 13), Wb.
+    pub rotor_flux: f32,
+    /// 1/lambda_r guarded against zero (from the flux model), 1/Wb.
+    pub inv_rotor_flux: f32,
+    /// Equivalent resistance Rseq = Rs_hat + (Lm/Lr)^2 Rr, ohm.
+    pub equivalent_resistance: f32,
+}
+
+/// Observer state: estimated q-axis current, mechanical speed and load torque.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ReducedOrderObserver {
+    /// i_sq_hat, A.
+    pub current_estimate: f32,
+    /// Omega_hat, rad/s mechanical.
+    pub speed_estimate: f32,
+    /// T_L_hat (load torque, friction excluded), N m.
+    pub load_torque_estimate: f32,
+}
+
+impl ReducedOrderObserver {
+    /// All estimates zero.
+    pub const fn new() -> Self {
+        Self {
+            current_estimate: 0.0,
+            speed_estimate: 0.0,
+            load_torque_estimate: 0.0,
+        }
+    }
+
+    /// Restarts from a known state (e.g. i_sq measured, speed 0, load 0 at start-up).
+    pub fn reset(&mut self, i_sq: f32, speed: f32, load_torque: f32) {
+        self.current_estimate = i_sq;
+        self.speed_estimate = speed;
+        self.load_torque_estimate = load_torque;
+    }
+
+    /// One forward-Euler step of eq. (12). About 20 multiply-adds, no division.
+    #[inline]
+    pub fn update(&mut self, cfg: &ObserverConfig, u: &ObserverInputs) {
+        let e = self.current_estimate - u.i_sq;
+        let lambda = u.rotor_flux;
+        let k2 = cfg.g2 * u.inv_rotor_flux - cfg.torque_per_inertia * lambda;
+        let k3 = cfg.g3 * u.inv_rotor_flux;
+        // a e + (v_sq - Rseq i_sq - p lambda Omega_hat)/(sigma Ls) - w_s i_sd
+        let di = cfg.a * e
+            + cfg.inv_transient_inductance
+                * (u.v_sq
+                    - u.equivalent_resistance * u.i_sq
+                    - cfg.pole_pairs * lambda * self.speed_estimate)
+            - u.stator_frequency * u.i_sd;
+        let dw = cfg.torque_per_inertia * lambda * self.current_estimate
+            - cfg.inv_inertia * self.load_torque_estimate
+            - cfg.friction_rate * self.speed_estimate
+            + k2 * e;
+        let dt = k3 * e;
+        self.current_estimate += cfg.ts * di;
+        self.speed_estimate += cfg.ts * dw;
+        self.load_torque_estimate += cfg.ts * dt;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn cfg() -> (MachineParams, ObserverConfig) {
+        let m = MachineParams::paper_table1();
+        let c = ObserverConfig::new(&m, ObserverPoles::DEFAULT, 200e-6).unwrap();
+        (m, c)
+    }
+
+    #[test]
+    fn rejects_bad_designs() {
+        let m = MachineParams::paper_table1();
+        let mut p = ObserverPoles::DEFAULT;
+        p.p2 = -1.0;
+        assert_eq!(
+            ObserverConfig::new(&m, p, 200e-6),
+            Err(ObserverDesignError::PoleNotPositive)
+        );
+        p.p2 = 6000.0;
+        assert_eq!(
+            ObserverConfig::new(&m, p, 200e-6),
+            Err(ObserverDesignError::PoleTooFast)
+        );
+        assert_eq!(
+            ObserverConfig::new(&m, ObserverPoles::DEFAULT, 0.0),
+            Err(ObserverDesignError::BadPeriod)
+        );
+    }
+
+    /// The plant (9b)+(10) accelerating under a constant torque current against a load:
+    /// with exact parameters the estimates lock onto the moving speed and the load.
+    #[test]
+    fn tracks_an_accelerating_machine() {
+        let (m, c) = cfg();
+        let lambda = m.rotor_flux_for(1.5);
+        let rseq = m.equivalent_resistance();
+        let sl = m.transient_inductance();
+        let ts = 200e-6;
+        let (i_sq, i_sd, tl) = (2.0f32, 1.5f32, 1.2f32);
+        let mut w = 0.0f32;
+        let mut obs = ReducedOrderObserver::new();
+        for _ in 0..(0.3 / ts) as usize {
+            let ws = 2.0 * w + m.referred_rotor_resistance() * i_sq / lambda;
+            // the voltage that holds di_sq/dt = 0 in eq. (9b)
+            let v = rseq * i_sq + sl * ws * i_sd + 2.0 * lambda * w;
+            obs.update(
+                &c,
+                &ObserverInputs {
+                    i_sq,
+                    i_sd,
+                    stator_frequency: ws,
+                    v_sq: v,
+                    rotor_flux: lambda,
+                    inv_rotor_flux: 1.0 / lambda,
+                    equivalent_resistance: rseq,
+                },
+            );
+            let te = m.torque_constant(lambda) * i_sq;
+            w += ts * (te - m.viscous_friction() * w - tl) / m.inertia();
+        }
+        assert!(w > 50.0, "plant should accelerate, w = {w}");
+        assert!(
+            (obs.speed_estimate - w).abs() < 0.05,
+            "{} vs {w}",
+            obs.speed_estimate
+        );
+        assert!(
+            (obs.load_torque_estimate - tl).abs() < 0.01,
+            "{}",
+            obs.load_torque_estimate
+        );
+    }
+
+    #[test]
+    fn default_design_is_discrete_stable_and_places_poles() {
+        let (m, c) = cfg();
+        let rseq = m.equivalent_resistance();
+        let (c2, c1, c0) = ObserverPoles::DEFAULT.polynomial();
+        let (q2, q1, q0) = c.error_polynomial(m.rotor_flux_for(1.5), rseq);
+        assert!((q2 - c2).abs() < 1e-3 * c2);
+        assert!((q1 - c1).abs() < 1e-3 * c1);
+        assert!((q0 - c0).abs() < 1e-3 * c0);
+        assert!(c.discrete_stable(m.rotor_flux_for(1.5), rseq));
+    }
+
+    #[test]
+    fn jury_matches_known_polynomials() {
+        // (z - 0.5)(z - 0.2)(z + 0.3): stable
+        let (r1, r2, r3) = (0.5f32, 0.2f32, -0.3f32);
+        let a2 = -(r1 + r2 + r3);
+        let a1 = r1 * r2 + r1 * r3 + r2 * r3;
+        let a0 = -r1 * r2 * r3;
+        assert!(jury_cubic(a2, a1, a0));
+        // (z - 1.1)(z - 0.2)(z - 0.1): unstable
+        let (r1, r2, r3) = (1.1f32, 0.2f32, 0.1f32);
+        assert!(!jury_cubic(
+            -(r1 + r2 + r3),
+            r1 * r2 + r1 * r3 + r2 * r3,
+            -r1 * r2 * r3
+        ));
+        // complex pair of modulus 1.05 and a real root 0.5: unstable
+        let (re, im, r) = (0.0f32, 1.05f32, 0.5f32);
+        let m2 = re * re + im * im;
+        assert!(!jury_cubic(-(2.0 * re + r), m2 + 2.0 * re * r, -m2 * r));
+    }
+
+    proptest! {
+        /// Eigenvalues of the error dynamics (as the coefficients of their characteristic
+        /// polynomial) equal the requested poles at any flux, and the Euler discretisation
+        /// at 5 kHz is stable, over a grid of flux levels, speeds and pole choices.
+        #[test]
+        fn poles_placed_and_discrete_stable_over_operating_points(
+            flux_frac in 0.1f32..1.2,
+            p1 in 20.0f32..2000.0, p2 in 20.0f32..2000.0, p3 in 20.0f32..2000.0,
+            rs_scale in 0.5f32..1.6,
+        ) {
+            let m = MachineParams::paper_table1();
+            let poles = ObserverPoles { p1, p2, p3 };
+            let c = ObserverConfig::new(&m, poles, 200e-6).unwrap();
+            let lambda = flux_frac * m.rotor_flux_for(1.5);
+            let rseq = m.stator_resistance() * rs_scale + m.referred_rotor_resistance();
+            let (c2, c1, c0) = poles.polynomial();
+            let (q2, q1, q0) = c.error_polynomial(lambda, rseq);
+            prop_assert!((q2 - c2).abs() <= 1e-4 * c2);
+            prop_assert!((q1 - c1).abs() <= 1e-3 * c1);
+            prop_assert!((q0 - c0).abs() <= 1e-3 * c0);
+            prop_assert!(c.discrete_stable(lambda, rseq));
+        }
+
+        /// The step itself (not only the polynomial) contracts the error: from any initial
+        /// error, after 0.3 s at fixed operating point (speed and frequency vary), the
+        /// error has decayed by the slowest pole's factor.
+        #[test]
+        fn step_contracts_error_at_any_speed(
+            speed in -160.0f32..160.0, i_sq in -4.0f32..4.0,
+            e0 in -50.0f32..50.0, t0 in -3.0f32..3.0,
+        ) {
+            let m = MachineParams::paper_table1();
+            let c = ObserverConfig::new(&m, ObserverPoles::DEFAULT, 200e-6).unwrap();
+            let lambda = m.rotor_flux_for(1.5);
+            let rseq = m.equivalent_resistance();
+            let i_sd = 1.5;
+            let kt = m.torque_constant(lambda);
+            let load = kt * i_sq - m.viscous_friction() * speed;
+            let ws = 2.0 * speed + m.referred_rotor_resistance() * i_sq / lambda;
+            let v = rseq * i_sq + m.transient_inductance() * ws * i_sd + 2.0 * lambda * speed;
+            let mut obs = ReducedOrderObserver::new();
+            obs.reset(i_sq, speed + e0, load + t0);
+            let u = ObserverInputs { i_sq, i_sd, stator_frequency: ws, v_sq: v, rotor_flux: lambda,
+                inv_rotor_flux: 1.0 / lambda, equivalent_resistance: rseq };
+            for _ in 0..1500 { obs.update(&c, &u); }
+            prop_assert!((obs.speed_estimate - speed).abs() < 0.05 * (1.0 + e0.abs() + t0.abs()));
+            prop_assert!((obs.load_torque_estimate - load).abs() < 0.01 * (1.0 + e0.abs() + t0.abs()));
+        }
+    }
+}

@@ -1,0 +1,202 @@
+//! Space-vector modulation with DC-bus compensation, a defined overmodulation limit and
+//! dead-time compensation (the PWM block of paper Fig. 1 and 5).
+//!
+//! Implemented as min-max (symmetrical) zero-sequence injection, which gives the same
+//! centre-aligned duties as classical sector-based SVPWM:
+//!
+//! ```text
+//! v_x  = inverse Clarke of (v_alpha, v_beta)       phase-to-neutral, x = a, b, c
+//! v_0  = -(max v_x + min v_x)/2                    zero-sequence offset
+//! d_x  = 1/2 + (v_x + v_0)/V_dc                    duty of the high-side switch
+//! ```
+//!
+//! * Linear range: |v_alpha_beta| <= V_dc/sqrt(3) (the hexagon's inscribed circle); in the
+//!   whole hexagon max v_x - min v_x <= V_dc and the duties reproduce the command exactly.
+//! * Overmodulation/limit: outside the hexagon the vector is scaled down onto it (angle
+//!   kept, magnitude reduced: "minimum phase error" limiting) and `saturated` is reported
+//!   so the current controllers stop integrating.
+//! * Bus compensation: the measured V_dc divides the voltages, so the output voltage does
+//!   not depend on bus ripple. V_dc is floored at `min_bus_voltage` (no division by a
+//!   vanishing bus; the drive faults on under-voltage before that matters).
+//! * Dead-time compensation: during the dead time the pole voltage follows the current
+//!   sign (diode conduction), which loses (t_d/T_pwm) V_dc against the current. Each duty is
+//!   raised by (t_d/T_pwm) sat(i_x/i_band): a sign function made linear within
+//!   +/- `current_band` so that it does not chatter around zero crossings.
+
+use crate::frames::{inverse_clarke, AlphaBeta};
+use crate::math::clamp;
+
+/// Modulator configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SvpwmConfig {
+    /// Dead time over PWM period, t_d/T_pwm (dimensionless duty).
+    pub dead_time_duty: f32,
+    /// 1/current_band, 1/A: slope of the linearised sign used for dead-time compensation.
+    pub inv_current_band: f32,
+    /// Smallest bus voltage used as divisor, V.
+    pub min_bus_voltage: f32,
+}
+
+impl SvpwmConfig {
+    /// Dead time `dead_time` (s) at PWM period `pwm_period` (s); compensation linear within
+    /// +/- `current_band` (A, > 0).
+    pub fn new(dead_time: f32, pwm_period: f32, current_band: f32) -> Self {
+        Self {
+            dead_time_duty: clamp(dead_time / pwm_period, 0.0, 0.1),
+            inv_current_band: 1.0 / current_band.max(1e-3),
+            min_bus_voltage: 1.0,
+        }
+    }
+}
+
+/// Output of the modulator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Modulation {
+    /// High-side duty of phases a, b, c, each in [0, 1].
+    pub duties: [f32; 3],
+    /// The voltage vector actually produced (after any overmodulation limit), V.
+    pub voltage: AlphaBeta,
+    /// True when the command was outside the hexagon and was scaled down.
+    pub saturated: bool,
+}
+
+/// Largest voltage vector magnitude in the linear range at bus `dc_bus`: V_dc/sqrt(3).
+#[inline]
+pub fn linear_limit(dc_bus: f32) -> f32 {
+    dc_bus * 0.577_350_26
+}
+
+/// Computes the duties for voltage command `v` (V, alpha-beta), measured bus `dc_bus` (V)
+/// and measured phase currents `phase_currents` (A, for dead-time compensation).
+#[inline]
+pub fn modulate(
+    cfg: &SvpwmConfig,
+    v: AlphaBeta,
+    dc_bus: f32,
+    phase_currents: [f32; 3],
+) -> Modulation {
+    let vdc = if dc_bus > cfg.min_bus_voltage {
+        dc_bus
+    } else {
+        cfg.min_bus_voltage
+    };
+    let inv_vdc = 1.0 / vdc;
+    let [mut a, mut b, mut c] = inverse_clarke(v);
+    let max = a.max(b).max(c);
+    let min = a.min(b).min(c);
+    let span = max - min;
+    let mut out = v;
+    let mut saturated = false;
+    let mut offset = -0.5 * (max + min);
+    if span > vdc {
+        // onto the hexagon: scale every phase (and the vector) by vdc/span < 1
+        let k = vdc / span;
+        a *= k;
+        b *= k;
+        c *= k;
+        offset *= k;
+        out.alpha *= k;
+        out.beta *= k;
+        saturated = true;
+    }
+    let dt = cfg.dead_time_duty;
+    let s = cfg.inv_current_band;
+    let comp = |i: f32| dt * clamp(i * s, -1.0, 1.0);
+    let duty = |vx: f32, i: f32| clamp(0.5 + (vx + offset) * inv_vdc + comp(i), 0.0, 1.0);
+    Modulation {
+        duties: [
+            duty(a, phase_currents[0]),
+            duty(b, phase_currents[1]),
+            duty(c, phase_currents[2]),
+        ],
+        voltage: out,
+        saturated,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frames::clarke_three;
+    use proptest::prelude::*;
+
+    fn no_dt() -> SvpwmConfig {
+        SvpwmConfig::new(0.0, 200e-6, 0.1)
+    }
+
+    fn reconstruct(d: [f32; 3], vdc: f32) -> AlphaBeta {
+        clarke_three(d[0] * vdc, d[1] * vdc, d[2] * vdc)
+    }
+
+    #[test]
+    fn zero_command_gives_half_duty() {
+        let m = modulate(&no_dt(), AlphaBeta::default(), 325.0, [0.0; 3]);
+        assert_eq!(m.duties, [0.5; 3]);
+        assert!(!m.saturated);
+    }
+
+    #[test]
+    fn dead_time_compensation_follows_current_sign() {
+        let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 0.1);
+        let m = modulate(&cfg, AlphaBeta::default(), 325.0, [2.0, -2.0, 0.05]);
+        assert!((m.duties[0] - (0.5 + 0.0075)).abs() < 1e-6);
+        assert!((m.duties[1] - (0.5 - 0.0075)).abs() < 1e-6);
+        assert!((m.duties[2] - (0.5 + 0.00375)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bad_bus_and_nan_stay_in_range() {
+        for vdc in [0.0f32, -5.0, f32::NAN, 1e-9] {
+            let m = modulate(
+                &no_dt(),
+                AlphaBeta {
+                    alpha: 100.0,
+                    beta: 0.0,
+                },
+                vdc,
+                [0.0; 3],
+            );
+            assert!(m.duties.iter().all(|d| (0.0..=1.0).contains(d)));
+        }
+        let m = modulate(
+            &no_dt(),
+            AlphaBeta {
+                alpha: f32::NAN,
+                beta: 1.0,
+            },
+            325.0,
+            [f32::NAN; 3],
+        );
+        assert!(m.duties.iter().all(|d| (0.0..=1.0).contains(d)));
+    }
+
+    proptest! {
+        #[test]
+        fn duties_in_range_and_linear_range_reproduced(
+            mag in 0.0f32..1.2, ang in -4.0f32..4.0, vdc in 50.0f32..800.0,
+            ia in -10.0f32..10.0, ib in -10.0f32..10.0,
+        ) {
+            let lim = linear_limit(vdc);
+            let v = AlphaBeta { alpha: mag * lim * ang.cos(), beta: mag * lim * ang.sin() };
+            let m = modulate(&no_dt(), v, vdc, [ia, ib, -ia - ib]);
+            prop_assert!(m.duties.iter().all(|d| (0.0..=1.0).contains(d)));
+            let back = reconstruct(m.duties, vdc);
+            if mag <= 1.0 {
+                prop_assert!(!m.saturated);
+                prop_assert!((back.alpha - v.alpha).abs() < 1e-4 * vdc);
+                prop_assert!((back.beta - v.beta).abs() < 1e-4 * vdc);
+            } else {
+                // on the hexagon: angle kept, magnitude never above the command
+                prop_assert!((back.alpha - m.voltage.alpha).abs() < 1e-4 * vdc);
+                prop_assert!((back.beta - m.voltage.beta).abs() < 1e-4 * vdc);
+                let cross = back.alpha * v.beta - back.beta * v.alpha;
+                prop_assert!(cross.abs() < 1e-3 * vdc * vdc);
+                let mb = back.alpha * back.alpha + back.beta * back.beta;
+                let mv = v.alpha * v.alpha + v.beta * v.beta;
+                prop_assert!(mb <= mv * (1.0 + 1e-5));
+            }
+        }
+    }
+}
