@@ -60,7 +60,7 @@ pub struct FastSinCos;
 const PIO2_HI: f32 = 1.570_312_5;
 // pi/2 - PIO2_HI = 4.838267948966e-4, written out: computing it from the f32 FRAC_PI_2
 // would carry that constant's 4.4e-8 rounding error into every reduced angle.
-const PIO2_LO: f32 = 4.838_267_9e-4;
+const PIO2_LO: f32 = 4.838_268e-4;
 const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
 
 impl FastSinCos {

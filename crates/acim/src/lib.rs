@@ -18,9 +18,15 @@ pub mod math;
 pub mod params;
 
 pub use params::{MachineData, MachineParams, ParamError};
+pub mod drive;
 pub mod flux;
 pub mod frames;
 pub mod observer;
 pub mod pi;
 pub mod rs_estimator;
 pub mod svpwm;
+
+pub use drive::{
+    CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
+    DriveTelemetry, FaultReason, PwmOutput,
+};

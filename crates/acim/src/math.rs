@@ -19,7 +19,7 @@ pub fn is_finite(x: f32) -> bool {
 /// 0 for +inf. No division.
 #[inline]
 pub fn rsqrt(x: f32) -> f32 {
-    if !(x > 0.0) || !is_finite(x) {
+    if x.is_nan() || x <= 0.0 || !is_finite(x) {
         return 0.0;
     }
     let mut y = f32::from_bits(0x5f37_5a86_u32.wrapping_sub(x.to_bits() >> 1));

@@ -1,0 +1,1046 @@
+//! The sensorless IFOC drive: one type that owns the blocks and runs one control step,
+//! phase currents and DC bus in, PWM duties out (paper Fig. 1 and 5).
+//!
+//! ## The cascade, each step (order matters)
+//!
+//! 1. Fault checks on the raw inputs (non-finite, over-current, bus limits): a fault turns
+//!    all switches off in this same step.
+//! 2. Clarke (two or three currents) and Park at the frame angle theta_s[k].
+//! 3. Reduced-order observer (eq. 12) with the voltage applied over the past period and the
+//!    frame frequency: i_sq_hat, speed Omega_hat, load T_L_hat.
+//! 4. Stator-resistance estimator (eq. 19-20, corrected sign), feeding Rs_hat to the observer
+//!    (through Rseq) and to the current controllers' feed-forward.
+//! 5. Flux model (eq. 13), slip law and frame angle (eq. 8) with p Omega_hat: sensorless.
+//! 6. Speed reference ramp, speed PI -> i_sq*, limited so that |i_s| <= I_max with d-axis
+//!    priority; flux reference -> i_sd*.
+//! 7. d/q current PIs with decoupling feed-forward (eq. 9a, 9b), voltage limited to the
+//!    linear range of the modulator (d-axis priority).
+//! 8. Inverse Park at theta_s advanced by the computation and PWM delay, then SVPWM with bus
+//!    and dead-time compensation.
+//!
+//! ## States
+//!
+//! `Idle -> Magnetizing -> Running`, `Idle -> OpenLoop` (V/f commissioning), any -> `Fault`.
+//! Magnetizing builds the flux at zero torque with the frame held (the observer assumes a
+//! settled flux, paper section 4) until the model flux is within tolerance of its reference.
+//! `Fault` is left only by [`Drive::reset_fault`], to `Idle`.
+//!
+//! ## Timing convention
+//!
+//! Duties computed at step k are applied over the next PWM period (k+1 .. k+2), as with
+//! preloaded compare registers; the voltage the plant saw over (k .. k+1) is the command of
+//! step k-1, which is what the observer and the Rs estimator use.
+
+use crate::flux::{FluxModel, FluxModelConfig};
+use crate::frames::{
+    clarke_three, clarke_two, inverse_park, park, AlphaBeta, Dq, FastSinCos, SinCos, SinCosValue,
+};
+use crate::math::{clamp, is_finite, sqrt, wrap_angle};
+use crate::observer::{
+    ObserverConfig, ObserverDesignError, ObserverInputs, ObserverPoles, ReducedOrderObserver,
+};
+use crate::params::{self, MachineParams};
+use crate::pi::{PiConfig, PiController};
+use crate::rs_estimator::{RsEstimator, RsEstimatorConfig, RsEstimatorInputs};
+use crate::svpwm::{linear_limit, modulate, SvpwmConfig};
+
+/// How many phase currents are measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CurrentSensing {
+    /// Phases a and b measured; c = -a - b.
+    TwoPhase,
+    /// All three measured; the zero-sequence part is rejected.
+    ThreePhase,
+}
+
+/// Open-loop V/f commissioning settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VfConfig {
+    /// Voltage per electrical frequency, V peak per rad/s (230 V rms line at 50 Hz:
+    /// 187.8 V / 314.16 rad/s = 0.598).
+    pub volts_per_rad_s: f32,
+    /// Low-frequency boost added to the voltage magnitude, V peak.
+    pub boost: f32,
+}
+
+/// Complete drive configuration (all user-facing settings; nothing here changes at run
+/// time). Units SI, speeds mechanical rad/s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveConfig {
+    /// The controller's machine model (may differ from the real machine).
+    pub machine: MachineParams,
+    /// Control and PWM period, s.
+    pub control_period: f32,
+    /// d-axis (flux) current reference i_sd*, A peak.
+    pub flux_current: f32,
+    /// Stator current vector limit I_max, A peak.
+    pub current_limit: f32,
+    /// Phase current trip level, A (any phase above it faults).
+    pub overcurrent_trip: f32,
+    /// Lowest DC-bus voltage while active, V.
+    pub dc_bus_min: f32,
+    /// Highest DC-bus voltage, V.
+    pub dc_bus_max: f32,
+    /// Over-speed trip on the estimated speed, rad/s.
+    pub max_speed: f32,
+    /// Speed reference slew rate (trapezoid ramps), rad/s^2.
+    pub speed_ramp: f32,
+    /// Current-loop bandwidth, rad/s.
+    pub current_bandwidth: f32,
+    /// Speed-loop bandwidth, rad/s.
+    pub speed_bandwidth: f32,
+    /// Observer poles (rates, rad/s).
+    pub observer_poles: ObserverPoles,
+    /// Whether the stator-resistance estimator adapts.
+    pub rs_estimation: bool,
+    /// Initial stator-resistance estimate R0, ohm (eq. 19).
+    pub rs_initial: f32,
+    /// Convergence time constant of the Rs estimator, s.
+    pub rs_convergence_time: f32,
+    /// Inverter dead time, s (compensated).
+    pub dead_time: f32,
+    /// Current band of the dead-time compensation's linearised sign, A.
+    pub dead_time_current_band: f32,
+    /// Measured phases.
+    pub current_sensing: CurrentSensing,
+    /// Flux within this fraction of its reference counts as settled.
+    pub flux_tolerance: f32,
+    /// Delay between sampling and the centre of the period the voltage is applied in, in
+    /// control periods (1.5 for preloaded compare registers).
+    pub delay_periods: f32,
+    /// Fault when the speed PI has been at its limit with |Omega_hat| below 10 % of the
+    /// reference for this long, s (locked rotor / stall).
+    pub stall_time: f32,
+    /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
+    pub max_load_torque_estimate: f32,
+    /// V/f mode settings.
+    pub vf: VfConfig,
+}
+
+impl DriveConfig {
+    /// The project's documented defaults for the paper's machine (Table 1): 5 kHz, 1.5 A
+    /// flux current, 4.67 A limit, 325 V bus, 1.5 us dead time.
+    pub fn paper_defaults() -> Self {
+        let machine = MachineParams::paper_table1();
+        Self {
+            machine,
+            control_period: params::DEFAULT_CONTROL_PERIOD,
+            flux_current: params::DEFAULT_FLUX_CURRENT,
+            current_limit: params::DEFAULT_CURRENT_LIMIT,
+            overcurrent_trip: 8.0,
+            dc_bus_min: 200.0,
+            dc_bus_max: 400.0,
+            max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+            speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
+            current_bandwidth: 1000.0,
+            speed_bandwidth: 25.0,
+            observer_poles: ObserverPoles::DEFAULT,
+            rs_estimation: false,
+            rs_initial: machine.stator_resistance(),
+            rs_convergence_time: 0.2,
+            dead_time: 1.5e-6,
+            dead_time_current_band: 0.1,
+            current_sensing: CurrentSensing::TwoPhase,
+            flux_tolerance: 0.02,
+            delay_periods: 1.5,
+            stall_time: 1.0,
+            max_load_torque_estimate: 15.0,
+            vf: VfConfig {
+                volts_per_rad_s: 187.8 / 314.16,
+                boost: 8.0,
+            },
+        }
+    }
+}
+
+/// Why a drive configuration was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// The named field is not finite and positive (or not in its documented range).
+    OutOfRange(&'static str),
+    /// The observer design failed.
+    Observer(ObserverDesignError),
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ConfigError::OutOfRange(name) => write!(f, "drive config: {name} out of range"),
+            ConfigError::Observer(e) => write!(f, "observer design: {e:?}"),
+        }
+    }
+}
+
+/// Operating state of the drive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DriveState {
+    /// Switches off, waiting for a start command.
+    Idle,
+    /// Building the rotor flux at zero torque, frame held.
+    Magnetizing,
+    /// Sensorless speed control.
+    Running,
+    /// Open-loop V/f (commissioning).
+    OpenLoop,
+    /// Switches off after a fault, until [`Drive::reset_fault`].
+    Fault,
+}
+
+impl DriveState {
+    /// Small integer code for logs and CSV files: 0 idle, 1 magnetizing, 2 running,
+    /// 3 open loop, 4 fault.
+    pub fn code(self) -> u8 {
+        match self {
+            DriveState::Idle => 0,
+            DriveState::Magnetizing => 1,
+            DriveState::Running => 2,
+            DriveState::OpenLoop => 3,
+            DriveState::Fault => 4,
+        }
+    }
+}
+
+/// Why the drive faulted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FaultReason {
+    /// A phase current exceeded the trip level (or an ADC saturated).
+    OverCurrent,
+    /// DC bus above its maximum (e.g. regenerative braking without a chopper).
+    DcBusOverVoltage,
+    /// DC bus below its minimum while active.
+    DcBusUnderVoltage,
+    /// Estimated speed beyond the over-speed limit.
+    OverSpeed,
+    /// A current or bus sample was NaN or infinite.
+    NonFiniteInput,
+    /// An estimator left its plausible range (Rs at a clamp bound, observer non-finite or
+    /// load estimate implausible).
+    EstimatorOutOfRange,
+    /// Torque at its limit with no speed for `stall_time`: locked rotor.
+    Stall,
+}
+
+/// Commands refused by the drive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandError {
+    /// The command does not apply in the present state (e.g. start while faulted).
+    WrongState(DriveState),
+    /// The value is not finite.
+    NotFinite,
+}
+
+/// Samples of one control step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveInputs {
+    /// Phase currents a, b, c (A); with two-phase sensing c is ignored.
+    pub phase_currents: [f32; 3],
+    /// DC-bus voltage, V.
+    pub dc_bus: f32,
+}
+
+/// PWM command of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PwmOutput {
+    /// High-side duties of phases a, b, c in [0, 1] (0.5 when disabled).
+    pub duties: [f32; 3],
+    /// False: all six switches off (timer main output disabled).
+    pub enabled: bool,
+}
+
+impl PwmOutput {
+    /// All switches off.
+    pub const OFF: Self = Self {
+        duties: [0.5; 3],
+        enabled: false,
+    };
+}
+
+/// What the last step computed, for telemetry and evaluation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriveTelemetry {
+    /// Ramped speed reference, rad/s.
+    pub speed_reference: f32,
+    /// Estimated speed Omega_hat, rad/s.
+    pub speed_estimate: f32,
+    /// Estimated load torque T_L_hat, N m.
+    pub load_torque_estimate: f32,
+    /// Estimated electromagnetic torque 1.5 p lambda_r i_sq, N m.
+    pub torque_estimate: f32,
+    /// Measured dq currents, A.
+    pub current: Dq,
+    /// dq current references, A.
+    pub current_reference: Dq,
+    /// dq voltage command, V.
+    pub voltage: Dq,
+    /// Model rotor flux lambda_r, Wb.
+    pub rotor_flux: f32,
+    /// Stator-resistance estimate, ohm.
+    pub stator_resistance_estimate: f32,
+    /// Frame angle theta_s, rad electrical.
+    pub angle: f32,
+    /// Frame frequency w_s, rad/s electrical.
+    pub stator_frequency: f32,
+    /// Whether the modulator limited the voltage.
+    pub voltage_saturated: bool,
+}
+
+/// The sensorless IFOC drive. `S` supplies sin/cos (software by default, CORDIC on the G4).
+#[derive(Clone, Debug)]
+pub struct Drive<S: SinCos = FastSinCos> {
+    cfg: DriveConfig,
+    // precomputed configuration
+    pi_d: PiConfig,
+    pi_q: PiConfig,
+    pi_speed: PiConfig,
+    flux_cfg: FluxModelConfig,
+    obs_cfg: ObserverConfig,
+    rs_cfg: RsEstimatorConfig,
+    pwm_cfg: SvpwmConfig,
+    i_sd_ref: f32,
+    i_sq_limit: f32,
+    flux_reference: f32,
+    settled_flux: f32,
+    sigma_ls: f32,
+    referred_rotor_resistance: f32,
+    inv_rotor_time_constant: f32,
+    pole_pairs: f32,
+    torque_factor: f32,
+    ramp_step: f32,
+    overcurrent_trip: f32,
+    stall_steps: u32,
+    // state
+    state: DriveState,
+    fault: Option<FaultReason>,
+    speed_target: f32,
+    speed_reference: f32,
+    speed_ctl: PiController,
+    d_ctl: PiController,
+    q_ctl: PiController,
+    flux: FluxModel,
+    observer: ReducedOrderObserver,
+    rs: RsEstimator,
+    applied_voltage: Dq,
+    stall_counter: u32,
+    vf_angle: f32,
+    vf_frequency: f32,
+    telemetry: DriveTelemetry,
+    sincos: S,
+}
+
+fn positive(v: f32, name: &'static str) -> Result<f32, ConfigError> {
+    if is_finite(v) && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(ConfigError::OutOfRange(name))
+    }
+}
+
+impl Drive<FastSinCos> {
+    /// A drive with the software sin/cos.
+    pub fn new(cfg: DriveConfig) -> Result<Self, ConfigError> {
+        Self::with_sincos(cfg, FastSinCos)
+    }
+}
+
+impl<S: SinCos> Drive<S> {
+    /// Validates `cfg`, precomputes every gain and reciprocal, and returns an idle drive.
+    pub fn with_sincos(cfg: DriveConfig, sincos: S) -> Result<Self, ConfigError> {
+        let ts = positive(cfg.control_period, "control_period")?;
+        if ts > 0.01 {
+            return Err(ConfigError::OutOfRange("control_period"));
+        }
+        let i_max = positive(cfg.current_limit, "current_limit")?;
+        let i_d = positive(cfg.flux_current, "flux_current")?;
+        if i_d >= i_max {
+            return Err(ConfigError::OutOfRange("flux_current"));
+        }
+        positive(cfg.overcurrent_trip, "overcurrent_trip")?;
+        if cfg.overcurrent_trip < i_max {
+            return Err(ConfigError::OutOfRange("overcurrent_trip"));
+        }
+        positive(cfg.dc_bus_min, "dc_bus_min")?;
+        positive(cfg.dc_bus_max, "dc_bus_max")?;
+        if cfg.dc_bus_max <= cfg.dc_bus_min {
+            return Err(ConfigError::OutOfRange("dc_bus_max"));
+        }
+        positive(cfg.max_speed, "max_speed")?;
+        positive(cfg.speed_ramp, "speed_ramp")?;
+        positive(cfg.current_bandwidth, "current_bandwidth")?;
+        positive(cfg.speed_bandwidth, "speed_bandwidth")?;
+        if cfg.current_bandwidth * ts > 0.5 {
+            return Err(ConfigError::OutOfRange("current_bandwidth"));
+        }
+        if cfg.speed_bandwidth * 4.0 > cfg.current_bandwidth {
+            return Err(ConfigError::OutOfRange("speed_bandwidth"));
+        }
+        positive(cfg.rs_initial, "rs_initial")?;
+        positive(cfg.rs_convergence_time, "rs_convergence_time")?;
+        if !(is_finite(cfg.dead_time) && cfg.dead_time >= 0.0 && cfg.dead_time < 0.1 * ts) {
+            return Err(ConfigError::OutOfRange("dead_time"));
+        }
+        positive(cfg.dead_time_current_band, "dead_time_current_band")?;
+        let tol = positive(cfg.flux_tolerance, "flux_tolerance")?;
+        if tol >= 0.5 {
+            return Err(ConfigError::OutOfRange("flux_tolerance"));
+        }
+        if !(is_finite(cfg.delay_periods) && (0.0..=3.0).contains(&cfg.delay_periods)) {
+            return Err(ConfigError::OutOfRange("delay_periods"));
+        }
+        positive(cfg.stall_time, "stall_time")?;
+        positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
+        positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
+        if !(is_finite(cfg.vf.boost) && cfg.vf.boost >= 0.0) {
+            return Err(ConfigError::OutOfRange("vf.boost"));
+        }
+
+        let m = cfg.machine;
+        let flux_reference = m.rotor_flux_for(i_d);
+        let i_sq_limit = sqrt(i_max * i_max - i_d * i_d);
+        let obs_cfg =
+            ObserverConfig::new(&m, cfg.observer_poles, ts).map_err(ConfigError::Observer)?;
+        // the voltage limit of the current PIs follows the bus at run time; these static
+        // limits only bound the integrators before the first step
+        let v_static = linear_limit(cfg.dc_bus_max);
+        let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
+        rs_cfg.flux_tolerance = tol;
+        Ok(Self {
+            pi_d: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
+            pi_q: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
+            pi_speed: PiConfig::speed_loop(&m, flux_reference, cfg.speed_bandwidth, ts, i_sq_limit),
+            flux_cfg: FluxModelConfig::new(&m, ts, flux_reference),
+            obs_cfg,
+            rs_cfg,
+            pwm_cfg: SvpwmConfig::new(cfg.dead_time, ts, cfg.dead_time_current_band),
+            i_sd_ref: i_d,
+            i_sq_limit,
+            flux_reference,
+            settled_flux: flux_reference * (1.0 - tol),
+            sigma_ls: m.transient_inductance(),
+            referred_rotor_resistance: m.referred_rotor_resistance(),
+            inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
+            pole_pairs: m.pole_pairs_f32(),
+            torque_factor: 1.5 * m.pole_pairs_f32(),
+            ramp_step: cfg.speed_ramp * ts,
+            overcurrent_trip: cfg.overcurrent_trip,
+            stall_steps: (cfg.stall_time / ts) as u32,
+            state: DriveState::Idle,
+            fault: None,
+            speed_target: 0.0,
+            speed_reference: 0.0,
+            speed_ctl: PiController::new(),
+            d_ctl: PiController::new(),
+            q_ctl: PiController::new(),
+            flux: FluxModel::new(),
+            observer: ReducedOrderObserver::new(),
+            rs: RsEstimator::new(cfg.rs_initial),
+            applied_voltage: Dq::default(),
+            stall_counter: 0,
+            vf_angle: 0.0,
+            vf_frequency: 0.0,
+            telemetry: DriveTelemetry {
+                stator_resistance_estimate: cfg.rs_initial,
+                ..DriveTelemetry::default()
+            },
+            sincos,
+            cfg,
+        })
+    }
+
+    /// The configuration the drive was built with.
+    pub fn config(&self) -> &DriveConfig {
+        &self.cfg
+    }
+    /// Present state.
+    pub fn state(&self) -> DriveState {
+        self.state
+    }
+    /// The fault that stopped the drive, if any.
+    pub fn fault(&self) -> Option<FaultReason> {
+        self.fault
+    }
+    /// Quantities computed by the last step.
+    pub fn telemetry(&self) -> &DriveTelemetry {
+        &self.telemetry
+    }
+    /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
+    pub fn torque_current_limit(&self) -> f32 {
+        self.i_sq_limit
+    }
+    /// Rotor-flux reference L_M i_sd*, Wb.
+    pub fn flux_reference(&self) -> f32 {
+        self.flux_reference
+    }
+    /// Precomputed observer design.
+    pub fn observer_config(&self) -> &ObserverConfig {
+        &self.obs_cfg
+    }
+
+    /// Sets the speed target (rad/s mechanical); the reference ramps to it at
+    /// `speed_ramp`. Clamped to +/- 90 % of `max_speed`.
+    pub fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
+        if !is_finite(speed) {
+            return Err(CommandError::NotFinite);
+        }
+        let lim = 0.9 * self.cfg.max_speed;
+        self.speed_target = clamp(speed, -lim, lim);
+        Ok(())
+    }
+
+    /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
+    pub fn start(&mut self) -> Result<(), CommandError> {
+        if self.state != DriveState::Idle {
+            return Err(CommandError::WrongState(self.state));
+        }
+        self.reset_dynamic_state();
+        self.state = DriveState::Magnetizing;
+        Ok(())
+    }
+
+    /// Idle -> OpenLoop: V/f at the electrical frequency p * speed target.
+    pub fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        if self.state != DriveState::Idle {
+            return Err(CommandError::WrongState(self.state));
+        }
+        self.reset_dynamic_state();
+        self.state = DriveState::OpenLoop;
+        Ok(())
+    }
+
+    /// Any active state -> Idle, switches off at once (the machine coasts). A faulted drive
+    /// stays faulted.
+    pub fn stop(&mut self) {
+        if self.state != DriveState::Fault {
+            self.state = DriveState::Idle;
+        }
+    }
+
+    /// Fault -> Idle: the deliberate reset after the cause has been dealt with.
+    pub fn reset_fault(&mut self) -> Result<(), CommandError> {
+        if self.state != DriveState::Fault {
+            return Err(CommandError::WrongState(self.state));
+        }
+        self.fault = None;
+        self.state = DriveState::Idle;
+        Ok(())
+    }
+
+    /// Forces a fault from outside (e.g. the hardware break input or a missed deadline).
+    pub fn trip(&mut self, reason: FaultReason) -> PwmOutput {
+        self.enter_fault(reason)
+    }
+
+    fn reset_dynamic_state(&mut self) {
+        self.speed_reference = 0.0;
+        self.speed_ctl.reset();
+        self.d_ctl.reset();
+        self.q_ctl.reset();
+        self.flux = FluxModel::new();
+        self.observer = ReducedOrderObserver::new();
+        self.rs = RsEstimator::new(self.rs.stator_resistance_estimate);
+        self.applied_voltage = Dq::default();
+        self.stall_counter = 0;
+        self.vf_angle = 0.0;
+        self.vf_frequency = 0.0;
+    }
+
+    fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput {
+        self.state = DriveState::Fault;
+        if self.fault.is_none() {
+            self.fault = Some(reason);
+        }
+        self.applied_voltage = Dq::default();
+        PwmOutput::OFF
+    }
+
+    /// Checks on the raw samples, before anything uses them.
+    fn check_inputs(&self, inp: &DriveInputs) -> Option<FaultReason> {
+        let [a, b, c_meas] = inp.phase_currents;
+        let c = match self.cfg.current_sensing {
+            CurrentSensing::TwoPhase => -a - b,
+            CurrentSensing::ThreePhase => c_meas,
+        };
+        if !(is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus)) {
+            return Some(FaultReason::NonFiniteInput);
+        }
+        let trip = self.overcurrent_trip;
+        if a.abs() > trip || b.abs() > trip || c.abs() > trip {
+            return Some(FaultReason::OverCurrent);
+        }
+        if inp.dc_bus > self.cfg.dc_bus_max {
+            return Some(FaultReason::DcBusOverVoltage);
+        }
+        if inp.dc_bus < self.cfg.dc_bus_min {
+            return Some(FaultReason::DcBusUnderVoltage);
+        }
+        None
+    }
+
+    /// One control step: samples in, PWM command out. Never panics and never returns a
+    /// non-finite or out-of-range duty: bad input faults the drive (switches off) instead.
+    pub fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+        match self.state {
+            DriveState::Fault => return PwmOutput::OFF,
+            DriveState::Idle => {
+                // a non-finite or over-current sample while idle is still a fault; bus
+                // limits apply only when the drive is about to switch
+                return match self.check_inputs(inp) {
+                    Some(r @ (FaultReason::NonFiniteInput | FaultReason::OverCurrent)) => {
+                        self.enter_fault(r)
+                    }
+                    _ => PwmOutput::OFF,
+                };
+            }
+            _ => {}
+        }
+        if let Some(reason) = self.check_inputs(inp) {
+            return self.enter_fault(reason);
+        }
+        let [a, b, c] = inp.phase_currents;
+        let i_ab = match self.cfg.current_sensing {
+            CurrentSensing::TwoPhase => clarke_two(a, b),
+            CurrentSensing::ThreePhase => clarke_three(a, b, c),
+        };
+        let phase_currents = match self.cfg.current_sensing {
+            CurrentSensing::TwoPhase => [a, b, -a - b],
+            CurrentSensing::ThreePhase => [a, b, c],
+        };
+        if self.state == DriveState::OpenLoop {
+            return self.step_open_loop(i_ab, inp.dc_bus, phase_currents);
+        }
+
+        let ts = self.cfg.control_period;
+        let sc = self.sincos.sin_cos(self.flux.angle);
+        let i = park(i_ab, sc);
+        let magnetizing = self.state == DriveState::Magnetizing;
+
+        // 3. observer (eq. 12), with the voltage applied over the past period
+        let rseq = self.rs.stator_resistance_estimate + self.referred_rotor_resistance;
+        if !magnetizing {
+            self.observer.update(
+                &self.obs_cfg,
+                &ObserverInputs {
+                    i_sq: i.q,
+                    i_sd: i.d,
+                    stator_frequency: self.flux.stator_frequency,
+                    v_sq: self.applied_voltage.q,
+                    rotor_flux: self.flux.rotor_flux,
+                    inv_rotor_flux: self.flux.inv_rotor_flux,
+                    equivalent_resistance: rseq,
+                },
+            );
+        }
+        let speed_est = self.observer.speed_estimate;
+
+        // 4. stator resistance (eq. 19-20)
+        let flux_settled = self.flux.rotor_flux >= self.settled_flux;
+        if self.cfg.rs_estimation && !magnetizing {
+            self.rs.update(
+                &self.rs_cfg,
+                &RsEstimatorInputs {
+                    i_sd: i.d,
+                    i_sq: i.q,
+                    v_sd: self.applied_voltage.d,
+                    stator_frequency: self.flux.stator_frequency,
+                    flux_settled,
+                },
+            );
+        }
+        let rs_hat = self.rs.stator_resistance_estimate;
+
+        // 5. flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
+        self.flux.update(
+            &self.flux_cfg,
+            i.d,
+            i.q,
+            self.pole_pairs * speed_est,
+            magnetizing,
+        );
+        let ws = self.flux.stator_frequency;
+        let lambda = self.flux.rotor_flux;
+
+        // estimator plausibility (after the updates, before anything is applied)
+        if !(is_finite(speed_est)
+            && is_finite(self.observer.load_torque_estimate)
+            && is_finite(self.observer.current_estimate))
+            || self.observer.load_torque_estimate.abs() > self.cfg.max_load_torque_estimate
+            || (self.cfg.rs_estimation && self.rs.at_bound)
+        {
+            return self.enter_fault(FaultReason::EstimatorOutOfRange);
+        }
+        if speed_est.abs() > self.cfg.max_speed {
+            return self.enter_fault(FaultReason::OverSpeed);
+        }
+
+        // 6. references
+        let (i_sd_ref, i_sq_ref);
+        if magnetizing {
+            i_sd_ref = self.i_sd_ref;
+            i_sq_ref = 0.0;
+            if flux_settled {
+                self.state = DriveState::Running;
+                self.observer.reset(i.q, 0.0, 0.0);
+                self.speed_ctl.reset();
+            }
+        } else {
+            let dv = clamp(
+                self.speed_target - self.speed_reference,
+                -self.ramp_step,
+                self.ramp_step,
+            );
+            self.speed_reference += dv;
+            i_sd_ref = self.i_sd_ref;
+            i_sq_ref = self
+                .speed_ctl
+                .update(&self.pi_speed, self.speed_reference - speed_est, 0.0);
+            // stall: torque at its limit while the speed stays near zero
+            let stalled =
+                self.speed_ctl.saturated() && speed_est.abs() < 0.1 * self.speed_reference.abs();
+            self.stall_counter = if stalled { self.stall_counter + 1 } else { 0 };
+            if self.stall_counter > self.stall_steps {
+                return self.enter_fault(FaultReason::Stall);
+            }
+        }
+
+        // 7. current PIs with decoupling feed-forward (eq. 9a, 9b)
+        let v_max = linear_limit(inp.dc_bus) * 0.98;
+        let ff_d = rs_hat * i_sd_ref + self.referred_rotor_resistance * i_sd_ref
+            - lambda * self.inv_rotor_time_constant
+            - ws * self.sigma_ls * i_sq_ref;
+        let ff_q = (rs_hat + self.referred_rotor_resistance) * i_sq_ref
+            + ws * self.sigma_ls * i_sd_ref
+            + self.pole_pairs * speed_est * lambda;
+        let v_d = self
+            .d_ctl
+            .update_with_limits(&self.pi_d, i_sd_ref - i.d, ff_d, -v_max, v_max);
+        let v_q_max = sqrt(v_max * v_max - v_d * v_d);
+        let v_q =
+            self.q_ctl
+                .update_with_limits(&self.pi_q, i_sq_ref - i.q, ff_q, -v_q_max, v_q_max);
+        let v = Dq { d: v_d, q: v_q };
+
+        // 8. inverse Park at the angle the voltage will act at, then SVPWM
+        let lead = ws * ts * self.cfg.delay_periods;
+        let rot = small_rotation(sc, lead);
+        let v_ab = inverse_park(v, rot);
+        let m = modulate(&self.pwm_cfg, v_ab, inp.dc_bus, phase_currents);
+        self.applied_voltage = v;
+
+        self.telemetry = DriveTelemetry {
+            speed_reference: self.speed_reference,
+            speed_estimate: speed_est,
+            load_torque_estimate: self.observer.load_torque_estimate,
+            torque_estimate: self.torque_factor * lambda * i.q,
+            current: i,
+            current_reference: Dq {
+                d: i_sd_ref,
+                q: i_sq_ref,
+            },
+            voltage: v,
+            rotor_flux: lambda,
+            stator_resistance_estimate: rs_hat,
+            angle: self.flux.angle,
+            stator_frequency: ws,
+            voltage_saturated: m.saturated,
+        };
+        PwmOutput {
+            duties: m.duties,
+            enabled: true,
+        }
+    }
+
+    fn step_open_loop(&mut self, i_ab: AlphaBeta, dc_bus: f32, currents: [f32; 3]) -> PwmOutput {
+        let ts = self.cfg.control_period;
+        let dv = clamp(
+            self.speed_target - self.speed_reference,
+            -self.ramp_step,
+            self.ramp_step,
+        );
+        self.speed_reference += dv;
+        self.vf_frequency = self.pole_pairs * self.speed_reference;
+        let mag = clamp(
+            self.cfg.vf.boost + self.cfg.vf.volts_per_rad_s * self.vf_frequency.abs(),
+            0.0,
+            linear_limit(dc_bus),
+        );
+        let sc = self.sincos.sin_cos(self.vf_angle);
+        let v = Dq { d: mag, q: 0.0 };
+        let v_ab = inverse_park(v, sc);
+        let m = modulate(&self.pwm_cfg, v_ab, dc_bus, currents);
+        self.vf_angle = wrap_angle(self.vf_angle + self.vf_frequency * ts);
+        self.telemetry = DriveTelemetry {
+            speed_reference: self.speed_reference,
+            current: park(i_ab, sc),
+            voltage: v,
+            angle: self.vf_angle,
+            stator_frequency: self.vf_frequency,
+            stator_resistance_estimate: self.rs.stator_resistance_estimate,
+            voltage_saturated: m.saturated,
+            ..DriveTelemetry::default()
+        };
+        PwmOutput {
+            duties: m.duties,
+            enabled: true,
+        }
+    }
+}
+
+/// sin/cos of (theta + delta) from sin/cos of theta and a small delta (|delta| < 0.3 rad)
+/// by the angle-sum formula with 3rd/4th-order series for delta (error < 2e-5 at 0.3 rad,
+/// < 1e-7 at the 0.1 rad of 1500 rpm and 1.5 periods).
+#[inline]
+fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
+    let d = clamp(delta, -0.3, 0.3);
+    let d2 = d * d;
+    let sd = d * (1.0 - d2 * (1.0 / 6.0));
+    let cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0));
+    SinCosValue {
+        sin: sc.sin * cd + sc.cos * sd,
+        cos: sc.cos * cd - sc.sin * sd,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn drive() -> Drive {
+        Drive::new(DriveConfig::paper_defaults()).unwrap()
+    }
+
+    fn idle_inputs() -> DriveInputs {
+        DriveInputs {
+            phase_currents: [0.0; 3],
+            dc_bus: 325.0,
+        }
+    }
+
+    #[test]
+    fn config_validation_names_the_field() {
+        let mut c = DriveConfig::paper_defaults();
+        c.control_period = 0.0;
+        assert_eq!(
+            Drive::new(c).err(),
+            Some(ConfigError::OutOfRange("control_period"))
+        );
+        let mut c = DriveConfig::paper_defaults();
+        c.flux_current = 5.0;
+        assert_eq!(
+            Drive::new(c).err(),
+            Some(ConfigError::OutOfRange("flux_current"))
+        );
+        let mut c = DriveConfig::paper_defaults();
+        c.dc_bus_max = 100.0;
+        assert_eq!(
+            Drive::new(c).err(),
+            Some(ConfigError::OutOfRange("dc_bus_max"))
+        );
+        let mut c = DriveConfig::paper_defaults();
+        c.observer_poles.p1 = f32::NAN;
+        assert_eq!(
+            Drive::new(c).err(),
+            Some(ConfigError::Observer(ObserverDesignError::PoleNotPositive))
+        );
+        let mut c = DriveConfig::paper_defaults();
+        c.speed_bandwidth = 900.0;
+        assert_eq!(
+            Drive::new(c).err(),
+            Some(ConfigError::OutOfRange("speed_bandwidth"))
+        );
+    }
+
+    #[test]
+    fn idle_keeps_switches_off_and_start_magnetizes_at_zero_torque() {
+        let mut d = drive();
+        assert_eq!(d.step(&idle_inputs()), PwmOutput::OFF);
+        assert_eq!(d.state(), DriveState::Idle);
+        d.start().unwrap();
+        assert_eq!(
+            d.start(),
+            Err(CommandError::WrongState(DriveState::Magnetizing))
+        );
+        let out = d.step(&idle_inputs());
+        assert!(out.enabled);
+        assert_eq!(d.state(), DriveState::Magnetizing);
+        assert_eq!(d.telemetry().current_reference.q, 0.0);
+        assert_eq!(d.telemetry().current_reference.d, 1.5);
+        // voltage on the d axis pushes current into the (held) frame
+        assert!(d.telemetry().voltage.d > 0.0);
+        assert_eq!(d.telemetry().angle, 0.0);
+    }
+
+    /// Synthetic inputs: feed back the commanded d current as if the machine followed it;
+    /// the flux model settles and the state machine moves to Running.
+    #[test]
+    fn magnetizing_ends_when_flux_is_settled() {
+        let mut d = drive();
+        d.start().unwrap();
+        let mut steps = 0;
+        while d.state() == DriveState::Magnetizing && steps < 20_000 {
+            d.step(&DriveInputs {
+                phase_currents: [1.5, -0.75, -0.75],
+                dc_bus: 325.0,
+            });
+            steps += 1;
+        }
+        assert_eq!(d.state(), DriveState::Running);
+        // about ln(1/0.02) = 3.9 rotor time constants of 66.7 ms
+        let t = steps as f32 * 200e-6;
+        assert!((0.2..0.35).contains(&t), "magnetizing took {t} s");
+    }
+
+    #[test]
+    fn faults_switch_off_in_the_same_step_and_need_a_reset() {
+        let cases: [(DriveInputs, FaultReason); 5] = [
+            (
+                DriveInputs {
+                    phase_currents: [9.0, 0.0, -9.0],
+                    dc_bus: 325.0,
+                },
+                FaultReason::OverCurrent,
+            ),
+            (
+                DriveInputs {
+                    phase_currents: [f32::NAN, 0.0, 0.0],
+                    dc_bus: 325.0,
+                },
+                FaultReason::NonFiniteInput,
+            ),
+            (
+                DriveInputs {
+                    phase_currents: [0.0; 3],
+                    dc_bus: f32::INFINITY,
+                },
+                FaultReason::NonFiniteInput,
+            ),
+            (
+                DriveInputs {
+                    phase_currents: [0.0; 3],
+                    dc_bus: 450.0,
+                },
+                FaultReason::DcBusOverVoltage,
+            ),
+            (
+                DriveInputs {
+                    phase_currents: [0.0; 3],
+                    dc_bus: 150.0,
+                },
+                FaultReason::DcBusUnderVoltage,
+            ),
+        ];
+        for (inp, reason) in cases {
+            let mut d = drive();
+            d.start().unwrap();
+            assert!(d.step(&idle_inputs()).enabled);
+            assert_eq!(d.step(&inp), PwmOutput::OFF);
+            assert_eq!(d.state(), DriveState::Fault);
+            assert_eq!(d.fault(), Some(reason));
+            // stays off with good input until reset
+            assert_eq!(d.step(&idle_inputs()), PwmOutput::OFF);
+            assert_eq!(d.start(), Err(CommandError::WrongState(DriveState::Fault)));
+            d.reset_fault().unwrap();
+            assert_eq!(d.state(), DriveState::Idle);
+            assert_eq!(d.fault(), None);
+            d.start().unwrap();
+        }
+    }
+
+    #[test]
+    fn rejects_non_finite_speed_target_and_limits_it() {
+        let mut d = drive();
+        assert_eq!(d.set_speed_target(f32::NAN), Err(CommandError::NotFinite));
+        d.set_speed_target(1e6).unwrap();
+        assert!(d.speed_target <= 0.9 * d.config().max_speed);
+    }
+
+    #[test]
+    fn current_limit_circle_with_d_priority() {
+        let d = drive();
+        let iq = d.torque_current_limit();
+        assert!((iq * iq + 1.5 * 1.5 - 4.67 * 4.67).abs() < 1e-3);
+    }
+
+    #[test]
+    fn open_loop_vf_rotates_the_voltage() {
+        let mut d = drive();
+        d.set_speed_target(50.0).unwrap();
+        d.start_open_loop().unwrap();
+        let mut last = 0.0;
+        for _ in 0..5000 {
+            let out = d.step(&idle_inputs());
+            assert!(out.enabled);
+            assert!(out.duties.iter().all(|x| (0.0..=1.0).contains(x)));
+            last = d.telemetry().stator_frequency;
+        }
+        // ramped to p * 50 rad/s after 50 / (500 rpm/s) = 0.95 s
+        assert!((last - 100.0).abs() < 1e-3, "{last}");
+        assert!((d.telemetry().voltage.d - (8.0 + 0.598 * 100.0)).abs() < 0.5);
+    }
+
+    #[test]
+    fn small_rotation_matches_direct_evaluation() {
+        for &th in &[0.0f32, 1.0, -2.5, 3.0] {
+            for &dl in &[0.0f32, 0.01, -0.1, 0.2] {
+                let r = small_rotation(FastSinCos::eval(th), dl);
+                let e = FastSinCos::eval(th + dl);
+                assert!((r.sin - e.sin).abs() < 2e-5 && (r.cos - e.cos).abs() < 2e-5);
+            }
+        }
+    }
+
+    fn any_current() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -12.0f32..12.0,
+            Just(f32::NAN),
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+            Just(10.0f32), // a saturated 10 A full-scale ADC
+            Just(-10.0f32),
+            Just(0.0f32),
+        ]
+    }
+
+    fn any_bus() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            0.0f32..600.0,
+            Just(f32::NAN),
+            Just(f32::NEG_INFINITY),
+            Just(325.0f32),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Whatever the samples, the duties are finite and in [0, 1], and a disabled output
+        /// is the neutral 0.5; a fault keeps the switches off.
+        #[test]
+        fn never_emits_bad_duty(
+            samples in proptest::collection::vec((any_current(), any_current(), any_current(), any_bus()), 1..400),
+            target in -400.0f32..400.0,
+            vf in any::<bool>(),
+        ) {
+            let mut d = drive();
+            d.set_speed_target(target).unwrap();
+            if vf { d.start_open_loop().unwrap(); } else { d.start().unwrap(); }
+            for (a, b, c, bus) in samples {
+                let out = d.step(&DriveInputs { phase_currents: [a, b, c], dc_bus: bus });
+                prop_assert!(out.duties.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)));
+                if !out.enabled { prop_assert_eq!(out.duties, [0.5; 3]); }
+                if d.state() == DriveState::Fault { prop_assert!(!out.enabled); }
+                let bad = !(a.is_finite() && b.is_finite() && bus.is_finite());
+                if bad { prop_assert_eq!(d.state(), DriveState::Fault); }
+                let t = d.telemetry();
+                prop_assert!(t.speed_estimate.is_finite() && t.rotor_flux.is_finite());
+            }
+        }
+    }
+}
