@@ -15,6 +15,7 @@
 #![warn(missing_docs)]
 
 pub mod math;
+pub mod model;
 pub mod params;
 
 pub use params::{MachineData, MachineParams, ParamError};

@@ -1,0 +1,440 @@
+//! Induction-motor plant model for simulation and the hardware-free self-test: machine
+//! (paper eq. 1-3 in the stationary frame), load torque, inverter (averaged or
+//! switching-level) and sensors.
+//!
+//! Everything is `no_std`, allocation-free, f32-only and panic-free; no trigonometry is
+//! needed at run time because the machine is integrated in the stationary alpha-beta frame.
+//!
+//! Conventions (crate-wide): SI units; amplitude-invariant Clarke
+//! (`i_alpha = i_a`, `i_beta = (i_a + 2 i_b)/sqrt3`), so alpha-beta values are peak phase
+//! values; speeds in rad/s mechanical, electrical speed `p Omega`; torque
+//! `Te = 1.5 p (Lm/Lr)(psi_alpha i_beta - psi_beta i_alpha)`.
+//!
+//! Typical use, once per control period (default 200 us, integrated as
+//! [`DEFAULT_SUBSTEPS`] = 10 RK4 steps of 20 us):
+//!
+//! ```
+//! use acim::model::{LoadTorque, Plant};
+//! let mut plant = Plant::paper_default(1);
+//! for _ in 0..100 {
+//!     let m = plant.sample(); // ADC values at the period boundary (PWM centre)
+//!     let _ = m;
+//!     // ... controller computes the duties from m ...
+//!     plant.run_period([0.5, 0.5, 0.5], true, LoadTorque::None);
+//! }
+//! assert!(plant.machine().speed().abs() < 1e-3);
+//! ```
+
+mod inverter;
+mod load;
+mod machine;
+mod sensors;
+
+pub use inverter::{
+    sanitize_duty, smooth_sign, Inverter, InverterConfig, InverterOutput, LegState, SwitchInterval,
+    SwitchingPattern, DEFAULT_CURRENT_BAND, DEFAULT_DEAD_TIME, DEFAULT_DEVICE_DROP,
+    DEFAULT_PWM_PERIOD,
+};
+pub use load::{LoadTorque, PASSIVE_SPEED_BAND};
+pub use machine::{EnergyAccount, InductionMachine, MachineState, DEFAULT_SUBSTEPS};
+pub use sensors::{
+    Adc, BusSensorConfig, BusVoltageSensor, CurrentChannels, CurrentSensorConfig, CurrentSensors,
+    Measurements, Rng, DEFAULT_BUS_FULL_SCALE, DEFAULT_CURRENT_FULL_SCALE,
+};
+
+use crate::params::MachineParams;
+use machine::{StageSource, StepSourceIntegral};
+
+const INV_SQRT3: f32 = 0.577_350_26;
+const SQRT3_2: f32 = 0.866_025_4;
+
+/// Amplitude-invariant Clarke of three phase quantities (zero sequence dropped):
+/// alpha = (2a - b - c)/3, beta = (b - c)/sqrt3.
+pub(crate) fn clarke(x: [f32; 3]) -> [f32; 2] {
+    let [a, b, c] = x;
+    [(2.0 * a - b - c) * (1.0 / 3.0), (b - c) * INV_SQRT3]
+}
+
+/// Inverse amplitude-invariant Clarke (no zero sequence).
+pub(crate) fn inverse_clarke(alpha: f32, beta: f32) -> [f32; 3] {
+    [
+        alpha,
+        -0.5 * alpha + SQRT3_2 * beta,
+        -0.5 * alpha - SQRT3_2 * beta,
+    ]
+}
+
+/// Clamp without `core`'s `lo <= hi` assertion (so no panic path): a NaN `x` gives `lo`.
+/// Callers pass `lo <= hi`.
+pub(crate) fn clampf(x: f32, lo: f32, hi: f32) -> f32 {
+    if x > hi {
+        hi
+    } else if x >= lo {
+        x
+    } else {
+        lo
+    }
+}
+
+fn max3(a: f32, b: f32, c: f32) -> f32 {
+    let m = if a > b { a } else { b };
+    if m > c {
+        m
+    } else {
+        c
+    }
+}
+
+fn min3(a: f32, b: f32, c: f32) -> f32 {
+    let m = if a < b { a } else { b };
+    if m < c {
+        m
+    } else {
+        c
+    }
+}
+
+/// How [`Plant::run_period`] models the inverter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PwmMode {
+    /// Period-averaged voltages (duty * Vdc with dead-time and drop errors), integrated as
+    /// `substeps` equal RK4 steps; no current ripple.
+    #[default]
+    Averaged,
+    /// Switching level: the period is split at every switching edge of the centre-aligned
+    /// pattern and the machine is integrated over each interval with its switch states
+    /// (RK4 steps no longer than period/substeps); shows the current ripple.
+    Switched,
+}
+
+/// Averages over the last period of [`Plant::run_period`].
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct PeriodReport {
+    /// Mean applied v_alpha, V.
+    pub v_alpha: f32,
+    /// Mean applied v_beta, V.
+    pub v_beta: f32,
+    /// Mean DC-link current, A.
+    pub dc_current: f32,
+    /// Mean power drawn from the DC link, W.
+    pub dc_power: f32,
+    /// Mean power into the machine terminals, 1.5 (v_alpha i_alpha + v_beta i_beta), W.
+    pub input_power: f32,
+}
+
+/// Machine + inverter + sensors + load: what a simulator or the firmware's hardware-free
+/// self-test steps once per control period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plant {
+    machine: InductionMachine,
+    inverter: Inverter,
+    current_sensors: CurrentSensors,
+    bus_sensor: BusVoltageSensor,
+    mode: PwmMode,
+    substeps: u32,
+    load: LoadTorque,
+    report: PeriodReport,
+    periods: u64,
+}
+
+impl Plant {
+    /// A plant from its parts, averaged PWM, [`DEFAULT_SUBSTEPS`] sub-steps per period.
+    pub fn new(
+        machine: InductionMachine,
+        inverter: Inverter,
+        current_sensors: CurrentSensors,
+        bus_sensor: BusVoltageSensor,
+    ) -> Self {
+        let mut p = Self {
+            machine,
+            inverter,
+            current_sensors,
+            bus_sensor,
+            mode: PwmMode::Averaged,
+            substeps: DEFAULT_SUBSTEPS,
+            load: LoadTorque::None,
+            report: PeriodReport::default(),
+            periods: 0,
+        };
+        p.update_freewheel_slope();
+        p
+    }
+
+    /// Table 1 machine, default inverter (1.5 us dead time, 1 V drop, 200 us) on a
+    /// 325 V bus, 12-bit two-channel current sensors and a 12-bit bus sensor, without
+    /// noise, gain or offset errors (set them through the sensor accessors).
+    pub fn paper_default(seed: u64) -> Self {
+        Self::new(
+            InductionMachine::new(MachineParams::paper_table1()),
+            Inverter::default(),
+            CurrentSensors::g474(CurrentChannels::Two, seed),
+            BusVoltageSensor::new(BusSensorConfig::default(), seed.wrapping_add(0x5eed)),
+        )
+    }
+
+    /// Ideal plant for tests: ideal inverter on `dc_bus` V, ideal sensors.
+    pub fn ideal(params: MachineParams, dc_bus: f32) -> Self {
+        Self::new(
+            InductionMachine::new(params),
+            Inverter::ideal(dc_bus),
+            CurrentSensors::ideal(),
+            BusVoltageSensor::ideal(),
+        )
+    }
+
+    fn update_freewheel_slope(&mut self) {
+        let h = self.inverter.pwm_period() / self.substeps as f32;
+        let l = self.machine.params().transient_inductance();
+        self.inverter.set_freewheel_slope(2.0 * h / l);
+    }
+
+    /// Selects averaged or switching-level PWM.
+    pub fn set_mode(&mut self, mode: PwmMode) {
+        self.mode = mode;
+    }
+
+    /// The PWM model in use.
+    pub fn mode(&self) -> PwmMode {
+        self.mode
+    }
+
+    /// Sets the number of RK4 sub-steps per period (at least 1; default 10).
+    pub fn set_substeps(&mut self, n: u32) {
+        self.substeps = n.max(1);
+        self.update_freewheel_slope();
+    }
+
+    /// RK4 sub-steps per period.
+    pub fn substeps(&self) -> u32 {
+        self.substeps
+    }
+
+    /// Control (= PWM) period, s.
+    pub fn period(&self) -> f32 {
+        self.inverter.pwm_period()
+    }
+
+    /// Sets the DC-bus voltage, V (a bus sag can be applied between periods).
+    pub fn set_dc_bus(&mut self, v: f32) {
+        self.inverter.set_dc_bus(v);
+    }
+
+    /// Runs one PWM period with duties `duties` (each clamped to [0, 1], NaN = 0.5),
+    /// gates `enabled` (false: all switches off) and load `load` held over the period.
+    pub fn run_period(&mut self, duties: [f32; 3], enabled: bool, load: LoadTorque) {
+        self.update_freewheel_slope();
+        self.load = load;
+        let inv = self.inverter;
+        let vdc = inv.dc_bus();
+        let t = inv.pwm_period();
+        let h_max = t / self.substeps as f32;
+        let mut acc = StepSourceIntegral::default();
+        let mut add = |s: StepSourceIntegral| {
+            acc.v_alpha_dt += s.v_alpha_dt;
+            acc.v_beta_dt += s.v_beta_dt;
+            acc.e_dc += s.e_dc;
+            acc.e_in += s.e_in;
+        };
+        if self.mode == PwmMode::Switched && enabled {
+            let pattern = inv.switching_pattern(duties);
+            let band = inv.config().current_band;
+            for iv in pattern.intervals() {
+                let len = iv.t1 - iv.t0;
+                let ratio = len / h_max;
+                let mut n = ratio as u32;
+                if (n as f32) < ratio || n == 0 {
+                    n += 1;
+                }
+                let h = len / n as f32;
+                let legs = iv.legs;
+                let src = move |ia: f32, ib: f32| {
+                    let out = inv.output(legs, inverse_clarke(ia, ib), band);
+                    let [v_alpha, v_beta] = out.alpha_beta;
+                    StageSource {
+                        v_alpha,
+                        v_beta,
+                        p_dc: vdc * out.dc_current,
+                    }
+                };
+                for _ in 0..n {
+                    add(self.machine.step_with(h, load, &src));
+                }
+            }
+        } else if !enabled {
+            let band = inv.freewheel_band();
+            let limit = vdc + 2.0 * inv.config().device_drop;
+            let src = move |ia: f32, ib: f32| {
+                let out = inv.averaged_output(duties, false, inverse_clarke(ia, ib));
+                let [v_alpha, v_beta] = out.alpha_beta;
+                StageSource {
+                    v_alpha,
+                    v_beta,
+                    p_dc: vdc * out.dc_current,
+                }
+            };
+            for _ in 0..self.substeps {
+                let small = self
+                    .machine
+                    .phase_currents()
+                    .iter()
+                    .all(|i| i.abs() <= band);
+                let [ea, eb] = self.machine.open_circuit_voltage();
+                let [e1, e2, e3] = inverse_clarke(ea, eb);
+                let spread = max3(e1, e2, e3) - min3(e1, e2, e3);
+                if small && spread <= limit {
+                    // every diode blocked: open stator, the terminals show the back-EMF
+                    self.machine.step_open_circuit(load, h_max);
+                    let [ea, eb] = self.machine.open_circuit_voltage();
+                    add(StepSourceIntegral {
+                        v_alpha_dt: ea * h_max,
+                        v_beta_dt: eb * h_max,
+                        e_dc: 0.0,
+                        e_in: 0.0,
+                    });
+                } else {
+                    add(self.machine.step_with(h_max, load, &src));
+                }
+            }
+        } else {
+            let src = move |ia: f32, ib: f32| {
+                let out = inv.averaged_output(duties, enabled, inverse_clarke(ia, ib));
+                let [v_alpha, v_beta] = out.alpha_beta;
+                StageSource {
+                    v_alpha,
+                    v_beta,
+                    p_dc: vdc * out.dc_current,
+                }
+            };
+            for _ in 0..self.substeps {
+                add(self.machine.step_with(h_max, load, &src));
+            }
+        }
+        let inv_t = 1.0 / t;
+        self.report = PeriodReport {
+            v_alpha: acc.v_alpha_dt * inv_t,
+            v_beta: acc.v_beta_dt * inv_t,
+            dc_current: if vdc > 0.0 {
+                acc.e_dc * inv_t / vdc
+            } else {
+                0.0
+            },
+            dc_power: acc.e_dc * inv_t,
+            input_power: acc.e_in * inv_t,
+        };
+        self.periods = self.periods.wrapping_add(1);
+    }
+
+    /// Samples the sensors at the period boundary (call after [`Plant::run_period`]).
+    pub fn sample(&mut self) -> Measurements {
+        let i = self.machine.phase_currents();
+        let phase_currents = self.current_sensors.measure(i);
+        let dc_bus = self.bus_sensor.measure(self.inverter.dc_bus());
+        Measurements {
+            phase_currents,
+            dc_bus,
+            channels: self.current_sensors.config().channels,
+        }
+    }
+
+    /// Averages over the last period (applied voltage, DC-link current and power).
+    pub fn last_period(&self) -> PeriodReport {
+        self.report
+    }
+
+    /// Periods run so far.
+    pub fn periods(&self) -> u64 {
+        self.periods
+    }
+
+    /// The machine (true speed, torque, currents, fluxes, energies).
+    pub fn machine(&self) -> &InductionMachine {
+        &self.machine
+    }
+
+    /// Mutable machine (set state, lock the rotor, change parameters).
+    pub fn machine_mut(&mut self) -> &mut InductionMachine {
+        &mut self.machine
+    }
+
+    /// The inverter.
+    pub fn inverter(&self) -> &Inverter {
+        &self.inverter
+    }
+
+    /// Mutable inverter.
+    pub fn inverter_mut(&mut self) -> &mut Inverter {
+        &mut self.inverter
+    }
+
+    /// Mutable current sensors (e.g. to replace them with another configuration).
+    pub fn current_sensors_mut(&mut self) -> &mut CurrentSensors {
+        &mut self.current_sensors
+    }
+
+    /// Mutable bus-voltage sensor.
+    pub fn bus_sensor_mut(&mut self) -> &mut BusVoltageSensor {
+        &mut self.bus_sensor
+    }
+
+    /// The load of the last period.
+    pub fn load(&self) -> LoadTorque {
+        self.load
+    }
+
+    /// True load torque at the present speed, N m.
+    pub fn load_torque(&self) -> f32 {
+        self.load.torque(self.machine.speed())
+    }
+
+    /// True stator current (i_alpha, i_beta), A.
+    pub fn current_alpha_beta(&self) -> [f32; 2] {
+        self.machine.current_alpha_beta()
+    }
+
+    /// True phase currents, A.
+    pub fn phase_currents(&self) -> [f32; 3] {
+        self.machine.phase_currents()
+    }
+
+    /// True stator current in a frame at electrical angle `(cos, sin)` of theta:
+    /// (i_d, i_q) = Park(i_alpha, i_beta) (the caller supplies cos/sin, no trig here).
+    pub fn current_dq(&self, cos_theta: f32, sin_theta: f32) -> [f32; 2] {
+        let [a, b] = self.machine.current_alpha_beta();
+        [
+            a * cos_theta + b * sin_theta,
+            -a * sin_theta + b * cos_theta,
+        ]
+    }
+
+    /// True mechanical speed, rad/s.
+    pub fn speed(&self) -> f32 {
+        self.machine.speed()
+    }
+
+    /// True electromagnetic torque, N m.
+    pub fn torque(&self) -> f32 {
+        self.machine.torque()
+    }
+}
+
+impl Default for Plant {
+    fn default() -> Self {
+        Self::paper_default(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clarke_round_trip() {
+        let [a, b, c] = inverse_clarke(1.0, 2.0);
+        assert!((a + b + c).abs() < 1e-6);
+        let [al, be] = clarke([a, b, c]);
+        assert!((al - 1.0).abs() < 1e-6 && (be - 2.0).abs() < 1e-6);
+        // i_beta = (i_a + 2 i_b)/sqrt3 for zero-sum currents
+        assert!((be - (a + 2.0 * b) * INV_SQRT3).abs() < 1e-6);
+    }
+}
