@@ -33,7 +33,7 @@
 
 use crate::flux::{FluxModel, FluxModelConfig};
 use crate::frames::{
-    clarke_three, clarke_two, inverse_park, park, AlphaBeta, Dq, FastSinCos, SinCos, SinCosValue,
+    clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos, SinCos, SinCosValue,
 };
 use crate::math::{clamp, is_finite, sqrt, wrap_angle};
 use crate::observer::{
@@ -101,6 +101,8 @@ pub struct DriveConfig {
     pub rs_convergence_time: f32,
     /// Inverter dead time, s (compensated).
     pub dead_time: f32,
+    /// Inverter device on-state drop, V (compensated with the dead time).
+    pub device_drop: f32,
     /// Current band of the dead-time compensation's linearised sign, A.
     pub dead_time_current_band: f32,
     /// Measured phases.
@@ -141,6 +143,7 @@ impl DriveConfig {
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
             dead_time: 1.5e-6,
+            device_drop: 1.0,
             dead_time_current_band: 0.1,
             current_sensing: CurrentSensing::TwoPhase,
             flux_tolerance: 0.02,
@@ -285,7 +288,7 @@ pub struct DriveTelemetry {
     pub rotor_flux: f32,
     /// Stator-resistance estimate, ohm.
     pub stator_resistance_estimate: f32,
-    /// Frame angle theta_s, rad electrical.
+    /// Frame angle theta_s used for this step's samples (Park), rad electrical.
     pub angle: f32,
     /// Frame frequency w_s, rad/s electrical.
     pub stator_frequency: f32,
@@ -387,6 +390,9 @@ impl<S: SinCos> Drive<S> {
         if !(is_finite(cfg.dead_time) && cfg.dead_time >= 0.0 && cfg.dead_time < 0.1 * ts) {
             return Err(ConfigError::OutOfRange("dead_time"));
         }
+        if !(is_finite(cfg.device_drop) && (0.0..=20.0).contains(&cfg.device_drop)) {
+            return Err(ConfigError::OutOfRange("device_drop"));
+        }
         positive(cfg.dead_time_current_band, "dead_time_current_band")?;
         let tol = positive(cfg.flux_tolerance, "flux_tolerance")?;
         if tol >= 0.5 {
@@ -419,7 +425,12 @@ impl<S: SinCos> Drive<S> {
             flux_cfg: FluxModelConfig::new(&m, ts, flux_reference),
             obs_cfg,
             rs_cfg,
-            pwm_cfg: SvpwmConfig::new(cfg.dead_time, ts, cfg.dead_time_current_band),
+            pwm_cfg: SvpwmConfig::new(
+                cfg.dead_time,
+                ts,
+                cfg.device_drop,
+                cfg.dead_time_current_band,
+            ),
             i_sd_ref: i_d,
             i_sq_limit,
             flux_reference,
@@ -618,7 +629,8 @@ impl<S: SinCos> Drive<S> {
         }
 
         let ts = self.cfg.control_period;
-        let sc = self.sincos.sin_cos(self.flux.angle);
+        let sample_angle = self.flux.angle;
+        let sc = self.sincos.sin_cos(sample_angle);
         let i = park(i_ab, sc);
         let magnetizing = self.state == DriveState::Magnetizing;
 
@@ -731,7 +743,17 @@ impl<S: SinCos> Drive<S> {
         let lead = ws * ts * self.cfg.delay_periods;
         let rot = small_rotation(sc, lead);
         let v_ab = inverse_park(v, rot);
-        let m = modulate(&self.pwm_cfg, v_ab, inp.dc_bus, phase_currents);
+        // dead-time compensation needs the current sign while the voltage acts: predict it
+        // from the current reference at the same (advanced) angle, which is noise-free and
+        // not 1.5 periods old like the samples
+        let i_ref_abc = inverse_clarke(inverse_park(
+            Dq {
+                d: i_sd_ref,
+                q: i_sq_ref,
+            },
+            rot,
+        ));
+        let m = modulate(&self.pwm_cfg, v_ab, inp.dc_bus, i_ref_abc);
         self.applied_voltage = v;
 
         self.telemetry = DriveTelemetry {
@@ -747,7 +769,7 @@ impl<S: SinCos> Drive<S> {
             voltage: v,
             rotor_flux: lambda,
             stator_resistance_estimate: rs_hat,
-            angle: self.flux.angle,
+            angle: sample_angle,
             stator_frequency: ws,
             voltage_saturated: m.saturated,
         };

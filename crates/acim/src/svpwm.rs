@@ -18,9 +18,10 @@
 //! * Bus compensation: the measured V_dc divides the voltages, so the output voltage does
 //!   not depend on bus ripple. V_dc is floored at `min_bus_voltage` (no division by a
 //!   vanishing bus; the drive faults on under-voltage before that matters).
-//! * Dead-time compensation: during the dead time the pole voltage follows the current
-//!   sign (diode conduction), which loses (t_d/T_pwm) V_dc against the current. Each duty is
-//!   raised by (t_d/T_pwm) sat(i_x/i_band): a sign function made linear within
+//! * Dead-time and device-drop compensation: during the dead time the pole voltage follows
+//!   the current sign (diode conduction), which loses (t_d/T_pwm) V_dc against the current,
+//!   and the conducting device drops V_drop, also against the current. Each duty is raised
+//!   by (t_d/T_pwm + V_drop/V_dc) sat(i_x/i_band): a sign function made linear within
 //!   +/- `current_band` so that it does not chatter around zero crossings.
 
 use crate::frames::{inverse_clarke, AlphaBeta};
@@ -32,6 +33,8 @@ use crate::math::clamp;
 pub struct SvpwmConfig {
     /// Dead time over PWM period, t_d/T_pwm (dimensionless duty).
     pub dead_time_duty: f32,
+    /// Device (IGBT/diode) on-state drop, V.
+    pub device_drop: f32,
     /// 1/current_band, 1/A: slope of the linearised sign used for dead-time compensation.
     pub inv_current_band: f32,
     /// Smallest bus voltage used as divisor, V.
@@ -39,11 +42,12 @@ pub struct SvpwmConfig {
 }
 
 impl SvpwmConfig {
-    /// Dead time `dead_time` (s) at PWM period `pwm_period` (s); compensation linear within
-    /// +/- `current_band` (A, > 0).
-    pub fn new(dead_time: f32, pwm_period: f32, current_band: f32) -> Self {
+    /// Dead time `dead_time` (s) at PWM period `pwm_period` (s) and device drop
+    /// `device_drop` (V); compensation linear within +/- `current_band` (A, > 0).
+    pub fn new(dead_time: f32, pwm_period: f32, device_drop: f32, current_band: f32) -> Self {
         Self {
             dead_time_duty: clamp(dead_time / pwm_period, 0.0, 0.1),
+            device_drop: clamp(device_drop, 0.0, 20.0),
             inv_current_band: 1.0 / current_band.max(1e-3),
             min_bus_voltage: 1.0,
         }
@@ -101,7 +105,7 @@ pub fn modulate(
         out.beta *= k;
         saturated = true;
     }
-    let dt = cfg.dead_time_duty;
+    let dt = cfg.dead_time_duty + cfg.device_drop * inv_vdc;
     let s = cfg.inv_current_band;
     let comp = |i: f32| dt * clamp(i * s, -1.0, 1.0);
     let duty = |vx: f32, i: f32| clamp(0.5 + (vx + offset) * inv_vdc + comp(i), 0.0, 1.0);
@@ -123,7 +127,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn no_dt() -> SvpwmConfig {
-        SvpwmConfig::new(0.0, 200e-6, 0.1)
+        SvpwmConfig::new(0.0, 200e-6, 0.0, 0.1)
     }
 
     fn reconstruct(d: [f32; 3], vdc: f32) -> AlphaBeta {
@@ -139,11 +143,17 @@ mod tests {
 
     #[test]
     fn dead_time_compensation_follows_current_sign() {
-        let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 0.1);
+        let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 0.0, 0.1);
         let m = modulate(&cfg, AlphaBeta::default(), 325.0, [2.0, -2.0, 0.05]);
         assert!((m.duties[0] - (0.5 + 0.0075)).abs() < 1e-6);
         assert!((m.duties[1] - (0.5 - 0.0075)).abs() < 1e-6);
         assert!((m.duties[2] - (0.5 + 0.00375)).abs() < 1e-6);
+        // a 1.3 V device drop on a 325 V bus adds 0.004 duty against the current
+        let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 1.3, 0.1);
+        let m = modulate(&cfg, AlphaBeta::default(), 325.0, [2.0, -2.0, 0.0]);
+        assert!((m.duties[0] - (0.5 + 0.0115)).abs() < 1e-6);
+        assert!((m.duties[1] - (0.5 - 0.0115)).abs() < 1e-6);
+        assert!((m.duties[2] - 0.5).abs() < 1e-6);
     }
 
     #[test]
