@@ -33,7 +33,8 @@
 
 use crate::flux::{FluxModel, FluxModelConfig};
 use crate::frames::{
-    clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos, SinCos, SinCosValue,
+    clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
+    SinCos, SinCosValue,
 };
 use crate::math::{clamp, is_finite, sqrt, wrap_angle};
 use crate::observer::{
@@ -99,6 +100,19 @@ pub struct DriveConfig {
     pub rs_initial: f32,
     /// Convergence time constant of the Rs estimator, s.
     pub rs_convergence_time: f32,
+    /// Rs adapts only below this |w_s|, rad/s electrical: there the d-axis residual is
+    /// dominated by the resistance error (its orientation part grows with w_s).
+    pub rs_max_frequency: f32,
+    /// With Rs estimation on, magnetizing also waits (at standstill, where the d-axis
+    /// residual is purely the resistance error) until the Rs estimate has settled, for at
+    /// most this long, s.
+    pub rs_identification_timeout: f32,
+    /// Orientation-correction gain k (dimensionless, 0 = the paper's scheme unchanged):
+    /// the frame frequency gets -k sign(w_s) r_d / lambda_ref. Regeneration is stable for
+    /// k > tau_r |w_slip| (see module docs).
+    pub orientation_gain: f32,
+    /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
+    pub orientation_fade: (f32, f32),
     /// Inverter dead time, s (compensated).
     pub dead_time: f32,
     /// Inverter device on-state drop, V (compensated with the dead time).
@@ -142,6 +156,13 @@ impl DriveConfig {
             rs_estimation: false,
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
+            rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
+            rs_identification_timeout: 1.5,
+            orientation_gain: 2.0,
+            orientation_fade: (
+                2.0 * core::f32::consts::PI * 0.5,
+                2.0 * core::f32::consts::PI * 1.5,
+            ),
             dead_time: 1.5e-6,
             device_drop: 1.0,
             dead_time_current_band: 0.1,
@@ -224,7 +245,8 @@ pub enum FaultReason {
     /// An estimator left its plausible range (Rs at a clamp bound, observer non-finite or
     /// load estimate implausible).
     EstimatorOutOfRange,
-    /// Torque at its limit with no speed for `stall_time`: locked rotor.
+    /// Torque at its limit with no speed for `stall_time`, or a load estimate beyond the
+    /// plausible range while the torque is at its limit: locked rotor or overload.
     Stall,
 }
 
@@ -318,8 +340,17 @@ pub struct Drive<S: SinCos = FastSinCos> {
     pole_pairs: f32,
     torque_factor: f32,
     ramp_step: f32,
+    orientation_gain_per_flux: f32,
+    orientation_fade_start: f32,
+    orientation_inv_fade_width: f32,
+    orientation_limit: f32,
     overcurrent_trip: f32,
     stall_steps: u32,
+    rs_timeout_steps: u32,
+    rs_settle_steps: u32,
+    implausible_limit: u32,
+    residual_filter: f32,
+    rs_settled_error: f32,
     // state
     state: DriveState,
     fault: Option<FaultReason>,
@@ -333,6 +364,10 @@ pub struct Drive<S: SinCos = FastSinCos> {
     rs: RsEstimator,
     applied_voltage: Dq,
     stall_counter: u32,
+    implausible_steps: u32,
+    magnetizing_steps: u32,
+    rs_settled_steps: u32,
+    filtered_residual: f32,
     vf_angle: f32,
     vf_frequency: f32,
     telemetry: DriveTelemetry,
@@ -401,6 +436,15 @@ impl<S: SinCos> Drive<S> {
         if !(is_finite(cfg.delay_periods) && (0.0..=3.0).contains(&cfg.delay_periods)) {
             return Err(ConfigError::OutOfRange("delay_periods"));
         }
+        positive(cfg.rs_max_frequency, "rs_max_frequency")?;
+        positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
+        if !(is_finite(cfg.orientation_gain) && (0.0..=50.0).contains(&cfg.orientation_gain)) {
+            return Err(ConfigError::OutOfRange("orientation_gain"));
+        }
+        let (fa, fb) = cfg.orientation_fade;
+        if !(is_finite(fa) && is_finite(fb) && fa >= 0.0 && fb > fa) {
+            return Err(ConfigError::OutOfRange("orientation_fade"));
+        }
         positive(cfg.stall_time, "stall_time")?;
         positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
@@ -418,6 +462,8 @@ impl<S: SinCos> Drive<S> {
         let v_static = linear_limit(cfg.dc_bus_max);
         let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
         rs_cfg.flux_tolerance = tol;
+        rs_cfg.adapt = cfg.rs_estimation;
+        rs_cfg.max_stator_frequency = cfg.rs_max_frequency;
         Ok(Self {
             pi_d: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
             pi_q: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
@@ -441,8 +487,20 @@ impl<S: SinCos> Drive<S> {
             pole_pairs: m.pole_pairs_f32(),
             torque_factor: 1.5 * m.pole_pairs_f32(),
             ramp_step: cfg.speed_ramp * ts,
+            orientation_gain_per_flux: cfg.orientation_gain / flux_reference,
+            orientation_fade_start: cfg.orientation_fade.0,
+            orientation_inv_fade_width: 1.0 / (cfg.orientation_fade.1 - cfg.orientation_fade.0),
+            // a correction beyond the rotor-frequency range means a wrong model: bound it
+            orientation_limit: 0.25 * cfg.max_speed * m.pole_pairs_f32(),
             overcurrent_trip: cfg.overcurrent_trip,
             stall_steps: (cfg.stall_time / ts) as u32,
+            rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
+            rs_settle_steps: (0.05 / ts) as u32,
+            implausible_limit: (0.02 / ts) as u32,
+            // 20 ms low-pass of the d-axis current-model error
+            residual_filter: (ts / 0.02).min(1.0),
+            // |error| below 0.3 % of i_sd* means |Rs_hat - Rs| below about 0.3 %
+            rs_settled_error: 0.003 * i_d,
             state: DriveState::Idle,
             fault: None,
             speed_target: 0.0,
@@ -455,6 +513,10 @@ impl<S: SinCos> Drive<S> {
             rs: RsEstimator::new(cfg.rs_initial),
             applied_voltage: Dq::default(),
             stall_counter: 0,
+            implausible_steps: 0,
+            magnetizing_steps: 0,
+            rs_settled_steps: 0,
+            filtered_residual: 0.0,
             vf_angle: 0.0,
             vf_frequency: 0.0,
             telemetry: DriveTelemetry {
@@ -559,6 +621,10 @@ impl<S: SinCos> Drive<S> {
         self.rs = RsEstimator::new(self.rs.stator_resistance_estimate);
         self.applied_voltage = Dq::default();
         self.stall_counter = 0;
+        self.implausible_steps = 0;
+        self.magnetizing_steps = 0;
+        self.rs_settled_steps = 0;
+        self.filtered_residual = 0.0;
         self.vf_angle = 0.0;
         self.vf_frequency = 0.0;
     }
@@ -652,41 +718,77 @@ impl<S: SinCos> Drive<S> {
         }
         let speed_est = self.observer.speed_estimate;
 
-        // 4. stator resistance (eq. 19-20)
+        // 4. stator resistance (eq. 19-20): the current model of eq. (20) runs every step
+        // (its error is the d-axis residual), the resistance adapts only inside its gate
         let flux_settled = self.flux.rotor_flux >= self.settled_flux;
-        if self.cfg.rs_estimation && !magnetizing {
-            self.rs.update(
-                &self.rs_cfg,
-                &RsEstimatorInputs {
-                    i_sd: i.d,
-                    i_sq: i.q,
-                    v_sd: self.applied_voltage.d,
-                    stator_frequency: self.flux.stator_frequency,
-                    flux_settled,
-                },
+        let ws_prev = self.flux.stator_frequency;
+        self.rs.update(
+            &self.rs_cfg,
+            &RsEstimatorInputs {
+                i_sd: i.d,
+                i_sq: i.q,
+                v_sd: self.applied_voltage.d,
+                stator_frequency: ws_prev,
+                flux_settled,
+            },
+        );
+        let rs_hat = self.rs.stator_resistance_estimate;
+        self.filtered_residual +=
+            self.residual_filter * (self.rs.current_error - self.filtered_residual);
+
+        // orientation correction (beyond the paper, see module docs): in field orientation
+        // the steady d-axis residual is r_d = Rs_hat e_d = -w_s lambda_q, so
+        // dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux; it fades in
+        // above the Rs-estimation band, where r_d is dominated by orientation.
+        let mut correction = 0.0;
+        if !magnetizing && flux_settled {
+            let w = clamp(
+                (ws_prev.abs() - self.orientation_fade_start) * self.orientation_inv_fade_width,
+                0.0,
+                1.0,
+            );
+            let r_d = rs_hat * self.rs.current_error;
+            let signed = if ws_prev >= 0.0 { -r_d } else { r_d };
+            correction = clamp(
+                self.orientation_gain_per_flux * w * signed,
+                -self.orientation_limit,
+                self.orientation_limit,
             );
         }
-        let rs_hat = self.rs.stator_resistance_estimate;
 
         // 5. flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
         self.flux.update(
             &self.flux_cfg,
             i.d,
             i.q,
-            self.pole_pairs * speed_est,
+            self.pole_pairs * speed_est + correction,
             magnetizing,
         );
         let ws = self.flux.stator_frequency;
         let lambda = self.flux.rotor_flux;
 
-        // estimator plausibility (after the updates, before anything is applied)
+        // estimator plausibility: a non-finite state faults at once; an implausible load
+        // estimate must persist for 20 ms (a current transient, e.g. a short, must trip on
+        // over-current first), and while the torque is at its limit it means a stall
         if !(is_finite(speed_est)
             && is_finite(self.observer.load_torque_estimate)
             && is_finite(self.observer.current_estimate))
-            || self.observer.load_torque_estimate.abs() > self.cfg.max_load_torque_estimate
             || (self.cfg.rs_estimation && self.rs.at_bound)
         {
             return self.enter_fault(FaultReason::EstimatorOutOfRange);
+        }
+        self.implausible_steps =
+            if self.observer.load_torque_estimate.abs() > self.cfg.max_load_torque_estimate {
+                self.implausible_steps.saturating_add(1)
+            } else {
+                0
+            };
+        if self.implausible_steps > self.implausible_limit {
+            return self.enter_fault(if self.speed_ctl.saturated() {
+                FaultReason::Stall
+            } else {
+                FaultReason::EstimatorOutOfRange
+            });
         }
         if speed_est.abs() > self.cfg.max_speed {
             return self.enter_fault(FaultReason::OverSpeed);
@@ -697,7 +799,17 @@ impl<S: SinCos> Drive<S> {
         if magnetizing {
             i_sd_ref = self.i_sd_ref;
             i_sq_ref = 0.0;
-            if flux_settled {
+            self.magnetizing_steps = self.magnetizing_steps.saturating_add(1);
+            self.rs_settled_steps = if self.filtered_residual.abs() < self.rs_settled_error {
+                self.rs_settled_steps.saturating_add(1)
+            } else {
+                0
+            };
+            // standstill Rs identification: wait for 50 ms of settled residual
+            let rs_done = !self.cfg.rs_estimation
+                || self.rs_settled_steps > self.rs_settle_steps
+                || self.magnetizing_steps > self.rs_timeout_steps;
+            if flux_settled && rs_done {
                 self.state = DriveState::Running;
                 self.observer.reset(i.q, 0.0, 0.0);
                 self.speed_ctl.reset();

@@ -90,8 +90,9 @@ impl FluxModel {
     }
 
     /// One step: slip (eq. 8) from the present flux and the measured i_sq, stator
-    /// frequency from the estimated electrical rotor speed `rotor_speed_elec` (rad/s),
-    /// angle advance, then the flux update (eq. 13) with the measured i_sd.
+    /// frequency from `rotor_speed_elec` (rad/s: the estimated electrical rotor speed
+    /// p Omega_hat, plus any frame-frequency correction the caller adds), angle advance,
+    /// then the flux update (eq. 13) with the measured i_sd.
     /// When `hold_angle` is set (magnetising), the frame does not rotate.
     #[inline]
     pub fn update(

@@ -63,6 +63,9 @@ pub struct RsEstimatorConfig {
     pub max_stator_frequency: f32,
     /// Adapt only with the flux within this fraction of its reference.
     pub flux_tolerance: f32,
+    /// Whether the resistance adapts at all (the current model of eq. 20 always runs: the
+    /// drive's orientation correction uses its error).
+    pub adapt: bool,
 }
 
 impl RsEstimatorConfig {
@@ -83,6 +86,7 @@ impl RsEstimatorConfig {
             max_torque_current: 2.0 * flux_current.abs(),
             max_stator_frequency: 2.0 * core::f32::consts::PI * 40.0,
             flux_tolerance: 0.02,
+            adapt: true,
         }
     }
 
@@ -118,6 +122,9 @@ pub struct RsEstimator {
     pub current_estimate: f32,
     /// Whether the last step adapted (inside the gate).
     pub adapting: bool,
+    /// i_sd_hat - i_sd at the last step, A: in steady state r_d / Rs_hat, where r_d is the
+    /// d-axis voltage residual of the field-oriented model.
+    pub current_error: f32,
     /// Whether the estimate sits at a clamp bound.
     pub at_bound: bool,
 }
@@ -128,6 +135,7 @@ impl RsEstimator {
         Self {
             stator_resistance_estimate: r0,
             current_estimate: 0.0,
+            current_error: 0.0,
             adapting: false,
             at_bound: false,
         }
@@ -138,7 +146,9 @@ impl RsEstimator {
     pub fn update(&mut self, cfg: &RsEstimatorConfig, u: &RsEstimatorInputs) -> f32 {
         let rs = self.stator_resistance_estimate;
         let e = self.current_estimate - u.i_sd;
-        self.adapting = u.flux_settled
+        self.current_error = if crate::math::is_finite(e) { e } else { 0.0 };
+        self.adapting = cfg.adapt
+            && u.flux_settled
             && u.i_sd.abs() >= cfg.min_flux_current
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;
