@@ -245,6 +245,10 @@ pub enum FaultReason {
     /// An estimator left its plausible range (Rs at a clamp bound, observer non-finite or
     /// load estimate implausible).
     EstimatorOutOfRange,
+    /// The hardware break input (gate-driver fault, external over-current) fired.
+    HardwareBreak,
+    /// The control step did not finish before the next conversion.
+    DeadlineMissed,
     /// Torque at its limit with no speed for `stall_time`, or a load estimate beyond the
     /// plausible range while the torque is at its limit: locked rotor or overload.
     Stall,

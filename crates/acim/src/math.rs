@@ -73,6 +73,8 @@ pub fn wrap_angle(x: f32) -> f32 {
 }
 
 /// Clamps to [lo, hi] (requires lo <= hi); a NaN input returns 0 clamped into range.
+/// Comparisons only: `f32::clamp` asserts `lo <= hi` and would link a panic path (and
+/// core's float formatting) into the control step.
 #[inline(always)]
 pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
     if x > hi {
@@ -81,9 +83,13 @@ pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
         x
     } else if x < lo {
         lo
-    } else {
+    } else if 0.0 > hi {
         // NaN
-        0.0f32.clamp(lo, hi)
+        hi
+    } else if 0.0 < lo {
+        lo
+    } else {
+        0.0
     }
 }
 

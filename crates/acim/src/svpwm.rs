@@ -88,8 +88,10 @@ pub fn modulate(
     };
     let inv_vdc = 1.0 / vdc;
     let [mut a, mut b, mut c] = inverse_clarke(v);
-    let max = a.max(b).max(c);
-    let min = a.min(b).min(c);
+    // comparisons, not f32::max/min (those call fmaxf/fminf on the M4)
+    let (hi_ab, lo_ab) = if a > b { (a, b) } else { (b, a) };
+    let max = if c > hi_ab { c } else { hi_ab };
+    let min = if c < lo_ab { c } else { lo_ab };
     let span = max - min;
     let mut out = v;
     let mut saturated = false;
