@@ -1,0 +1,245 @@
+//! Built-in scenarios: the paper's Figs. 6-12, open-loop V/f, regeneration (the subject of
+//! a later issue: run and reported here) and fault cases.
+//!
+//! Common settings of the paper cases (design notes section 4 and the issue's defaults):
+//! Table 1 machine, J = 0.01 kg m^2, viscous friction 2e-3 N m s/rad, 325 V stiff bus,
+//! 1.5 us dead time and 1 V device drop (compensated by the drive with its nominal values),
+//! 12-bit current sensors with 10 mA rms noise, the paper's load as a passive brake.
+//! Figs. 10-12 (the paper's experiments) add sensor gain and offset errors.
+
+use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, Window};
+
+fn sp(t_s: f32, rpm: f32) -> SpeedPoint {
+    SpeedPoint { t_s, rpm }
+}
+
+fn load(t_s: f32, kind: LoadKind, torque_nm: f32) -> LoadPoint {
+    LoadPoint {
+        t_s,
+        kind,
+        torque_nm,
+    }
+}
+
+fn win(name: &str, from_s: f32, to_s: f32) -> Window {
+    Window {
+        name: name.into(),
+        from_s,
+        to_s,
+    }
+}
+
+/// The common base of the paper cases.
+fn base(name: &str, description: &str, duration_s: f32) -> Scenario {
+    let mut s = Scenario {
+        name: name.into(),
+        description: description.into(),
+        duration_s,
+        ..Scenario::default()
+    };
+    s.sensors.noise_a = 0.01;
+    s
+}
+
+/// Sensor imperfections of the paper's experiments (Figs. 10-12).
+fn realistic_sensors(s: &mut Scenario) {
+    s.sensors.gain_error = [0.003, -0.003, 0.0];
+    s.sensors.offset_a = [0.005, -0.005, 0.0];
+}
+
+/// Trapezoid with reversal at `rpm`: up at 0.5 s, reverse at 4 s, back to zero at 8 s.
+fn trapezoid(name: &str, description: &str, rpm: f32) -> Scenario {
+    let mut s = base(name, description, 10.0);
+    realistic_sensors(&mut s);
+    s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm), sp(8.0, 0.0)];
+    // steady windows start 1 s after the ramp ends (500 rpm/s)
+    let ramp = 2.0 * rpm.abs() / s.drive.speed_ramp_rpm_s;
+    s.windows = vec![
+        win(
+            "forward",
+            0.5 + rpm.abs() / s.drive.speed_ramp_rpm_s + 1.0,
+            4.0,
+        ),
+        win("reverse", (4.0 + ramp + 1.0).min(7.9), 8.0),
+    ];
+    s
+}
+
+/// The fig. 7 profile: 500 rpm, 1.5 N m brake from 4 s to 8 s.
+fn load_step(name: &str, description: &str) -> Scenario {
+    let mut s = base(name, description, 10.0);
+    s.speed_profile = vec![sp(0.5, 500.0)];
+    s.load_profile = vec![
+        load(4.0, LoadKind::Passive, 1.5),
+        load(8.0, LoadKind::None, 0.0),
+    ];
+    // steady state: from 1 s after each step (the speed loop's slow PI tail)
+    s.windows = vec![
+        win("no-load", 2.5, 4.0),
+        win("load", 5.0, 8.0),
+        win("unloaded", 9.0, 10.0),
+    ];
+    s
+}
+
+/// Reversal against an active (constant-sign) load: regeneration while braking and in
+/// the reverse direction.
+fn regen(name: &str, rpm: f32) -> Scenario {
+    let mut s = base(
+        name,
+        "reversal against an active 1.5 N m load (regenerating phase; see issue 7)",
+        8.0,
+    );
+    s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm)];
+    s.load_profile = vec![load(2.0, LoadKind::Active, 1.5)];
+    let up = rpm.abs() / s.drive.speed_ramp_rpm_s;
+    s.windows = vec![
+        win("motoring", (0.5 + up + 1.0).max(2.5), 4.0),
+        win("regenerating", 4.0 + 2.0 * up + 1.0, 8.0),
+    ];
+    s
+}
+
+/// A fault case at 500 rpm: the fault strikes at 3 s.
+fn fault(name: &str, description: &str) -> Scenario {
+    let mut s = base(name, description, 5.0);
+    s.speed_profile = vec![sp(0.5, 500.0)];
+    s.windows = vec![win("before-fault", 2.0, 3.0)];
+    s
+}
+
+/// Every built-in scenario, in listing order.
+pub fn all() -> Vec<Scenario> {
+    let mut v = Vec::new();
+
+    let mut s = base(
+        "paper-fig6",
+        "Fig. 6: start-up, 500 rpm, speed reversal, no load",
+        8.0,
+    );
+    s.speed_profile = vec![sp(0.5, 500.0), sp(4.0, -500.0)];
+    s.windows = vec![win("forward", 2.5, 4.0), win("reverse", 7.0, 8.0)];
+    v.push(s);
+
+    v.push(load_step(
+        "paper-fig7",
+        "Fig. 7: 500 rpm, 1.5 N m load from 4 s to 8 s",
+    ));
+
+    let mut s = load_step(
+        "paper-fig8-rr",
+        "Fig. 8a-b: +50 % Rr in the controller, Rs estimator off",
+    );
+    s.controller.rr_ohm = 1.5 * s.plant.rr_ohm;
+    v.push(s);
+
+    let mut s = load_step(
+        "paper-fig8-rs",
+        "Fig. 8c-d: +50 % Rs in the controller, Rs estimator off",
+    );
+    s.controller.rs_ohm = 1.5 * s.plant.rs_ohm;
+    v.push(s);
+
+    let mut s = load_step(
+        "paper-fig9",
+        "Fig. 9: Rs estimator on, initial Rs_hat 15.75 ohm (+50 %)",
+    );
+    s.controller.rs_ohm = 1.5 * s.plant.rs_ohm;
+    s.drive.rs_estimation = true;
+    v.push(s);
+
+    v.push(trapezoid(
+        "paper-fig10",
+        "Fig. 10: trapezoid to 500 rpm with reversal, realistic sensors and inverter",
+        500.0,
+    ));
+    v.push(trapezoid(
+        "paper-fig11",
+        "Fig. 11: trapezoid to 120 rpm with reversal, realistic sensors and inverter",
+        120.0,
+    ));
+    v.push(trapezoid(
+        "paper-fig12",
+        "Fig. 12: trapezoid to 60 rpm with reversal, realistic sensors and inverter",
+        60.0,
+    ));
+    let mut s = trapezoid(
+        "paper-fig12-load",
+        "Fig. 12 with a 1.5 N m powder-brake load from 2 s: 60 rpm with reversal under load",
+        60.0,
+    );
+    s.load_profile = vec![load(2.0, LoadKind::Passive, 1.5)];
+    s.windows[0].from_s = s.windows[0].from_s.max(3.0);
+    v.push(s);
+
+    let mut s = base(
+        "vf-open-loop",
+        "open-loop V/f commissioning: ramp to 750 rpm, 1.5 N m brake at 3 s",
+        5.0,
+    );
+    s.drive.mode = ControlMode::Vf;
+    s.speed_profile = vec![sp(0.0, 750.0)];
+    s.load_profile = vec![load(3.0, LoadKind::Passive, 1.5)];
+    s.windows = vec![win("no-load", 2.0, 3.0), win("load", 4.0, 5.0)];
+    v.push(s);
+
+    v.push(regen("regen-500", 500.0));
+    v.push(regen("regen-60", 60.0));
+
+    let mut s = fault(
+        "fault-short",
+        "phase-a low-side switch fails short at 3 s: over-current trip",
+    );
+    s.faults.phase_short_at_s = Some(3.0);
+    v.push(s);
+
+    let mut s = fault(
+        "fault-bus-sag",
+        "mains sag: the bus source drops to 150 V at 3 s (470 uF link): under-voltage trip",
+    );
+    s.dc_link.capacitance_f = 470e-6;
+    s.faults.bus_sag_at_s = Some(3.0);
+    s.faults.bus_sag_to_v = 150.0;
+    v.push(s);
+
+    let mut s = base(
+        "fault-overvoltage-braking",
+        "fast braking from 1000 rpm on a 220 uF link without a chopper: over-voltage trip",
+        4.0,
+    );
+    s.dc_link.capacitance_f = 220e-6;
+    s.drive.speed_ramp_rpm_s = 4000.0;
+    s.speed_profile = vec![sp(0.5, 1000.0), sp(2.5, 0.0)];
+    s.windows = vec![win("before-fault", 1.5, 2.5)];
+    v.push(s);
+
+    let mut s = fault(
+        "fault-locked-rotor",
+        "the rotor locks at 3 s: stall (locked-rotor) trip",
+    );
+    s.faults.locked_rotor_at_s = Some(3.0);
+    v.push(s);
+
+    let mut s = fault(
+        "fault-nan-sample",
+        "one NaN phase-current sample at 3 s: non-finite-input trip",
+    );
+    s.faults.nan_sample_at_s = Some(3.0);
+    v.push(s);
+
+    v
+}
+
+/// The built-in scenario called `name`.
+pub fn get(name: &str) -> Option<Scenario> {
+    all().into_iter().find(|s| s.name == name)
+}
+
+/// Names of the paper-figure scenarios (the main job).
+pub fn paper_names() -> Vec<String> {
+    all()
+        .into_iter()
+        .map(|s| s.name)
+        .filter(|n| n.starts_with("paper-"))
+        .collect()
+}

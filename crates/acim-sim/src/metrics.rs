@@ -1,0 +1,274 @@
+//! Metrics of a run: steady-state errors per window, load-step tracking, Rs convergence,
+//! faults. Speeds in rpm, torques in N m.
+//!
+//! Steady-state speed errors are taken on 10 ms moving averages (50 control steps): a
+//! speed measurement on a bench (the paper's 1024-line encoder) averages over a similar
+//! time, and this removes the 5 kHz sensor-noise jitter of the estimate without hiding any
+//! error slower than 100 Hz. The raw (unfiltered) maxima are reported too.
+
+use crate::sim::{Row, RunResult};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Moving-average length for steady-state speed errors, control steps (10 ms at 5 kHz).
+pub const SMOOTHING_STEPS: usize = 50;
+
+/// Steady-state metrics over one window.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct WindowMetrics {
+    /// Window start, s.
+    pub from_s: f32,
+    /// Window end, s.
+    pub to_s: f32,
+    /// Max |speed_est - speed| of the 10 ms averages, rpm.
+    pub speed_est_err_max_rpm: f32,
+    /// Mean speed_est - speed, rpm (signed).
+    pub speed_est_err_mean_rpm: f32,
+    /// Max |speed_est - speed| unfiltered, rpm.
+    pub speed_est_err_raw_max_rpm: f32,
+    /// Max |speed - speed_ref| of the 10 ms averages, rpm.
+    pub speed_err_max_rpm: f32,
+    /// Mean speed - speed_ref, rpm (signed).
+    pub speed_err_mean_rpm: f32,
+    /// Mean |load_est - load|, N m.
+    pub load_est_err_mean_nm: f32,
+    /// Max |orientation error|, degrees electrical.
+    pub orientation_err_max_deg: f32,
+    /// Mean Rs estimate, ohm.
+    pub rs_est_mean_ohm: f32,
+    /// Mean true speed, rpm.
+    pub speed_mean_rpm: f32,
+}
+
+/// Tracking after one load change.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct LoadStepMetrics {
+    /// When the load changed, s.
+    pub t_s: f32,
+    /// New load torque, N m.
+    pub load_nm: f32,
+    /// Time until |load_est - load| (10 ms average) <= 0.05 N m for good (until the next
+    /// load or speed-target change), s.
+    pub load_est_settle_s: Option<f32>,
+    /// Time until |speed - ref| <= 5 rpm for good (10 ms average), s.
+    pub speed_recovery_s: Option<f32>,
+    /// Largest |speed - ref| after the change (10 ms average), rpm.
+    pub speed_dip_rpm: f32,
+}
+
+/// Rs estimator convergence.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RsMetrics {
+    /// True stator resistance, ohm.
+    pub true_ohm: f32,
+    /// Initial estimate, ohm.
+    pub initial_ohm: f32,
+    /// Final estimate, ohm.
+    pub final_ohm: f32,
+    /// First time from which the estimate stays within 2 % of the true value, s.
+    pub within_2pct_from_s: Option<f32>,
+    /// The same, counted from the start of speed control (end of magnetizing), s.
+    pub within_2pct_after_running_s: Option<f32>,
+}
+
+/// All metrics of a run.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Metrics {
+    /// Scenario name.
+    pub name: String,
+    /// Scenario description.
+    pub description: String,
+    /// Simulated time, s.
+    pub duration_s: f32,
+    /// Fault reason, if the drive faulted.
+    pub fault: Option<String>,
+    /// Fault time, s.
+    pub fault_time_s: Option<f32>,
+    /// Whether the switches were off at the end.
+    pub switches_off_at_end: bool,
+    /// Final drive state.
+    pub final_state: String,
+    /// Whether the drive stayed in control: no fault, and |speed - ref| (10 ms average)
+    /// stayed below 100 rpm whenever running.
+    pub control_kept: bool,
+    /// Largest |speed - ref| while running (10 ms average), rpm.
+    pub speed_err_max_running_rpm: f32,
+    /// Per-window steady-state metrics.
+    pub windows: BTreeMap<String, WindowMetrics>,
+    /// Load changes.
+    pub load_steps: Vec<LoadStepMetrics>,
+    /// Rs estimator convergence.
+    pub rs: RsMetrics,
+    /// Wall-clock time of the simulation, s.
+    pub wall_time_s: f64,
+    /// Simulated seconds per wall-clock second.
+    pub real_time_factor: f64,
+}
+
+fn moving_average(x: &[f32], n: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(x.len());
+    let mut sum = 0.0f64;
+    for i in 0..x.len() {
+        sum += x[i] as f64;
+        if i >= n {
+            sum -= x[i - n] as f64;
+        }
+        let len = (i + 1).min(n);
+        out.push((sum / len as f64) as f32);
+    }
+    out
+}
+
+fn idx(rows: &[Row], t: f32) -> usize {
+    rows.partition_point(|r| r.t_s < t)
+}
+
+/// Computes the metrics of a run.
+pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
+    let rows = &r.rows;
+    let sc = &r.scenario;
+    let est_err: Vec<f32> = rows.iter().map(|r| r.speed_est_rpm - r.speed_rpm).collect();
+    let spd_err: Vec<f32> = rows.iter().map(|r| r.speed_rpm - r.speed_ref_rpm).collect();
+    let est_avg = moving_average(&est_err, SMOOTHING_STEPS);
+    let load_err: Vec<f32> = rows
+        .iter()
+        .map(|r| r.load_torque_est_nm - r.load_torque_nm)
+        .collect();
+    let load_avg = moving_average(&load_err, SMOOTHING_STEPS);
+    let spd_avg = moving_average(&spd_err, SMOOTHING_STEPS);
+
+    let mut windows = BTreeMap::new();
+    for w in &sc.windows {
+        let (a, b) = (idx(rows, w.from_s), idx(rows, w.to_s));
+        if b <= a {
+            continue;
+        }
+        let n = (b - a) as f32;
+        let rs = &rows[a..b];
+        let m = WindowMetrics {
+            from_s: w.from_s,
+            to_s: w.to_s,
+            speed_est_err_max_rpm: est_avg[a..b].iter().fold(0.0, |m, x| m.max(x.abs())),
+            speed_est_err_mean_rpm: est_err[a..b].iter().sum::<f32>() / n,
+            speed_est_err_raw_max_rpm: est_err[a..b].iter().fold(0.0, |m, x| m.max(x.abs())),
+            speed_err_max_rpm: spd_avg[a..b].iter().fold(0.0, |m, x| m.max(x.abs())),
+            speed_err_mean_rpm: spd_err[a..b].iter().sum::<f32>() / n,
+            load_est_err_mean_nm: rs
+                .iter()
+                .map(|r| (r.load_torque_est_nm - r.load_torque_nm).abs())
+                .sum::<f32>()
+                / n,
+            orientation_err_max_deg: rs
+                .iter()
+                .fold(0.0, |m, r| m.max(r.orientation_error_deg.abs())),
+            rs_est_mean_ohm: rs.iter().map(|r| r.stator_resistance_est_ohm).sum::<f32>() / n,
+            speed_mean_rpm: rs.iter().map(|r| r.speed_rpm).sum::<f32>() / n,
+        };
+        windows.insert(w.name.clone(), m);
+    }
+
+    // load steps: each change until the next one (or the end)
+    let mut changes: Vec<(f32, f32)> = Vec::new();
+    let mut sorted = sc.load_profile.clone();
+    sorted.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    for p in &sorted {
+        changes.push((p.t_s, p.load().torque(1.0)));
+    }
+    let mut load_steps = Vec::new();
+    for (t, _) in changes.iter() {
+        // evaluate until the next load change or speed-target change (a reversal is not a
+        // load-tracking failure), or the end
+        let end = changes
+            .iter()
+            .map(|c| c.0)
+            .chain(sc.speed_profile.iter().map(|p| p.t_s))
+            .filter(|&x| x > *t)
+            .fold(sc.duration_s, f32::min);
+        let (a, b) = (idx(rows, *t), idx(rows, end));
+        if b <= a + 1 {
+            continue;
+        }
+        let mut last_bad_load = None;
+        let mut last_bad_speed = None;
+        let mut dip = 0.0f32;
+        for k in a..b {
+            if load_avg[k].abs() > 0.05 {
+                last_bad_load = Some(k);
+            }
+            if spd_avg[k].abs() > 5.0 {
+                last_bad_speed = Some(k);
+            }
+            dip = dip.max(spd_avg[k].abs());
+        }
+        let settle = |bad: Option<usize>| match bad {
+            None => Some(0.0),
+            Some(k) if k + 1 < b => Some(rows[k + 1].t_s - t),
+            Some(_) => None,
+        };
+        load_steps.push(LoadStepMetrics {
+            t_s: *t,
+            load_nm: rows[a].load_torque_nm,
+            load_est_settle_s: settle(last_bad_load),
+            speed_recovery_s: settle(last_bad_speed),
+            speed_dip_rpm: dip,
+        });
+    }
+
+    // Rs convergence
+    let true_rs = sc.plant.rs_ohm;
+    let mut last_out = None;
+    for (k, r) in rows.iter().enumerate() {
+        if (r.stator_resistance_est_ohm - true_rs).abs() > 0.02 * true_rs {
+            last_out = Some(k);
+        }
+    }
+    let within = match last_out {
+        None => Some(0.0),
+        Some(k) if k + 1 < rows.len() => Some(rows[k + 1].t_s),
+        Some(_) => None,
+    };
+    let running_from = rows.iter().find(|r| r.state == 2).map(|r| r.t_s);
+    let rs = RsMetrics {
+        true_ohm: true_rs,
+        initial_ohm: rows
+            .first()
+            .map(|r| r.stator_resistance_est_ohm)
+            .unwrap_or(0.0),
+        final_ohm: rows
+            .last()
+            .map(|r| r.stator_resistance_est_ohm)
+            .unwrap_or(0.0),
+        within_2pct_from_s: within,
+        within_2pct_after_running_s: match (within, running_from) {
+            (Some(w), Some(r)) => Some((w - r).max(0.0)),
+            _ => None,
+        },
+    };
+
+    let mut max_running = 0.0f32;
+    for (k, r) in rows.iter().enumerate() {
+        if r.state == 2 || r.state == 3 {
+            max_running = max_running.max(spd_avg[k].abs());
+        }
+    }
+    Metrics {
+        name: sc.name.clone(),
+        description: sc.description.clone(),
+        duration_s: sc.duration_s,
+        fault: r.fault.map(|f| format!("{f:?}")),
+        fault_time_s: r.fault_time_s,
+        switches_off_at_end: r.switches_off_at_end,
+        final_state: format!("{:?}", r.final_state),
+        control_kept: r.fault.is_none() && max_running < 100.0,
+        speed_err_max_running_rpm: max_running,
+        windows,
+        load_steps,
+        rs,
+        wall_time_s,
+        real_time_factor: if wall_time_s > 0.0 {
+            sc.duration_s as f64 / wall_time_s
+        } else {
+            0.0
+        },
+    }
+}

@@ -1,0 +1,680 @@
+//! Scenario description: plant, controller model, drive settings, inverter, sensors, DC
+//! link, speed and load profiles, injected faults and metric windows. Read from TOML
+//! (`scenarios/example.toml` documents every field) or taken from the built-in list.
+
+use acim::model::{CurrentChannels, LoadTorque};
+use acim::{MachineData, MachineParams};
+use serde::{Deserialize, Serialize};
+
+/// An error in a scenario, naming the field and the allowed range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioError {
+    /// Dotted field path, e.g. `plant.rs_ohm`.
+    pub field: String,
+    /// What is allowed.
+    pub allowed: String,
+}
+
+impl std::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "scenario field `{}`: {}", self.field, self.allowed)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+fn err<T>(field: &str, allowed: &str) -> Result<T, ScenarioError> {
+    Err(ScenarioError {
+        field: field.to_string(),
+        allowed: allowed.to_string(),
+    })
+}
+
+fn check_range(field: &str, v: f32, lo: f32, hi: f32) -> Result<(), ScenarioError> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        err(field, &format!("must be a number in [{lo}, {hi}], got {v}"))
+    }
+}
+
+/// Electrical and mechanical machine data (plant or controller model).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MachineSpec {
+    /// Stator resistance, ohm.
+    pub rs_ohm: f32,
+    /// Rotor resistance, ohm.
+    pub rr_ohm: f32,
+    /// Stator inductance, H.
+    pub ls_h: f32,
+    /// Rotor inductance, H.
+    pub lr_h: f32,
+    /// Mutual inductance, H.
+    pub lm_h: f32,
+    /// Pole pairs.
+    pub pole_pairs: u8,
+    /// Inertia, kg m^2.
+    pub inertia_kgm2: f32,
+    /// Viscous friction, N m s/rad.
+    pub friction_nms: f32,
+}
+
+impl Default for MachineSpec {
+    fn default() -> Self {
+        let d = MachineParams::paper_table1().data();
+        Self {
+            rs_ohm: d.stator_resistance,
+            rr_ohm: d.rotor_resistance,
+            ls_h: d.stator_inductance,
+            lr_h: d.rotor_inductance,
+            lm_h: d.mutual_inductance,
+            pole_pairs: d.pole_pairs,
+            inertia_kgm2: d.inertia,
+            friction_nms: d.viscous_friction,
+        }
+    }
+}
+
+impl MachineSpec {
+    fn params(&self, prefix: &str) -> Result<MachineParams, ScenarioError> {
+        check_range(&format!("{prefix}.rs_ohm"), self.rs_ohm, 1e-3, 1e3)?;
+        check_range(&format!("{prefix}.rr_ohm"), self.rr_ohm, 1e-3, 1e3)?;
+        check_range(&format!("{prefix}.ls_h"), self.ls_h, 1e-5, 100.0)?;
+        check_range(&format!("{prefix}.lr_h"), self.lr_h, 1e-5, 100.0)?;
+        check_range(&format!("{prefix}.lm_h"), self.lm_h, 1e-5, 100.0)?;
+        check_range(
+            &format!("{prefix}.inertia_kgm2"),
+            self.inertia_kgm2,
+            1e-6,
+            1e3,
+        )?;
+        check_range(
+            &format!("{prefix}.friction_nms"),
+            self.friction_nms,
+            0.0,
+            10.0,
+        )?;
+        if !(1..=32).contains(&self.pole_pairs) {
+            return err(
+                &format!("{prefix}.pole_pairs"),
+                "must be an integer in [1, 32]",
+            );
+        }
+        MachineParams::new(MachineData {
+            stator_resistance: self.rs_ohm,
+            rotor_resistance: self.rr_ohm,
+            stator_inductance: self.ls_h,
+            rotor_inductance: self.lr_h,
+            mutual_inductance: self.lm_h,
+            pole_pairs: self.pole_pairs,
+            inertia: self.inertia_kgm2,
+            viscous_friction: self.friction_nms,
+        })
+        .or_else(|e| err(&format!("{prefix}.lm_h"), &format!("{e}")))
+    }
+}
+
+/// Controller mode.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControlMode {
+    /// Sensorless IFOC (the paper's scheme).
+    Sensorless,
+    /// Open-loop V/f.
+    Vf,
+}
+
+/// Drive (controller) settings.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriveSpec {
+    /// Sensorless IFOC or open-loop V/f.
+    pub mode: ControlMode,
+    /// Control period, s.
+    pub control_period_s: f32,
+    /// Flux current reference, A peak.
+    pub flux_current_a: f32,
+    /// Stator current limit, A peak.
+    pub current_limit_a: f32,
+    /// Phase over-current trip, A.
+    pub overcurrent_trip_a: f32,
+    /// Bus under-voltage trip, V.
+    pub dc_bus_min_v: f32,
+    /// Bus over-voltage trip, V.
+    pub dc_bus_max_v: f32,
+    /// Speed reference ramp, rpm/s.
+    pub speed_ramp_rpm_s: f32,
+    /// Current-loop bandwidth, rad/s.
+    pub current_bandwidth_rad_s: f32,
+    /// Speed-loop bandwidth, rad/s.
+    pub speed_bandwidth_rad_s: f32,
+    /// Observer pole rates, rad/s.
+    pub observer_poles_rad_s: [f32; 3],
+    /// Stator-resistance estimator on.
+    pub rs_estimation: bool,
+    /// Initial Rs estimate, ohm (the controller model's Rs when absent).
+    pub rs_initial_ohm: Option<f32>,
+    /// Rs estimator convergence time constant, s.
+    pub rs_convergence_time_s: f32,
+    /// Dead time the drive compensates, s.
+    pub dead_time_comp_s: f32,
+    /// Device drop the drive compensates, V.
+    pub device_drop_comp_v: f32,
+    /// Stall (locked rotor) detection time, s.
+    pub stall_time_s: f32,
+}
+
+impl Default for DriveSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        let p = d.observer_poles;
+        Self {
+            mode: ControlMode::Sensorless,
+            control_period_s: d.control_period,
+            flux_current_a: d.flux_current,
+            current_limit_a: d.current_limit,
+            overcurrent_trip_a: d.overcurrent_trip,
+            dc_bus_min_v: d.dc_bus_min,
+            dc_bus_max_v: d.dc_bus_max,
+            speed_ramp_rpm_s: d.speed_ramp * acim::math::RAD_S_TO_RPM,
+            current_bandwidth_rad_s: d.current_bandwidth,
+            speed_bandwidth_rad_s: d.speed_bandwidth,
+            observer_poles_rad_s: [p.p1, p.p2, p.p3],
+            rs_estimation: false,
+            rs_initial_ohm: None,
+            rs_convergence_time_s: d.rs_convergence_time,
+            dead_time_comp_s: d.dead_time,
+            device_drop_comp_v: d.device_drop,
+            stall_time_s: d.stall_time,
+        }
+    }
+}
+
+/// Inverter settings of the plant.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct InverterSpec {
+    /// Dead time, s.
+    pub dead_time_s: f32,
+    /// Device on-state drop, V.
+    pub device_drop_v: f32,
+    /// Switching-level PWM (ripple) instead of period averages.
+    pub switching: bool,
+    /// RK4 sub-steps per control period.
+    pub substeps: u32,
+}
+
+impl Default for InverterSpec {
+    fn default() -> Self {
+        Self {
+            dead_time_s: 1.5e-6,
+            device_drop_v: 1.0,
+            switching: false,
+            substeps: 5,
+        }
+    }
+}
+
+/// Sensor settings of the plant.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorSpec {
+    /// Current ADC resolution, bits (8 like the paper's bench, 12 like the G4).
+    pub adc_bits: u8,
+    /// Current ADC full scale, +/- A.
+    pub full_scale_a: f32,
+    /// Current noise standard deviation, A.
+    pub noise_a: f32,
+    /// Relative gain error per channel.
+    pub gain_error: [f32; 3],
+    /// Offset per channel, A.
+    pub offset_a: [f32; 3],
+    /// Measured phases: 2 or 3.
+    pub channels: u8,
+    /// Bus ADC resolution, bits.
+    pub bus_adc_bits: u8,
+}
+
+impl Default for SensorSpec {
+    fn default() -> Self {
+        Self {
+            adc_bits: 12,
+            full_scale_a: 10.0,
+            noise_a: 0.0,
+            gain_error: [0.0; 3],
+            offset_a: [0.0; 3],
+            channels: 2,
+            bus_adc_bits: 12,
+        }
+    }
+}
+
+/// DC link: a diode-rectifier source behind a resistance, feeding a capacitor. With
+/// `capacitance_f = 0` the bus is stiff (equal to the source). The rectifier cannot take
+/// energy back, so regeneration charges the capacitor (the over-voltage fault case).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DcLinkSpec {
+    /// Source (rectified mains) voltage, V.
+    pub source_v: f32,
+    /// Bus capacitance, F (0: stiff bus).
+    pub capacitance_f: f32,
+    /// Source resistance, ohm.
+    pub source_resistance_ohm: f32,
+}
+
+impl Default for DcLinkSpec {
+    fn default() -> Self {
+        Self {
+            source_v: 325.0,
+            capacitance_f: 0.0,
+            source_resistance_ohm: 1.0,
+        }
+    }
+}
+
+/// A speed-target change at `t_s`: the drive ramps to `rpm`.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpeedPoint {
+    /// Time, s.
+    pub t_s: f32,
+    /// Target speed, rpm.
+    pub rpm: f32,
+}
+
+/// Load kinds.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoadKind {
+    /// No load.
+    None,
+    /// Opposes motion (powder brake).
+    Passive,
+    /// Constant sign (can drive the machine: regeneration).
+    Active,
+}
+
+/// A load change at `t_s`.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LoadPoint {
+    /// Time, s.
+    pub t_s: f32,
+    /// Load kind.
+    pub kind: LoadKind,
+    /// Torque, N m (positive opposes forward rotation for `active`).
+    #[serde(default)]
+    pub torque_nm: f32,
+}
+
+impl LoadPoint {
+    /// The model's load.
+    pub fn load(&self) -> LoadTorque {
+        match self.kind {
+            LoadKind::None => LoadTorque::None,
+            LoadKind::Passive => LoadTorque::Passive {
+                torque: self.torque_nm,
+            },
+            LoadKind::Active => LoadTorque::Active {
+                torque: self.torque_nm,
+            },
+        }
+    }
+}
+
+/// A controller parameter change at run time is not modelled; faults are injected into
+/// the plant or its sensors.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct FaultSpec {
+    /// Phase-a low-side switch fails short at this time (leg held at DC-), s.
+    pub phase_short_at_s: Option<f32>,
+    /// The bus source drops to `bus_sag_to_v` at this time, s.
+    pub bus_sag_at_s: Option<f32>,
+    /// Source voltage after the sag, V.
+    pub bus_sag_to_v: f32,
+    /// The rotor locks at this time, s.
+    pub locked_rotor_at_s: Option<f32>,
+    /// One phase-a current sample is NaN at this time, s.
+    pub nan_sample_at_s: Option<f32>,
+}
+
+/// A time window over which steady-state metrics are computed.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Window {
+    /// Window name (metrics key).
+    pub name: String,
+    /// Start, s.
+    pub from_s: f32,
+    /// End, s.
+    pub to_s: f32,
+}
+
+/// A whole scenario.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scenario {
+    /// Name (output file stem).
+    pub name: String,
+    /// One-line description.
+    pub description: String,
+    /// Simulated time, s.
+    pub duration_s: f32,
+    /// Noise seed.
+    pub seed: u64,
+    /// Write every n-th control step to the CSV (1 = all).
+    pub csv_decimation: u32,
+    /// The real machine.
+    pub plant: MachineSpec,
+    /// The controller's model of the machine (may differ).
+    pub controller: MachineSpec,
+    /// Drive settings.
+    pub drive: DriveSpec,
+    /// Inverter settings.
+    pub inverter: InverterSpec,
+    /// Sensor settings.
+    pub sensors: SensorSpec,
+    /// DC link.
+    pub dc_link: DcLinkSpec,
+    /// Speed-target changes.
+    pub speed_profile: Vec<SpeedPoint>,
+    /// Load changes.
+    pub load_profile: Vec<LoadPoint>,
+    /// Injected faults.
+    pub faults: FaultSpec,
+    /// Steady-state metric windows.
+    pub windows: Vec<Window>,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            name: "custom".into(),
+            description: String::new(),
+            duration_s: 5.0,
+            seed: 1,
+            csv_decimation: 1,
+            plant: MachineSpec::default(),
+            controller: MachineSpec::default(),
+            drive: DriveSpec::default(),
+            inverter: InverterSpec::default(),
+            sensors: SensorSpec::default(),
+            dc_link: DcLinkSpec::default(),
+            speed_profile: vec![],
+            load_profile: vec![],
+            faults: FaultSpec::default(),
+            windows: vec![],
+        }
+    }
+}
+
+/// Everything validated and converted to library types.
+#[derive(Clone, Debug)]
+pub struct Validated {
+    /// The real machine.
+    pub plant: MachineParams,
+    /// The drive configuration.
+    pub drive: acim::DriveConfig,
+    /// Current channels.
+    pub channels: CurrentChannels,
+}
+
+impl Scenario {
+    /// Parses TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        toml::from_str(text).or_else(|e| err("(file)", &format!("{e}")))
+    }
+
+    /// Applies `key=value` overrides (dotted keys, TOML values; a bare word is a string).
+    pub fn with_overrides(&self, sets: &[String]) -> Result<Self, ScenarioError> {
+        if sets.is_empty() {
+            return Ok(self.clone());
+        }
+        let mut v = toml::Value::try_from(self).or_else(|e| err("(scenario)", &format!("{e}")))?;
+        for s in sets {
+            let Some((key, val)) = s.split_once('=') else {
+                return err(
+                    s,
+                    "override must be key=value, e.g. drive.rs_estimation=true",
+                );
+            };
+            let key = key.trim();
+            let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("x = {}", val.trim()))
+                .ok()
+                .and_then(|t| t.get("x").cloned())
+                .unwrap_or_else(|| toml::Value::String(val.trim().to_string()));
+            let mut cur = &mut v;
+            let parts: Vec<&str> = key.split('.').collect();
+            for (i, part) in parts.iter().enumerate() {
+                let Some(table) = cur.as_table_mut() else {
+                    return err(key, "is not a field of the scenario");
+                };
+                if i + 1 == parts.len() {
+                    table.insert(part.to_string(), parsed.clone());
+                    break;
+                }
+                cur = table
+                    .entry(part.to_string())
+                    .or_insert_with(|| toml::Value::Table(Default::default()));
+            }
+        }
+        let text = toml::to_string(&v).or_else(|e| err("(scenario)", &format!("{e}")))?;
+        Self::from_toml(&text)
+    }
+
+    /// Checks every field and builds the library configuration.
+    pub fn validate(&self) -> Result<Validated, ScenarioError> {
+        check_range("duration_s", self.duration_s, 0.001, 600.0)?;
+        if self.csv_decimation == 0 {
+            return err("csv_decimation", "must be an integer >= 1");
+        }
+        let plant = self.plant.params("plant")?;
+        let ctl = self.controller.params("controller")?;
+        let d = &self.drive;
+        check_range("drive.control_period_s", d.control_period_s, 25e-6, 2e-3)?;
+        check_range("drive.flux_current_a", d.flux_current_a, 0.05, 100.0)?;
+        check_range(
+            "drive.current_limit_a",
+            d.current_limit_a,
+            d.flux_current_a * 1.01,
+            200.0,
+        )?;
+        check_range(
+            "drive.overcurrent_trip_a",
+            d.overcurrent_trip_a,
+            d.current_limit_a,
+            400.0,
+        )?;
+        check_range("drive.dc_bus_min_v", d.dc_bus_min_v, 1.0, 1000.0)?;
+        check_range(
+            "drive.dc_bus_max_v",
+            d.dc_bus_max_v,
+            d.dc_bus_min_v + 1.0,
+            2000.0,
+        )?;
+        check_range("drive.speed_ramp_rpm_s", d.speed_ramp_rpm_s, 1.0, 1e5)?;
+        check_range(
+            "drive.current_bandwidth_rad_s",
+            d.current_bandwidth_rad_s,
+            10.0,
+            0.5 / d.control_period_s,
+        )?;
+        check_range(
+            "drive.speed_bandwidth_rad_s",
+            d.speed_bandwidth_rad_s,
+            0.1,
+            d.current_bandwidth_rad_s / 4.0,
+        )?;
+        for (i, p) in d.observer_poles_rad_s.iter().enumerate() {
+            check_range(
+                &format!("drive.observer_poles_rad_s[{i}]"),
+                *p,
+                1.0,
+                0.99 / d.control_period_s,
+            )?;
+        }
+        let rs0 = d.rs_initial_ohm.unwrap_or(self.controller.rs_ohm);
+        check_range("drive.rs_initial_ohm", rs0, 1e-3, 1e3)?;
+        check_range(
+            "drive.rs_convergence_time_s",
+            d.rs_convergence_time_s,
+            1e-3,
+            100.0,
+        )?;
+        check_range(
+            "drive.dead_time_comp_s",
+            d.dead_time_comp_s,
+            0.0,
+            0.09 * d.control_period_s,
+        )?;
+        check_range("drive.device_drop_comp_v", d.device_drop_comp_v, 0.0, 20.0)?;
+        check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
+        check_range(
+            "inverter.dead_time_s",
+            self.inverter.dead_time_s,
+            0.0,
+            0.09 * d.control_period_s,
+        )?;
+        check_range(
+            "inverter.device_drop_v",
+            self.inverter.device_drop_v,
+            0.0,
+            10.0,
+        )?;
+        if !(1..=200).contains(&self.inverter.substeps) {
+            return err("inverter.substeps", "must be an integer in [1, 200]");
+        }
+        let s = &self.sensors;
+        if !(4..=24).contains(&s.adc_bits) {
+            return err("sensors.adc_bits", "must be an integer in [4, 24]");
+        }
+        if !(4..=24).contains(&s.bus_adc_bits) {
+            return err("sensors.bus_adc_bits", "must be an integer in [4, 24]");
+        }
+        check_range("sensors.full_scale_a", s.full_scale_a, 0.1, 1000.0)?;
+        check_range("sensors.noise_a", s.noise_a, 0.0, 10.0)?;
+        for i in 0..3 {
+            check_range(
+                &format!("sensors.gain_error[{i}]"),
+                s.gain_error[i],
+                -0.5,
+                0.5,
+            )?;
+            check_range(
+                &format!("sensors.offset_a[{i}]"),
+                s.offset_a[i],
+                -10.0,
+                10.0,
+            )?;
+        }
+        let channels = match s.channels {
+            2 => CurrentChannels::Two,
+            3 => CurrentChannels::Three,
+            _ => return err("sensors.channels", "must be 2 or 3"),
+        };
+        check_range("dc_link.source_v", self.dc_link.source_v, 1.0, 2000.0)?;
+        check_range(
+            "dc_link.capacitance_f",
+            self.dc_link.capacitance_f,
+            0.0,
+            10.0,
+        )?;
+        check_range(
+            "dc_link.source_resistance_ohm",
+            self.dc_link.source_resistance_ohm,
+            1e-3,
+            1e3,
+        )?;
+        for (i, p) in self.speed_profile.iter().enumerate() {
+            check_range(
+                &format!("speed_profile[{i}].t_s"),
+                p.t_s,
+                0.0,
+                self.duration_s,
+            )?;
+            check_range(&format!("speed_profile[{i}].rpm"), p.rpm, -20000.0, 20000.0)?;
+        }
+        for (i, p) in self.load_profile.iter().enumerate() {
+            check_range(
+                &format!("load_profile[{i}].t_s"),
+                p.t_s,
+                0.0,
+                self.duration_s,
+            )?;
+            check_range(
+                &format!("load_profile[{i}].torque_nm"),
+                p.torque_nm,
+                -1000.0,
+                1000.0,
+            )?;
+        }
+        let f = &self.faults;
+        for (name, t) in [
+            ("faults.phase_short_at_s", f.phase_short_at_s),
+            ("faults.bus_sag_at_s", f.bus_sag_at_s),
+            ("faults.locked_rotor_at_s", f.locked_rotor_at_s),
+            ("faults.nan_sample_at_s", f.nan_sample_at_s),
+        ] {
+            if let Some(t) = t {
+                check_range(name, t, 0.0, self.duration_s)?;
+            }
+        }
+        if f.bus_sag_at_s.is_some() {
+            check_range("faults.bus_sag_to_v", f.bus_sag_to_v, 0.0, 2000.0)?;
+        }
+        for (i, w) in self.windows.iter().enumerate() {
+            check_range(
+                &format!("windows[{i}].from_s"),
+                w.from_s,
+                0.0,
+                self.duration_s,
+            )?;
+            check_range(
+                &format!("windows[{i}].to_s"),
+                w.to_s,
+                w.from_s,
+                self.duration_s,
+            )?;
+        }
+
+        let mut drive = acim::DriveConfig::paper_defaults();
+        drive.machine = ctl;
+        drive.control_period = d.control_period_s;
+        drive.flux_current = d.flux_current_a;
+        drive.current_limit = d.current_limit_a;
+        drive.overcurrent_trip = d.overcurrent_trip_a;
+        drive.dc_bus_min = d.dc_bus_min_v;
+        drive.dc_bus_max = d.dc_bus_max_v;
+        drive.speed_ramp = d.speed_ramp_rpm_s * acim::math::RPM_TO_RAD_S;
+        drive.current_bandwidth = d.current_bandwidth_rad_s;
+        drive.speed_bandwidth = d.speed_bandwidth_rad_s;
+        drive.observer_poles = acim::observer::ObserverPoles {
+            p1: d.observer_poles_rad_s[0],
+            p2: d.observer_poles_rad_s[1],
+            p3: d.observer_poles_rad_s[2],
+        };
+        drive.rs_estimation = d.rs_estimation;
+        drive.rs_initial = rs0;
+        drive.rs_convergence_time = d.rs_convergence_time_s;
+        drive.dead_time = d.dead_time_comp_s;
+        drive.device_drop = d.device_drop_comp_v;
+        drive.stall_time = d.stall_time_s;
+        drive.current_sensing = match channels {
+            CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
+            CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
+        };
+        // the drive's own checks name its fields; map them to scenario fields
+        acim::Drive::new(drive).map_err(|e| ScenarioError {
+            field: "drive".into(),
+            allowed: format!("{e}"),
+        })?;
+        Ok(Validated {
+            plant,
+            drive,
+            channels,
+        })
+    }
+}

@@ -1,0 +1,286 @@
+//! The closed loop: the real `acim::Drive` against the in-crate plant model, one control
+//! period at a time, seeing only the sampled currents and bus voltage.
+//!
+//! Timing per period k (matching the firmware): the plant is sampled at the period
+//! boundary (PWM centre of the low-side-on interval), the drive computes duties, and those
+//! duties are applied over the next period (preloaded compare registers), so during period
+//! k the duties of step k-1 act. A switch-off (fault or stop) acts at once (the timer's
+//! main output is cleared immediately, not preloaded).
+
+use crate::scenario::{ControlMode, Scenario, ScenarioError, Validated};
+use acim::math::RAD_S_TO_RPM;
+use acim::model::{
+    BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, InductionMachine,
+    Inverter, InverterConfig, LoadTorque, Plant, PwmMode,
+};
+use acim::{Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
+use serde::Serialize;
+
+/// The CSV header: the required columns first, then extra ones.
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled";
+
+/// One recorded control step.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Row {
+    /// Time, s.
+    pub t_s: f32,
+    /// Ramped speed reference, rpm.
+    pub speed_ref_rpm: f32,
+    /// True speed, rpm.
+    pub speed_rpm: f32,
+    /// Estimated speed, rpm.
+    pub speed_est_rpm: f32,
+    /// True load torque, N m.
+    pub load_torque_nm: f32,
+    /// Estimated load torque, N m.
+    pub load_torque_est_nm: f32,
+    /// True electromagnetic torque, N m.
+    pub torque_nm: f32,
+    /// Measured i_sd in the controller's frame, A.
+    pub i_sd_a: f32,
+    /// Measured i_sq in the controller's frame, A.
+    pub i_sq_a: f32,
+    /// i_sd reference, A.
+    pub i_sd_ref_a: f32,
+    /// i_sq reference, A.
+    pub i_sq_ref_a: f32,
+    /// Model rotor flux, Wb.
+    pub rotor_flux_est: f32,
+    /// Rs estimate, ohm.
+    pub stator_resistance_est_ohm: f32,
+    /// v_sd command, V.
+    pub v_sd_v: f32,
+    /// v_sq command, V.
+    pub v_sq_v: f32,
+    /// Drive state code (0 idle, 1 magnetizing, 2 running, 3 open loop, 4 fault).
+    pub state: u8,
+    /// True DC bus, V.
+    pub dc_bus_v: f32,
+    /// True rotor flux amplitude (inverse-Gamma), Wb.
+    pub rotor_flux_true: f32,
+    /// Controller angle minus true flux angle, degrees electrical.
+    pub orientation_error_deg: f32,
+    /// PWM outputs enabled.
+    pub pwm_enabled: bool,
+}
+
+impl Row {
+    /// CSV line for this row (same column order as [`CSV_HEADER`]).
+    pub fn csv(&self) -> String {
+        format!(
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{}",
+            self.t_s,
+            self.speed_ref_rpm,
+            self.speed_rpm,
+            self.speed_est_rpm,
+            self.load_torque_nm,
+            self.load_torque_est_nm,
+            self.torque_nm,
+            self.i_sd_a,
+            self.i_sq_a,
+            self.i_sd_ref_a,
+            self.i_sq_ref_a,
+            self.rotor_flux_est,
+            self.stator_resistance_est_ohm,
+            self.v_sd_v,
+            self.v_sq_v,
+            self.state,
+            self.dc_bus_v,
+            self.rotor_flux_true,
+            self.orientation_error_deg,
+            self.pwm_enabled as u8,
+        )
+    }
+}
+
+/// Result of a run: every control step and how it ended.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// The scenario as run (overrides applied).
+    pub scenario: Scenario,
+    /// One row per control step.
+    pub rows: Vec<Row>,
+    /// Fault that stopped the drive, if any.
+    pub fault: Option<FaultReason>,
+    /// Time of the fault, s.
+    pub fault_time_s: Option<f32>,
+    /// Final drive state.
+    pub final_state: DriveState,
+    /// Whether the PWM outputs were off at the end.
+    pub switches_off_at_end: bool,
+}
+
+fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
+    let inv = Inverter::new(
+        InverterConfig {
+            dead_time: sc.inverter.dead_time_s,
+            pwm_period: sc.drive.control_period_s,
+            device_drop: sc.inverter.device_drop_v,
+            ..InverterConfig::default()
+        },
+        sc.dc_link.source_v,
+    );
+    let mut cs = CurrentSensorConfig::default();
+    cs.adc.bits = sc.sensors.adc_bits;
+    cs.adc.full_scale = sc.sensors.full_scale_a;
+    cs.channels = v.channels;
+    cs.gain_error = sc.sensors.gain_error;
+    cs.offset = sc.sensors.offset_a;
+    cs.noise_std = sc.sensors.noise_a;
+    let mut bs = BusSensorConfig::default();
+    bs.adc.bits = sc.sensors.bus_adc_bits;
+    let mut plant = Plant::new(
+        InductionMachine::new(v.plant),
+        inv,
+        CurrentSensors::new(cs, sc.seed),
+        BusVoltageSensor::new(bs, sc.seed.wrapping_add(0x5eed)),
+    );
+    plant.set_substeps(sc.inverter.substeps);
+    plant.set_mode(if sc.inverter.switching {
+        PwmMode::Switched
+    } else {
+        PwmMode::Averaged
+    });
+    plant
+}
+
+fn wrap_deg(x: f32) -> f32 {
+    let mut d = x.to_degrees() % 360.0;
+    if d > 180.0 {
+        d -= 360.0;
+    } else if d < -180.0 {
+        d += 360.0;
+    }
+    d
+}
+
+/// Runs a scenario to its end (or, after a fault, on with the switches off so the
+/// result shows the machine coasting).
+pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
+    let v = sc.validate()?;
+    let mut plant = build_plant(sc, &v);
+    let mut drive = Drive::new(v.drive).map_err(|e| ScenarioError {
+        field: "drive".into(),
+        allowed: format!("{e}"),
+    })?;
+    let ts = sc.drive.control_period_s;
+    let n = (sc.duration_s / ts).round() as usize;
+    let mut rows = Vec::with_capacity(n);
+
+    let mut speed_points = sc.speed_profile.clone();
+    speed_points.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let mut load_points = sc.load_profile.clone();
+    load_points.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let (mut si, mut li) = (0usize, 0usize);
+    let mut load = LoadTorque::None;
+
+    match sc.drive.mode {
+        ControlMode::Sensorless => drive.start(),
+        ControlMode::Vf => drive.start_open_loop(),
+    }
+    .map_err(|e| ScenarioError {
+        field: "drive.mode".into(),
+        allowed: format!("{e:?}"),
+    })?;
+
+    let mut pending = PwmOutput::OFF;
+    let mut source_v = sc.dc_link.source_v;
+    let mut bus_v = sc.dc_link.source_v;
+    let mut short_active = false;
+    let mut fault_time = None;
+    let mut nan_done = false;
+
+    for k in 0..n {
+        let t = k as f32 * ts;
+        while si < speed_points.len() && speed_points[si].t_s <= t + 0.5 * ts {
+            let _ = drive.set_speed_target(speed_points[si].rpm * acim::math::RPM_TO_RAD_S);
+            si += 1;
+        }
+        while li < load_points.len() && load_points[li].t_s <= t + 0.5 * ts {
+            load = load_points[li].load();
+            li += 1;
+        }
+        let f = &sc.faults;
+        if f.bus_sag_at_s.is_some_and(|ta| t >= ta) {
+            source_v = f.bus_sag_to_v;
+        }
+        if f.locked_rotor_at_s.is_some_and(|ta| t >= ta) && !plant.machine().is_locked() {
+            plant.machine_mut().set_locked(true);
+        }
+        short_active = short_active || f.phase_short_at_s.is_some_and(|ta| t >= ta);
+
+        // sample at the period boundary
+        let mut meas = plant.sample();
+        if !nan_done && f.nan_sample_at_s.is_some_and(|ta| t >= ta) {
+            meas.phase_currents[0] = f32::NAN;
+            nan_done = true;
+        }
+        let out = drive.step(&DriveInputs {
+            phase_currents: meas.phase_currents,
+            dc_bus: meas.dc_bus,
+        });
+        if drive.state() == DriveState::Fault && fault_time.is_none() {
+            fault_time = Some(t);
+        }
+
+        // record the state at the sampling instant
+        let tel = *drive.telemetry();
+        let m = plant.machine();
+        let lam = m.lambda_r();
+        let flux_angle = lam[1].atan2(lam[0]);
+        rows.push(Row {
+            t_s: t,
+            speed_ref_rpm: tel.speed_reference * RAD_S_TO_RPM,
+            speed_rpm: m.speed() * RAD_S_TO_RPM,
+            speed_est_rpm: tel.speed_estimate * RAD_S_TO_RPM,
+            load_torque_nm: load.torque(m.speed()),
+            load_torque_est_nm: tel.load_torque_estimate,
+            torque_nm: m.torque(),
+            i_sd_a: tel.current.d,
+            i_sq_a: tel.current.q,
+            i_sd_ref_a: tel.current_reference.d,
+            i_sq_ref_a: tel.current_reference.q,
+            rotor_flux_est: tel.rotor_flux,
+            stator_resistance_est_ohm: tel.stator_resistance_estimate,
+            v_sd_v: tel.voltage.d,
+            v_sq_v: tel.voltage.q,
+            state: drive.state().code(),
+            dc_bus_v: bus_v,
+            rotor_flux_true: (lam[0] * lam[0] + lam[1] * lam[1]).sqrt(),
+            orientation_error_deg: if drive.state() == DriveState::Running {
+                wrap_deg(tel.angle - flux_angle)
+            } else {
+                0.0
+            },
+            pwm_enabled: out.enabled,
+        });
+
+        // apply: a switch-off acts at once, new duties from the next period
+        let applied = if out.enabled { pending } else { PwmOutput::OFF };
+        let mut duties = applied.duties;
+        if short_active && applied.enabled {
+            duties[0] = 0.0; // failed low-side switch holds phase a at DC-
+        }
+        plant.set_dc_bus(bus_v);
+        plant.run_period(duties, applied.enabled, load);
+        pending = out;
+
+        // DC link: diode rectifier + capacitor (stiff when capacitance is 0)
+        if sc.dc_link.capacitance_f > 0.0 {
+            let i_dc = plant.last_period().dc_current;
+            let i_src = ((source_v - bus_v) / sc.dc_link.source_resistance_ohm).max(0.0);
+            bus_v += ts * (i_src - i_dc) / sc.dc_link.capacitance_f;
+            bus_v = bus_v.max(0.0);
+        } else {
+            bus_v = source_v;
+        }
+    }
+    Ok(RunResult {
+        scenario: sc.clone(),
+        rows,
+        fault: drive.fault(),
+        fault_time_s: fault_time,
+        final_state: drive.state(),
+        switches_off_at_end: !pending.enabled,
+    })
+}

@@ -1,0 +1,221 @@
+//! Board description: NUCLEO-G474RE + a generic three-shunt IGBT inverter for a 230 V
+//! induction motor. Every number that depends on the hardware lives here, next to the pin
+//! map, so that adapting the firmware to another power stage is an edit of this file.
+//!
+//! **The power-stage values below are assumptions, not measurements: check them against the
+//! schematic of the power stage actually connected before applying the DC bus.** They
+//! describe a typical 230 VAC, ~1 kW three-shunt IGBT board (the class of ST's
+//! STEVAL-IHM028V2 / STEVAL-IHM023V3 inverters): low-side shunts with a non-inverting
+//! amplifier biased at mid-supply, a resistive DC-bus divider, active-high gate inputs
+//! with pull-downs, and an active-low open-drain fault line (gate-driver / over-current
+//! comparator) wired to the timer's break input.
+//!
+//! Pin map (NUCLEO-G474RE Morpho/Arduino headers; AF = alternate function number):
+//!
+//! | MCU pin | function | signal | NUCLEO header |
+//! |---|---|---|---|
+//! | PA8  | TIM1_CH1  (AF6) | phase U high-side gate | Arduino D7 |
+//! | PA9  | TIM1_CH2  (AF6) | phase V high-side gate | Arduino D8 |
+//! | PA10 | TIM1_CH3  (AF6) | phase W high-side gate | Arduino D2 |
+//! | PA7  | TIM1_CH1N (AF6) | phase U low-side gate  | Arduino D11 |
+//! | PB0  | TIM1_CH2N (AF6) | phase V low-side gate  | Arduino A3 |
+//! | PB1  | TIM1_CH3N (AF6) | phase W low-side gate  | Morpho CN10 |
+//! | PA6  | TIM1_BKIN (AF6) | fault, active low (open drain, pull-up on the power board) | Arduino D12 |
+//! | PA0  | ADC1_IN1  | phase U current amplifier output | Arduino A0 |
+//! | PC1  | ADC2_IN7  | phase V current amplifier output | Arduino A4 |
+//! | PA1  | ADC2_IN2  | phase W current amplifier output | Arduino A1 |
+//! | PC0  | ADC1_IN6  | DC-bus divider output | Arduino A5 |
+//! | PA2 / PA3 | USART2 TX / RX (AF7) | commands and replies, ST-LINK virtual COM port | (on board) |
+//! | PA5  | GPIO | LD2 green LED: on while the switches are enabled | (on board) |
+//!
+//! Ground: the power stage's signal ground to a NUCLEO GND pin; its logic supply must be
+//! 3.3 V compatible (the G474 pins above are 3.3 V; PA0/PA1/PC0/PC1 are not 5 V tolerant
+//! in analog mode).
+
+use acim::{CurrentSensing, DriveConfig};
+
+/// Core clock after `freeze` (PLL from HSI16: 16 MHz / 4 * 85 / 2), Hz. Also TIM1's clock.
+pub const SYSCLK_HZ: u32 = 170_000_000;
+
+/// PWM and control frequency, Hz (the paper's 5 kHz; configurable here).
+pub const PWM_FREQUENCY_HZ: u32 = 5_000;
+
+/// Control period, s.
+pub const CONTROL_PERIOD_S: f32 = 1.0 / PWM_FREQUENCY_HZ as f32;
+
+/// Centre-aligned PWM auto-reload value: the counter runs 0 -> ARR -> 0 once per period,
+/// so ARR = f_tim / (2 f_pwm) (17 000 at 170 MHz and 5 kHz: 5.9 ns resolution).
+pub const fn pwm_arr(sysclk_hz: u32, pwm_hz: u32) -> u32 {
+    sysclk_hz / (2 * pwm_hz)
+}
+
+/// TIM1 auto-reload value for [`PWM_FREQUENCY_HZ`].
+pub const PWM_ARR: u16 = {
+    let arr = pwm_arr(SYSCLK_HZ, PWM_FREQUENCY_HZ);
+    assert!(
+        arr > 1000 && arr <= 0xFFFF,
+        "PWM frequency out of the 16-bit timer range"
+    );
+    arr as u16
+};
+
+/// Dead time inserted by TIM1 between complementary switches, ns (power-stage dependent:
+/// at least the IGBTs' turn-off time plus driver skew).
+pub const DEAD_TIME_NS: u32 = 1_500;
+
+/// The ADC's sampling window is centred on the counter peak (mid low-side-on time). The
+/// injected trigger (TRGO2 = OC4REF rising edge, CCR4 = ARR - lead) fires this long
+/// before the peak: half the first rank's sampling time (24.5 ADC clocks at 42.5 MHz).
+pub const SAMPLE_LEAD_NS: u32 = 290;
+
+/// TIM1 ticks between the trigger and the counter peak.
+pub const SAMPLE_LEAD_TICKS: u16 =
+    ((SYSCLK_HZ as u64 * SAMPLE_LEAD_NS as u64) / 1_000_000_000) as u16;
+
+/// Largest high-side duty: the low-side switch must stay on long enough around the peak
+/// for the shunt signal to settle and be sampled (3 us here).
+pub const MAX_DUTY: f32 = 1.0 - 3.0e-6 * PWM_FREQUENCY_HZ as f32;
+
+/// Electrical description of the power stage's measurement chain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PowerStage {
+    /// Human-readable description.
+    pub name: &'static str,
+    /// Number of phase shunts (2 or 3).
+    pub shunts: u8,
+    /// Shunt resistance, ohm.
+    pub shunt_ohm: f32,
+    /// Current amplifier gain, V/V.
+    pub amplifier_gain: f32,
+    /// Amplifier output at zero current (mid-supply bias), V.
+    pub amplifier_bias_v: f32,
+    /// +1 if the amplifier output rises with a current flowing into the motor, -1 if it
+    /// falls (a low-side shunt sees the motor current flowing out of DC-: usually -1).
+    pub current_sign: f32,
+    /// DC-bus divider, upper resistance, ohm.
+    pub divider_top_ohm: f32,
+    /// DC-bus divider, lower resistance (the one the ADC sees), ohm.
+    pub divider_bottom_ohm: f32,
+    /// ADC reference voltage, V (VREF+ = VDDA = 3.3 V on the NUCLEO).
+    pub adc_vref: f32,
+    /// ADC full-scale count + 1 (4096 for 12 bits).
+    pub adc_counts: u32,
+}
+
+impl PowerStage {
+    /// Phase current per ADC count, A (signed by `current_sign`).
+    pub const fn amps_per_count(&self) -> f32 {
+        self.current_sign * self.adc_vref
+            / (self.adc_counts as f32 * self.shunt_ohm * self.amplifier_gain)
+    }
+    /// DC-bus voltage per ADC count, V.
+    pub const fn volts_per_count(&self) -> f32 {
+        self.adc_vref / self.adc_counts as f32 * (self.divider_top_ohm + self.divider_bottom_ohm)
+            / self.divider_bottom_ohm
+    }
+    /// ADC count of the amplifier bias (zero current), nominal.
+    pub const fn bias_counts(&self) -> f32 {
+        self.amplifier_bias_v / self.adc_vref * self.adc_counts as f32
+    }
+    /// Largest measurable current magnitude, A (the smaller side of the bias).
+    pub const fn current_full_scale(&self) -> f32 {
+        let lo = self.amplifier_bias_v;
+        let hi = self.adc_vref - self.amplifier_bias_v;
+        let headroom = if lo < hi { lo } else { hi };
+        headroom / (self.shunt_ohm * self.amplifier_gain)
+    }
+    /// DC-bus voltage at ADC full scale, V.
+    pub const fn bus_full_scale(&self) -> f32 {
+        self.adc_vref * (self.divider_top_ohm + self.divider_bottom_ohm) / self.divider_bottom_ohm
+    }
+}
+
+/// The assumed power stage (see the module documentation: **values to be checked**).
+pub const POWER_STAGE: PowerStage = PowerStage {
+    name: "generic 3-shunt IGBT inverter, 230 VAC / 325 VDC (STEVAL-IHM028V2 class), values unverified",
+    shunts: 3,
+    shunt_ohm: 0.033,
+    amplifier_gain: 5.0,
+    amplifier_bias_v: 1.65,
+    current_sign: -1.0,
+    divider_top_ohm: 990_000.0,
+    divider_bottom_ohm: 6_800.0,
+    adc_vref: 3.3,
+    adc_counts: 4096,
+};
+
+/// Offset calibration: number of samples averaged with the switches off (0.2 s at 5 kHz).
+pub const OFFSET_CALIBRATION_SAMPLES: u32 = 1024;
+
+/// Offset calibration: largest accepted distance of a measured offset from the nominal
+/// bias, ADC counts (150 counts = 0.12 V; beyond it the amplifier or wiring is suspect).
+pub const OFFSET_TOLERANCE_COUNTS: f32 = 150.0;
+
+/// Telemetry decimation: one sample every this many control periods (10 Hz at 5 kHz).
+pub const TELEMETRY_DECIMATION: u16 = 500;
+
+/// Largest speed command accepted by the parser, rpm (the drive clamps further to 90 %
+/// of its over-speed limit).
+pub const MAX_SPEED_COMMAND_RPM: f32 = 1800.0;
+
+/// Independent watchdog timeout, ms (the main loop feeds it only while the control
+/// interrupt is alive).
+pub const WATCHDOG_TIMEOUT_MS: u32 = 100;
+
+/// USART2 baud rate (ST-LINK virtual COM port).
+pub const UART_BAUD: u32 = 115_200;
+
+/// The drive configuration for this board: the project's defaults for the paper's machine
+/// with this board's control period, dead time and current sensing.
+pub fn drive_config() -> DriveConfig {
+    let mut cfg = DriveConfig::paper_defaults();
+    cfg.control_period = CONTROL_PERIOD_S;
+    cfg.dead_time = DEAD_TIME_NS as f32 * 1e-9;
+    cfg.current_sensing = if POWER_STAGE.shunts >= 3 {
+        CurrentSensing::ThreePhase
+    } else {
+        CurrentSensing::TwoPhase
+    };
+    // the trip level must stay inside the measurable range (saturation also trips)
+    let fs = POWER_STAGE.current_full_scale();
+    if cfg.overcurrent_trip > 0.9 * fs {
+        cfg.overcurrent_trip = 0.9 * fs;
+    }
+    cfg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use acim::Drive;
+
+    #[test]
+    fn timer_values() {
+        assert_eq!(PWM_ARR, 17_000);
+        assert_eq!(SAMPLE_LEAD_TICKS, 49);
+        assert!((CONTROL_PERIOD_S - 200e-6).abs() < 1e-9);
+        const { assert!(MAX_DUTY > 0.98 && MAX_DUTY < 1.0) };
+    }
+
+    #[test]
+    fn power_stage_scales() {
+        let s = POWER_STAGE;
+        // 3.3 V / 4096 / (0.033 ohm * 5) = 4.88 mA per count, negative sign
+        assert!((s.amps_per_count() + 3.3 / 4096.0 / 0.165).abs() < 1e-7);
+        assert!((s.current_full_scale() - 10.0).abs() < 1e-4);
+        assert!((s.bias_counts() - 2048.0).abs() < 1e-3);
+        // divider: 3.3 V at the ADC is 483.7 V on the bus
+        assert!((s.bus_full_scale() - 483.7).abs() < 0.1);
+        assert!(
+            s.bus_full_scale() > 400.0,
+            "bus trip level must be measurable"
+        );
+    }
+
+    #[test]
+    fn drive_config_is_accepted() {
+        let cfg = drive_config();
+        assert!(cfg.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6);
+        assert!(Drive::new(cfg).is_ok());
+    }
+}

@@ -1,0 +1,349 @@
+//! The bounded command parser: one ASCII line per command, at most [`MAX_LINE`] bytes.
+//!
+//! ```text
+//! start            Idle -> magnetizing -> sensorless speed control
+//! vf               Idle -> open-loop V/f (commissioning)
+//! stop             switches off, the machine coasts
+//! speed <rpm>      speed target, |rpm| <= MAX_SPEED_COMMAND_RPM, e.g. "speed -500" or "speed 120.5"
+//! reset            fault -> idle
+//! params           print the drive configuration and board values
+//! status           print the state, fault and timing
+//! stream on|off    text telemetry frames on the UART as well as RTT
+//! help             list the commands
+//! ```
+//!
+//! Words are separated by spaces or tabs, case-sensitive lower case. A malformed line
+//! (unknown word, missing, extra or bad argument, non-ASCII byte, longer than
+//! [`MAX_LINE`]) yields a [`ParseError`] and no command: nothing changes.
+
+use crate::board::MAX_SPEED_COMMAND_RPM;
+use heapless::Vec;
+
+/// Longest accepted line, bytes (without the terminator).
+pub const MAX_LINE: usize = 32;
+
+/// A parsed command.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// Start sensorless speed control.
+    Start,
+    /// Start open-loop V/f.
+    StartOpenLoop,
+    /// Switches off.
+    Stop,
+    /// Speed target, rpm (mechanical).
+    Speed(f32),
+    /// Leave the fault state.
+    ResetFault,
+    /// Print the parameters.
+    Params,
+    /// Print the status.
+    Status,
+    /// Text telemetry on the UART on/off.
+    Stream(bool),
+    /// List the commands.
+    Help,
+}
+
+/// Why a line was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ParseError {
+    /// Blank line.
+    Empty,
+    /// Longer than [`MAX_LINE`] bytes.
+    TooLong,
+    /// A byte outside printable ASCII.
+    NotAscii,
+    /// Unknown command word.
+    UnknownCommand,
+    /// The command needs an argument.
+    MissingArgument,
+    /// More words than the command takes.
+    UnexpectedArgument,
+    /// The argument is not a decimal number (at most 5 integer and 3 fraction digits).
+    BadNumber,
+    /// The number is outside the accepted range.
+    OutOfRange,
+    /// Expected `on` or `off`.
+    BadSwitch,
+}
+
+impl ParseError {
+    /// Short text for the error reply.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ParseError::Empty => "empty line",
+            ParseError::TooLong => "line too long",
+            ParseError::NotAscii => "non-ASCII byte",
+            ParseError::UnknownCommand => "unknown command (try help)",
+            ParseError::MissingArgument => "missing argument",
+            ParseError::UnexpectedArgument => "unexpected argument",
+            ParseError::BadNumber => "bad number",
+            ParseError::OutOfRange => "out of range",
+            ParseError::BadSwitch => "expected on or off",
+        }
+    }
+}
+
+/// Parses one line (without its terminator).
+pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
+    if line.len() > MAX_LINE {
+        return Err(ParseError::TooLong);
+    }
+    if line
+        .iter()
+        .any(|&b| !(b == b'\t' || (0x20..0x7f).contains(&b)))
+    {
+        return Err(ParseError::NotAscii);
+    }
+    let mut words = line
+        .split(|&b| b == b' ' || b == b'\t')
+        .filter(|w| !w.is_empty());
+    let cmd = words.next().ok_or(ParseError::Empty)?;
+    let arg = words.next();
+    if words.next().is_some() {
+        return Err(ParseError::UnexpectedArgument);
+    }
+    let no_arg = |c: Command| match arg {
+        None => Ok(c),
+        Some(_) => Err(ParseError::UnexpectedArgument),
+    };
+    match cmd {
+        b"start" => no_arg(Command::Start),
+        b"vf" => no_arg(Command::StartOpenLoop),
+        b"stop" => no_arg(Command::Stop),
+        b"reset" => no_arg(Command::ResetFault),
+        b"params" => no_arg(Command::Params),
+        b"status" => no_arg(Command::Status),
+        b"help" => no_arg(Command::Help),
+        b"speed" => {
+            let a = arg.ok_or(ParseError::MissingArgument)?;
+            let rpm = parse_decimal(a).ok_or(ParseError::BadNumber)?;
+            if rpm.abs() > MAX_SPEED_COMMAND_RPM {
+                return Err(ParseError::OutOfRange);
+            }
+            Ok(Command::Speed(rpm))
+        }
+        b"stream" => match arg.ok_or(ParseError::MissingArgument)? {
+            b"on" => Ok(Command::Stream(true)),
+            b"off" => Ok(Command::Stream(false)),
+            _ => Err(ParseError::BadSwitch),
+        },
+        _ => Err(ParseError::UnknownCommand),
+    }
+}
+
+/// A bounded decimal: optional sign, 1 to 5 integer digits, optionally `.` and 1 to 3
+/// fraction digits. No exponent, no `inf`/`nan`.
+pub fn parse_decimal(s: &[u8]) -> Option<f32> {
+    let (neg, rest) = match s.split_first() {
+        Some((b'-', r)) => (true, r),
+        Some((b'+', r)) => (false, r),
+        Some(_) => (false, s),
+        None => return None,
+    };
+    let (int, frac) = match rest.iter().position(|&b| b == b'.') {
+        Some(p) => (&rest[..p], Some(&rest[p + 1..])),
+        None => (rest, None),
+    };
+    if int.is_empty() || int.len() > 5 {
+        return None;
+    }
+    let mut whole: u32 = 0;
+    for &d in int {
+        if !d.is_ascii_digit() {
+            return None;
+        }
+        whole = whole * 10 + (d - b'0') as u32;
+    }
+    let mut milli: u32 = 0;
+    if let Some(f) = frac {
+        if f.is_empty() || f.len() > 3 {
+            return None;
+        }
+        let mut scale = 100;
+        for &d in f {
+            if !d.is_ascii_digit() {
+                return None;
+            }
+            milli += (d - b'0') as u32 * scale;
+            scale /= 10;
+        }
+    }
+    // integer part and thousandths separately: whole numbers stay exact
+    let v = whole as f32 + milli as f32 / 1000.0;
+    Some(if neg { -v } else { v })
+}
+
+/// Collects bytes into lines (terminated by `\r` or `\n`) in a fixed buffer. An oversized
+/// line is discarded up to its terminator and reported once as [`ParseError::TooLong`].
+#[derive(Clone, Debug, Default)]
+pub struct LineAssembler {
+    buf: Vec<u8, MAX_LINE>,
+    overflow: bool,
+}
+
+impl LineAssembler {
+    /// An empty assembler.
+    pub const fn new() -> Self {
+        Self {
+            buf: Vec::new(),
+            overflow: false,
+        }
+    }
+
+    /// Feeds one byte; returns the parse result when it completes a non-empty line
+    /// (blank lines, e.g. the `\n` of a `\r\n` pair, return `None`).
+    pub fn push(&mut self, byte: u8) -> Option<Result<Command, ParseError>> {
+        if byte == b'\r' || byte == b'\n' {
+            let overflow = core::mem::replace(&mut self.overflow, false);
+            let result = if overflow {
+                Some(Err(ParseError::TooLong))
+            } else {
+                match parse(&self.buf) {
+                    Err(ParseError::Empty) => None,
+                    r => Some(r),
+                }
+            };
+            self.buf.clear();
+            return result;
+        }
+        if !self.overflow && self.buf.push(byte).is_err() {
+            self.overflow = true;
+            self.buf.clear();
+        }
+        None
+    }
+
+    /// Drops a partial line (e.g. after a UART overrun).
+    pub fn reset(&mut self) {
+        self.buf.clear();
+        self.overflow = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn feed(a: &mut LineAssembler, s: &[u8]) -> heapless::Vec<Result<Command, ParseError>, 8> {
+        let mut out = heapless::Vec::new();
+        for &b in s {
+            if let Some(r) = a.push(b) {
+                out.push(r).unwrap();
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn valid_commands() {
+        assert_eq!(parse(b"start"), Ok(Command::Start));
+        assert_eq!(parse(b"  stop  "), Ok(Command::Stop));
+        assert_eq!(parse(b"vf"), Ok(Command::StartOpenLoop));
+        assert_eq!(parse(b"reset"), Ok(Command::ResetFault));
+        assert_eq!(parse(b"params"), Ok(Command::Params));
+        assert_eq!(parse(b"status"), Ok(Command::Status));
+        assert_eq!(parse(b"help"), Ok(Command::Help));
+        assert_eq!(parse(b"speed 500"), Ok(Command::Speed(500.0)));
+        assert_eq!(parse(b"speed\t-120.5"), Ok(Command::Speed(-120.5)));
+        assert_eq!(parse(b"speed +0.125"), Ok(Command::Speed(0.125)));
+        assert_eq!(parse(b"speed 1800"), Ok(Command::Speed(1800.0)));
+        assert_eq!(parse(b"stream on"), Ok(Command::Stream(true)));
+        assert_eq!(parse(b"stream off"), Ok(Command::Stream(false)));
+    }
+
+    #[test]
+    fn malformed_commands() {
+        use ParseError::*;
+        let cases: &[(&[u8], ParseError)] = &[
+            (b"", Empty),
+            (b"   ", Empty),
+            (b"go", UnknownCommand),
+            (b"START", UnknownCommand),
+            (b"start now", UnexpectedArgument),
+            (b"speed", MissingArgument),
+            (b"speed 1 2", UnexpectedArgument),
+            (b"speed fast", BadNumber),
+            (b"speed 1e3", BadNumber),
+            (b"speed nan", BadNumber),
+            (b"speed inf", BadNumber),
+            (b"speed -", BadNumber),
+            (b"speed .5", BadNumber),
+            (b"speed 5.", BadNumber),
+            (b"speed 1.2345", BadNumber),
+            (b"speed 123456", BadNumber),
+            (b"speed 1.2.3", BadNumber),
+            (b"speed --5", BadNumber),
+            (b"speed 1801", OutOfRange),
+            (b"speed -99999.999", OutOfRange),
+            (b"stream", MissingArgument),
+            (b"stream maybe", BadSwitch),
+            (b"sta\xffrt", NotAscii),
+            (b"stop\x00", NotAscii),
+        ];
+        for (line, err) in cases {
+            assert_eq!(parse(line), Err(*err), "{:?}", core::str::from_utf8(line));
+        }
+    }
+
+    #[test]
+    fn oversized_line_rejected() {
+        let long = [b'a'; MAX_LINE + 1];
+        assert_eq!(parse(&long), Err(ParseError::TooLong));
+        let mut a = LineAssembler::new();
+        let mut input = [b'x'; 100];
+        input[99] = b'\n';
+        let r = feed(&mut a, &input);
+        assert_eq!(r.as_slice(), &[Err(ParseError::TooLong)]);
+        // the assembler recovers: the next line parses normally
+        assert_eq!(feed(&mut a, b"start\r\n").as_slice(), &[Ok(Command::Start)]);
+        // a line of exactly MAX_LINE bytes is accepted by the assembler
+        let mut exact = [b' '; MAX_LINE + 1];
+        exact[..4].copy_from_slice(b"stop");
+        exact[MAX_LINE] = b'\n';
+        assert_eq!(feed(&mut a, &exact).as_slice(), &[Ok(Command::Stop)]);
+    }
+
+    #[test]
+    fn assembler_lines() {
+        let mut a = LineAssembler::new();
+        let r = feed(&mut a, b"speed 300\r\n\r\nbogus\nstop\n");
+        assert_eq!(
+            r.as_slice(),
+            &[
+                Ok(Command::Speed(300.0)),
+                Err(ParseError::UnknownCommand),
+                Ok(Command::Stop)
+            ]
+        );
+        feed(&mut a, b"spe");
+        a.reset();
+        assert_eq!(
+            feed(&mut a, b"ed 1\n").as_slice(),
+            &[Err(ParseError::UnknownCommand)]
+        );
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic() {
+        // a cheap deterministic fuzz over all byte values and lengths
+        let mut a = LineAssembler::new();
+        let mut x: u32 = 1;
+        for _ in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let _ = a.push((x >> 24) as u8);
+        }
+        for n in 0..=MAX_LINE + 2 {
+            let mut line = [0u8; MAX_LINE + 2];
+            for (i, b) in line.iter_mut().enumerate().take(n) {
+                *b = b"speed -1.5 9"[i % 12];
+            }
+            let _ = parse(&line[..n]);
+        }
+    }
+}

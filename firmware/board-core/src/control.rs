@@ -1,0 +1,325 @@
+//! The per-period control loop that the firmware's interrupt runs: raw ADC counts in,
+//! PWM command out, plus fault bookkeeping and decimated telemetry.
+//!
+//! Hardware-independent and generic over the sin/cos provider, so the same code runs with
+//! the CORDIC on the target, with [`acim::frames::FastSinCos`] in host tests, and against
+//! the motor model in the self-test ([`crate::sim`]).
+
+use crate::convert::{Converter, RawSample};
+use crate::telemetry::TelemetrySample;
+use crate::timing::{CycleStats, CycleSummary, Decimator};
+use acim::frames::SinCos;
+use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
+use acim::{CommandError, Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
+
+/// Faults detected by the firmware rather than by the drive library.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FirmwareFault {
+    /// The timer's break input fired (gate driver or over-current comparator): the
+    /// hardware already cleared the main output.
+    HardwareBreak,
+    /// A new conversion completed before the previous step finished.
+    DeadlineMissed,
+    /// A current channel sat at an ADC rail.
+    AdcSaturated,
+    /// The injected sequence was incomplete when the interrupt ran.
+    AdcSequence,
+}
+
+impl FirmwareFault {
+    /// The [`FaultReason`] passed to [`Drive::trip`] (the exact firmware cause is also
+    /// kept here and published as the fault code).
+    pub fn drive_reason(self) -> FaultReason {
+        match self {
+            FirmwareFault::HardwareBreak => FaultReason::HardwareBreak,
+            FirmwareFault::AdcSaturated => FaultReason::OverCurrent,
+            FirmwareFault::DeadlineMissed => FaultReason::DeadlineMissed,
+            FirmwareFault::AdcSequence => FaultReason::NonFiniteInput,
+        }
+    }
+}
+
+/// Fault code published in telemetry: 0 none, 1..15 the drive's [`FaultReason`], 16..
+/// a [`FirmwareFault`].
+pub struct FaultCode;
+
+impl FaultCode {
+    /// The code of a fault state.
+    pub fn of(drive: Option<FaultReason>, firmware: Option<FirmwareFault>) -> u8 {
+        if let Some(f) = firmware {
+            return match f {
+                FirmwareFault::HardwareBreak => 16,
+                FirmwareFault::DeadlineMissed => 17,
+                FirmwareFault::AdcSaturated => 18,
+                FirmwareFault::AdcSequence => 19,
+            };
+        }
+        match drive {
+            None => 0,
+            Some(FaultReason::OverCurrent) => 1,
+            Some(FaultReason::DcBusOverVoltage) => 2,
+            Some(FaultReason::DcBusUnderVoltage) => 3,
+            Some(FaultReason::OverSpeed) => 4,
+            Some(FaultReason::NonFiniteInput) => 5,
+            Some(FaultReason::EstimatorOutOfRange) => 6,
+            Some(FaultReason::Stall) => 7,
+            Some(FaultReason::HardwareBreak) => 8,
+            Some(FaultReason::DeadlineMissed) => 9,
+        }
+    }
+}
+
+/// Commands the main loop sends to the interrupt (through a lock-free queue: the
+/// interrupt owns the drive, the main loop never touches it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControlCommand {
+    /// Idle -> magnetizing -> running.
+    Start,
+    /// Idle -> open-loop V/f.
+    StartOpenLoop,
+    /// Switches off.
+    Stop,
+    /// Speed target, rpm.
+    SpeedRpm(f32),
+    /// Fault -> idle (also clears a firmware fault).
+    ResetFault,
+}
+
+/// The interrupt's reply to a [`ControlCommand`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CommandReply {
+    /// The command.
+    pub command: ControlCommand,
+    /// Its outcome.
+    pub result: Result<(), CommandError>,
+}
+
+/// Drive + conversion + statistics, owned by the control interrupt.
+pub struct ControlLoop<S: SinCos> {
+    drive: Drive<S>,
+    conv: Converter,
+    stats: CycleStats,
+    last_summary: CycleSummary,
+    decim: Decimator,
+    seq: u32,
+    fw_fault: Option<FirmwareFault>,
+    inputs: DriveInputs,
+}
+
+impl<S: SinCos> ControlLoop<S> {
+    /// A loop around an idle drive; telemetry every `decimation` periods.
+    pub fn new(drive: Drive<S>, conv: Converter, decimation: u16) -> Self {
+        Self {
+            drive,
+            conv,
+            stats: CycleStats::new(),
+            last_summary: CycleSummary::default(),
+            decim: Decimator::new(decimation),
+            seq: 0,
+            fw_fault: None,
+            inputs: DriveInputs::default(),
+        }
+    }
+
+    /// One control step on this period's raw sample. A saturated current channel trips
+    /// the drive; every fault returns [`PwmOutput::OFF`] in this same step.
+    #[inline]
+    pub fn step(&mut self, raw: &RawSample) -> PwmOutput {
+        let c = self.conv.convert(raw);
+        self.inputs = c.inputs;
+        if c.saturated {
+            return self.trip(FirmwareFault::AdcSaturated);
+        }
+        self.drive.step(&c.inputs)
+    }
+
+    /// Forces a fault; the first cause is kept.
+    #[inline]
+    pub fn trip(&mut self, fault: FirmwareFault) -> PwmOutput {
+        if self.drive.fault().is_none() {
+            self.fw_fault = Some(fault);
+        }
+        self.drive.trip(fault.drive_reason())
+    }
+
+    /// Applies a command from the main loop.
+    pub fn apply(&mut self, cmd: ControlCommand) -> CommandReply {
+        let result = match cmd {
+            ControlCommand::Start => self.drive.start(),
+            ControlCommand::StartOpenLoop => self.drive.start_open_loop(),
+            ControlCommand::Stop => {
+                self.drive.stop();
+                Ok(())
+            }
+            ControlCommand::SpeedRpm(rpm) => self.drive.set_speed_target(rpm * RPM_TO_RAD_S),
+            ControlCommand::ResetFault => {
+                let r = self.drive.reset_fault();
+                if r.is_ok() {
+                    self.fw_fault = None;
+                }
+                r
+            }
+        };
+        CommandReply {
+            command: cmd,
+            result,
+        }
+    }
+
+    /// Closes the period: records the step's cycle count and, every `decimation` periods,
+    /// returns a telemetry sample. `plant_speed_rpm` is the self-test model's speed (0 on
+    /// hardware).
+    #[inline]
+    pub fn finish_period(&mut self, cycles: u32, plant_speed_rpm: f32) -> Option<TelemetrySample> {
+        self.stats.record(cycles);
+        if !self.decim.tick() {
+            return None;
+        }
+        let cyc = self.stats.take();
+        self.last_summary = cyc;
+        let t = self.drive.telemetry();
+        self.seq = self.seq.wrapping_add(1);
+        Some(TelemetrySample {
+            seq: self.seq,
+            state: self.drive.state().code(),
+            fault: self.fault_code(),
+            speed_ref_rpm: t.speed_reference * RAD_S_TO_RPM,
+            speed_est_rpm: t.speed_estimate * RAD_S_TO_RPM,
+            i_d: t.current.d,
+            i_q: t.current.q,
+            torque: t.torque_estimate,
+            load_torque: t.load_torque_estimate,
+            rs: t.stator_resistance_estimate,
+            flux: t.rotor_flux,
+            dc_bus: self.inputs.dc_bus,
+            cycles_min: cyc.min,
+            cycles_mean: cyc.mean,
+            cycles_max: cyc.max,
+            plant_speed_rpm,
+        })
+    }
+
+    /// The published fault code.
+    pub fn fault_code(&self) -> u8 {
+        FaultCode::of(self.drive.fault(), self.fw_fault)
+    }
+
+    /// The firmware-detected fault, if it was the first cause.
+    pub fn firmware_fault(&self) -> Option<FirmwareFault> {
+        self.fw_fault
+    }
+
+    /// The drive.
+    pub fn drive(&self) -> &Drive<S> {
+        &self.drive
+    }
+
+    /// State of the drive.
+    pub fn state(&self) -> DriveState {
+        self.drive.state()
+    }
+
+    /// Inputs of the last step (A, V).
+    pub fn inputs(&self) -> &DriveInputs {
+        &self.inputs
+    }
+
+    /// Cycle statistics of the last closed window.
+    pub fn last_cycles(&self) -> CycleSummary {
+        self.last_summary
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::board::{drive_config, POWER_STAGE};
+
+    fn looped() -> ControlLoop<acim::frames::FastSinCos> {
+        ControlLoop::new(
+            Drive::new(drive_config()).unwrap(),
+            Converter::new(&POWER_STAGE),
+            10,
+        )
+    }
+
+    fn raw_at_bus(c: &Converter, v: f32) -> RawSample {
+        RawSample {
+            currents: [2048; 3],
+            dc_bus: c.volts_to_counts(v),
+        }
+    }
+
+    #[test]
+    fn saturation_trips_in_the_same_step() {
+        let mut l = looped();
+        let conv = Converter::new(&POWER_STAGE);
+        assert!(l.apply(ControlCommand::Start).result.is_ok());
+        let out = l.step(&raw_at_bus(&conv, 325.0));
+        assert!(out.enabled);
+        let mut raw = raw_at_bus(&conv, 325.0);
+        raw.currents[1] = 4095;
+        let out = l.step(&raw);
+        assert!(!out.enabled);
+        assert_eq!(l.state(), DriveState::Fault);
+        assert_eq!(l.firmware_fault(), Some(FirmwareFault::AdcSaturated));
+        assert_eq!(l.fault_code(), 18);
+        // start refused while faulted, reset clears both faults
+        assert!(l.apply(ControlCommand::Start).result.is_err());
+        assert!(l.apply(ControlCommand::ResetFault).result.is_ok());
+        assert_eq!(l.fault_code(), 0);
+        assert_eq!(l.state(), DriveState::Idle);
+    }
+
+    #[test]
+    fn first_cause_is_kept() {
+        let mut l = looped();
+        let conv = Converter::new(&POWER_STAGE);
+        l.apply(ControlCommand::Start);
+        // bus over-voltage: the drive's own fault
+        let out = l.step(&raw_at_bus(&conv, 450.0));
+        assert!(!out.enabled);
+        assert_eq!(l.fault_code(), 2);
+        let out = l.trip(FirmwareFault::DeadlineMissed);
+        assert!(!out.enabled);
+        assert_eq!(
+            l.fault_code(),
+            2,
+            "later firmware trip does not hide the first cause"
+        );
+        let mut l = looped();
+        l.trip(FirmwareFault::HardwareBreak);
+        assert_eq!(l.fault_code(), 16);
+        assert_eq!(l.drive().fault(), Some(FaultReason::HardwareBreak));
+    }
+
+    #[test]
+    fn telemetry_is_decimated_with_cycle_stats() {
+        let mut l = looped();
+        let conv = Converter::new(&POWER_STAGE);
+        let mut samples = 0;
+        for k in 0..100u32 {
+            l.step(&raw_at_bus(&conv, 325.0));
+            if let Some(s) = l.finish_period(1000 + k % 10, 0.0) {
+                samples += 1;
+                assert_eq!(s.cycles_min, 1000);
+                assert_eq!(s.cycles_max, 1009);
+                assert_eq!(s.cycles_mean, 1004);
+                assert_eq!(s.state, 0);
+                assert!((s.dc_bus - 325.0).abs() < 0.2);
+            }
+        }
+        assert_eq!(samples, 10);
+    }
+
+    #[test]
+    fn speed_command_in_rpm() {
+        let mut l = looped();
+        assert!(l.apply(ControlCommand::SpeedRpm(500.0)).result.is_ok());
+        assert!(l.apply(ControlCommand::SpeedRpm(f32::NAN)).result.is_err());
+        assert!(l.apply(ControlCommand::Stop).result.is_ok());
+    }
+}

@@ -1,0 +1,31 @@
+//! # acim-firmware-core: the hardware-independent half of the STM32G474 firmware
+//!
+//! Everything here is `no_std`, allocation-free, free of `unsafe` and host-tested (plain
+//! `cargo test` at the repository root runs these tests; the firmware binary itself is
+//! only built for `thumbv7em-none-eabihf`):
+//!
+//! - [`board`]: the board description (power stage gains, pin map, PWM and ADC timing) and
+//!   the drive configuration derived from it;
+//! - [`convert`]: ADC counts to amperes and volts, offset calibration, duty to compare
+//!   counts: the one place where raw numbers become SI units;
+//! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
+//! - [`telemetry`]: the decimated telemetry sample and its text framing;
+//! - [`timing`]: cycle-count statistics and the telemetry decimator;
+//! - [`sim`]: the motor model behind this board's ADC, for the self-test;
+//! - [`control`]: the per-period control loop (conversion, faults, drive step, telemetry)
+//!   that the firmware's interrupt calls, generic over the sin/cos provider.
+//!
+//! Code reachable from [`control::ControlLoop::step`] and
+//! [`control::ControlLoop::finish_period`] runs in the 5 kHz interrupt: it must not panic
+//! and uses f32 only (the firmware's `check.sh` verifies this on the linked binary).
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod board;
+pub mod command;
+pub mod control;
+pub mod convert;
+pub mod sim;
+pub mod telemetry;
+pub mod timing;

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Builds the firmware in both modes (release, thumbv7em-none-eabihf), prints flash/RAM
+# use (llvm-size), and fails if the control interrupt can reach a panic or f64 routine,
+# if it is not in CCM SRAM, or if a budget (flash 64 KiB, static RAM 16 KiB) is exceeded.
+#
+#   firmware/check.sh [--warn-only]     (from anywhere; uses the pinned toolchain)
+#
+# Needs the rustup components llvm-tools (rust-toolchain.toml lists it) and python3.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+TARGET=thumbv7em-none-eabihf
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
+HOST=$(rustc -vV | sed -n 's/^host: //p')
+BIN="$(rustc --print sysroot)/lib/rustlib/$HOST/bin"
+[ -x "$BIN/llvm-objdump" ] || { echo "llvm-tools missing: rustup component add llvm-tools" >&2; exit 2; }
+OUT="$CARGO_TARGET_DIR/$TARGET/release"
+status=0
+for mode in power-stage selftest; do
+  if [ "$mode" = selftest ]; then feat=(--features selftest); isr=TIM6_DACUNDER; else feat=(); isr=ADC1_2; fi
+  echo "== acim-firmware, $mode build"
+  cargo build --release -p acim-firmware --target "$TARGET" "${feat[@]}"
+  cp "$OUT/acim-firmware" "$OUT/acim-firmware-$mode.elf"
+  "$BIN/llvm-size" "$OUT/acim-firmware-$mode.elf"
+  python3 firmware/fwcheck.py "$OUT/acim-firmware-$mode.elf" "$isr" "$BIN" "$@" || status=1
+done
+exit $status

@@ -1,0 +1,149 @@
+//! The control interrupt: one step per PWM period, at top priority, code and state in CCM
+//! SRAM (see ccmram.x).
+//!
+//! Hardware: ADC1's end-of-injected-sequence interrupt (`ADC1_2`), triggered through
+//! TIM1 TRGO2 at the sampling instant. Self-test: TIM6's 5 kHz update interrupt, with the
+//! motor model in place of ADC and PWM (TIM1 is never configured, outputs stay off).
+//!
+//! Per period: acknowledge, apply at most one queued command, read the samples, break /
+//! sequence checks, `ControlLoop::step`, write the PWM (switches off in this same period
+//! on any fault), deadline check, cycle statistics and decimated telemetry.
+//!
+//! Data shared with `main` only through lock-free SPSC queues and atomics: the interrupt
+//! owns the drive.
+
+use crate::board_cfg::Sc;
+use acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
+use acim_firmware_core::telemetry::TelemetrySample;
+use acim_firmware_core::timing::elapsed;
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicBool, AtomicU32, AtomicU8, Ordering};
+use cortex_m::peripheral::DWT;
+use heapless::spsc::{Consumer, Producer};
+use stm32g4xx_hal::pac::interrupt;
+
+#[cfg(not(feature = "selftest"))]
+use crate::hw;
+#[cfg(not(feature = "selftest"))]
+use acim_firmware_core::board::{MAX_DUTY, PWM_ARR};
+
+/// Telemetry queue length (holds N-1 samples: 1.5 s at 10 Hz).
+pub const TEL_Q: usize = 16;
+/// Command and reply queue length.
+pub const CMD_Q: usize = 4;
+
+/// Everything the interrupt owns.
+pub struct IsrState {
+    /// Drive, conversion and statistics.
+    pub ctl: ControlLoop<Sc>,
+    /// Telemetry out.
+    pub tel: Producer<'static, TelemetrySample, TEL_Q>,
+    /// Commands in.
+    pub cmd: Consumer<'static, ControlCommand, CMD_Q>,
+    /// Replies out.
+    pub reply: Producer<'static, CommandReply, CMD_Q>,
+    /// Self-test: the simulated power stage.
+    #[cfg(feature = "selftest")]
+    pub sim: acim_firmware_core::sim::SimulatedStage,
+}
+
+#[link_section = ".ccmram_uninit.isr_state"]
+static mut STATE: MaybeUninit<IsrState> = MaybeUninit::uninit();
+static READY: AtomicBool = AtomicBool::new(false);
+
+/// Periods run (the watchdog is fed only while this advances).
+pub static HEARTBEAT: AtomicU32 = AtomicU32::new(0);
+/// Drive state code of the last period (for the LED and `status`).
+pub static STATE_CODE: AtomicU8 = AtomicU8::new(0);
+/// Fault code of the last period.
+pub static FAULT_CODE: AtomicU8 = AtomicU8::new(0);
+/// Telemetry samples dropped because the queue was full.
+pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
+
+/// Hands the state to the interrupt. Called once by `main` before the interrupt is
+/// unmasked.
+pub fn install(state: IsrState) {
+    // SAFETY: called once, before the control interrupt is unmasked (READY is false and
+    // the handler returns early until it is set), so no reference to STATE exists.
+    unsafe { (*core::ptr::addr_of_mut!(STATE)).write(state) };
+    READY.store(true, Ordering::Release);
+}
+
+#[inline(always)]
+fn state() -> Option<&'static mut IsrState> {
+    if !READY.load(Ordering::Acquire) {
+        return None;
+    }
+    // SAFETY: STATE was initialised by `install` (READY is set after the write). Only the
+    // control interrupt takes this reference after `install`; it does not preempt itself,
+    // so the &mut is unique for the duration of one invocation.
+    Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
+}
+
+#[inline(always)]
+fn commands(st: &mut IsrState) -> Option<ControlCommand> {
+    let cmd = st.cmd.dequeue()?;
+    let r = st.ctl.apply(cmd);
+    let _ = st.reply.enqueue(r);
+    Some(cmd)
+}
+
+#[inline(always)]
+fn publish(st: &mut IsrState, cycles: u32, plant_speed_rpm: f32) {
+    if let Some(s) = st.ctl.finish_period(cycles, plant_speed_rpm) {
+        if st.tel.enqueue(s).is_err() {
+            TEL_DROPPED.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+    STATE_CODE.store(st.ctl.state().code(), Ordering::Relaxed);
+    FAULT_CODE.store(st.ctl.fault_code(), Ordering::Relaxed);
+    HEARTBEAT.fetch_add(1, Ordering::Release);
+}
+
+#[cfg(not(feature = "selftest"))]
+#[interrupt]
+fn ADC1_2() {
+    let t0 = DWT::cycle_count();
+    hw::adc_ack();
+    let Some(st) = state() else { return };
+    if let Some(ControlCommand::ResetFault) = commands(st) {
+        hw::clear_break_flag();
+    }
+    let complete = hw::adc2_done();
+    let raw = hw::adc_read();
+    let out = if hw::break_flag() {
+        st.ctl.trip(FirmwareFault::HardwareBreak)
+    } else if !complete {
+        st.ctl.trip(FirmwareFault::AdcSequence)
+    } else {
+        st.ctl.step(&raw)
+    };
+    hw::pwm_write(&out, PWM_ARR, MAX_DUTY);
+    // deadline: a newer sequence already completed while this step ran
+    if hw::adc_sequence_pending() {
+        let off = st.ctl.trip(FirmwareFault::DeadlineMissed);
+        hw::pwm_write(&off, PWM_ARR, MAX_DUTY);
+    }
+    let t1 = DWT::cycle_count();
+    publish(st, elapsed(t0, t1), 0.0);
+}
+
+#[cfg(feature = "selftest")]
+#[interrupt]
+fn TIM6_DACUNDER() {
+    let t0 = DWT::cycle_count();
+    crate::hw::tim6_ack();
+    let Some(st) = state() else { return };
+    commands(st);
+    let raw = st.sim.sample();
+    let out = st.ctl.step(&raw);
+    let t1 = DWT::cycle_count();
+    // the model is the power stage: it runs outside the measured step
+    st.sim.run_period(out);
+    if crate::hw::tim6_update_pending() {
+        st.ctl.trip(FirmwareFault::DeadlineMissed);
+        st.sim.switch_off();
+    }
+    let speed = st.sim.speed_rpm();
+    publish(st, elapsed(t0, t1), speed);
+}

@@ -1,0 +1,449 @@
+//! STM32G474 (NUCLEO-G474RE) firmware for the sensorless IFOC drive of the `acim` crate.
+//!
+//! `main` sets the clocks (170 MHz, boost mode), the watchdog, the UART command channel
+//! and either the power-stage path (TIM1 PWM, ADC injected conversions, offset
+//! calibration) or, with the `selftest` feature, the motor model on a 5 kHz TIM6
+//! interrupt; then it hands the drive to the control interrupt ([`control_isr`]) and loops:
+//! watchdog, commands, replies, telemetry. See firmware/README.md.
+#![no_std]
+#![no_main]
+
+mod ccm;
+mod control_isr;
+#[cfg(not(feature = "soft-sincos"))]
+mod cordic;
+#[cfg_attr(feature = "selftest", allow(dead_code))]
+mod hw;
+
+use acim::math::RAD_S_TO_RPM;
+use acim::Drive;
+use acim_firmware_core::board::{self, POWER_STAGE};
+use acim_firmware_core::command::{Command, LineAssembler, ParseError};
+use acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop};
+use acim_firmware_core::convert::Converter;
+use acim_firmware_core::telemetry::{self, TelemetrySample};
+use control_isr::{IsrState, CMD_Q, TEL_Q};
+use core::sync::atomic::Ordering;
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use defmt_rtt as _;
+use heapless::spsc::Queue;
+use heapless::Deque;
+use stm32g4xx_hal::hal_02::serial::{Read as _, Write as _};
+use stm32g4xx_hal::independent_watchdog::IndependentWatchdog;
+use stm32g4xx_hal::prelude::*;
+use stm32g4xx_hal::pwr::{PwrExt, VoltageScale};
+use stm32g4xx_hal::rcc::{Config, PllConfig, PllMDiv, PllNMul, PllRDiv, PllSrc, RccExt};
+use stm32g4xx_hal::serial::FullConfig;
+use stm32g4xx_hal::{pac, time::ExtU32};
+
+/// Which sin/cos the drive uses, and how it is made.
+mod board_cfg {
+    #[cfg(not(feature = "soft-sincos"))]
+    pub type Sc = crate::cordic::CordicSinCos;
+    #[cfg(feature = "soft-sincos")]
+    pub type Sc = acim::frames::FastSinCos;
+
+    #[cfg(not(feature = "soft-sincos"))]
+    pub fn sincos(c: stm32g4xx_hal::pac::CORDIC, rcc: &mut stm32g4xx_hal::rcc::Rcc) -> Sc {
+        crate::cordic::CordicSinCos::new(c, rcc)
+    }
+    #[cfg(feature = "soft-sincos")]
+    pub fn sincos(_c: stm32g4xx_hal::pac::CORDIC, _rcc: &mut stm32g4xx_hal::rcc::Rcc) -> Sc {
+        acim::frames::FastSinCos
+    }
+}
+
+static mut TEL_QUEUE: Queue<TelemetrySample, TEL_Q> = Queue::new();
+static mut CMD_QUEUE: Queue<ControlCommand, CMD_Q> = Queue::new();
+static mut REPLY_QUEUE: Queue<CommandReply, CMD_Q> = Queue::new();
+
+const MODE: &str = if cfg!(feature = "selftest") {
+    "self-test (motor model, outputs disabled)"
+} else {
+    "power stage"
+};
+
+#[entry]
+fn main() -> ! {
+    // first: the control step's code must be in CCM before anything calls it
+    ccm::init();
+
+    let Some(dp) = pac::Peripherals::take() else {
+        panic!("peripherals taken twice")
+    };
+    let Some(mut cp) = cortex_m::Peripherals::take() else {
+        panic!("core peripherals taken twice")
+    };
+
+    // 170 MHz from HSI16: 16 / 4 * 85 / 2; Range 1 boost mode (needed above 150 MHz);
+    // the HAL sets the flash wait states (4 at 170 MHz) during the switch.
+    let pwr = dp
+        .PWR
+        .constrain()
+        .vos(VoltageScale::Range1 { enable_boost: true })
+        .freeze();
+    let mut rcc = dp.RCC.constrain().freeze(
+        Config::pll()
+            .pll_cfg(PllConfig {
+                mux: PllSrc::HSI,
+                m: PllMDiv::DIV_4,
+                n: PllNMul::MUL_85,
+                r: Some(PllRDiv::DIV_2),
+                q: None,
+                p: None,
+            })
+            .boost(true),
+        pwr,
+    );
+    if rcc.clocks.sys_clk.raw() != board::SYSCLK_HZ {
+        panic!("system clock is not 170 MHz");
+    }
+    defmt::info!(
+        "acim-firmware {}: {} Hz core, {} Hz PWM, mode: {}",
+        env!("CARGO_PKG_VERSION"),
+        rcc.clocks.sys_clk.raw(),
+        board::PWM_FREQUENCY_HZ,
+        MODE
+    );
+
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    #[cfg(not(feature = "selftest"))]
+    let gpiob = dp.GPIOB.split(&mut rcc);
+    #[cfg(not(feature = "selftest"))]
+    let gpioc = dp.GPIOC.split(&mut rcc);
+    let mut led = gpioa.pa5.into_push_pull_output();
+
+    // commands and replies: USART2 on the ST-LINK virtual COM port
+    let Ok(serial) = dp.USART2.usart(
+        gpioa.pa2.into_alternate(),
+        gpioa.pa3.into_alternate(),
+        FullConfig::default()
+            .baudrate(board::UART_BAUD.bps())
+            .fifo_enable(),
+        &mut rcc,
+    ) else {
+        panic!("USART2 set-up failed")
+    };
+    let (mut tx, mut rx) = serial.split();
+
+    let sincos = board_cfg::sincos(dp.CORDIC, &mut rcc);
+    let cfg = board::drive_config();
+    let drive = match Drive::with_sincos(cfg, sincos) {
+        Ok(d) => d,
+        Err(e) => {
+            defmt::error!("drive configuration rejected: {}", e);
+            panic!("drive configuration rejected")
+        }
+    };
+    #[cfg_attr(feature = "selftest", allow(unused_mut))]
+    let mut conv = Converter::new(&POWER_STAGE);
+
+    // SAFETY: the queues are split exactly once, here, before the interrupt that uses
+    // the other halves is enabled; afterwards each half has exactly one user.
+    let (tel_p, mut tel_c) = unsafe { (*core::ptr::addr_of_mut!(TEL_QUEUE)).split() };
+    let (mut cmd_p, cmd_c) = unsafe { (*core::ptr::addr_of_mut!(CMD_QUEUE)).split() };
+    let (reply_p, mut reply_c) = unsafe { (*core::ptr::addr_of_mut!(REPLY_QUEUE)).split() };
+
+    #[cfg(not(feature = "selftest"))]
+    let irq = {
+        use stm32g4xx_hal::pwm::{Polarity, PwmAdvExt};
+        // TIM1: centre-aligned, ARR = 17000 (5 kHz), dead time, break on PA6 (active low)
+        let pins = (
+            gpioa.pa8.into_alternate(),
+            gpioa.pa9.into_alternate(),
+            gpioa.pa10.into_alternate(),
+        );
+        let (_control, (c1, c2, c3)) = dp
+            .TIM1
+            .pwm_advanced(pins, &mut rcc)
+            .prescaler(0)
+            .period(board::PWM_ARR)
+            .center_aligned()
+            .with_deadtime(board::DEAD_TIME_NS.nanos())
+            .with_break_pin(gpioa.pa6.into_alternate(), Polarity::ActiveLow)
+            .finalize();
+        // the HAL leaves MOE set: clear it before any channel is enabled
+        hw::tim1_safe_state();
+        let mut c1 = c1.into_complementary(gpioa.pa7.into_alternate());
+        let mut c2 = c2.into_complementary(gpiob.pb0.into_alternate());
+        let mut c3 = c3.into_complementary(gpiob.pb1.into_alternate());
+        c1.enable();
+        c2.enable();
+        c3.enable();
+        hw::tim1_start(board::PWM_ARR, board::PWM_ARR - board::SAMPLE_LEAD_TICKS);
+
+        // ADC pins in analog mode; ADC1: U current (IN1), bus (IN6); ADC2: V (IN7), W (IN2)
+        let _ia = gpioa.pa0.into_analog();
+        let _ic = gpioa.pa1.into_analog();
+        let _vbus = gpioc.pc0.into_analog();
+        let _ib = gpioc.pc1.into_analog();
+        let mut delay = cp.SYST.delay(&rcc.clocks);
+        let adc_ok = hw::adc_init(
+            &hw::InjectedChannels {
+                adc1: [1, 6],
+                adc2: [7, 2],
+            },
+            |us| delay.delay_us(us),
+        );
+        if !adc_ok {
+            panic!("ADC power-up or calibration timed out");
+        }
+
+        // offset calibration with the switches off (MOE = 0), triggers running
+        let mut cal = acim_firmware_core::convert::OffsetCalibrator::new();
+        while cal.count() < board::OFFSET_CALIBRATION_SAMPLES {
+            match hw::adc_poll(1_000_000) {
+                Some(raw) => cal.push(&raw),
+                None => panic!("no ADC injected conversions: TIM1 TRGO2 not running?"),
+            }
+        }
+        match cal.finish(&POWER_STAGE) {
+            Ok(off) => {
+                defmt::info!("current offsets (counts): {}", off);
+                conv = conv.with_offsets(off);
+            }
+            Err(e) => {
+                // never run with wrong offsets: outputs stay off until a power cycle
+                defmt::error!("offset calibration failed: {}; switches stay off", e);
+                halt_safe();
+            }
+        }
+        hw::adc_enable_interrupt();
+        pac::Interrupt::ADC1_2
+    };
+
+    #[cfg(feature = "selftest")]
+    let (irq, _tim6) = {
+        use stm32g4xx_hal::timer::{Event, Timer};
+        let mut t = Timer::new(dp.TIM6, &rcc.clocks).start_count_down(200.micros());
+        t.listen(Event::TimeOut);
+        let _ = conv; // nominal offsets: the simulated ADC has none
+        (pac::Interrupt::TIM6_DACUNDER, t)
+    };
+
+    control_isr::install(IsrState {
+        ctl: ControlLoop::new(drive, conv, board::TELEMETRY_DECIMATION),
+        tel: tel_p,
+        cmd: cmd_c,
+        reply: reply_p,
+        #[cfg(feature = "selftest")]
+        sim: acim_firmware_core::sim::SimulatedStage::new(conv),
+    });
+    hw::nvic_enable_top(irq, &mut cp.NVIC);
+
+    let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+    watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
+    let mut last_beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
+
+    let mut line = LineAssembler::new();
+    let mut out: Deque<u8, 512> = Deque::new();
+    let mut stream = false;
+    say(&mut out, b"acim-firmware ready (help for commands)\r\n");
+
+    loop {
+        // watchdog: fed only while the control interrupt is alive
+        let beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
+        if beat != last_beat {
+            last_beat = beat;
+            watchdog.feed();
+        }
+        let code = control_isr::STATE_CODE.load(Ordering::Relaxed);
+        if code == 1 || code == 2 || code == 3 {
+            led.set_high();
+        } else {
+            led.set_low();
+        }
+
+        // commands in
+        match rx.read() {
+            Ok(byte) => {
+                if let Some(parsed) = line.push(byte) {
+                    handle(parsed, &mut cmd_p, &mut out, &mut stream, &cfg);
+                }
+            }
+            Err(stm32g4xx_hal::nb::Error::WouldBlock) => {}
+            Err(stm32g4xx_hal::nb::Error::Other(_)) => {
+                line.reset();
+                say(&mut out, b"err uart receive error, line dropped\r\n");
+            }
+        }
+
+        // replies from the interrupt
+        while let Some(r) = reply_c.dequeue() {
+            match r.result {
+                Ok(()) => {
+                    defmt::info!("ok {}", r.command);
+                    say(&mut out, b"ok\r\n");
+                }
+                Err(e) => {
+                    defmt::warn!("refused {}: {}", r.command, e);
+                    say(&mut out, b"err refused in this state\r\n");
+                }
+            }
+        }
+
+        // telemetry
+        while let Some(s) = tel_c.dequeue() {
+            defmt::info!("{}", s);
+            if stream && out.capacity() - out.len() >= telemetry::FRAME_CAPACITY {
+                say(&mut out, &telemetry::encode(&s));
+            }
+        }
+
+        // UART out, non-blocking
+        while let Some(&b) = out.front() {
+            match tx.write(b) {
+                Ok(()) => {
+                    out.pop_front();
+                }
+                Err(_) => break,
+            }
+        }
+    }
+}
+
+fn say(out: &mut Deque<u8, 512>, text: &[u8]) {
+    for &b in text {
+        if out.push_back(b).is_err() {
+            break;
+        }
+    }
+}
+
+fn handle(
+    parsed: Result<Command, ParseError>,
+    cmd_p: &mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
+    out: &mut Deque<u8, 512>,
+    stream: &mut bool,
+    cfg: &acim::DriveConfig,
+) {
+    let c = match parsed {
+        Ok(c) => c,
+        Err(e) => {
+            defmt::warn!("command rejected: {}", e);
+            say(out, b"err ");
+            say(out, e.as_str().as_bytes());
+            say(out, b"\r\n");
+            return;
+        }
+    };
+    let to_isr = match c {
+        Command::Start => Some(ControlCommand::Start),
+        Command::StartOpenLoop => Some(ControlCommand::StartOpenLoop),
+        Command::Stop => Some(ControlCommand::Stop),
+        Command::Speed(rpm) => Some(ControlCommand::SpeedRpm(rpm)),
+        Command::ResetFault => Some(ControlCommand::ResetFault),
+        Command::Stream(on) => {
+            *stream = on;
+            say(out, b"ok\r\n");
+            None
+        }
+        Command::Params => {
+            let m = &cfg.machine;
+            defmt::info!(
+                "params: Ts {} s, flux current {} A, current limit {} A, trip {} A, bus {}..{} V, max speed {} rpm, ramp {} rpm/s, Rs0 {} ohm, Rs estimation {}, dead time {} s, sensing {}, pole pairs {}",
+                cfg.control_period,
+                cfg.flux_current,
+                cfg.current_limit,
+                cfg.overcurrent_trip,
+                cfg.dc_bus_min,
+                cfg.dc_bus_max,
+                cfg.max_speed * RAD_S_TO_RPM,
+                cfg.speed_ramp * RAD_S_TO_RPM,
+                cfg.rs_initial,
+                cfg.rs_estimation,
+                cfg.dead_time,
+                cfg.current_sensing,
+                m.pole_pairs_f32(),
+            );
+            defmt::info!(
+                "board: {}, {} A/count, {} V/count, PWM ARR {}, sample lead {} ticks",
+                POWER_STAGE.name,
+                POWER_STAGE.amps_per_count(),
+                POWER_STAGE.volts_per_count(),
+                board::PWM_ARR,
+                board::SAMPLE_LEAD_TICKS
+            );
+            say(out, b"ok parameters logged on RTT (defmt)\r\n");
+            None
+        }
+        Command::Status => {
+            let st = control_isr::STATE_CODE.load(Ordering::Relaxed);
+            let fault = control_isr::FAULT_CODE.load(Ordering::Relaxed);
+            defmt::info!(
+                "status: state {}, fault {}, outputs {}, periods {}, telemetry dropped {}",
+                st,
+                fault,
+                hw_outputs_enabled(),
+                control_isr::HEARTBEAT.load(Ordering::Relaxed),
+                control_isr::TEL_DROPPED.load(Ordering::Relaxed)
+            );
+            say(out, b"ok state ");
+            say(out, &[b'0' + st.min(9)]);
+            say(out, b" fault ");
+            say(out, &[b'0' + fault / 10 % 10, b'0' + fault % 10]);
+            say(out, b"\r\n");
+            None
+        }
+        Command::Help => {
+            say(
+                out,
+                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off\r\n",
+            );
+            None
+        }
+    };
+    if let Some(cmd) = to_isr {
+        if cmd_p.enqueue(cmd).is_err() {
+            say(out, b"err busy, command dropped\r\n");
+        }
+        // the reply ("ok" / "err refused") comes back from the interrupt
+    }
+}
+
+fn hw_outputs_enabled() -> bool {
+    if cfg!(feature = "selftest") {
+        false
+    } else {
+        hw::outputs_enabled()
+    }
+}
+
+/// Switches off and waits for a power cycle (called before the watchdog is started, so
+/// the board stays halted with its outputs off instead of resetting in a loop).
+#[cfg(not(feature = "selftest"))]
+fn halt_safe() -> ! {
+    hw::emergency_off();
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    // switches off first, before anything that could fail
+    cortex_m::interrupt::disable();
+    hw::emergency_off();
+    // location and static message only: formatting arbitrary panic arguments would link
+    // core::fmt's float machinery (~15 KB) for nothing
+    let msg = info.message().as_str().unwrap_or("(formatted message)");
+    match info.location() {
+        Some(l) => defmt::error!("panic at {}:{}: {}", l.file(), l.line(), msg),
+        None => defmt::error!("panic: {}", msg),
+    }
+    // the independent watchdog (if started) resets the MCU; the drive restarts idle
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+#[exception]
+unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+    hw::emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
