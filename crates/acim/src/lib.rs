@@ -22,6 +22,7 @@ pub use params::{MachineData, MachineParams, ParamError};
 pub mod drive;
 pub mod flux;
 pub mod frames;
+pub mod full_order;
 pub mod observer;
 pub mod pi;
 pub mod rs_estimator;
