@@ -1,0 +1,1282 @@
+//! Host-side runner of the cycle-count bench (issue 4).
+//!
+//! ```text
+//! cargo run -p acim-bench --release                  # measure, print, write results/
+//! cargo run -p acim-bench --release -- --check       # also fail on budget/panic/f64
+//! cargo run -p acim-bench --release -- --update-budget
+//! ```
+//!
+//! Steps: builds the firmware bin `acim-bench-fw` for `thumbv7em-none-eabihf` (release),
+//! disassembles it with the rustup `llvm-tools` `llvm-objdump`, finds the marker functions
+//! and the static call graph of the measured code, runs QEMU (`netduinoplus2`, Cortex-M4F)
+//! with one guest instruction per translation block and the execution log restricted by
+//! `-dfilter` to the measured code, and stream-parses the log (never held in memory):
+//! every executed instruction is one `Trace` line with its PC, so the count between the
+//! `bench_begin_R` and `bench_end_R` marker calls is exact. Each executed instruction is
+//! weighted with the Cortex-M4 timing table below to estimate cycles.
+//!
+//! ## Cortex-M4 timing table (Arm Cortex-M4 TRM r0p1, tables 3-1 and 7-1) and assumptions
+//!
+//! | instructions | cycles |
+//! |---|---|
+//! | ALU, MOV/MOVW/MOVT, CMP/TST, shifts, extend, bitfield, IT, NOP, MUL, SMULL/UMULL/SMLAL/UMLAL | 1 |
+//! | MLA, MLS | 2 |
+//! | SDIV, UDIV | 12 (the TRM's 2-12 is data dependent; worst case taken) |
+//! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2, or 1 when directly after another single load/store (pipelined) |
+//! | LDRD, STRD | 3 |
+//! | LDM/STM/PUSH/POP (N registers) | 1 + N; POP/LDM with PC: 1 + N + 2 |
+//! | B, B<cond>, CBZ/CBNZ | taken 3 (1 + 2 refill), not taken 1 |
+//! | BL, BX, BLX | 3 |
+//! | TBB, TBH | 4 |
+//! | other writes of PC (MOV/ADD/LDR pc) | + 2 |
+//! | VADD/VSUB/VMUL/VNMUL/VABS/VNEG/VCMP/VCVT/VMOV/VMRS/VMSR (F32) | 1 |
+//! | VMOV two core registers <-> two S / one D register | 2 |
+//! | VLDR, VSTR | 2 |
+//! | VLDM/VSTM/VPUSH/VPOP (N single registers, a D counts 2) | 1 + N |
+//! | VMLA/VMLS/VNMLA/VNMLS, VFMA/VFMS/VFNMA/VFNMS | 3 |
+//! | VDIV, VSQRT | 14 |
+//!
+//! Assumptions: zero-wait-state memory (code in CCM SRAM or flash hidden by the ART
+//! accelerator), no bus contention, no interrupts; no modelling of operand dependencies
+//! (a VMUL result feeding the next VADD, a load feeding an address), of the FPU's
+//! load/store pipelining beyond the table, or of IT folding (IT counted as 1). An
+//! instruction skipped inside an IT block is counted as executed (1 cycle), as the core
+//! does. QEMU itself is not cycle-accurate: only the instruction counts are exact.
+//!
+//! Region overhead: the `bl bench_end_R` call is inside the region; the minimum of the
+//! `empty` calibration region (begin immediately followed by end) is subtracted from every
+//! sample (instructions and cycles).
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+#[path = "scenario.rs"]
+#[allow(dead_code)]
+mod scenario;
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+const FW_BIN: &str = "acim-bench-fw";
+/// Budget tolerance: a region fails when its max instruction count exceeds the budget
+/// by more than this fraction.
+const BUDGET_TOLERANCE: f64 = 0.05;
+const CLOCK_MHZ: f64 = 170.0;
+
+/// The regions of the JSON report (marker regions, without the calibration one), in the
+/// order of the issue.
+const REPORT_REGIONS: [&str; 11] = [
+    "sincos",
+    "clarke_park",
+    "current_pi",
+    "speed_pi",
+    "flux_slip",
+    "observer_reduced",
+    "observer_full_order",
+    "rs_estimator",
+    "svpwm",
+    "fault_checks",
+    "drive_step",
+];
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut check = false;
+    let mut update_budget = false;
+    let mut keep_trace: Option<PathBuf> = None;
+    let mut allow_panic_paths = false;
+    let mut i = 0;
+    while i < args.len() {
+        match args[i].as_str() {
+            "--check" => check = true,
+            "--update-budget" => update_budget = true,
+            "--allow-panic-paths" => allow_panic_paths = true,
+            "--help" | "-h" => {
+                println!(
+                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the bench's replica diverged\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE"
+                );
+                return;
+            }
+            "--keep-trace" => {
+                i += 1;
+                keep_trace = args.get(i).map(PathBuf::from);
+            }
+            other => {
+                eprintln!("unknown argument {other} (see --help)");
+                std::process::exit(2);
+            }
+        }
+        i += 1;
+    }
+    match run(check, update_budget, allow_panic_paths, keep_trace) {
+        Ok(true) => {}
+        Ok(false) => {
+            eprintln!("acim-bench: CHECK FAILED");
+            std::process::exit(1);
+        }
+        Err(e) => {
+            eprintln!("acim-bench: error: {e}");
+            std::process::exit(2);
+        }
+    }
+}
+
+type Res<T> = Result<T, String>;
+
+fn bench_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn run(
+    check: bool,
+    update_budget: bool,
+    allow_panic_paths: bool,
+    keep_trace: Option<PathBuf>,
+) -> Res<bool> {
+    let t0 = Instant::now();
+    let elf = build_firmware()?;
+    let t_build = t0.elapsed();
+    let tools = llvm_tools()?;
+    let dis = Disassembly::load(&tools, &elf)?;
+    let markers = dis.markers()?;
+
+    // static call graphs: the whole measured code (for -dfilter), and the drive step alone
+    // (for the panic/f64 scan)
+    let shadow_root = dis
+        .function_named(|n| n.contains("Shadow") && n.contains("::step"))
+        .ok_or("cannot find scenario::Shadow::step in the disassembly")?;
+    let drive_root = dis
+        .function_named(|n| n == "bench_region_drive_step")
+        .ok_or("cannot find bench_region_drive_step")?;
+    let step_graph = dis.reachable(&[drive_root]);
+    let calib_root = dis
+        .function_named(|n| n == "bench_calibrate")
+        .ok_or("cannot find bench_calibrate")?;
+    let mut roots = vec![shadow_root, drive_root, calib_root];
+    roots.extend(markers.values().map(|m| m.func));
+    let measured_graph = dis.reachable(&roots);
+    let filter = dis.dfilter(&measured_graph.functions);
+
+    let qemu = Qemu::detect()?;
+    let t1 = Instant::now();
+    let (stats, profile, summary) = run_qemu(&qemu, &elf, &filter, &dis, &markers, keep_trace)?;
+    let t_qemu = t1.elapsed();
+
+    // ---- results
+    let base = stats.get("empty").cloned().unwrap_or_default();
+    let (b_i, b_c) = (base.min_i, base.min_c);
+    let mut regions = serde_json::Map::new();
+    let mut rows = Vec::new();
+    for name in REPORT_REGIONS {
+        let s = stats.get(name).cloned().unwrap_or_default();
+        if s.n == 0 {
+            return Err(format!("region {name} was never measured"));
+        }
+        let (imin, imean, imax) = (
+            s.min_i - b_i,
+            s.sum_i as f64 / s.n as f64 - b_i as f64,
+            s.max_i - b_i,
+        );
+        let (cmin, cmean, cmax) = (
+            s.min_c - b_c,
+            s.sum_c as f64 / s.n as f64 - b_c as f64,
+            s.max_c - b_c,
+        );
+        regions.insert(
+            name.to_string(),
+            serde_json::json!({
+                "instructions": {"min": imin, "mean": round2(imean), "max": imax},
+                "cycles_est": {"min": cmin, "mean": round2(cmean), "max": cmax},
+            }),
+        );
+        rows.push((name, s.n, imin, imean, imax, cmin, cmean, cmax));
+    }
+    let mean_c = |n: &str| {
+        rows.iter()
+            .find(|r| r.0 == n)
+            .map(|r| r.6)
+            .unwrap_or(f64::NAN)
+    };
+    let ratio = mean_c("observer_full_order") / mean_c("observer_reduced");
+    let json = serde_json::json!({
+        "target": format!("{TARGET} (Cortex-M4F; instructions counted in QEMU {} netduinoplus2, cycles estimated from the Cortex-M4 TRM timings)", qemu.version_string),
+        "regions": regions,
+        "full_to_reduced_observer_ratio": round2(ratio),
+    });
+    let results = bench_dir().join("results");
+    std::fs::create_dir_all(&results).map_err(|e| e.to_string())?;
+    let out = results.join("cycles.json");
+    std::fs::write(
+        &out,
+        serde_json::to_string_pretty(&json).map_err(|e| e.to_string())? + "\n",
+    )
+    .map_err(|e| format!("{}: {e}", out.display()))?;
+
+    println!();
+    println!(
+        "{:<20} {:>5} {:>7} {:>9} {:>7} | {:>7} {:>9} {:>7} | {:>8}",
+        "region", "n", "ins min", "ins mean", "ins max", "cyc min", "cyc mean", "cyc max", "us@170"
+    );
+    for r in &rows {
+        println!(
+            "{:<20} {:>5} {:>7} {:>9.1} {:>7} | {:>7} {:>9.1} {:>7} | {:>8.3}",
+            r.0,
+            r.1,
+            r.2,
+            r.3,
+            r.4,
+            r.5,
+            r.6,
+            r.7,
+            r.6 / CLOCK_MHZ
+        );
+    }
+    println!("(marker overhead subtracted: {b_i} instructions, {b_c} cycles)");
+    println!("full-order / reduced-order observer cost ratio (mean est. cycles): {ratio:.2}");
+    let targets = [
+        (
+            "observer_reduced mean <= 60 est. cycles",
+            mean_c("observer_reduced") <= 60.0,
+        ),
+        (
+            "drive_step mean <= 400 est. cycles",
+            mean_c("drive_step") <= 400.0,
+        ),
+        ("full/reduced ratio >= 3.75", ratio >= 3.75),
+    ];
+    for (t, ok) in targets {
+        println!("target {t}: {}", if ok { "met" } else { "NOT met" });
+    }
+    println!("firmware: {summary}");
+
+    // ---- profile of the drive step
+    let prof_path = results.join("profile_drive_step.txt");
+    let prof_text = profile.render(
+        &dis,
+        rows.iter()
+            .find(|r| r.0 == "drive_step")
+            .map(|r| r.1)
+            .unwrap_or(1),
+    );
+    std::fs::write(&prof_path, &prof_text).map_err(|e| e.to_string())?;
+    println!("drive-step profile: {}", prof_path.display());
+
+    // ---- panic / f64 scan
+    let mut ok = true;
+    println!();
+    println!(
+        "static scan of bench_region_drive_step and its {} callees:",
+        step_graph.functions.len() - 1
+    );
+    let findings = scan(&dis, &step_graph);
+    for f in &findings.panics {
+        println!("  PANIC PATH: {f}");
+    }
+    for f in &findings.f64 {
+        println!("  F64 SOFT-FLOAT: {f}");
+    }
+    for f in &findings.other_calls {
+        println!("  note: calls {f}");
+    }
+    for f in &findings.indirect {
+        println!("  note: indirect branch in {f}");
+    }
+    if findings.panics.is_empty() && findings.f64.is_empty() {
+        println!("  no panic and no f64 routine reachable from the drive step");
+    } else if allow_panic_paths {
+        println!("  (--allow-panic-paths: reported, not failing)");
+    } else {
+        ok = false;
+    }
+    let shadow_findings = scan(&dis, &measured_graph);
+    if !shadow_findings.panics.is_empty() || !shadow_findings.f64.is_empty() {
+        println!(
+            "  (bench harness, all regions: panics {:?}, f64 {:?})",
+            shadow_findings.panics, shadow_findings.f64
+        );
+    }
+    if !measured_graph.indirect.is_empty() {
+        println!("  warning: indirect calls in the measured code; -dfilter may hide callees");
+    }
+    if !summary.contains("mismatches=0") || summary.contains("drive_faulted=1") {
+        println!("  REPLICA: the per-block replica diverged from Drive::step or the drive faulted");
+        ok = false;
+    }
+
+    // ---- budget
+    let budget_path = bench_dir().join("budget.json");
+    if update_budget {
+        let mut b = serde_json::Map::new();
+        for r in &rows {
+            b.insert(r.0.to_string(), serde_json::json!(r.4));
+        }
+        let doc = serde_json::json!({
+            "comment": "max executed instructions per region (acim-bench, QEMU); --check fails above +5 %. Regenerate with: cargo run -p acim-bench --release -- --update-budget",
+            "max_instructions": b,
+        });
+        std::fs::write(
+            &budget_path,
+            serde_json::to_string_pretty(&doc).unwrap() + "\n",
+        )
+        .map_err(|e| e.to_string())?;
+        println!("budget written: {}", budget_path.display());
+    }
+    if check {
+        let text = std::fs::read_to_string(&budget_path)
+            .map_err(|e| format!("{}: {e}", budget_path.display()))?;
+        let doc: serde_json::Value = serde_json::from_str(&text).map_err(|e| e.to_string())?;
+        println!();
+        println!(
+            "budget check ({}, +{:.0} %):",
+            budget_path.display(),
+            BUDGET_TOLERANCE * 100.0
+        );
+        for r in &rows {
+            match doc["max_instructions"][r.0].as_u64() {
+                Some(b) => {
+                    let limit = b as f64 * (1.0 + BUDGET_TOLERANCE);
+                    let pass = (r.4 as f64) <= limit;
+                    println!(
+                        "  {:<20} max {:>6} budget {:>6} {}",
+                        r.0,
+                        r.4,
+                        b,
+                        if pass { "ok" } else { "OVER BUDGET" }
+                    );
+                    ok &= pass;
+                }
+                None => {
+                    println!("  {:<20} no budget entry", r.0);
+                    ok = false;
+                }
+            }
+        }
+    }
+    println!();
+    println!(
+        "time: build {:.1} s, QEMU run + parse {:.1} s; results: {}",
+        t_build.as_secs_f64(),
+        t_qemu.as_secs_f64(),
+        out.display()
+    );
+    Ok(ok)
+}
+
+fn round2(x: f64) -> f64 {
+    (x * 100.0).round() / 100.0
+}
+
+// ------------------------------------------------------------------------------------
+// building and tools
+// ------------------------------------------------------------------------------------
+
+fn cargo() -> String {
+    std::env::var("CARGO").unwrap_or_else(|_| "cargo".into())
+}
+
+fn build_firmware() -> Res<PathBuf> {
+    let mut cmd = Command::new(cargo());
+    cmd.args([
+        "build",
+        "--release",
+        "--target",
+        TARGET,
+        "-p",
+        "acim-bench",
+        "--bin",
+        FW_BIN,
+        "--message-format=json-render-diagnostics",
+    ])
+    .current_dir(bench_dir())
+    .stdout(Stdio::piped())
+    .stderr(Stdio::inherit());
+    eprintln!("building {FW_BIN} for {TARGET} (release) ...");
+    let out = cmd.output().map_err(|e| format!("cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "building the firmware failed (is the target installed? rustup target add {TARGET})"
+        ));
+    }
+    let mut exe = None;
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(line) {
+            if v["reason"] == "compiler-artifact" && v["target"]["name"] == FW_BIN {
+                if let Some(p) = v["executable"].as_str() {
+                    exe = Some(PathBuf::from(p));
+                }
+            }
+        }
+    }
+    exe.ok_or_else(|| "cargo did not report the firmware executable".into())
+}
+
+struct Tools {
+    objdump: PathBuf,
+}
+
+fn llvm_tools() -> Res<Tools> {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let sysroot = Command::new(&rustc)
+        .args(["--print", "sysroot"])
+        .output()
+        .map_err(|e| format!("rustc: {e}"))?;
+    let vv = Command::new(&rustc)
+        .arg("-vV")
+        .output()
+        .map_err(|e| format!("rustc: {e}"))?;
+    let host = String::from_utf8_lossy(&vv.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("host: ").map(str::to_string))
+        .ok_or("rustc -vV: no host line")?;
+    let dir = PathBuf::from(String::from_utf8_lossy(&sysroot.stdout).trim())
+        .join("lib/rustlib")
+        .join(host)
+        .join("bin");
+    let objdump = dir.join("llvm-objdump");
+    if !objdump.exists() {
+        return Err(format!(
+            "{} not found: rustup component add llvm-tools",
+            objdump.display()
+        ));
+    }
+    Ok(Tools { objdump })
+}
+
+// ------------------------------------------------------------------------------------
+// disassembly
+// ------------------------------------------------------------------------------------
+
+#[derive(Clone, Debug)]
+struct Insn {
+    addr: u32,
+    size: u32,
+    mnemonic: String,
+    operands: String,
+    func: usize,
+}
+
+#[derive(Clone, Debug)]
+struct Func {
+    name: String,
+    start: u32,
+    end: u32,
+}
+
+struct Disassembly {
+    funcs: Vec<Func>,
+    /// index by (addr - base) / 2
+    base: u32,
+    table: Vec<Option<usize>>,
+    insns: Vec<Insn>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Marker {
+    region: &'static str,
+    begin: bool,
+    func: usize,
+}
+
+struct Graph {
+    functions: BTreeSet<usize>,
+    indirect: BTreeSet<usize>,
+}
+
+impl Disassembly {
+    fn load(tools: &Tools, elf: &Path) -> Res<Self> {
+        let out = Command::new(&tools.objdump)
+            .args(["-d", "-C"])
+            .arg(elf)
+            .output()
+            .map_err(|e| format!("llvm-objdump: {e}"))?;
+        if !out.status.success() {
+            return Err(format!("llvm-objdump failed on {}", elf.display()));
+        }
+        let text = String::from_utf8_lossy(&out.stdout);
+        let mut funcs: Vec<Func> = Vec::new();
+        let mut insns: Vec<Insn> = Vec::new();
+        for line in text.lines() {
+            // function label: "08000400 <Reset>:"
+            if let Some(rest) = line.strip_suffix(">:") {
+                if let Some((a, name)) = rest.split_once(" <") {
+                    if let Ok(addr) = u32::from_str_radix(a.trim(), 16) {
+                        if let Some(f) = funcs.last_mut() {
+                            if f.end == 0 {
+                                f.end = addr;
+                            }
+                        }
+                        funcs.push(Func {
+                            name: name.to_string(),
+                            start: addr,
+                            end: 0,
+                        });
+                    }
+                }
+                continue;
+            }
+            // instruction: " 8000400: b580         \tpush\t{r7, lr}"
+            let Some((a, rest)) = line.split_once(':') else {
+                continue;
+            };
+            let Ok(addr) = u32::from_str_radix(a.trim(), 16) else {
+                continue;
+            };
+            if funcs.is_empty() {
+                continue;
+            }
+            let mut parts = rest.split('\t');
+            let raw = parts.next().unwrap_or("").trim();
+            let size: u32 = raw.split_whitespace().map(|w| (w.len() / 2) as u32).sum();
+            let mnemonic = parts.next().unwrap_or("").trim().to_string();
+            let operands = parts.collect::<Vec<_>>().join("\t").trim().to_string();
+            if size == 0 || mnemonic.is_empty() {
+                continue;
+            }
+            insns.push(Insn {
+                addr,
+                size,
+                mnemonic,
+                operands,
+                func: funcs.len() - 1,
+            });
+        }
+        if let (Some(f), Some(i)) = (funcs.last_mut(), insns.last()) {
+            if f.end == 0 {
+                f.end = i.addr + i.size;
+            }
+        }
+        if insns.is_empty() {
+            return Err("empty disassembly".into());
+        }
+        let base = insns.iter().map(|i| i.addr).min().unwrap_or(0) & !1;
+        let top = insns.iter().map(|i| i.addr + i.size).max().unwrap_or(0);
+        let mut table = vec![None; ((top - base) / 2 + 1) as usize];
+        for (k, i) in insns.iter().enumerate() {
+            table[((i.addr - base) / 2) as usize] = Some(k);
+        }
+        Ok(Self {
+            funcs,
+            base,
+            table,
+            insns,
+        })
+    }
+
+    fn at(&self, pc: u32) -> Option<&Insn> {
+        let off = pc.checked_sub(self.base)? / 2;
+        self.table
+            .get(off as usize)
+            .copied()
+            .flatten()
+            .map(|k| &self.insns[k])
+    }
+
+    fn function_named(&self, pred: impl Fn(&str) -> bool) -> Option<usize> {
+        self.funcs.iter().position(|f| pred(&f.name))
+    }
+
+    fn function_at(&self, addr: u32) -> Option<usize> {
+        self.funcs
+            .iter()
+            .position(|f| f.start <= addr && addr < f.end.max(f.start + 1))
+    }
+
+    fn markers(&self) -> Res<HashMap<u32, Marker>> {
+        let mut m = HashMap::new();
+        for r in scenario::REGIONS {
+            for begin in [true, false] {
+                let name = format!("bench_{}_{}", if begin { "begin" } else { "end" }, r);
+                let func = self
+                    .function_named(|n| n == name)
+                    .ok_or_else(|| format!("marker {name} not found in the ELF"))?;
+                let start = self.funcs[func].start;
+                if m.insert(
+                    start,
+                    Marker {
+                        region: r,
+                        begin,
+                        func,
+                    },
+                )
+                .is_some()
+                {
+                    return Err(format!("marker {name} shares its address with another"));
+                }
+            }
+        }
+        Ok(m)
+    }
+
+    /// Functions reachable from `roots` through direct calls and branches to other
+    /// functions (tail calls); indirect branches are recorded.
+    fn reachable(&self, roots: &[usize]) -> Graph {
+        let mut seen: BTreeSet<usize> = BTreeSet::new();
+        let mut indirect = BTreeSet::new();
+        let mut stack: Vec<usize> = roots.to_vec();
+        let mut by_func: HashMap<usize, Vec<usize>> = HashMap::new();
+        for (k, i) in self.insns.iter().enumerate() {
+            by_func.entry(i.func).or_default().push(k);
+        }
+        while let Some(f) = stack.pop() {
+            if !seen.insert(f) {
+                continue;
+            }
+            for &k in by_func.get(&f).map(Vec::as_slice).unwrap_or(&[]) {
+                let i = &self.insns[k];
+                let base = base_mnemonic(&i.mnemonic);
+                match base.as_str() {
+                    "bl" | "b" | "blx" | "cbz" | "cbnz" => {
+                        if let Some(t) = branch_target(&i.operands) {
+                            if let Some(g) = self.function_at(t) {
+                                if g != f {
+                                    stack.push(g);
+                                }
+                            }
+                        } else if base == "blx" || (base == "b" && !i.operands.is_empty()) {
+                            indirect.insert(f);
+                        }
+                    }
+                    "bx" if !i.operands.starts_with("lr") => {
+                        indirect.insert(f);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        Graph {
+            functions: seen,
+            indirect,
+        }
+    }
+
+    /// `-dfilter` ranges covering the given functions (adjacent ones merged).
+    fn dfilter(&self, funcs: &BTreeSet<usize>) -> String {
+        let mut ranges: Vec<(u32, u32)> = funcs
+            .iter()
+            .map(|&f| (self.funcs[f].start, self.funcs[f].end))
+            .collect();
+        ranges.sort();
+        let mut merged: Vec<(u32, u32)> = Vec::new();
+        for (s, e) in ranges {
+            match merged.last_mut() {
+                Some(last) if s <= last.1 + 16 => last.1 = last.1.max(e),
+                _ => merged.push((s, e)),
+            }
+        }
+        merged
+            .iter()
+            .map(|(s, e)| format!("0x{s:x}..0x{:x}", e.saturating_sub(1).max(*s)))
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+}
+
+fn branch_target(ops: &str) -> Option<u32> {
+    // "0x8007a0c <bench_begin_drive_step> @ imm = ..." or "r0, 0x80077e6 <...>"
+    ops.split([' ', ',', '\t'])
+        .find_map(|w| w.strip_prefix("0x"))
+        .and_then(|h| u32::from_str_radix(h, 16).ok())
+}
+
+const CONDS: [&str; 16] = [
+    "eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt", "le",
+];
+
+const KNOWN: &[&str] = &[
+    "adc", "add", "addw", "adr", "and", "asr", "b", "bfc", "bfi", "bic", "bkpt", "bl", "blx", "bx",
+    "cbnz", "cbz", "clz", "cmn", "cmp", "cpsid", "cpsie", "dmb", "dsb", "eor", "isb", "it", "ite",
+    "itt", "itee", "itet", "itte", "ittt", "iteee", "iteet", "itete", "itett", "ittee", "ittet",
+    "ittte", "itttt", "ldm", "ldmdb", "ldmia", "ldr", "ldrb", "ldrd", "ldrex", "ldrh", "ldrsb",
+    "ldrsh", "lsl", "lsr", "mla", "mls", "mov", "movt", "movw", "mrs", "msr", "mul", "mvn", "nop",
+    "orn", "orr", "pop", "push", "rbit", "rev", "rev16", "revsh", "ror", "rrx", "rsb", "sbc",
+    "sbfx", "sdiv", "smlal", "smull", "ssat", "stm", "stmdb", "stmia", "str", "strb", "strd",
+    "strex", "strh", "sub", "subw", "svc", "sxtb", "sxth", "tbb", "tbh", "teq", "tst", "ubfx",
+    "udf", "udiv", "umlal", "umull", "usat", "uxtb", "uxth", "vabs", "vadd", "vcmp", "vcmpe",
+    "vcvt", "vcvtr", "vdiv", "vfma", "vfms", "vfnma", "vfnms", "vldm", "vldmia", "vldmdb", "vldr",
+    "vmla", "vmls", "vmov", "vmrs", "vmsr", "vmul", "vneg", "vnmla", "vnmls", "vnmul", "vpop",
+    "vpush", "vsqrt", "vstm", "vstmia", "vstmdb", "vstr", "vsub", "wfi", "yield", "smmul", "smmla",
+    "umaal", "pld",
+];
+
+/// Mnemonic without the width qualifier, data type, condition code and S suffix.
+fn base_mnemonic(m: &str) -> String {
+    let head = m.split('.').next().unwrap_or(m).to_ascii_lowercase();
+    if KNOWN.contains(&head.as_str()) {
+        return head;
+    }
+    for c in CONDS {
+        if let Some(h) = head.strip_suffix(c) {
+            if KNOWN.contains(&h) {
+                return h.to_string();
+            }
+            if let Some(h2) = h.strip_suffix('s') {
+                if KNOWN.contains(&h2) {
+                    return h2.to_string();
+                }
+            }
+        }
+    }
+    if let Some(h) = head.strip_suffix('s') {
+        if KNOWN.contains(&h) {
+            return h.to_string();
+        }
+    }
+    head
+}
+
+fn reg_count(ops: &str) -> u32 {
+    // "{r4, r5, r6, r7, lr}" or "{d8, d9}" or "r3, {r0, r1, r2, r3}" or "{s16-s19}"
+    let Some(start) = ops.find('{') else { return 1 };
+    let end = ops[start..]
+        .find('}')
+        .map(|e| start + e)
+        .unwrap_or(ops.len());
+    let mut n = 0;
+    for r in ops[start + 1..end].split(',') {
+        let r = r.trim();
+        let w = if r.starts_with('d') { 2 } else { 1 };
+        if let Some((a, b)) = r.split_once('-') {
+            let num = |x: &str| {
+                x.trim()
+                    .trim_start_matches(|c: char| c.is_alphabetic())
+                    .parse::<u32>()
+                    .ok()
+            };
+            if let (Some(a), Some(b)) = (num(a), num(b)) {
+                n += (b.saturating_sub(a) + 1) * w;
+                continue;
+            }
+        }
+        n += w;
+    }
+    n.max(1)
+}
+
+/// Instruction class for the profile and the pipelining rule.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+enum Class {
+    Alu,
+    Mul,
+    Div,
+    LoadStore,
+    LoadStoreDouble,
+    LoadStoreMultiple,
+    Branch,
+    Call,
+    It,
+    FpAluMov,
+    FpLoadStore,
+    FpMultiple,
+    FpMac,
+    FpDivSqrt,
+    Other,
+}
+
+/// Estimated Cortex-M4 cycles of one executed instruction (see the table in the crate
+/// docs). `taken`: the next executed PC is not the next instruction; `after_ls`: the
+/// previous executed instruction was a single load/store.
+fn cycles(i: &Insn, taken: bool, after_ls: bool) -> (u32, Class) {
+    let b = base_mnemonic(&i.mnemonic);
+    let ops = i.operands.as_str();
+    let writes_pc =
+        ops.starts_with("pc") || (ops.contains("pc}") && (b == "pop" || b.starts_with("ldm")));
+    let refill = 2;
+    match b.as_str() {
+        "ldr" | "ldrb" | "ldrh" | "ldrsb" | "ldrsh" | "ldrex" | "str" | "strb" | "strh"
+        | "strex" => {
+            let c = if after_ls { 1 } else { 2 };
+            (c + if writes_pc { refill } else { 0 }, Class::LoadStore)
+        }
+        "ldrd" | "strd" => (3, Class::LoadStoreDouble),
+        "ldm" | "ldmia" | "ldmdb" | "stm" | "stmia" | "stmdb" | "push" | "pop" => {
+            let n = reg_count(ops);
+            (
+                1 + n + if writes_pc { refill } else { 0 },
+                Class::LoadStoreMultiple,
+            )
+        }
+        "b" | "cbz" | "cbnz" => (if taken { 1 + refill } else { 1 }, Class::Branch),
+        "bl" | "blx" => (1 + refill, Class::Call),
+        "bx" => (1 + refill, Class::Branch),
+        "tbb" | "tbh" => (2 + refill, Class::Branch),
+        "mla" | "mls" => (2, Class::Mul),
+        "mul" | "smull" | "umull" | "smlal" | "umlal" | "smmul" | "smmla" | "umaal" => {
+            (1, Class::Mul)
+        }
+        "sdiv" | "udiv" => (12, Class::Div),
+        "vldr" | "vstr" => (2, Class::FpLoadStore),
+        "vldm" | "vldmia" | "vldmdb" | "vstm" | "vstmia" | "vstmdb" | "vpush" | "vpop" => {
+            (1 + reg_count(ops), Class::FpMultiple)
+        }
+        "vmla" | "vmls" | "vnmla" | "vnmls" | "vfma" | "vfms" | "vfnma" | "vfnms" => {
+            (3, Class::FpMac)
+        }
+        "vdiv" | "vsqrt" => (14, Class::FpDivSqrt),
+        "vmov" => {
+            // two core registers <-> two singles or a double: 2
+            let n_ops = ops.split(',').count();
+            (
+                if n_ops >= 3 || ops.contains(" d") || ops.starts_with('d') {
+                    2
+                } else {
+                    1
+                },
+                Class::FpAluMov,
+            )
+        }
+        "vadd" | "vsub" | "vmul" | "vnmul" | "vabs" | "vneg" | "vcmp" | "vcmpe" | "vcvt"
+        | "vcvtr" | "vmrs" | "vmsr" => (1, Class::FpAluMov),
+        b if b.starts_with("it") => (1, Class::It),
+        _ if KNOWN.contains(&b.as_str()) => (1 + if writes_pc { refill } else { 0 }, Class::Alu),
+        _ => (1, Class::Other),
+    }
+}
+
+fn is_single_ls(class: Class) -> bool {
+    class == Class::LoadStore
+}
+
+// ------------------------------------------------------------------------------------
+// QEMU
+// ------------------------------------------------------------------------------------
+
+struct Qemu {
+    one_insn_args: Vec<String>,
+    version_string: String,
+}
+
+impl Qemu {
+    fn detect() -> Res<Self> {
+        let out = Command::new("qemu-system-arm")
+            .arg("--version")
+            .output()
+            .map_err(|e| {
+                format!("qemu-system-arm not found ({e}): apt-get install qemu-system-arm")
+            })?;
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        // "QEMU emulator version 7.2.x (Debian ...)"
+        let ver = text
+            .split_whitespace()
+            .skip_while(|w| *w != "version")
+            .nth(1)
+            .unwrap_or("0.0")
+            .to_string();
+        let mut it = ver.split('.').map(|x| x.parse::<u32>().unwrap_or(0));
+        let (major, minor) = (it.next().unwrap_or(0), it.next().unwrap_or(0));
+        // QEMU 8.1 deprecated -singlestep for -accel tcg,one-insn-per-tb=on (removed in 9.0)
+        let one_insn_args = if (major, minor) >= (8, 1) {
+            vec!["-accel".into(), "tcg,one-insn-per-tb=on".into()]
+        } else {
+            vec!["-singlestep".into()]
+        };
+        Ok(Self {
+            one_insn_args,
+            version_string: ver,
+        })
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+struct Stat {
+    n: u64,
+    min_i: u64,
+    max_i: u64,
+    sum_i: u64,
+    min_c: u64,
+    max_c: u64,
+    sum_c: u64,
+}
+
+impl Stat {
+    fn add(&mut self, i: u64, c: u64) {
+        if self.n == 0 {
+            self.min_i = i;
+            self.max_i = i;
+            self.min_c = c;
+            self.max_c = c;
+        } else {
+            self.min_i = self.min_i.min(i);
+            self.max_i = self.max_i.max(i);
+            self.min_c = self.min_c.min(c);
+            self.max_c = self.max_c.max(c);
+        }
+        self.n += 1;
+        self.sum_i += i;
+        self.sum_c += c;
+    }
+}
+
+/// Per-instruction execution counts and cycles inside the drive-step region.
+#[derive(Default)]
+struct Profile {
+    by_pc: HashMap<u32, (u64, u64)>,
+}
+
+impl Profile {
+    fn render(&self, dis: &Disassembly, steps: u64) -> String {
+        let steps = steps.max(1) as f64;
+        let mut by_func: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+        let mut by_class: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+        let mut by_mnem: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+        let (mut ti, mut tc) = (0u64, 0u64);
+        for (&pc, &(n, c)) in &self.by_pc {
+            let Some(i) = dis.at(pc) else { continue };
+            let f = by_func.entry(dis.funcs[i.func].name.clone()).or_default();
+            f.0 += n;
+            f.1 += c;
+            let (_, class) = cycles(i, false, false);
+            let k = by_class.entry(format!("{class:?}")).or_default();
+            k.0 += n;
+            k.1 += c;
+            let m = by_mnem.entry(i.mnemonic.clone()).or_default();
+            m.0 += n;
+            m.1 += c;
+            ti += n;
+            tc += c;
+        }
+        let mut s = String::new();
+        s.push_str(&format!(
+            "Drive step profile (acim-bench): per step, averaged over {steps} steps; total {:.1} instructions, {:.1} est. cycles (marker overhead not subtracted)\n\n",
+            ti as f64 / steps,
+            tc as f64 / steps
+        ));
+        let table = |s: &mut String, title: &str, m: &BTreeMap<String, (u64, u64)>| {
+            s.push_str(&format!(
+                "## {title}\n{:>10} {:>10}  name\n",
+                "ins/step", "cyc/step"
+            ));
+            let mut v: Vec<_> = m.iter().collect();
+            v.sort_by_key(|e| std::cmp::Reverse(e.1 .1));
+            for (k, (n, c)) in v {
+                s.push_str(&format!(
+                    "{:>10.1} {:>10.1}  {}\n",
+                    *n as f64 / steps,
+                    *c as f64 / steps,
+                    k
+                ));
+            }
+            s.push('\n');
+        };
+        table(&mut s, "by function", &by_func);
+        table(&mut s, "by instruction class", &by_class);
+        table(&mut s, "by mnemonic", &by_mnem);
+        // hottest instructions in address order
+        s.push_str("## instructions executed in the step (address order)\n");
+        s.push_str(&format!(
+            "{:>9} {:>8}  address   instruction\n",
+            "ins/step", "cyc/step"
+        ));
+        let mut pcs: Vec<_> = self.by_pc.keys().copied().collect();
+        pcs.sort();
+        let mut last_f = usize::MAX;
+        for pc in pcs {
+            let (n, c) = self.by_pc[&pc];
+            if let Some(i) = dis.at(pc) {
+                if i.func != last_f {
+                    s.push_str(&format!("<{}>\n", dis.funcs[i.func].name));
+                    last_f = i.func;
+                }
+                s.push_str(&format!(
+                    "{:>9.2} {:>8.2}  {:08x}  {} {}\n",
+                    n as f64 / steps,
+                    c as f64 / steps,
+                    pc,
+                    i.mnemonic,
+                    i.operands
+                ));
+            }
+        }
+        s
+    }
+}
+
+fn run_qemu(
+    qemu: &Qemu,
+    elf: &Path,
+    filter: &str,
+    dis: &Disassembly,
+    markers: &HashMap<u32, Marker>,
+    keep_trace: Option<PathBuf>,
+) -> Res<(HashMap<&'static str, Stat>, Profile, String)> {
+    let mut cmd = Command::new("qemu-system-arm");
+    cmd.args([
+        "-machine",
+        "netduinoplus2",
+        "-cpu",
+        "cortex-m4",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-semihosting-config",
+        "enable=on,target=native",
+        "-kernel",
+    ])
+    .arg(elf)
+    .args(&qemu.one_insn_args)
+    .args(["-d", "exec,nochain", "-dfilter", filter])
+    .stdin(Stdio::null())
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    eprintln!(
+        "running QEMU ({}) with the execution log ...",
+        qemu.one_insn_args.join(" ")
+    );
+    let mut child = cmd.spawn().map_err(|e| format!("qemu-system-arm: {e}"))?;
+    let mut stdout = child.stdout.take().ok_or("no stdout")?;
+    let out_thread = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stdout.read_to_string(&mut s);
+        s
+    });
+    let stderr = child.stderr.take().ok_or("no stderr")?;
+    let mut reader = BufReader::with_capacity(1 << 20, stderr);
+    let mut keep = match keep_trace {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(&p).map_err(|e| format!("{}: {e}", p.display()))?,
+        )),
+        None => None,
+    };
+
+    let mut stats: HashMap<&'static str, Stat> = HashMap::new();
+    let mut profile = Profile::default();
+    let mut active: Option<&'static str> = None;
+    let (mut count_i, mut count_c) = (0u64, 0u64);
+    // the previous executed instruction, finalised when the next PC is known
+    let mut pending: Option<(u32, bool)> = None; // (pc, counted in region)
+    let mut after_ls = false;
+    let mut unknown_pcs = 0u64;
+    let mut other_lines = Vec::new();
+    let mut stderr_summary = String::new();
+    let mut line = Vec::with_capacity(256);
+    let mut marker_ranges: Vec<(u32, u32)> = markers
+        .values()
+        .map(|m| (dis.funcs[m.func].start, dis.funcs[m.func].end))
+        .collect();
+    marker_ranges.sort();
+    let in_marker = |pc: u32| marker_ranges.iter().any(|&(s, e)| s <= pc && pc < e);
+
+    loop {
+        line.clear();
+        let n = reader
+            .read_until(b'\n', &mut line)
+            .map_err(|e| format!("reading the QEMU log: {e}"))?;
+        if n == 0 {
+            break;
+        }
+        if let Some(k) = keep.as_mut() {
+            use std::io::Write;
+            let _ = k.write_all(&line);
+        }
+        if !line.starts_with(b"Trace ") {
+            let l = String::from_utf8_lossy(&line);
+            if let Some(sm) = l.trim().strip_prefix("ACIM-BENCH summary ") {
+                stderr_summary = sm.to_string();
+            } else if other_lines.len() < 20 {
+                other_lines.push(String::from_utf8_lossy(&line).trim().to_string());
+            }
+            continue;
+        }
+        // "Trace 0: 0x7f.. [00800408/08000400/00000110/ff000201] Reset"
+        let Some(open) = line.iter().position(|&c| c == b'[') else {
+            continue;
+        };
+        let rest = &line[open + 1..];
+        let Some(s1) = rest.iter().position(|&c| c == b'/') else {
+            continue;
+        };
+        let rest = &rest[s1 + 1..];
+        let Some(s2) = rest.iter().position(|&c| c == b'/') else {
+            continue;
+        };
+        let pc = match std::str::from_utf8(&rest[..s2])
+            .ok()
+            .and_then(|h| u32::from_str_radix(h, 16).ok())
+        {
+            Some(p) => p,
+            None => continue,
+        };
+
+        // finalise the previous instruction now that its successor is known
+        if let Some((ppc, counted)) = pending.take() {
+            if let Some(i) = dis.at(ppc) {
+                let taken = pc != ppc + i.size;
+                let (c, class) = cycles(i, taken, after_ls);
+                after_ls = is_single_ls(class);
+                if counted {
+                    count_c += c as u64;
+                    if active == Some("drive_step") {
+                        let e = profile.by_pc.entry(ppc).or_default();
+                        e.0 += 1;
+                        e.1 += c as u64;
+                    }
+                }
+            }
+        }
+
+        if let Some(m) = markers.get(&pc) {
+            if m.begin {
+                active = Some(m.region);
+                count_i = 0;
+                count_c = 0;
+            } else if active == Some(m.region) {
+                stats.entry(m.region).or_default().add(count_i, count_c);
+                active = None;
+            } else {
+                active = None;
+            }
+            pending = Some((pc, false));
+            continue;
+        }
+        let counted = active.is_some() && !in_marker(pc);
+        if counted {
+            count_i += 1;
+            if dis.at(pc).is_none() {
+                unknown_pcs += 1;
+            }
+        }
+        pending = Some((pc, counted));
+    }
+    let status = child.wait().map_err(|e| e.to_string())?;
+    let out = out_thread.join().unwrap_or_default();
+    let summary = out
+        .lines()
+        .find_map(|l| l.strip_prefix("ACIM-BENCH summary "))
+        .map(str::to_string)
+        .unwrap_or(stderr_summary);
+    if !status.success() || summary.is_empty() {
+        return Err(format!(
+            "QEMU failed ({status}); firmware output:\n{out}\nother log lines: {other_lines:?}"
+        ));
+    }
+    if unknown_pcs > 0 {
+        eprintln!("warning: {unknown_pcs} executed PCs not found in the disassembly");
+    }
+    Ok((stats, profile, summary))
+}
+
+// ------------------------------------------------------------------------------------
+// static scan
+// ------------------------------------------------------------------------------------
+
+struct Findings {
+    panics: Vec<String>,
+    f64: Vec<String>,
+    other_calls: Vec<String>,
+    indirect: Vec<String>,
+}
+
+fn is_panic(name: &str) -> bool {
+    let n = name.to_ascii_lowercase();
+    n.contains("panic")
+        || n.contains("unwrap_failed")
+        || n.contains("expect_failed")
+        || n.contains("slice_index")
+        || n.contains("slice_start_index")
+        || n.contains("slice_end_index")
+        || n.contains("assert_failed")
+        || n.contains("str_index")
+}
+
+fn is_f64(name: &str) -> bool {
+    let n = name.trim_start_matches('_');
+    (name.starts_with("__aeabi_d") && !name.starts_with("__aeabi_div"))
+        || name.starts_with("__aeabi_f2d")
+        || name.starts_with("__aeabi_i2d")
+        || name.starts_with("__aeabi_ui2d")
+        || name.starts_with("__aeabi_l2d")
+        || name.starts_with("__aeabi_ul2d")
+        || (name.starts_with("__")
+            && (n.ends_with("df3")
+                || n.ends_with("df2")
+                || n.contains("dfsi")
+                || n.contains("sidf")
+                || n.contains("didf")
+                || n.contains("dfdi")
+                || n.contains("sfdf")
+                || n.contains("dfsf")))
+}
+
+fn scan(dis: &Disassembly, g: &Graph) -> Findings {
+    let mut f = Findings {
+        panics: vec![],
+        f64: vec![],
+        other_calls: vec![],
+        indirect: vec![],
+    };
+    for &k in &g.functions {
+        let name = &dis.funcs[k].name;
+        if is_panic(name) {
+            f.panics.push(name.clone());
+        } else if is_f64(name) {
+            f.f64.push(name.clone());
+        } else if name.starts_with("__") || name.contains("memcpy") || name.contains("memset") {
+            f.other_calls.push(name.clone());
+        }
+    }
+    // f64 arithmetic instructions (none exist on the single-precision FPU; listed if ever)
+    for i in &dis.insns {
+        if g.functions.contains(&i.func) && i.mnemonic.contains(".f64") {
+            f.f64
+                .push(format!("{} in {}", i.mnemonic, dis.funcs[i.func].name));
+        }
+    }
+    for &k in &g.indirect {
+        f.indirect.push(dis.funcs[k].name.clone());
+    }
+    f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The scenario on the host: the per-block replica reproduces `Drive::step` bit for
+    /// bit, the drive does not fault, and both observers track the true speed.
+    #[test]
+    fn scenario_replica_matches_the_drive_on_the_host() {
+        let s = scenario::run();
+        assert_eq!(s.measured, scenario::MEASURED_STEPS, "{s:?}");
+        assert_eq!(s.mismatches, 0, "{s:?}");
+        assert_eq!(s.replica_faults, 0, "{s:?}");
+        assert!(!s.drive_faulted, "{s:?}");
+        assert!(s.full_mean_abs_err_rpm < 10.0, "{s:?}");
+        assert!(s.reduced_mean_abs_err_rpm < 10.0, "{s:?}");
+    }
+
+    #[test]
+    fn mnemonics_and_timings() {
+        let mk = |m: &str, o: &str| Insn {
+            addr: 0,
+            size: 4,
+            mnemonic: m.into(),
+            operands: o.into(),
+            func: 0,
+        };
+        assert_eq!(base_mnemonic("bls"), "b");
+        assert_eq!(base_mnemonic("bl"), "bl");
+        assert_eq!(base_mnemonic("vmovgt.f32"), "vmov");
+        assert_eq!(base_mnemonic("movs"), "mov");
+        assert_eq!(base_mnemonic("ldr.w"), "ldr");
+        assert_eq!(base_mnemonic("vmls.f32"), "vmls");
+        assert_eq!(cycles(&mk("vdiv.f32", "s0, s1, s2"), false, false).0, 14);
+        assert_eq!(cycles(&mk("vfma.f32", "s0, s1, s2"), false, false).0, 3);
+        assert_eq!(cycles(&mk("pop", "{r4, r5, r6, r7, pc}"), true, false).0, 8);
+        assert_eq!(
+            cycles(&mk("push", "{r4, r5, r6, r7, lr}"), false, false).0,
+            6
+        );
+        assert_eq!(cycles(&mk("vpush", "{d8, d9}"), false, false).0, 5);
+        assert_eq!(cycles(&mk("ldr", "r0, [r1]"), false, true).0, 1);
+        assert_eq!(cycles(&mk("ldr", "r0, [r1]"), false, false).0, 2);
+        assert_eq!(cycles(&mk("bne", "0x8000"), true, false).0, 3);
+        assert_eq!(cycles(&mk("bne", "0x8000"), false, false).0, 1);
+        assert_eq!(cycles(&mk("vmov", "r0, r1, d0"), false, false).0, 2);
+        assert_eq!(cycles(&mk("vmov", "s0, r1"), false, false).0, 1);
+        assert!(is_f64("__aeabi_dadd") && is_f64("__adddf3") && is_f64("__extendsfdf2"));
+        assert!(!is_f64("__aeabi_uidiv") && !is_f64("__aeabi_memcpy"));
+        assert!(is_panic("core::panicking::panic_bounds_check::h1"));
+    }
+}
