@@ -94,7 +94,7 @@ fn main() {
             "--allow-panic-paths" => allow_panic_paths = true,
             "--help" | "-h" => {
                 println!(
-                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the bench's replica diverged\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE"
+                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the probed step diverged from the real one\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE"
                 );
                 return;
             }
@@ -144,8 +144,8 @@ fn run(
     // static call graphs: the whole measured code (for -dfilter), and the drive step alone
     // (for the panic/f64 scan)
     let shadow_root = dis
-        .function_named(|n| n.contains("Shadow") && n.contains("::step"))
-        .ok_or("cannot find scenario::Shadow::step in the disassembly")?;
+        .function_named(|n| n == "bench_regions_step")
+        .ok_or("cannot find bench_regions_step in the disassembly")?;
     let drive_root = dis
         .function_named(|n| n == "bench_region_drive_step")
         .ok_or("cannot find bench_region_drive_step")?;
@@ -300,7 +300,7 @@ fn run(
         println!("  warning: indirect calls in the measured code; -dfilter may hide callees");
     }
     if !summary.contains("mismatches=0") || summary.contains("drive_faulted=1") {
-        println!("  REPLICA: the per-block replica diverged from Drive::step or the drive faulted");
+        println!("  PROBED STEP: the probed clone diverged from Drive::step or the drive faulted");
         ok = false;
     }
 
@@ -1233,10 +1233,10 @@ fn scan(dis: &Disassembly, g: &Graph) -> Findings {
 mod tests {
     use super::*;
 
-    /// The scenario on the host: the per-block replica reproduces `Drive::step` bit for
-    /// bit, the drive does not fault, and both observers track the true speed.
+    /// The scenario on the host: the probed clone reproduces `Drive::step` bit for bit,
+    /// the drive does not fault, and both observers track the true speed.
     #[test]
-    fn scenario_replica_matches_the_drive_on_the_host() {
+    fn scenario_probed_step_matches_the_drive_on_the_host() {
         let s = scenario::run();
         assert_eq!(s.measured, scenario::MEASURED_STEPS, "{s:?}");
         assert_eq!(s.mismatches, 0, "{s:?}");

@@ -36,14 +36,14 @@ use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
     SinCos, SinCosValue,
 };
-use crate::math::{clamp, is_finite, sqrt, wrap_angle};
+use crate::math::{clamp, is_finite, sqrt, wrap_angle_step};
 use crate::observer::{
     ObserverConfig, ObserverDesignError, ObserverInputs, ObserverPoles, ReducedOrderObserver,
 };
 use crate::params::{self, MachineParams};
 use crate::pi::{PiConfig, PiController};
 use crate::rs_estimator::{RsEstimator, RsEstimatorConfig, RsEstimatorInputs};
-use crate::svpwm::{linear_limit, modulate, SvpwmConfig};
+use crate::svpwm::{linear_limit, modulate, modulate_with_inverse, SvpwmConfig};
 
 /// How many phase currents are measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -117,7 +117,11 @@ pub struct DriveConfig {
     pub dead_time: f32,
     /// Inverter device on-state drop, V (compensated with the dead time).
     pub device_drop: f32,
-    /// Current band of the dead-time compensation's linearised sign, A.
+    /// Current band of the dead-time compensation's linearised sign, A: the current
+    /// below which the inverter's dead-time error is proportional to the current (device
+    /// capacitances); a property of the power stage, to be measured at commissioning.
+    /// Default 50 mA, the inverter model's default. At 60 rpm, where the back-EMF is only
+    /// about 10 V, a mismatch shows as speed-estimate spikes at each current zero crossing.
     pub dead_time_current_band: f32,
     /// Measured phases.
     pub current_sensing: CurrentSensing,
@@ -165,7 +169,7 @@ impl DriveConfig {
             ),
             dead_time: 1.5e-6,
             device_drop: 1.0,
-            dead_time_current_band: 0.1,
+            dead_time_current_band: 0.05,
             current_sensing: CurrentSensing::TwoPhase,
             flux_tolerance: 0.02,
             delay_periods: 1.5,
@@ -320,6 +324,48 @@ pub struct DriveTelemetry {
     pub stator_frequency: f32,
     /// Whether the modulator limited the voltage.
     pub voltage_saturated: bool,
+}
+
+/// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StepRegion {
+    /// Checks on the raw samples.
+    FaultChecks,
+    /// sin/cos of the frame angle, Clarke and Park.
+    ClarkePark,
+    /// Reduced-order observer (eq. 12).
+    ObserverReduced,
+    /// Stator-resistance estimator (eq. 19-20) and its residual filter.
+    RsEstimator,
+    /// Orientation correction, flux model, slip law and angle (eq. 13, 8).
+    FluxSlip,
+    /// Speed ramp, speed PI and stall detection.
+    SpeedPi,
+    /// d/q current PIs with feed-forward and voltage limit.
+    CurrentPi,
+    /// Inverse Park with delay compensation and SVPWM.
+    Svpwm,
+}
+
+/// Instrumentation hooks around the regions of [`Drive::step_probed`]. The plain
+/// [`Drive::step`] uses [`NoProbe`], whose empty hooks compile away.
+pub trait StepProbe {
+    /// Called just before `region` runs.
+    fn begin(&mut self, region: StepRegion);
+    /// Called just after `region` ran.
+    fn end(&mut self, region: StepRegion);
+}
+
+/// The probe that does nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoProbe;
+
+impl StepProbe for NoProbe {
+    #[inline(always)]
+    fn begin(&mut self, _: StepRegion) {}
+    #[inline(always)]
+    fn end(&mut self, _: StepRegion) {}
 }
 
 /// The sensorless IFOC drive. `S` supplies sin/cos (software by default, CORDIC on the G4).
@@ -649,6 +695,27 @@ impl<S: SinCos> Drive<S> {
             CurrentSensing::TwoPhase => -a - b,
             CurrentSensing::ThreePhase => c_meas,
         };
+        // fast path: five comparisons, each false for NaN, so a good sample costs only
+        // these; the reason of a bad one is sorted out below
+        let trip = self.overcurrent_trip;
+        if a.abs() <= trip
+            && b.abs() <= trip
+            && c.abs() <= trip
+            && inp.dc_bus <= self.cfg.dc_bus_max
+            && inp.dc_bus >= self.cfg.dc_bus_min
+        {
+            return None;
+        }
+        self.classify_bad_inputs(a, b, c, inp.dc_bus)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn classify_bad_inputs(&self, a: f32, b: f32, c: f32, dc_bus: f32) -> Option<FaultReason> {
+        let inp = DriveInputs {
+            phase_currents: [a, b, c],
+            dc_bus,
+        };
         if !(is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus)) {
             return Some(FaultReason::NonFiniteInput);
         }
@@ -667,7 +734,16 @@ impl<S: SinCos> Drive<S> {
 
     /// One control step: samples in, PWM command out. Never panics and never returns a
     /// non-finite or out-of-range duty: bad input faults the drive (switches off) instead.
+    #[inline]
     pub fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+        self.step_probed(inp, &mut NoProbe)
+    }
+
+    /// [`Drive::step`] with `probe` called around each [`StepRegion`] of a running step
+    /// (the regions do not cover the state machine's bookkeeping, the estimator
+    /// plausibility checks and the telemetry record, which the whole step includes).
+    #[inline(always)]
+    pub fn step_probed<P: StepProbe>(&mut self, inp: &DriveInputs, probe: &mut P) -> PwmOutput {
         match self.state {
             DriveState::Fault => return PwmOutput::OFF,
             DriveState::Idle => {
@@ -682,29 +758,35 @@ impl<S: SinCos> Drive<S> {
             }
             _ => {}
         }
-        if let Some(reason) = self.check_inputs(inp) {
+        probe.begin(StepRegion::FaultChecks);
+        let bad = self.check_inputs(inp);
+        probe.end(StepRegion::FaultChecks);
+        if let Some(reason) = bad {
             return self.enter_fault(reason);
         }
         let [a, b, c] = inp.phase_currents;
+        if self.state == DriveState::OpenLoop {
+            let (i_ab, phase_currents) = match self.cfg.current_sensing {
+                CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
+                CurrentSensing::ThreePhase => (clarke_three(a, b, c), [a, b, c]),
+            };
+            return self.step_open_loop(i_ab, inp.dc_bus, phase_currents);
+        }
+
+        probe.begin(StepRegion::ClarkePark);
         let i_ab = match self.cfg.current_sensing {
             CurrentSensing::TwoPhase => clarke_two(a, b),
             CurrentSensing::ThreePhase => clarke_three(a, b, c),
         };
-        let phase_currents = match self.cfg.current_sensing {
-            CurrentSensing::TwoPhase => [a, b, -a - b],
-            CurrentSensing::ThreePhase => [a, b, c],
-        };
-        if self.state == DriveState::OpenLoop {
-            return self.step_open_loop(i_ab, inp.dc_bus, phase_currents);
-        }
-
         let ts = self.cfg.control_period;
         let sample_angle = self.flux.angle;
         let sc = self.sincos.sin_cos(sample_angle);
         let i = park(i_ab, sc);
+        probe.end(StepRegion::ClarkePark);
         let magnetizing = self.state == DriveState::Magnetizing;
 
         // 3. observer (eq. 12), with the voltage applied over the past period
+        probe.begin(StepRegion::ObserverReduced);
         let rseq = self.rs.stator_resistance_estimate + self.referred_rotor_resistance;
         if !magnetizing {
             self.observer.update(
@@ -721,9 +803,11 @@ impl<S: SinCos> Drive<S> {
             );
         }
         let speed_est = self.observer.speed_estimate;
+        probe.end(StepRegion::ObserverReduced);
 
         // 4. stator resistance (eq. 19-20): the current model of eq. (20) runs every step
         // (its error is the d-axis residual), the resistance adapts only inside its gate
+        probe.begin(StepRegion::RsEstimator);
         let flux_settled = self.flux.rotor_flux >= self.settled_flux;
         let ws_prev = self.flux.stator_frequency;
         self.rs.update(
@@ -739,7 +823,9 @@ impl<S: SinCos> Drive<S> {
         let rs_hat = self.rs.stator_resistance_estimate;
         self.filtered_residual +=
             self.residual_filter * (self.rs.current_error - self.filtered_residual);
+        probe.end(StepRegion::RsEstimator);
 
+        probe.begin(StepRegion::FluxSlip);
         // orientation correction (beyond the paper, see module docs): in field orientation
         // the steady d-axis residual is r_d = Rs_hat e_d = -w_s lambda_q, so
         // dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux; it fades in
@@ -770,6 +856,7 @@ impl<S: SinCos> Drive<S> {
         );
         let ws = self.flux.stator_frequency;
         let lambda = self.flux.rotor_flux;
+        probe.end(StepRegion::FluxSlip);
 
         // estimator plausibility: a non-finite state faults at once; an implausible load
         // estimate must persist for 20 ms (a current transient, e.g. a short, must trip on
@@ -799,6 +886,7 @@ impl<S: SinCos> Drive<S> {
         }
 
         // 6. references
+        probe.begin(StepRegion::SpeedPi);
         let (i_sd_ref, i_sq_ref);
         if magnetizing {
             i_sd_ref = self.i_sd_ref;
@@ -837,9 +925,15 @@ impl<S: SinCos> Drive<S> {
                 return self.enter_fault(FaultReason::Stall);
             }
         }
+        probe.end(StepRegion::SpeedPi);
 
         // 7. current PIs with decoupling feed-forward (eq. 9a, 9b)
+        probe.begin(StepRegion::CurrentPi);
+        // the bus was checked against dc_bus_min > 0 above: one division per step, shared
+        // by the voltage limit and the modulator
+        let inv_vdc = 1.0 / inp.dc_bus;
         let v_max = linear_limit(inp.dc_bus) * 0.98;
+        let inv_v_max = inv_vdc * (1.0 / (0.98 * 0.577_350_26));
         let ff_d = rs_hat * i_sd_ref + self.referred_rotor_resistance * i_sd_ref
             - lambda * self.inv_rotor_time_constant
             - ws * self.sigma_ls * i_sq_ref;
@@ -849,13 +943,24 @@ impl<S: SinCos> Drive<S> {
         let v_d = self
             .d_ctl
             .update_with_limits(&self.pi_d, i_sd_ref - i.d, ff_d, -v_max, v_max);
-        let v_q_max = sqrt(v_max * v_max - v_d * v_d);
+        // q limit on the circle |v| <= v_max with d priority, sqrt(v_max^2 - v_d^2), without
+        // a square root: the Taylor bound v_max - v_d^2/(2 v_max) while |v_d| <= v_max/2
+        // (at most 1 % above the circle there), the chord sqrt(3) (v_max - |v_d|) beyond
+        // (inside the circle, zero when v_d is at its limit)
+        let ad = v_d.abs();
+        let v_q_max = if ad <= 0.5 * v_max {
+            v_max - 0.5 * v_d * v_d * inv_v_max
+        } else {
+            1.732_050_8 * (v_max - ad)
+        };
         let v_q =
             self.q_ctl
                 .update_with_limits(&self.pi_q, i_sq_ref - i.q, ff_q, -v_q_max, v_q_max);
         let v = Dq { d: v_d, q: v_q };
+        probe.end(StepRegion::CurrentPi);
 
         // 8. inverse Park at the angle the voltage will act at, then SVPWM
+        probe.begin(StepRegion::Svpwm);
         let lead = ws * ts * self.cfg.delay_periods;
         let rot = small_rotation(sc, lead);
         let v_ab = inverse_park(v, rot);
@@ -869,7 +974,8 @@ impl<S: SinCos> Drive<S> {
             },
             rot,
         ));
-        let m = modulate(&self.pwm_cfg, v_ab, inp.dc_bus, i_ref_abc);
+        let m = modulate_with_inverse(&self.pwm_cfg, v_ab, inp.dc_bus, inv_vdc, i_ref_abc);
+        probe.end(StepRegion::Svpwm);
         self.applied_voltage = v;
 
         self.telemetry = DriveTelemetry {
@@ -913,7 +1019,7 @@ impl<S: SinCos> Drive<S> {
         let v = Dq { d: mag, q: 0.0 };
         let v_ab = inverse_park(v, sc);
         let m = modulate(&self.pwm_cfg, v_ab, dc_bus, currents);
-        self.vf_angle = wrap_angle(self.vf_angle + self.vf_frequency * ts);
+        self.vf_angle = wrap_angle_step(self.vf_angle + self.vf_frequency * ts);
         self.telemetry = DriveTelemetry {
             speed_reference: self.speed_reference,
             current: park(i_ab, sc),

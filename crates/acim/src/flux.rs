@@ -9,7 +9,7 @@
 //! `min_flux` (a configured fraction of the nominal flux), so start-up from zero flux cannot
 //! produce an infinite slip.
 
-use crate::math::{is_finite, wrap_angle};
+use crate::math::{is_finite, wrap_angle_step};
 use crate::params::MachineParams;
 
 /// Precomputed coefficients of the flux model and slip law.
@@ -94,7 +94,7 @@ impl FluxModel {
     /// p Omega_hat, plus any frame-frequency correction the caller adds), angle advance,
     /// then the flux update (eq. 13) with the measured i_sd.
     /// When `hold_angle` is set (magnetising), the frame does not rotate.
-    #[inline]
+    #[inline(always)]
     pub fn update(
         &mut self,
         cfg: &FluxModelConfig,
@@ -115,7 +115,7 @@ impl FluxModel {
         } else {
             rotor_speed_elec + self.slip_frequency
         };
-        self.angle = wrap_angle(self.angle + self.stator_frequency * cfg.ts);
+        self.angle = wrap_angle_step(self.angle + self.stator_frequency * cfg.ts);
         let next =
             self.rotor_flux + cfg.blend * (cfg.magnetizing_inductance * i_sd - self.rotor_flux);
         // a non-finite current would poison the state: keep the last flux instead

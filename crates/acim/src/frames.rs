@@ -66,7 +66,7 @@ const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
 impl FastSinCos {
     /// sin and cos of `theta` (rad). Exact quadrant reduction for |theta| < 1000 rad;
     /// beyond that the angle is first wrapped (precision of the input dominates).
-    #[inline]
+    #[inline(always)]
     pub fn eval(theta: f32) -> SinCosValue {
         let x = if theta.abs() < 1000.0 {
             theta
@@ -98,7 +98,7 @@ impl FastSinCos {
 }
 
 impl SinCos for FastSinCos {
-    #[inline]
+    #[inline(always)]
     fn sin_cos(&mut self, theta: f32) -> SinCosValue {
         Self::eval(theta)
     }

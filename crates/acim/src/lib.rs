@@ -30,5 +30,5 @@ pub mod svpwm;
 
 pub use drive::{
     CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
-    DriveTelemetry, FaultReason, PwmOutput,
+    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion,
 };

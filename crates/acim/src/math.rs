@@ -41,6 +41,25 @@ pub fn sqrt(x: f32) -> f32 {
     }
 }
 
+/// Wraps an angle that is at most one turn outside [-pi, pi) (the usual case: an angle
+/// advanced by a small increment) with one comparison each way; anything else (large,
+/// NaN) goes through [`wrap_angle`].
+#[inline(always)]
+pub fn wrap_angle_step(x: f32) -> f32 {
+    let a = if x >= PI {
+        x - TAU
+    } else if x < -PI {
+        x + TAU
+    } else {
+        x
+    };
+    if (-PI..PI).contains(&a) {
+        a
+    } else {
+        wrap_angle(x)
+    }
+}
+
 /// Wraps an angle (rad) into [-pi, pi). Exact for |x| < 3 pi (one correction); larger
 /// inputs are reduced by an integer number of turns first. NaN maps to 0.
 #[inline]
@@ -133,6 +152,11 @@ mod tests {
             prop_assert!((-PI..PI).contains(&w));
             let d = (x as f64 - w as f64) / core::f64::consts::TAU;
             prop_assert!((d - d.round()).abs() < 1e-3 * (1.0 + x.abs() as f64 / 1e3));
+        }
+
+        #[test]
+        fn wrap_step_matches_wrap(x in -20f32..20.0) {
+            prop_assert_eq!(wrap_angle_step(x), wrap_angle(x));
         }
 
         #[test]

@@ -119,6 +119,15 @@ pub struct ObserverConfig {
     pub g3: f32,
     /// The requested poles.
     pub poles: ObserverPoles,
+    // the same coefficients times Ts, for the step
+    ts_a: f32,
+    ts_inv_l: f32,
+    ts_p_inv_l: f32,
+    ts_torque_per_inertia: f32,
+    ts_inv_inertia: f32,
+    ts_friction_rate: f32,
+    ts_g2: f32,
+    ts_g3: f32,
 }
 
 impl ObserverConfig {
@@ -146,6 +155,8 @@ impl ObserverConfig {
         let j = m.inertia();
         let f = m.viscous_friction() / j;
         let a = f - c2;
+        let g2 = (c1 + a * f) * sigma_ls / pp;
+        let g3 = -c0 * j * sigma_ls / pp;
         Ok(Self {
             ts,
             inv_transient_inductance: 1.0 / sigma_ls,
@@ -154,9 +165,17 @@ impl ObserverConfig {
             inv_inertia: 1.0 / j,
             friction_rate: f,
             a,
-            g2: (c1 + a * f) * sigma_ls / pp,
-            g3: -c0 * j * sigma_ls / pp,
+            g2,
+            g3,
             poles,
+            ts_a: ts * a,
+            ts_inv_l: ts / sigma_ls,
+            ts_p_inv_l: ts * pp / sigma_ls,
+            ts_torque_per_inertia: ts * 1.5 * pp / j,
+            ts_inv_inertia: ts / j,
+            ts_friction_rate: ts * f,
+            ts_g2: ts * g2,
+            ts_g3: ts * g3,
         })
     }
 
@@ -259,28 +278,30 @@ impl ReducedOrderObserver {
         self.load_torque_estimate = load_torque;
     }
 
-    /// One forward-Euler step of eq. (12). About 20 multiply-adds, no division.
-    #[inline]
+    /// One forward-Euler step of eq. (12), with Ts folded into the precomputed
+    /// coefficients. About 20 multiply-adds, no division.
+    #[inline(always)]
     pub fn update(&mut self, cfg: &ObserverConfig, u: &ObserverInputs) {
         let e = self.current_estimate - u.i_sq;
         let lambda = u.rotor_flux;
-        let k2 = cfg.g2 * u.inv_rotor_flux - cfg.torque_per_inertia * lambda;
-        let k3 = cfg.g3 * u.inv_rotor_flux;
-        // a e + (v_sq - Rseq i_sq - p lambda Omega_hat)/(sigma Ls) - w_s i_sd
-        let di = cfg.a * e
-            + cfg.inv_transient_inductance
-                * (u.v_sq
-                    - u.equivalent_resistance * u.i_sq
-                    - cfg.pole_pairs * lambda * self.speed_estimate)
-            - u.stator_frequency * u.i_sd;
-        let dw = cfg.torque_per_inertia * lambda * self.current_estimate
-            - cfg.inv_inertia * self.load_torque_estimate
-            - cfg.friction_rate * self.speed_estimate
-            + k2 * e;
-        let dt = k3 * e;
-        self.current_estimate += cfg.ts * di;
-        self.speed_estimate += cfg.ts * dw;
-        self.load_torque_estimate += cfg.ts * dt;
+        let w = self.speed_estimate;
+        // Ts [a e + (v_sq - Rseq i_sq - p lambda Omega_hat)/(sigma Ls) - w_s i_sd]
+        let di = cfg.ts_a * e + cfg.ts_inv_l * (u.v_sq - u.equivalent_resistance * u.i_sq)
+            - cfg.ts_p_inv_l * lambda * w
+            - cfg.ts * u.stator_frequency * u.i_sd;
+        let e_per_flux = u.inv_rotor_flux * e;
+        // Ts [(1.5 p lambda i_hat - T_hat - B Omega_hat)/J + K2 e] with
+        // K2 = g2/lambda - (1.5 p/J) lambda: the two torque terms combine to
+        // (1.5 p lambda/J)(i_hat - e) = (1.5 p lambda/J) i_sq
+        let dw = cfg.ts_torque_per_inertia * lambda * u.i_sq
+            - cfg.ts_inv_inertia * self.load_torque_estimate
+            - cfg.ts_friction_rate * w
+            + cfg.ts_g2 * e_per_flux;
+        // Ts K3 e
+        let dt = cfg.ts_g3 * e_per_flux;
+        self.current_estimate += di;
+        self.speed_estimate = w + dw;
+        self.load_torque_estimate += dt;
     }
 }
 

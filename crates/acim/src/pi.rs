@@ -81,7 +81,7 @@ impl PiController {
     }
 
     /// One step with the configured limits; see [`PiController::update_with_limits`].
-    #[inline]
+    #[inline(always)]
     pub fn update(&mut self, cfg: &PiConfig, error: f32, feedforward: f32) -> f32 {
         self.update_with_limits(cfg, error, feedforward, cfg.out_min, cfg.out_max)
     }
@@ -89,7 +89,7 @@ impl PiController {
     /// One step with limits given for this step (`lo <= hi`, e.g. a voltage limit that
     /// follows the DC bus). Returns `clamp(ff + kp e + I, lo, hi)`. A non-finite error or
     /// feed-forward cannot poison the state: the integral stays finite and in range.
-    #[inline]
+    #[inline(always)]
     pub fn update_with_limits(
         &mut self,
         cfg: &PiConfig,

@@ -86,7 +86,22 @@ pub fn modulate(
     } else {
         cfg.min_bus_voltage
     };
-    let inv_vdc = 1.0 / vdc;
+    modulate_with_inverse(cfg, v, vdc, 1.0 / vdc, phase_currents)
+}
+
+/// [`modulate`] for a caller that has already checked `dc_bus` (>= `min_bus_voltage`) and
+/// computed `inv_dc_bus` = 1/`dc_bus` (the drive shares that one division with its
+/// voltage limit).
+#[inline(always)]
+pub fn modulate_with_inverse(
+    cfg: &SvpwmConfig,
+    v: AlphaBeta,
+    dc_bus: f32,
+    inv_dc_bus: f32,
+    phase_currents: [f32; 3],
+) -> Modulation {
+    let vdc = dc_bus;
+    let inv_vdc = inv_dc_bus;
     let [mut a, mut b, mut c] = inverse_clarke(v);
     // comparisons, not f32::max/min (those call fmaxf/fminf on the M4)
     let (hi_ab, lo_ab) = if a > b { (a, b) } else { (b, a) };
@@ -109,17 +124,27 @@ pub fn modulate(
     }
     let dt = cfg.dead_time_duty + cfg.device_drop * inv_vdc;
     let s = cfg.inv_current_band;
-    let comp = |i: f32| dt * clamp(i * s, -1.0, 1.0);
-    let duty = |vx: f32, i: f32| clamp(0.5 + (vx + offset) * inv_vdc + comp(i), 0.0, 1.0);
+    let base = 0.5 + offset * inv_vdc;
     Modulation {
         duties: [
-            duty(a, phase_currents[0]),
-            duty(b, phase_currents[1]),
-            duty(c, phase_currents[2]),
+            phase_duty(base, a, inv_vdc, dt, s, phase_currents[0]),
+            phase_duty(base, b, inv_vdc, dt, s, phase_currents[1]),
+            phase_duty(base, c, inv_vdc, dt, s, phase_currents[2]),
         ],
         voltage: out,
         saturated,
     }
+}
+
+/// One phase: 1/2 + (v_x + v_0)/V_dc plus the dead-time/drop compensation
+/// (t_d/T + V_drop/V_dc) sat(i_x/i_band), clamped to [0, 1].
+#[inline(always)]
+fn phase_duty(base: f32, vx: f32, inv_vdc: f32, comp: f32, inv_band: f32, i: f32) -> f32 {
+    clamp(
+        base + vx * inv_vdc + comp * clamp(i * inv_band, -1.0, 1.0),
+        0.0,
+        1.0,
+    )
 }
 
 #[cfg(test)]
