@@ -1,9 +1,5 @@
 //! The benchmark scenario, shared by the firmware bin (Cortex-M4F, QEMU or a board) and the
-//! host tests: the real drive in closed loop with the motor model, plus a "shadow" copy
-//! of the drive's pipeline built from the same public blocks and run on the same samples,
-//! so that each block can be bracketed by marker calls on its own, in the order of
-//! `Drive::step`. The shadow's duties are compared bit for bit with the drive's every
-//! step (a mismatch means the replica no longer reflects the drive).
+//! host tests: the real drive in closed loop with the motor model.
 //!
 //! ## Markers
 //!

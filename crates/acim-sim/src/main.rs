@@ -143,6 +143,10 @@ fn write_metrics_md(path: &Path, all: &[Metrics]) -> std::io::Result<()> {
             s += &format!("| {} | - | | | | | | {} |\n", m.name, outcome);
         }
     }
+    // open-loop rows have no estimate (NaN in the metrics)
+    let mut s = s
+        .replace("| NaN |", "| n/a |")
+        .replace("| NaN |", "| n/a |");
     s += "\nLoad steps and Rs convergence:\n\n";
     for m in all {
         for st in &m.load_steps {

@@ -164,6 +164,14 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             rs_est_mean_ohm: rs.iter().map(|r| r.stator_resistance_est_ohm).sum::<f32>() / n,
             speed_mean_rpm: rs.iter().map(|r| r.speed_rpm).sum::<f32>() / n,
         };
+        let mut m = m;
+        if sc.drive.mode == crate::scenario::ControlMode::Vf {
+            // open loop: there is no speed estimate to compare
+            m.speed_est_err_max_rpm = f32::NAN;
+            m.speed_est_err_mean_rpm = f32::NAN;
+            m.speed_est_err_raw_max_rpm = f32::NAN;
+            m.load_est_err_mean_nm = f32::NAN;
+        }
         windows.insert(w.name.clone(), m);
     }
 
@@ -175,6 +183,10 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         changes.push((p.t_s, p.load().torque(1.0)));
     }
     let mut load_steps = Vec::new();
+    if sc.drive.mode == crate::scenario::ControlMode::Vf {
+        // open loop: no load estimate to track
+        changes.clear();
+    }
     for (t, _) in changes.iter() {
         // evaluate until the next load change or speed-target change (a reversal is not a
         // load-tracking failure), or the end

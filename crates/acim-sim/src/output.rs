@@ -30,16 +30,23 @@ pub fn write_json(path: &Path, m: &Metrics) -> std::io::Result<()> {
 pub fn write_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>> {
     let rows = &r.rows;
     let col = |f: fn(&crate::sim::Row) -> f32| rows.iter().map(f).collect::<Vec<f32>>();
+    // the controller's quantities exist only while it runs: after a fault (switches off)
+    // they are not drawn (NaN breaks the line) instead of showing the last values
+    let ctl = |f: fn(&crate::sim::Row) -> f32| {
+        rows.iter()
+            .map(|r| if r.state == 4 { f32::NAN } else { f(r) })
+            .collect::<Vec<f32>>()
+    };
     let t = col(|r| r.t_s);
-    let sref = col(|r| r.speed_ref_rpm);
+    let sref = ctl(|r| r.speed_ref_rpm);
     let s = col(|r| r.speed_rpm);
-    let se = col(|r| r.speed_est_rpm);
-    let err = col(|r| r.speed_est_rpm - r.speed_rpm);
-    let isd = col(|r| r.i_sd_a);
-    let isq = col(|r| r.i_sq_a);
+    let se = ctl(|r| r.speed_est_rpm);
+    let err = ctl(|r| r.speed_est_rpm - r.speed_rpm);
+    let isd = ctl(|r| r.i_sd_a);
+    let isq = ctl(|r| r.i_sq_a);
     let tl = col(|r| r.load_torque_nm);
-    let tle = col(|r| r.load_torque_est_nm);
-    let rs = col(|r| r.stator_resistance_est_ohm);
+    let tle = ctl(|r| r.load_torque_est_nm);
+    let rs = ctl(|r| r.stator_resistance_est_ohm);
     let rs_true = vec![r.scenario.plant.rs_ohm; rows.len()];
     let mut panels = vec![
         Panel {
