@@ -1263,6 +1263,49 @@ mod tests {
     }
 
     proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// Whatever the limits, the speed demand and the samples, the current reference
+        /// stays inside the circle |i*| <= I_max (d axis first).
+        #[test]
+        fn current_reference_never_exceeds_the_limit(
+            flux_current in 0.3f32..3.0,
+            extra in 0.05f32..5.0,
+            target in -300.0f32..300.0,
+            samples in proptest::collection::vec((-6.0f32..6.0, -6.0f32..6.0), 1..300),
+        ) {
+            let mut c = DriveConfig::paper_defaults();
+            c.flux_current = flux_current;
+            c.current_limit = flux_current + extra;
+            c.overcurrent_trip = 2.0 * c.current_limit + 12.0;
+            c.speed_ramp = 1e6; // a step: a large target saturates the speed PI at once
+            let mut d = Drive::new(c).unwrap();
+            d.set_speed_target(target).unwrap();
+            d.start().unwrap();
+            // magnetize (frame held at 0: i_a = i_d, i_b = -i_d/2) until speed control runs
+            let mut n = 0;
+            while d.state() == DriveState::Magnetizing && n < 20_000 {
+                let i = flux_current;
+                d.step(&DriveInputs { phase_currents: [i, -0.5 * i, -0.5 * i], dc_bus: 325.0 });
+                n += 1;
+            }
+            prop_assert_eq!(d.state(), DriveState::Running);
+            let lim = c.current_limit * (1.0 + 1e-5);
+            let mut at_limit = false;
+            for (a, b) in samples {
+                d.step(&DriveInputs { phase_currents: [a, b, -a - b], dc_bus: 325.0 });
+                let r = d.telemetry().current_reference;
+                let mag = (r.d * r.d + r.q * r.q).sqrt();
+                prop_assert!(mag <= lim, "{r:?} vs {lim}");
+                at_limit |= mag > 0.999 * c.current_limit;
+            }
+            // the property is exercised: large targets drive the reference to the circle
+            if target.abs() > 250.0 {
+                prop_assert!(at_limit);
+            }
+        }
+    }
+
+    proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
         /// Whatever the samples, the duties are finite and in [0, 1], and a disabled output
         /// is the neutral 0.5; a fault keeps the switches off.
