@@ -187,7 +187,24 @@ pub fn all() -> Vec<Scenario> {
     v.push(s);
 
     v.push(regen("regen-500", 500.0));
+    v.push(regen("regen-120", 120.0));
     v.push(regen("regen-60", 60.0));
+
+    // zero torque: no load, no friction, 60 s (the orientation mode of the paper's scheme
+    // is neutral there)
+    for rpm in [500.0f32, 60.0] {
+        let mut s = base(
+            &format!("zero-torque-{rpm:.0}"),
+            "no load and zero friction for 60 s: orientation must stay bounded",
+            62.0,
+        );
+        s.plant.friction_nms = 0.0;
+        s.controller.friction_nms = 0.0;
+        s.csv_decimation = 10;
+        s.speed_profile = vec![sp(0.5, rpm)];
+        s.windows = vec![win("steady", 2.0, 62.0)];
+        v.push(s);
+    }
 
     let mut s = fault(
         "fault-short",

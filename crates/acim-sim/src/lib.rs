@@ -7,6 +7,7 @@ pub mod output;
 pub mod plot;
 pub mod scenario;
 pub mod sim;
+pub mod stability;
 
 use std::path::Path;
 

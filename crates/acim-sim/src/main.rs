@@ -17,7 +17,8 @@ const USAGE: &str = "usage:
   acim-sim                                  run all paper scenarios into out/, print metrics
   acim-sim list                             list built-in scenarios
   acim-sim run <name|file.toml> [--out DIR] [--set key=value]...
-  acim-sim figures [--out DIR]              regenerate docs/figures/*.png and metrics.md";
+  acim-sim figures [--out DIR]              regenerate docs/figures/*.png and metrics.md
+  acim-sim stability [DIR]                  orientation stability map (docs/stability)";
 
 fn load(spec: &str) -> Result<Scenario, String> {
     if let Some(s) = builtins::get(spec) {
@@ -245,6 +246,35 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             }
             write_metrics_md(&fig.join("metrics.md"), &all).map_err(|e| e.to_string())?;
             println!("figures and metrics.md written to {}", fig.display());
+        }
+        Some("stability") => {
+            let dir = if positional.is_empty() {
+                PathBuf::from("docs/stability")
+            } else {
+                PathBuf::from(&positional[0])
+            };
+            let gains = [0.0, acim::DriveConfig::paper_defaults().orientation_gain];
+            let t0 = std::time::Instant::now();
+            let pts = acim_sim::stability::map(&gains).map_err(|e| e.to_string())?;
+            acim_sim::output::write_stability(&dir, &pts, &gains).map_err(|e| e.to_string())?;
+            println!(
+                "{} operating points in {:.1} s; map and tables in {}",
+                pts.len(),
+                t0.elapsed().as_secs_f64(),
+                dir.display()
+            );
+            let unstable = |k: f32| {
+                pts.iter()
+                    .filter(|p| p.gain == k && (p.lost || p.growth_rate > 0.0))
+                    .count()
+            };
+            println!(
+                "unstable or lost: {} of {} without the correction, {} of {} with it",
+                unstable(gains[0]),
+                pts.len() / 2,
+                unstable(gains[1]),
+                pts.len() / 2
+            );
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),

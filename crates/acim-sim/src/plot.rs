@@ -564,6 +564,19 @@ pub fn render_panels(
     width: u32,
     height: u32,
 ) -> Result<(), PlotError> {
+    render_panels_over(path, title, "Time (s)", time_s, panels, width, height)
+}
+
+/// [`render_panels`] over any ascending x axis `x`, labelled `x_label`.
+pub fn render_panels_over(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    time_s: &[f32],
+    panels: &[Panel],
+    width: u32,
+    height: u32,
+) -> Result<(), PlotError> {
     if panels.is_empty() {
         return Err(PlotError::InvalidInput("no panels".into()));
     }
@@ -835,7 +848,7 @@ pub fn render_panels(
     m.desc_x.draw(
         &root,
         font,
-        "Time (s)",
+        x_label,
         ((plot_left + plot_right) / 2, top + m.gap),
     )?;
 

@@ -163,6 +163,8 @@ pub struct DriveSpec {
     pub device_drop_comp_v: f32,
     /// Stall (locked rotor) detection time, s.
     pub stall_time_s: f32,
+    /// Orientation-correction gain (0: the paper's scheme unchanged).
+    pub orientation_gain: f32,
 }
 
 impl Default for DriveSpec {
@@ -187,6 +189,7 @@ impl Default for DriveSpec {
             dead_time_comp_s: d.dead_time,
             device_drop_comp_v: d.device_drop,
             stall_time_s: d.stall_time,
+            orientation_gain: d.orientation_gain,
         }
     }
 }
@@ -532,6 +535,7 @@ impl Scenario {
         )?;
         check_range("drive.device_drop_comp_v", d.device_drop_comp_v, 0.0, 20.0)?;
         check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
+        check_range("drive.orientation_gain", d.orientation_gain, 0.0, 50.0)?;
         check_range(
             "inverter.dead_time_s",
             self.inverter.dead_time_s,
@@ -662,6 +666,7 @@ impl Scenario {
         drive.dead_time = d.dead_time_comp_s;
         drive.device_drop = d.device_drop_comp_v;
         drive.stall_time = d.stall_time_s;
+        drive.orientation_gain = d.orientation_gain;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,

@@ -110,7 +110,7 @@ pub struct RunResult {
     pub switches_off_at_end: bool,
 }
 
-fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
+pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     let inv = Inverter::new(
         InverterConfig {
             dead_time: sc.inverter.dead_time_s,
@@ -144,7 +144,7 @@ fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     plant
 }
 
-fn wrap_deg(x: f32) -> f32 {
+pub(crate) fn wrap_deg(x: f32) -> f32 {
     let mut d = x.to_degrees() % 360.0;
     if d > 180.0 {
         d -= 360.0;

@@ -25,6 +25,19 @@
 //! settled flux, paper section 4) until the model flux is within tolerance of its reference.
 //! `Fault` is left only by [`Drive::reset_fault`], to `Idle`.
 //!
+//! ## Beyond the paper: orientation correction
+//!
+//! The paper's orientation mode s^2 + s/tau_r + w_s w_slip = 0 (x = lambda_d - lambda_hat,
+//! y = lambda_q) is neutral at zero torque and unstable in regeneration. The steady d-axis
+//! residual r_d = (Rs - Rs_hat) i_sd - w_s y, which the eq. (20) current model already
+//! integrates (its error is r_d/Rs_hat), drives a frame-frequency correction
+//! dw = -k sign(w_s) r_d / lambda_ref. The mode becomes
+//! s^2 + s(1/tau_r + k|w_s|) + k|w_s|/tau_r + w_s w_slip = 0, stable in regeneration for
+//! k > tau_r |w_slip|. It fades in between `orientation_fade` (no information at w_s = 0),
+//! and Rs adapts only below `rs_max_frequency`, where the orientation part of r_d
+//! vanishes. `orientation_gain = 0` is the paper's scheme. Derivation, the measured
+//! stability map and before/after figures: `docs/orientation-stability.md`.
+//!
 //! ## Timing convention
 //!
 //! Duties computed at step k are applied over the next PWM period (k+1 .. k+2), as with
@@ -266,6 +279,8 @@ pub enum CommandError {
     WrongState(DriveState),
     /// The value is not finite.
     NotFinite,
+    /// The value is outside its documented range.
+    OutOfRange,
 }
 
 /// Samples of one control step.
@@ -653,6 +668,21 @@ impl<S: SinCos> Drive<S> {
         }
         self.fault = None;
         self.state = DriveState::Idle;
+        Ok(())
+    }
+
+    /// Changes the orientation-correction gain k at run time (outside the interrupt:
+    /// tuning or analysis; 0 restores the paper's scheme). Rejects non-finite or negative
+    /// values and values above 50, keeping the old gain.
+    pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError> {
+        if !is_finite(gain) {
+            return Err(CommandError::NotFinite);
+        }
+        if !(0.0..=50.0).contains(&gain) {
+            return Err(CommandError::OutOfRange);
+        }
+        self.cfg.orientation_gain = gain;
+        self.orientation_gain_per_flux = gain / self.flux_reference;
         Ok(())
     }
 
@@ -1201,6 +1231,13 @@ mod tests {
     #[test]
     fn rejects_non_finite_speed_target_and_limits_it() {
         let mut d = drive();
+        assert_eq!(d.set_orientation_gain(-1.0), Err(CommandError::OutOfRange));
+        assert_eq!(
+            d.set_orientation_gain(f32::NAN),
+            Err(CommandError::NotFinite)
+        );
+        assert_eq!(d.set_orientation_gain(0.0), Ok(()));
+        assert_eq!(d.config().orientation_gain, 0.0);
         assert_eq!(d.set_speed_target(f32::NAN), Err(CommandError::NotFinite));
         d.set_speed_target(1e6).unwrap();
         assert!(d.speed_target <= 0.9 * d.config().max_speed);

@@ -1,0 +1,215 @@
+//! Stability map of the orientation mode over the torque-speed plane, measured on the
+//! project's own closed loop (drive + plant), before (paper's scheme, orientation gain 0)
+//! and after (the orientation correction).
+//!
+//! Method: at each operating point (speed, active load torque) the loop is brought to a
+//! steady state with the correction on (so that unstable points can be reached at all),
+//! the gain under test is set, and the plant's rotor flux is rotated by a small angle: an
+//! orientation-error step. The growth rate sigma (1/s) of the orientation error's
+//! deviation from its equilibrium is fitted from its rms over two windows,
+//! sigma = ln(rms2/rms1)/dt (positive: unstable). Ideal sensors and inverter, zero
+//! friction, so the only torque is the load's.
+//!
+//! Theory beside it (module docs of `acim::drive`): with x = lambda_d - lambda_hat,
+//! y = lambda_q the orientation mode is s^2 + s (1/tau_r + k |w_s|) + k |w_s|/tau_r +
+//! w_s w_slip = 0; k = 0 is the paper's scheme, unstable when w_s w_slip < 0.
+
+use crate::scenario::{LoadKind, LoadPoint, Scenario, ScenarioError, SpeedPoint};
+use acim::math::RPM_TO_RAD_S;
+use acim::model::LoadTorque;
+use acim::{Drive, DriveInputs, DriveState, PwmOutput};
+use serde::Serialize;
+
+/// One measured operating point.
+#[derive(Clone, Debug, Serialize)]
+pub struct GrowthPoint {
+    /// Speed, rpm.
+    pub speed_rpm: f32,
+    /// Active load torque, N m (positive opposes forward rotation).
+    pub load_nm: f32,
+    /// Orientation-correction gain.
+    pub gain: f32,
+    /// Measured growth rate of the orientation error, 1/s.
+    pub growth_rate: f32,
+    /// Largest real part of the second-order model's roots, 1/s.
+    pub theory: f32,
+    /// Whether the drive faulted or the error passed 30 degrees.
+    pub lost: bool,
+}
+
+/// Largest real part of s^2 + a s + b.
+fn max_real_root(a: f32, b: f32) -> f32 {
+    let d = a * a - 4.0 * b;
+    if d >= 0.0 {
+        (-a + d.sqrt()) / 2.0
+    } else {
+        -a / 2.0
+    }
+}
+
+/// Theory for the paper's machine at `speed_rpm`, `load_nm`, gain `k`.
+pub fn theory(speed_rpm: f32, load_nm: f32, k: f32) -> f32 {
+    let m = acim::MachineParams::paper_table1();
+    let tau_r = m.rotor_time_constant();
+    let lambda = m.rotor_flux_for(acim::params::DEFAULT_FLUX_CURRENT);
+    let i_sq = load_nm / m.torque_constant(lambda);
+    let w_slip = m.referred_rotor_resistance() * i_sq / lambda;
+    let w_s = m.pole_pairs_f32() * speed_rpm * RPM_TO_RAD_S + w_slip;
+    let a = 1.0 / tau_r + k * w_s.abs();
+    let b = k * w_s.abs() / tau_r + w_s * w_slip;
+    max_real_root(a, b)
+}
+
+fn rms(x: &[f32]) -> f32 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    (x.iter().map(|v| v * v).sum::<f32>() / x.len() as f32).sqrt()
+}
+
+/// Measures the growth rate at one operating point with gain `k`.
+pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, ScenarioError> {
+    let mut sc = Scenario {
+        name: "stability".into(),
+        duration_s: 10.0,
+        ..Scenario::default()
+    };
+    sc.plant.friction_nms = 0.0;
+    sc.controller.friction_nms = 0.0;
+    sc.inverter.dead_time_s = 0.0;
+    sc.inverter.device_drop_v = 0.0;
+    sc.drive.dead_time_comp_s = 0.0;
+    sc.drive.device_drop_comp_v = 0.0;
+    sc.sensors.adc_bits = 16;
+    sc.drive.speed_ramp_rpm_s = 2000.0;
+    sc.speed_profile = vec![SpeedPoint {
+        t_s: 0.0,
+        rpm: speed_rpm,
+    }];
+    sc.load_profile = vec![LoadPoint {
+        t_s: 0.0,
+        kind: LoadKind::Active,
+        torque_nm: load_nm,
+    }];
+    let v = sc.validate()?;
+    let mut plant = crate::sim::build_plant(&sc, &v);
+    let mut drive = Drive::new(v.drive).map_err(|e| ScenarioError {
+        field: "drive".into(),
+        allowed: format!("{e}"),
+    })?;
+    let ts = sc.drive.control_period_s;
+    let _ = drive.set_speed_target(speed_rpm * RPM_TO_RAD_S);
+    let _ = drive.start();
+    let mut pending = PwmOutput::OFF;
+    let settle_s = 2.0;
+    let pre_s = 0.1;
+    let obs_s = 0.6;
+    let n = ((settle_s + pre_s + obs_s) / ts) as usize;
+    let mut phi = Vec::with_capacity(n);
+    let mut lost = false;
+    let mut loaded = false;
+    for step in 0..n {
+        let t = step as f32 * ts;
+        // the load comes on once the speed is reached (a free rotor would run away while
+        // magnetizing)
+        if !loaded && drive.state() == DriveState::Running && t > 0.3 + speed_rpm.abs() / 2000.0 {
+            loaded = true;
+        }
+        if (t - settle_s).abs() < 0.5 * ts {
+            let _ = drive.set_orientation_gain(k);
+        }
+        if (t - (settle_s + pre_s)).abs() < 0.5 * ts {
+            // rotate the rotor flux by 2 degrees: an orientation-error step
+            let mut st = plant.machine().state();
+            let (s, c) = (2.0f32.to_radians().sin(), 2.0f32.to_radians().cos());
+            let (a, b) = (st.psi_alpha, st.psi_beta);
+            st.psi_alpha = c * a - s * b;
+            st.psi_beta = s * a + c * b;
+            plant.machine_mut().set_state(st);
+        }
+        let meas = plant.sample();
+        let out = drive.step(&DriveInputs {
+            phase_currents: meas.phase_currents,
+            dc_bus: meas.dc_bus,
+        });
+        if drive.state() == DriveState::Fault {
+            lost = true;
+            break;
+        }
+        let lam = plant.machine().lambda_r();
+        let err = crate::sim::wrap_deg(drive.telemetry().angle - lam[1].atan2(lam[0]));
+        if t >= settle_s {
+            phi.push(err);
+            if t > settle_s + pre_s && err.abs() > 30.0 {
+                lost = true;
+                break;
+            }
+        }
+        let applied = if out.enabled { pending } else { PwmOutput::OFF };
+        let load = if loaded {
+            LoadTorque::Active { torque: load_nm }
+        } else {
+            LoadTorque::None
+        };
+        plant.run_period(applied.duties, applied.enabled, load);
+        pending = out;
+    }
+    // deviation from the equilibrium just before the step
+    let pre = (pre_s / ts) as usize;
+    let eq = if phi.len() > pre {
+        phi[pre - (0.02 / ts) as usize..pre].iter().sum::<f32>() / (0.02 / ts)
+    } else {
+        0.0
+    };
+    let dev: Vec<f32> = phi.iter().skip(pre).map(|p| p - eq).collect();
+    let w = |a: f32, b: f32| {
+        let (i, j) = ((a / ts) as usize, (b / ts) as usize);
+        rms(&dev[i.min(dev.len())..j.min(dev.len())])
+    };
+    let growth_rate = if lost || dev.len() < (0.5 / ts) as usize {
+        // diverged: from the first window to the end of what was recorded
+        let t_end = dev.len() as f32 * ts;
+        let early = w(0.01, 0.06);
+        let late = w((t_end - 0.05).max(0.06), t_end);
+        if early > 0.0 && t_end > 0.1 {
+            (late / early).ln() / (t_end - 0.05 - 0.035)
+        } else {
+            f32::INFINITY
+        }
+    } else {
+        let (r1, r2) = (w(0.02, 0.12), w(0.38, 0.48));
+        if r1 > 0.0 && r2 > 0.0 {
+            (r2 / r1).ln() / 0.36
+        } else {
+            f32::NEG_INFINITY
+        }
+    };
+    Ok(GrowthPoint {
+        speed_rpm,
+        load_nm,
+        gain: k,
+        growth_rate,
+        theory: theory(speed_rpm, load_nm, k),
+        lost,
+    })
+}
+
+/// Speeds of the map, rpm.
+pub const SPEEDS_RPM: [f32; 12] = [
+    -750.0, -500.0, -250.0, -120.0, -60.0, -30.0, 30.0, 60.0, 120.0, 250.0, 500.0, 750.0,
+];
+/// Active load torques of the map, N m.
+pub const LOADS_NM: [f32; 5] = [-3.0, -1.5, 0.0, 1.5, 3.0];
+
+/// The whole map for gains `gains`.
+pub fn map(gains: &[f32]) -> Result<Vec<GrowthPoint>, ScenarioError> {
+    let mut out = Vec::new();
+    for &k in gains {
+        for &l in &LOADS_NM {
+            for &s in &SPEEDS_RPM {
+                out.push(measure(s, l, k)?);
+            }
+        }
+    }
+    Ok(out)
+}
