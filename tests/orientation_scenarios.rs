@@ -26,6 +26,9 @@ fn reversal_against_an_active_load_keeps_control() {
                 x.speed_est_err_max_rpm
             );
             assert!(x.orientation_err_max_deg < 5.0, "{name} {w}: {x:?}");
+            // no loss of flux: within 5 % of the reference L_M i_sd* = 0.781 Wb
+            let flux_ref = acim::MachineParams::paper_table1().rotor_flux_for(1.5);
+            assert!(x.rotor_flux_true_min > 0.95 * flux_ref, "{name} {w}: {x:?}");
         }
     }
 }

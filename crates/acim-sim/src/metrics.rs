@@ -38,6 +38,8 @@ pub struct WindowMetrics {
     pub rs_est_mean_ohm: f32,
     /// Mean true speed, rpm.
     pub speed_mean_rpm: f32,
+    /// Smallest true rotor flux amplitude (inverse-Gamma), Wb.
+    pub rotor_flux_true_min: f32,
 }
 
 /// Tracking after one load change.
@@ -163,6 +165,9 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
                 .fold(0.0, |m, r| m.max(r.orientation_error_deg.abs())),
             rs_est_mean_ohm: rs.iter().map(|r| r.stator_resistance_est_ohm).sum::<f32>() / n,
             speed_mean_rpm: rs.iter().map(|r| r.speed_rpm).sum::<f32>() / n,
+            rotor_flux_true_min: rs
+                .iter()
+                .fold(f32::INFINITY, |m, r| m.min(r.rotor_flux_true)),
         };
         let mut m = m;
         if sc.drive.mode == crate::scenario::ControlMode::Vf {
