@@ -130,7 +130,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn exp_matches_std() {
+    fn one_minus_exp_matches_std() {
         for &x in &[0.0f32, 1e-4, 3e-3, 0.1, 0.5, 1.0] {
             let e1 = one_minus_exp_neg_small(x) as f64 - (1.0 - (-(x as f64)).exp());
             assert!(e1.abs() <= 1e-6 * (x as f64), "{x}: {e1}");
