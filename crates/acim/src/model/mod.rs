@@ -236,6 +236,16 @@ impl Plant {
             acc.e_dc += s.e_dc;
             acc.e_in += s.e_in;
         };
+        // period-averaged terminal voltages (gates on, or all off: diode conduction)
+        let averaged = move |ia: f32, ib: f32| {
+            let out = inv.averaged_output(duties, enabled, inverse_clarke(ia, ib));
+            let [v_alpha, v_beta] = out.alpha_beta;
+            StageSource {
+                v_alpha,
+                v_beta,
+                p_dc: vdc * out.dc_current,
+            }
+        };
         if self.mode == PwmMode::Switched && enabled {
             let pattern = inv.switching_pattern(duties);
             let band = inv.config().current_band;
@@ -264,15 +274,6 @@ impl Plant {
         } else if !enabled {
             let band = inv.freewheel_band();
             let limit = vdc + 2.0 * inv.config().device_drop;
-            let src = move |ia: f32, ib: f32| {
-                let out = inv.averaged_output(duties, false, inverse_clarke(ia, ib));
-                let [v_alpha, v_beta] = out.alpha_beta;
-                StageSource {
-                    v_alpha,
-                    v_beta,
-                    p_dc: vdc * out.dc_current,
-                }
-            };
             for _ in 0..self.substeps {
                 let small = self
                     .machine
@@ -293,21 +294,12 @@ impl Plant {
                         e_in: 0.0,
                     });
                 } else {
-                    add(self.machine.step_with(h_max, load, &src));
+                    add(self.machine.step_with(h_max, load, &averaged));
                 }
             }
         } else {
-            let src = move |ia: f32, ib: f32| {
-                let out = inv.averaged_output(duties, enabled, inverse_clarke(ia, ib));
-                let [v_alpha, v_beta] = out.alpha_beta;
-                StageSource {
-                    v_alpha,
-                    v_beta,
-                    p_dc: vdc * out.dc_current,
-                }
-            };
             for _ in 0..self.substeps {
-                add(self.machine.step_with(h_max, load, &src));
+                add(self.machine.step_with(h_max, load, &averaged));
             }
         }
         let inv_t = 1.0 / t;
