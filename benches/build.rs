@@ -13,5 +13,7 @@ fn main() {
         println!("cargo:rerun-if-changed=../memory.x");
         println!("cargo:rustc-link-arg-bin=acim-bench-fw=-Tlink.x");
         println!("cargo:rustc-link-arg-bin=acim-bench-fw=--nmagic");
+        println!("cargo:rustc-link-arg-bin=acim-bench-fixed=-Tlink.x");
+        println!("cargo:rustc-link-arg-bin=acim-bench-fixed=--nmagic");
     }
 }

@@ -125,6 +125,18 @@ pub enum ControlMode {
     Vf,
 }
 
+/// Arithmetic of the drive: the f32 `acim::Drive` or the fixed-point
+/// `acim::fixed::FixedDrive` (per unit, Q7.24; converted at the simulator boundary).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Arithmetic {
+    /// f32 SI (the default).
+    #[default]
+    F32,
+    /// Fixed point, per unit (sensorless mode only).
+    Fixed,
+}
+
 /// Drive (controller) settings.
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -165,6 +177,8 @@ pub struct DriveSpec {
     pub stall_time_s: f32,
     /// Orientation-correction gain (0: the paper's scheme unchanged).
     pub orientation_gain: f32,
+    /// "f32" or "fixed".
+    pub arithmetic: Arithmetic,
 }
 
 impl Default for DriveSpec {
@@ -190,6 +204,7 @@ impl Default for DriveSpec {
             device_drop_comp_v: d.device_drop,
             stall_time_s: d.stall_time,
             orientation_gain: d.orientation_gain,
+            arithmetic: Arithmetic::F32,
         }
     }
 }
@@ -676,6 +691,20 @@ impl Scenario {
             field: "drive".into(),
             allowed: format!("{e}"),
         })?;
+        if d.arithmetic == Arithmetic::Fixed {
+            if d.mode == ControlMode::Vf {
+                return err(
+                    "drive.arithmetic",
+                    "\"fixed\" runs the sensorless mode only",
+                );
+            }
+            acim::fixed::FixedDrive::new(drive, acim::fixed::PerUnitBases::PAPER).map_err(|e| {
+                ScenarioError {
+                    field: "drive.arithmetic".into(),
+                    allowed: format!("{e}"),
+                }
+            })?;
+        }
         Ok(Validated {
             plant,
             drive,

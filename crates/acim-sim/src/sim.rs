@@ -7,13 +7,14 @@
 //! k the duties of step k-1 act. A switch-off (fault or stop) acts at once (the timer's
 //! main output is cleared immediately, not preloaded).
 
-use crate::scenario::{ControlMode, Scenario, ScenarioError, Validated};
+use crate::scenario::{Arithmetic, ControlMode, Scenario, ScenarioError, Validated};
+use acim::fixed::{FixedDrive, PerUnitBases};
 use acim::math::RAD_S_TO_RPM;
 use acim::model::{
     BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, InductionMachine,
     Inverter, InverterConfig, LoadTorque, Plant, PwmMode,
 };
-use acim::{Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
+use acim::{CommandError, Drive, DriveInputs, DriveState, DriveTelemetry, FaultReason, PwmOutput};
 use serde::Serialize;
 
 /// The CSV header: the required columns first, then extra ones.
@@ -154,15 +155,77 @@ pub(crate) fn wrap_deg(x: f32) -> f32 {
     d
 }
 
+/// The drive under test: f32, or fixed point behind its SI boundary conversion
+/// (`drive.arithmetic`).
+enum SimDrive {
+    F32(Drive),
+    Fixed(FixedDrive),
+}
+
+impl SimDrive {
+    fn start(&mut self) -> Result<(), CommandError> {
+        match self {
+            SimDrive::F32(d) => d.start(),
+            SimDrive::Fixed(d) => d.start(),
+        }
+    }
+    fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        match self {
+            SimDrive::F32(d) => d.start_open_loop(),
+            SimDrive::Fixed(_) => Err(CommandError::WrongState(DriveState::Idle)),
+        }
+    }
+    fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
+        match self {
+            SimDrive::F32(d) => d.set_speed_target(speed),
+            SimDrive::Fixed(d) => d.set_speed_target_si(speed),
+        }
+    }
+    fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+        match self {
+            SimDrive::F32(d) => d.step(inp),
+            SimDrive::Fixed(d) => d.step_si(inp),
+        }
+    }
+    fn telemetry(&self) -> DriveTelemetry {
+        match self {
+            SimDrive::F32(d) => *d.telemetry(),
+            SimDrive::Fixed(d) => d.telemetry_si(),
+        }
+    }
+    fn state(&self) -> DriveState {
+        match self {
+            SimDrive::F32(d) => d.state(),
+            SimDrive::Fixed(d) => d.state(),
+        }
+    }
+    fn fault(&self) -> Option<FaultReason> {
+        match self {
+            SimDrive::F32(d) => d.fault(),
+            SimDrive::Fixed(d) => d.fault(),
+        }
+    }
+}
+
 /// Runs a scenario to its end (or, after a fault, on with the switches off so the
 /// result shows the machine coasting).
 pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
     let v = sc.validate()?;
     let mut plant = build_plant(sc, &v);
-    let mut drive = Drive::new(v.drive).map_err(|e| ScenarioError {
-        field: "drive".into(),
-        allowed: format!("{e}"),
-    })?;
+    let mut drive = match sc.drive.arithmetic {
+        Arithmetic::F32 => SimDrive::F32(Drive::new(v.drive).map_err(|e| ScenarioError {
+            field: "drive".into(),
+            allowed: format!("{e}"),
+        })?),
+        Arithmetic::Fixed => {
+            SimDrive::Fixed(FixedDrive::new(v.drive, PerUnitBases::PAPER).map_err(|e| {
+                ScenarioError {
+                    field: "drive.arithmetic".into(),
+                    allowed: format!("{e}"),
+                }
+            })?)
+        }
+    };
     let ts = sc.drive.control_period_s;
     let n = (sc.duration_s / ts).round() as usize;
     let mut rows = Vec::with_capacity(n);
@@ -224,7 +287,7 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         }
 
         // record the state at the sampling instant
-        let tel = *drive.telemetry();
+        let tel = drive.telemetry();
         let m = plant.machine();
         let lam = m.lambda_r();
         let flux_angle = lam[1].atan2(lam[0]);

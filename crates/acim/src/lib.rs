@@ -20,6 +20,7 @@ pub mod params;
 
 pub use params::{MachineData, MachineParams, ParamError};
 pub mod drive;
+pub mod fixed;
 pub mod flux;
 pub mod frames;
 pub mod full_order;

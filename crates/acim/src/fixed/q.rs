@@ -1,0 +1,254 @@
+//! Q7.24 signal arithmetic, construction-time gains with their own binary point, the
+//! per-unit bases and a division-free-in-spirit reciprocal (one hardware 32-bit division
+//! for the seed, one Newton step).
+//!
+//! Every signal is an `i32` holding `value_pu * 2^24` (Q7.24: sign, 7 integer bits, 24
+//! fraction bits; range [-128, 128) pu, resolution 6.0e-8 pu). Every operation saturates
+//! to that range: products go through `i64` and are rounded to nearest, then clamped;
+//! sums use `saturating_add`/`saturating_sub`. Nothing in a control quantity wraps; only
+//! the frame angle (a turn fraction, [`super::trig`]) wraps, by design.
+
+/// Fraction bits of the signal format (Q7.24).
+pub const FRAC_BITS: u32 = 24;
+/// 1.0 pu in Q7.24.
+pub const ONE: i32 = 1 << FRAC_BITS;
+/// 0.5 pu in Q7.24.
+pub const HALF: i32 = 1 << (FRAC_BITS - 1);
+
+/// Clamps an `i64` into the `i32` range (saturation, never wrap-around).
+#[inline(always)]
+pub fn saturate(v: i64) -> i32 {
+    if v > i32::MAX as i64 {
+        i32::MAX
+    } else if v < i32::MIN as i64 {
+        i32::MIN
+    } else {
+        v as i32
+    }
+}
+
+/// Product of two Q7.24 values in Q7.24, rounded to nearest (ties up) and saturated.
+/// The `i64` product of two `i32` cannot overflow (|a b| <= 2^62).
+#[inline(always)]
+pub fn mul(a: i32, b: i32) -> i32 {
+    // wrapping_* on operations that cannot overflow: no overflow-check panic path in any
+    // build profile (the i64 product is below 2^62, the rounded sum below 2^63)
+    saturate(
+        (a as i64)
+            .wrapping_mul(b as i64)
+            .wrapping_add(1i64 << (FRAC_BITS - 1))
+            >> FRAC_BITS,
+    )
+}
+
+/// `x` limited to [lo, hi] by comparisons (requires lo <= hi; `Ord::clamp` asserts that and
+/// would link a panic path).
+#[inline(always)]
+pub fn clamp(x: i32, lo: i32, hi: i32) -> i32 {
+    if x > hi {
+        hi
+    } else if x < lo {
+        lo
+    } else {
+        x
+    }
+}
+
+/// f32 to Q7.24, rounded and saturated (configuration and the simulator boundary only;
+/// NaN maps to 0).
+pub fn to_q24(x: f32) -> i32 {
+    let s = x * ONE as f32;
+    // `as` from f32 saturates and maps NaN to 0
+    (s + if s >= 0.0 { 0.5 } else { -0.5 }) as i32
+}
+
+/// Q7.24 to f32 (telemetry and the simulator boundary only).
+pub fn from_q24(x: i32) -> f32 {
+    x as f32 * (1.0 / ONE as f32)
+}
+
+/// A constant factor with its own binary point: `value = mantissa / 2^shift`, the
+/// mantissa normalised to 29-30 significant bits at construction, so a gain of 4e-5 keeps
+/// the same relative precision (about 2e-9, better than the f32 it comes from) as a gain
+/// of 200. [`Gain::apply`] multiplies a Q7.24 signal by it: one 32x32->64 multiply, a
+/// rounding add and a shift by `shift` (0..=62), saturated.
+///
+/// Gains are built from the f32 designs at construction time (the designs stay
+/// single-sourced in `observer`, `pi`, `flux`, `rs_estimator`, `svpwm`); the step never
+/// sees an f32.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Gain {
+    mantissa: i32,
+    shift: u32,
+}
+
+impl Gain {
+    /// The zero gain.
+    pub const ZERO: Self = Self {
+        mantissa: 0,
+        shift: 0,
+    };
+
+    /// The gain nearest to `x`, or `None` when `x` is not finite or |x| >= 2^30
+    /// (configuration time only).
+    pub fn from_f32(x: f32) -> Option<Self> {
+        if !crate::math::is_finite(x) || x.abs() >= 1_073_741_824.0 {
+            return None;
+        }
+        if x == 0.0 {
+            return Some(Self::ZERO);
+        }
+        // largest shift with |x| 2^shift < 2^30 (exact: scaling by 2 is exact in f32)
+        let mut scaled = x;
+        let mut shift = 0u32;
+        while shift < 62 && (scaled * 2.0).abs() < 1_073_741_824.0 {
+            scaled *= 2.0;
+            shift += 1;
+        }
+        let mantissa = (scaled + if scaled >= 0.0 { 0.5 } else { -0.5 }) as i32;
+        Some(Self { mantissa, shift })
+    }
+
+    /// The value as f32 (tests and diagnostics).
+    pub fn to_f32(self) -> f32 {
+        let mut v = self.mantissa as f32;
+        let mut s = 0;
+        while s < self.shift {
+            v *= 0.5;
+            s += 1;
+        }
+        v
+    }
+
+    /// `x * value`, rounded to nearest and saturated. `shift <= 62` by construction, so the
+    /// rounding term and the product (|x m| < 2^61) stay inside `i64`; the wrapping shift
+    /// functions only avoid a (never taken) overflow-check panic path.
+    #[inline(always)]
+    pub fn apply(self, x: i32) -> i32 {
+        let p = (x as i64).wrapping_mul(self.mantissa as i64);
+        let round = 1i64.wrapping_shl(self.shift) >> 1;
+        saturate(p.wrapping_add(round).wrapping_shr(self.shift))
+    }
+}
+
+/// Reciprocal of a positive Q7.24 value, in Q7.24: `2^48 / x`, for x in [2^-6, 128) pu
+/// (inputs below 2^-6 pu, zero or negative are taken as 2^-6 pu, so the result is at most
+/// 64 pu). Relative error below 1e-8 plus the final rounding (tests check 2 LSB).
+///
+/// Method: normalise x to X in [0.5, 1) with a count of leading zeros; seed 1/X with one
+/// 32-bit hardware division (UDIV on Cortex-M3/M4, 2-12 cycles) of 2^32-1 by the top 16
+/// bits of X (relative error < 2^-15); one Newton step y (2 - X y) squares that error.
+/// Used where f32 divides too: 1/lambda_r in the slip law (eq. 8) and the observer, 1/V_dc
+/// in the modulator and the voltage limit, and the overmodulation scale.
+#[inline]
+pub fn reciprocal(x: i32) -> i32 {
+    const MIN_INPUT: i32 = 1 << (FRAC_BITS - 6);
+    let x = if x > MIN_INPUT { x } else { MIN_INPUT } as u32;
+    // x in [2^18, 2^31): n in [1, 13]
+    let n = x.leading_zeros();
+    // shifts and products below are in range by the bounds noted; the wrapping forms only
+    // keep overflow-check panic paths out of every build profile
+    let xn = x.wrapping_shl(n.wrapping_sub(1)); // [2^30, 2^31): X = xn / 2^31
+    let d = (xn >> 15) | 1; // [2^15, 2^16), nonzero (the `| 1` changes it by < 2^-15)
+    let q0 = u32::MAX / d; // 1/X in Q16, in [2^16, 2^17)
+    let y0 = (q0 as u64) << 14; // 1/X in Q30 (< 2^31)
+    let xy = (xn as u64).wrapping_mul(y0) >> 31; // X y0 in Q30
+    let t = (2u64 << 30).saturating_sub(xy); // 2 - X y0 in Q30
+    let y1 = y0.wrapping_mul(t) >> 30; // 1/X in Q30, about (2^30, 2^31]
+                                       // 1/x_pu = Y 2^(n-8) -> Q24 raw = y1 / 2^(14-n), 14 - n in [1, 13]
+    let s = 14u32.wrapping_sub(n);
+    let r = y1
+        .wrapping_add(1u64.wrapping_shl(s.wrapping_sub(1)))
+        .wrapping_shr(s);
+    saturate(r as i64)
+}
+
+/// Per-unit bases: the physical value of 1.0 pu of each quantity (SI). Chosen for the
+/// paper's machine so every signal over the whole operating range stays below 2 pu,
+/// leaving at least 64x (36 dB) before Q7.24 saturates at 128 pu (see the module docs).
+/// Resistance is V_base / I_base, so R i products are volts in pu directly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PerUnitBases {
+    /// Current base, A (phase peak, amplitude-invariant dq).
+    pub current: f32,
+    /// Voltage base, V (DC bus and phase peak).
+    pub voltage: f32,
+    /// Mechanical speed base, rad/s.
+    pub speed: f32,
+    /// Electrical (frame) frequency base, rad/s.
+    pub frequency: f32,
+    /// Rotor-flux base (inverse-Gamma lambda_r), Wb.
+    pub flux: f32,
+    /// Torque base, N m.
+    pub torque: f32,
+}
+
+impl PerUnitBases {
+    /// The bases for the paper's machine (Table 1) and drive: 10 A (the current sensors'
+    /// full scale, trip at 8 A = 0.8 pu), 400 V (the highest bus, 1.0 pu), 2000 rpm
+    /// mechanical (the over-speed trip, 1.0 pu), 2 pi 100 rad/s electrical (2000 rpm at
+    /// p = 2 is 0.67 pu), 1 Wb (nominal flux 0.781 Wb, 1.2x nominal = 0.94 pu), 10 N m
+    /// (twice rated; the largest plausible load estimate, 15 N m, is 1.5 pu).
+    pub const PAPER: Self = Self {
+        current: 10.0,
+        voltage: 400.0,
+        speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+        frequency: 2.0 * core::f32::consts::PI * 100.0,
+        flux: 1.0,
+        torque: 10.0,
+    };
+
+    /// Resistance base V_base / I_base, ohm.
+    pub fn resistance(&self) -> f32 {
+        self.voltage / self.current
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reciprocal_is_accurate_over_its_range() {
+        let mut x = 1i32 << 18;
+        let mut worst = 0.0f64;
+        while x < i32::MAX / 2 {
+            for k in 0..64 {
+                let v = x + k * (x >> 6);
+                let exact = (1u64 << 48) as f64 / v as f64;
+                let err = (reciprocal(v) as f64 - exact).abs();
+                worst = worst.max(err);
+                assert!(err <= 2.0, "x = {v}: {} vs {exact}", reciprocal(v));
+            }
+            x *= 2;
+        }
+        assert!(worst <= 2.0);
+        assert_eq!(reciprocal(0), reciprocal(1 << 18));
+        assert_eq!(reciprocal(-5), reciprocal(1 << 18));
+        assert_eq!(reciprocal(ONE), ONE);
+    }
+
+    #[test]
+    fn gains_keep_relative_precision_and_saturate() {
+        for &g in &[4e-5f32, 0.003, 1.0, -0.7, 5.12, 200.0, -754.0] {
+            let k = Gain::from_f32(g).unwrap();
+            assert!(((k.to_f32() - g) / g).abs() < 1e-7, "{g}");
+            let y = k.apply(ONE / 1000);
+            let exact = g as f64 * (ONE / 1000) as f64;
+            assert!((y as f64 - exact).abs() <= 1.0 + exact.abs() * 1e-7, "{g}");
+        }
+        assert_eq!(Gain::from_f32(0.0), Some(Gain::ZERO));
+        assert_eq!(Gain::from_f32(f32::NAN), None);
+        assert_eq!(Gain::from_f32(2e9), None);
+        let big = Gain::from_f32(1000.0).unwrap();
+        assert_eq!(big.apply(i32::MAX), i32::MAX);
+        assert_eq!(big.apply(i32::MIN), i32::MIN);
+        assert_eq!(mul(i32::MAX, i32::MAX), i32::MAX);
+        assert_eq!(mul(i32::MIN, i32::MAX), i32::MIN);
+        assert_eq!(mul(ONE, -ONE), -ONE);
+        assert_eq!(to_q24(f32::NAN), 0);
+        assert_eq!(to_q24(1e9), i32::MAX);
+    }
+}
