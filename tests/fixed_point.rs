@@ -18,11 +18,7 @@ use acim_sim::metrics::Metrics;
 const MARGIN_RPM: f32 = 0.5;
 
 fn run(name: &str, arithmetic: &str) -> Metrics {
-    let sc = builtins::get(name).expect("built-in scenario");
-    let sc = sc
-        .with_overrides(&[format!("drive.arithmetic={arithmetic}")])
-        .expect("overrides");
-    acim_sim::run_with_metrics(&sc).expect("valid scenario").1
+    acim_tests::run(name, &[&format!("drive.arithmetic={arithmetic}")])
 }
 
 /// Runs `name` in both arithmetics; checks the fixed-point run against the f32
@@ -67,14 +63,7 @@ fn check(name: &str, est_max: f32, speed_max: Option<f32>) -> Metrics {
 #[test]
 fn fixed_fig7_load_step_at_500_rpm() {
     let m = check("paper-fig7", 2.0, Some(2.0));
-    let step = &m.load_steps[0];
-    let settle = step.load_est_settle_s.expect("load estimate never settled");
-    assert!(
-        settle <= 0.5,
-        "load estimate within 0.05 N m after {settle} s"
-    );
-    let rec = step.speed_recovery_s.expect("speed never recovered");
-    assert!(rec <= 0.5, "speed back within 5 rpm after {rec} s");
+    acim_tests::assert_load_step_tracked(&m);
 }
 
 #[test]

@@ -2,15 +2,7 @@
 //! orientation correction), and the paper's scheme shown to lose it there, as the analysis
 //! in docs/orientation-stability.md predicts.
 
-use acim_sim::builtins;
-use acim_sim::metrics::Metrics;
-
-fn run(name: &str, sets: &[&str]) -> Metrics {
-    let sc = builtins::get(name).expect("built-in scenario");
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let sc = sc.with_overrides(&sets).expect("overrides");
-    acim_sim::run_with_metrics(&sc).expect("valid scenario").1
-}
+use acim_tests::run;
 
 /// Reversal against an active 1.5 N m load at 500, 120 and 60 rpm: control kept through
 /// the regenerating phase, steady estimation error <= 4 rpm, flux kept.

@@ -4,15 +4,9 @@
 //! Speed errors are maxima over each steady window of 10 ms moving averages (see
 //! acim_sim::metrics).
 
-use acim_sim::builtins;
 use acim_sim::metrics::Metrics;
 
-fn run(name: &str, sets: &[&str]) -> Metrics {
-    let sc = builtins::get(name).expect("built-in scenario");
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let sc = sc.with_overrides(&sets).expect("overrides");
-    acim_sim::run_with_metrics(&sc).expect("valid scenario").1
-}
+use acim_tests::{assert_load_step_tracked, run};
 
 fn check_windows(m: &Metrics, est_max: f32, speed_max: Option<f32>) {
     assert!(m.control_kept, "{}: control lost: {m:#?}", m.name);
@@ -49,15 +43,7 @@ fn fig6_startup_and_reversal_at_500_rpm() {
 fn fig7_load_step_at_500_rpm() {
     let m = run("paper-fig7", &[]);
     check_windows(&m, 2.0, Some(2.0));
-    let step = &m.load_steps[0];
-    assert!((step.load_nm - 1.5).abs() < 1e-6);
-    let settle = step.load_est_settle_s.expect("load estimate never settled");
-    assert!(
-        settle <= 0.5,
-        "load estimate within 0.05 N m after {settle} s"
-    );
-    let rec = step.speed_recovery_s.expect("speed never recovered");
-    assert!(rec <= 0.5, "speed back within 5 rpm after {rec} s");
+    assert_load_step_tracked(&m);
 }
 
 #[test]
