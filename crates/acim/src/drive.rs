@@ -283,6 +283,77 @@ pub enum CommandError {
     OutOfRange,
 }
 
+/// The drive's state machine and fault latch, shared by the f32 [`Drive`] and the
+/// fixed-point drive so that both obey the same commands: start only from `Idle`, stop to
+/// `Idle` unless faulted, the first fault reason latched until a deliberate reset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Supervisor {
+    state: DriveState,
+    fault: Option<FaultReason>,
+}
+
+impl Default for Supervisor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Supervisor {
+    /// Idle, no fault.
+    pub const fn new() -> Self {
+        Self {
+            state: DriveState::Idle,
+            fault: None,
+        }
+    }
+    /// Present state.
+    #[inline(always)]
+    pub fn state(&self) -> DriveState {
+        self.state
+    }
+    /// The latched fault, if any.
+    pub fn fault(&self) -> Option<FaultReason> {
+        self.fault
+    }
+    /// Idle -> `to` (`Magnetizing` or `OpenLoop`); any other state refuses.
+    pub fn start(&mut self, to: DriveState) -> Result<(), CommandError> {
+        if self.state != DriveState::Idle {
+            return Err(CommandError::WrongState(self.state));
+        }
+        self.state = to;
+        Ok(())
+    }
+    /// Any active state -> Idle; a faulted drive stays faulted.
+    pub fn stop(&mut self) {
+        if self.state != DriveState::Fault {
+            self.state = DriveState::Idle;
+        }
+    }
+    /// Fault -> Idle, clearing the latched reason.
+    pub fn reset_fault(&mut self) -> Result<(), CommandError> {
+        if self.state != DriveState::Fault {
+            return Err(CommandError::WrongState(self.state));
+        }
+        self.fault = None;
+        self.state = DriveState::Idle;
+        Ok(())
+    }
+    /// Enters Fault; the first reason is kept.
+    pub fn trip(&mut self, reason: FaultReason) {
+        self.state = DriveState::Fault;
+        if self.fault.is_none() {
+            self.fault = Some(reason);
+        }
+    }
+    /// Magnetizing -> Running (flux settled).
+    pub fn magnetized(&mut self) {
+        if self.state == DriveState::Magnetizing {
+            self.state = DriveState::Running;
+        }
+    }
+}
+
 /// Samples of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -417,8 +488,7 @@ pub struct Drive<S: SinCos = FastSinCos> {
     residual_filter: f32,
     rs_settled_error: f32,
     // state
-    state: DriveState,
-    fault: Option<FaultReason>,
+    sup: Supervisor,
     speed_target: f32,
     speed_reference: f32,
     speed_ctl: PiController,
@@ -566,8 +636,7 @@ impl<S: SinCos> Drive<S> {
             residual_filter: (ts / 0.02).min(1.0),
             // |error| below 0.3 % of i_sd* means |Rs_hat - Rs| below about 0.3 %
             rs_settled_error: 0.003 * i_d,
-            state: DriveState::Idle,
-            fault: None,
+            sup: Supervisor::new(),
             speed_target: 0.0,
             speed_reference: 0.0,
             speed_ctl: PiController::new(),
@@ -599,11 +668,11 @@ impl<S: SinCos> Drive<S> {
     }
     /// Present state.
     pub fn state(&self) -> DriveState {
-        self.state
+        self.sup.state()
     }
     /// The fault that stopped the drive, if any.
     pub fn fault(&self) -> Option<FaultReason> {
-        self.fault
+        self.sup.fault()
     }
     /// Quantities computed by the last step.
     pub fn telemetry(&self) -> &DriveTelemetry {
@@ -635,40 +704,27 @@ impl<S: SinCos> Drive<S> {
 
     /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
     pub fn start(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Idle {
-            return Err(CommandError::WrongState(self.state));
-        }
+        self.sup.start(DriveState::Magnetizing)?;
         self.reset_dynamic_state();
-        self.state = DriveState::Magnetizing;
         Ok(())
     }
 
     /// Idle -> OpenLoop: V/f at the electrical frequency p * speed target.
     pub fn start_open_loop(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Idle {
-            return Err(CommandError::WrongState(self.state));
-        }
+        self.sup.start(DriveState::OpenLoop)?;
         self.reset_dynamic_state();
-        self.state = DriveState::OpenLoop;
         Ok(())
     }
 
     /// Any active state -> Idle, switches off at once (the machine coasts). A faulted drive
     /// stays faulted.
     pub fn stop(&mut self) {
-        if self.state != DriveState::Fault {
-            self.state = DriveState::Idle;
-        }
+        self.sup.stop();
     }
 
     /// Fault -> Idle: the deliberate reset after the cause has been dealt with.
     pub fn reset_fault(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Fault {
-            return Err(CommandError::WrongState(self.state));
-        }
-        self.fault = None;
-        self.state = DriveState::Idle;
-        Ok(())
+        self.sup.reset_fault()
     }
 
     /// Changes the orientation-correction gain k at run time (outside the interrupt:
@@ -710,10 +766,7 @@ impl<S: SinCos> Drive<S> {
     }
 
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput {
-        self.state = DriveState::Fault;
-        if self.fault.is_none() {
-            self.fault = Some(reason);
-        }
+        self.sup.trip(reason);
         self.applied_voltage = Dq::default();
         PwmOutput::OFF
     }
@@ -774,7 +827,7 @@ impl<S: SinCos> Drive<S> {
     /// plausibility checks and the telemetry record, which the whole step includes).
     #[inline(always)]
     pub fn step_probed<P: StepProbe>(&mut self, inp: &DriveInputs, probe: &mut P) -> PwmOutput {
-        match self.state {
+        match self.sup.state() {
             DriveState::Fault => return PwmOutput::OFF,
             DriveState::Idle => {
                 // a non-finite or over-current sample while idle is still a fault; bus
@@ -795,7 +848,7 @@ impl<S: SinCos> Drive<S> {
             return self.enter_fault(reason);
         }
         let [a, b, c] = inp.phase_currents;
-        if self.state == DriveState::OpenLoop {
+        if self.sup.state() == DriveState::OpenLoop {
             let (i_ab, phase_currents) = match self.cfg.current_sensing {
                 CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
                 CurrentSensing::ThreePhase => (clarke_three(a, b, c), [a, b, c]),
@@ -813,7 +866,7 @@ impl<S: SinCos> Drive<S> {
         let sc = self.sincos.sin_cos(sample_angle);
         let i = park(i_ab, sc);
         probe.end(StepRegion::ClarkePark);
-        let magnetizing = self.state == DriveState::Magnetizing;
+        let magnetizing = self.sup.state() == DriveState::Magnetizing;
 
         // 3. observer (eq. 12), with the voltage applied over the past period
         probe.begin(StepRegion::ObserverReduced);
@@ -932,7 +985,7 @@ impl<S: SinCos> Drive<S> {
                 || self.rs_settled_steps > self.rs_settle_steps
                 || self.magnetizing_steps > self.rs_timeout_steps;
             if flux_settled && rs_done {
-                self.state = DriveState::Running;
+                self.sup.magnetized();
                 self.observer.reset(i.q, 0.0, 0.0);
                 self.speed_ctl.reset();
             }

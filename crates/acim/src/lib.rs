@@ -31,5 +31,5 @@ pub mod svpwm;
 
 pub use drive::{
     CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
-    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion,
+    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion, Supervisor,
 };

@@ -43,7 +43,7 @@ use super::trig::{
 use super::PerUnitBases;
 use crate::drive::{
     CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
-    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion,
+    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion, Supervisor,
 };
 use crate::flux::FluxModelConfig;
 use crate::frames::Dq;
@@ -194,8 +194,7 @@ pub struct FixedDrive {
     residual_filter: Gain,
     rs_settled_error: i32,
     // state
-    state: DriveState,
-    fault: Option<FaultReason>,
+    sup: Supervisor,
     speed_target: i32,
     speed_reference: i32,
     speed_ctl: FixedPiController,
@@ -340,8 +339,7 @@ impl FixedDrive {
             implausible_limit: (0.02 / ts) as u32,
             residual_filter: gain((ts / 0.02).min(1.0), "control_period")?,
             rs_settled_error: pu(0.003 * i_d, b.current, "flux_current")?,
-            state: DriveState::Idle,
-            fault: None,
+            sup: Supervisor::new(),
             speed_target: 0,
             speed_reference: 0,
             speed_ctl: FixedPiController::new(),
@@ -375,11 +373,11 @@ impl FixedDrive {
     }
     /// Present state.
     pub fn state(&self) -> DriveState {
-        self.state
+        self.sup.state()
     }
     /// The fault that stopped the drive, if any.
     pub fn fault(&self) -> Option<FaultReason> {
-        self.fault
+        self.sup.fault()
     }
     /// What the last step computed (Q7.24 pu).
     pub fn telemetry(&self) -> &FixedTelemetry {
@@ -393,29 +391,19 @@ impl FixedDrive {
 
     /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
     pub fn start(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Idle {
-            return Err(CommandError::WrongState(self.state));
-        }
+        self.sup.start(DriveState::Magnetizing)?;
         self.reset_dynamic_state();
-        self.state = DriveState::Magnetizing;
         Ok(())
     }
 
     /// Any active state -> Idle (switches off at once); a faulted drive stays faulted.
     pub fn stop(&mut self) {
-        if self.state != DriveState::Fault {
-            self.state = DriveState::Idle;
-        }
+        self.sup.stop();
     }
 
     /// Fault -> Idle.
     pub fn reset_fault(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Fault {
-            return Err(CommandError::WrongState(self.state));
-        }
-        self.fault = None;
-        self.state = DriveState::Idle;
-        Ok(())
+        self.sup.reset_fault()
     }
 
     /// Forces a fault from outside (hardware break, missed deadline).
@@ -440,10 +428,7 @@ impl FixedDrive {
     }
 
     fn enter_fault(&mut self, reason: FaultReason) -> FixedPwm {
-        self.state = DriveState::Fault;
-        if self.fault.is_none() {
-            self.fault = Some(reason);
-        }
+        self.sup.trip(reason);
         self.applied_voltage = DqQ24::default();
         FixedPwm::OFF
     }
@@ -479,7 +464,7 @@ impl FixedDrive {
     /// [`FixedDrive::step`] with `probe` called around each [`StepRegion`] (cycle bench).
     #[inline(always)]
     pub fn step_probed<P: StepProbe>(&mut self, inp: &FixedInputs, probe: &mut P) -> FixedPwm {
-        match self.state {
+        match self.sup.state() {
             DriveState::Fault => return FixedPwm::OFF,
             DriveState::Idle | DriveState::OpenLoop => {
                 return match self.check_inputs(inp) {
@@ -507,7 +492,7 @@ impl FixedDrive {
         let sc = sin_cos(sample_angle);
         let i = park(i_ab, sc);
         probe.end(StepRegion::ClarkePark);
-        let magnetizing = self.state == DriveState::Magnetizing;
+        let magnetizing = self.sup.state() == DriveState::Magnetizing;
 
         // 3. observer (eq. 12) with the voltage applied over the past period
         probe.begin(StepRegion::ObserverReduced);
@@ -634,7 +619,7 @@ impl FixedDrive {
                 || self.rs_settled_steps > self.rs_settle_steps
                 || self.magnetizing_steps > self.rs_timeout_steps;
             if flux_settled && rs_done {
-                self.state = DriveState::Running;
+                self.sup.magnetized();
                 self.observer.reset(i.q, 0, 0);
                 self.speed_ctl.reset();
             }
@@ -774,7 +759,7 @@ impl FixedDrive {
         let [a, b, c] = inp.phase_currents;
         let finite = is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus);
         if !finite {
-            return if self.state == DriveState::Fault {
+            return if self.sup.state() == DriveState::Fault {
                 PwmOutput::OFF
             } else {
                 self.enter_fault(FaultReason::NonFiniteInput);
