@@ -596,7 +596,6 @@ impl<S: SinCos> Drive<S> {
         // limits only bound the integrators before the first step
         let v_static = linear_limit(cfg.dc_bus_max);
         let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
-        rs_cfg.flux_tolerance = tol;
         rs_cfg.adapt = cfg.rs_estimation;
         rs_cfg.max_stator_frequency = cfg.rs_max_frequency;
         Ok(Self {

@@ -26,8 +26,6 @@ pub struct FluxModelConfig {
     pub min_flux: f32,
     /// Control period, s.
     pub ts: f32,
-    /// Pole pairs p as f32.
-    pub pole_pairs: f32,
 }
 
 impl FluxModelConfig {
@@ -42,7 +40,6 @@ impl FluxModelConfig {
             slip_gain: m.magnetizing_inductance() / m.rotor_time_constant(),
             min_flux: (0.1 * nominal_flux).max(1e-3),
             ts,
-            pole_pairs: m.pole_pairs_f32(),
         }
     }
 }

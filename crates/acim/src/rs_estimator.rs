@@ -32,9 +32,10 @@
 //! ## Gating and clamping
 //!
 //! Adaptation runs only where eq. (20) holds and the d-axis is informative: flux settled
-//! (within `flux_tolerance` of its reference), |i_sd| above `min_flux_current`, |i_sq| below
-//! `max_torque_current`, |w_s| below `max_stator_frequency` (at high frequency the
-//! sigma Ls w_s i_sq term and voltage errors dominate v_sd). The estimate is clamped to
+//! (the caller's `flux_settled`; the drive uses its `flux_tolerance`), |i_sd| above
+//! `min_flux_current`, |i_sq| below `max_torque_current`, |w_s| below
+//! `max_stator_frequency` (at high frequency the sigma Ls w_s i_sq term and voltage errors
+//! dominate v_sd). The estimate is clamped to
 //! [`min_resistance`, `max_resistance`]; reaching a bound is reported so the drive can
 //! raise an "estimator out of range" fault.
 
@@ -61,8 +62,6 @@ pub struct RsEstimatorConfig {
     pub max_torque_current: f32,
     /// Adapt only with |w_s| at most this, rad/s electrical.
     pub max_stator_frequency: f32,
-    /// Adapt only with the flux within this fraction of its reference.
-    pub flux_tolerance: f32,
     /// Whether the resistance adapts at all (the current model of eq. 20 always runs: the
     /// drive's orientation correction uses its error).
     pub adapt: bool,
@@ -85,7 +84,6 @@ impl RsEstimatorConfig {
             min_flux_current: 0.5 * flux_current.abs(),
             max_torque_current: 2.0 * flux_current.abs(),
             max_stator_frequency: 2.0 * core::f32::consts::PI * 40.0,
-            flux_tolerance: 0.02,
             adapt: true,
         }
     }

@@ -240,7 +240,6 @@ impl FixedDrive {
         let i_sq_limit = reference.torque_current_limit();
         let v_static = linear_limit(cfg.dc_bus_max);
         let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
-        rs_cfg.flux_tolerance = cfg.flux_tolerance;
         rs_cfg.adapt = cfg.rs_estimation;
         rs_cfg.max_stator_frequency = cfg.rs_max_frequency;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
