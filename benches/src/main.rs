@@ -25,7 +25,7 @@
 //! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2, or 1 when directly after another single load/store (pipelined) |
 //! | LDRD, STRD | 3 |
 //! | LDM/STM/PUSH/POP (N registers) | 1 + N; POP/LDM with PC: 1 + N + 2 |
-//! | B, B<cond>, CBZ/CBNZ | taken 3 (1 + 2 refill), not taken 1 |
+//! | B, B`<cond>`, CBZ/CBNZ | taken 3 (1 + 2 refill), not taken 1 |
 //! | BL, BX, BLX | 3 |
 //! | TBB, TBH | 4 |
 //! | other writes of PC (MOV/ADD/LDR pc) | + 2 |

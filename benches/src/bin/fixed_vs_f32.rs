@@ -138,7 +138,10 @@ mod fw {
             empty = empty.min(stats.t0.wrapping_sub(t1) & 0x00FF_FFFF);
             stats.begin();
             // SAFETY: 1000 `nop`s: no memory, register or flag effects.
-            unsafe { core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack)) };
+            #[allow(unsafe_code)]
+            unsafe {
+                core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack))
+            };
             let t1 = SYST::get_current();
             nops = nops.min(stats.t0.wrapping_sub(t1) & 0x00FF_FFFF);
         }

@@ -38,14 +38,23 @@ static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[allow(dead_code)] // a palette: callers need not use every colour
 pub enum Color {
+    /// Black (tab10 palette).
     Black,
+    /// Blue (tab10 palette).
     Blue,
+    /// Orange (tab10 palette).
     Orange,
+    /// Green (tab10 palette).
     Green,
+    /// Red (tab10 palette).
     Red,
+    /// Purple (tab10 palette).
     Purple,
+    /// Brown (tab10 palette).
     Brown,
+    /// Gray (tab10 palette).
     Gray,
+    /// Any colour, red, green, blue.
     Rgb(u8, u8, u8),
 }
 
@@ -68,7 +77,9 @@ impl Color {
 /// How one series is stroked.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LineStyle {
+    /// A continuous line.
     Solid(Color),
+    /// A dashed line (references, limits).
     Dashed(Color),
 }
 
@@ -87,16 +98,22 @@ impl LineStyle {
 /// the common prefix is drawn.
 #[derive(Clone, Debug)]
 pub struct Series<'a> {
+    /// Legend text.
     pub label: &'a str,
+    /// Samples, in the y-axis unit of the panel.
     pub values: &'a [f32],
+    /// Stroke.
     pub style: LineStyle,
 }
 
 /// One plot of the column: a title, a y-axis description (with unit) and its traces.
 #[derive(Clone, Debug)]
 pub struct Panel<'a> {
+    /// Title above the panel.
     pub title: &'a str,
+    /// y-axis label, with its unit.
     pub y_label: &'a str,
+    /// The traces drawn in this panel.
     pub series: Vec<Series<'a>>,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! 1. Fault checks on the raw inputs (non-finite, over-current, bus limits): a fault turns
 //!    all switches off in this same step.
-//! 2. Clarke (two or three currents) and Park at the frame angle theta_s[k].
+//! 2. Clarke (two or three currents) and Park at the frame angle theta_s\[k\].
 //! 3. Reduced-order observer (eq. 12) with the voltage applied over the past period and the
 //!    frame frequency: i_sq_hat, speed Omega_hat, load T_L_hat.
 //! 4. Stator-resistance estimator (eq. 19-20, corrected sign), feeding Rs_hat to the observer

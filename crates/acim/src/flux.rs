@@ -2,9 +2,9 @@
 //! model that gives the flux amplitude, the slip frequency and the angle of the dq frame.
 //!
 //! Eq. (13): d lambda_r/dt = -lambda_r/tau_r + (L_M/tau_r) i_sd, discretised exactly for a
-//! constant i_sd over one period: lambda[k+1] = lambda[k] + g (L_M i_sd - lambda[k]),
+//! constant i_sd over one period: lambda\[k+1\] = lambda\[k\] + g (L_M i_sd - lambda\[k\]),
 //! g = 1 - e^(-Ts/tau_r) (written so that the steady state is exactly L_M i_sd in f32).
-//! Eq. (8): w_s = p Omega + (L_M/tau_r) i_sq / lambda_r, theta_s[k+1] = theta_s[k] + w_s Ts.
+//! Eq. (8): w_s = p Omega + (L_M/tau_r) i_sq / lambda_r, theta_s\[k+1\] = theta_s\[k\] + w_s Ts.
 //! The division by lambda_r is guarded: the flux used in the denominator is never below
 //! `min_flux` (a configured fraction of the nominal flux), so start-up from zero flux cannot
 //! produce an infinite slip.

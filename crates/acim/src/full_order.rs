@@ -66,9 +66,9 @@
 //!
 //! ## Discretisation
 //!
-//! One step per control period Ts (200 us): `x[k+1]` from `x[k]`, the voltage `v[k]`
+//! One step per control period Ts (200 us): `x\[k+1\]` from `x\[k\]`, the voltage `v\[k\]`
 //! applied over (k, k+1) (the previous command, as for the reduced-order observer) and
-//! the current `i[k]` sampled at k. Plain forward Euler showed a speed bias of about 1 %
+//! the current `i\[k\]` sampled at k. Plain forward Euler showed a speed bias of about 1 %
 //! at 500 rpm against the motor model (the back-EMF and the flux input were taken at the
 //! start of a period over which they rotate by w Ts), shrinking linearly with Ts. The step
 //! is therefore Euler with three cheap corrections, all with precomputed coefficients:
@@ -260,7 +260,7 @@ impl FullOrderConfig {
     }
 
     /// Largest modulus of the eigenvalues of the discrete error matrix of the step (the
-    /// map from (i_hat - i, lambda_hat - lambda)[k] to [k+1] with the speed known) at the
+    /// map from (i_hat - i, lambda_hat - lambda)\[k\] to \[k+1\] with the speed known) at the
     /// mechanical speed `speed` (rad/s): a configuration-time check on the 2x2 complex
     /// matrix.
     pub fn discrete_spectral_radius(&self, speed: f32) -> f32 {
@@ -269,7 +269,7 @@ impl FullOrderConfig {
         let rot = (1.0, self.half_ts * w); // lambda_m = rot lambda
         let m11 = (self.c_ii + self.g_i_re, self.g_i_im_w * w);
         let m12 = cmul((self.c_il, -self.c_iv * w), rot);
-        // flux row: c_ll + j h_l w rot, plus c_li (e_i + e_i[k+1]) and the gain
+        // flux row: c_ll + j h_l w rot, plus c_li (e_i + e_i\[k+1\]) and the gain
         let m21 = (
             self.c_li * (1.0 + m11.0) + self.g_l_re,
             self.c_li * m11.1 + self.g_l_im_w * w,
@@ -396,7 +396,7 @@ impl FullOrderObserver {
             + cfg.c_iv * (v_beta - wlb)
             + cfg.g_i_re * eb
             + gim * ea;
-        // flux: e^(-Ts/tau_r) lambda + h_l (R_R (i_hat[k] + i_hat[k+1])/2 + j w lambda_m
+        // flux: e^(-Ts/tau_r) lambda + h_l (R_R (i_hat\[k\] + i_hat\[k+1\])/2 + j w lambda_m
         //       + g_lambda e)
         let fa = cfg.c_ll * la + cfg.c_li * (ia + na) - cfg.h_l * wla + cfg.g_l_re * ea - glm * eb;
         let fb = cfg.c_ll * lb + cfg.c_li * (ib + nb) + cfg.h_l * wlb + cfg.g_l_re * eb + glm * ea;

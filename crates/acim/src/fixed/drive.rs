@@ -13,7 +13,7 @@
 //! 50 ms, at most `rs_identification_timeout`).
 //!
 //! Differences from the f32 drive, all deliberate:
-//! - no open-loop V/f mode ([`FixedDrive::start_open_loop`] does not exist; commissioning
+//! - no open-loop V/f mode (`FixedDrive::start_open_loop` does not exist; commissioning
 //!   runs in f32);
 //! - samples are integers, so there is no non-finite input inside the step: the
 //!   simulator boundary ([`FixedDrive::step_si`]) reports a NaN/inf sample as

@@ -2,8 +2,8 @@
 //! [`crate::flux::FluxModelConfig`].
 //!
 //! Eq. (13), exact for a constant i_sd over a period:
-//! lambda[k+1] = lambda[k] + g (L_M i_sd - lambda[k]), g = 1 - e^(-Ts/tau_r).
-//! Eq. (8): w_s = p Omega + (L_M/tau_r) i_sq / lambda_r, theta_s[k+1] = theta_s[k] + w_s Ts.
+//! lambda\[k+1\] = lambda\[k\] + g (L_M i_sd - lambda\[k\]), g = 1 - e^(-Ts/tau_r).
+//! Eq. (8): w_s = p Omega + (L_M/tau_r) i_sq / lambda_r, theta_s\[k+1\] = theta_s\[k\] + w_s Ts.
 //! The divisor is max(lambda_r, lambda_min) (lambda_min = 10 % of nominal, as in f32) and
 //! 1/lambda_r comes from [`super::q::reciprocal`] (relative error ~1e-8). Units: flux in
 //! Q7.24 of the flux base, currents of the current base, frequencies of the electrical
