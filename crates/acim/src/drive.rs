@@ -1,22 +1,32 @@
-//! The sensorless IFOC drive: one type that owns the blocks and runs one control step,
-//! phase currents and DC bus in, PWM duties out (paper Fig. 1 and 5).
+//! The sensorless IFOC drive: one type that runs the cascade of stages, phase currents and
+//! DC bus in, PWM duties out (paper Fig. 1 and 5).
 //!
 //! ## The cascade, each step (order matters)
 //!
-//! 1. Fault checks on the raw inputs (non-finite, over-current, bus limits): a fault turns
-//!    all switches off in this same step.
-//! 2. Clarke (two or three currents) and Park at the frame angle theta_s\[k\].
-//! 3. Reduced-order observer (eq. 12) with the voltage applied over the past period and the
-//!    frame frequency: i_sq_hat, speed Omega_hat, load T_L_hat.
-//! 4. Stator-resistance estimator (eq. 19-20, corrected sign), feeding Rs_hat to the observer
-//!    (through Rseq) and to the current controllers' feed-forward.
-//! 5. Flux model (eq. 13), slip law and frame angle (eq. 8) with p Omega_hat: sensorless.
-//! 6. Speed reference ramp, speed PI -> i_sq*, limited so that |i_s| <= I_max with d-axis
-//!    priority; flux reference -> i_sd*.
-//! 7. d/q current PIs with decoupling feed-forward (eq. 9a, 9b), voltage limited to the
-//!    linear range of the modulator (d-axis priority).
-//! 8. Inverse Park at theta_s advanced by the computation and PWM delay, then SVPWM with bus
-//!    and dead-time compensation.
+//! [`Drive::step_probed`] reads as the block diagram; each stage is a method with one job
+//! and the signals between them are plain structs:
+//!
+//! 1. **Gate** ([`Supervisor::gate`]): state machine and checks on the raw samples
+//!    (non-finite, over-current, bus window). A fault turns all switches off in this same
+//!    step.
+//! 2. **Sense** -> [`Measured`]: Clarke (two or three currents) and Park at the frame angle
+//!    theta_s\[k\].
+//! 3. **Estimate** -> [`Estimate`]: speed observer ([`SpeedObserver`]; the paper's
+//!    reduced-order observer, eq. 12, by default) with the voltage applied over the past
+//!    period ([`Applied`]); stator-resistance estimator (eq. 19-20, corrected sign);
+//!    orientation correction ([`crate::orientation`]); flux model, slip law and frame angle
+//!    (eq. 13, 8) with p Omega_hat: sensorless.
+//! 4. **Plausibility** ([`Supervisor::plausibility`]): the estimates within range.
+//! 5. **References** -> i_dq*: magnetizing (flux build-up, standstill Rs identification)
+//!    or speed ramp, speed PI -> i_sq*, limited so that |i_s| <= I_max with d-axis
+//!    priority; stall detection ([`Supervisor::stall`]).
+//! 6. **Current control** -> v_dq*: d/q current PIs with decoupling feed-forward (eq. 9a,
+//!    9b), voltage limited to the circle the modulator supplies (d-axis priority).
+//! 7. **Modulation**: inverse Park at theta_s advanced by the computation and PWM delay,
+//!    then the [`Modulator`] (SVPWM with bus and dead-time compensation by default).
+//!
+//! Every derived constant comes from one immutable [`DriveDesign`]; every fault decision
+//! from the [`Supervisor`].
 //!
 //! ## States
 //!
@@ -25,334 +35,29 @@
 //! settled flux, paper section 4) until the model flux is within tolerance of its reference.
 //! `Fault` is left only by [`Drive::reset_fault`], to `Idle`.
 //!
-//! ## Beyond the paper: orientation correction
-//!
-//! The paper's orientation mode s^2 + s/tau_r + w_s w_slip = 0 (x = lambda_d - lambda_hat,
-//! y = lambda_q) is neutral at zero torque and unstable in regeneration. The steady d-axis
-//! residual r_d = (Rs - Rs_hat) i_sd - w_s y, which the eq. (20) current model already
-//! integrates (its error is r_d/Rs_hat), drives a frame-frequency correction
-//! dw = -k sign(w_s) r_d / lambda_ref. The mode becomes
-//! s^2 + s(1/tau_r + k|w_s|) + k|w_s|/tau_r + w_s w_slip = 0, stable in regeneration for
-//! k > tau_r |w_slip|. It fades in between `orientation_fade` (no information at w_s = 0),
-//! and Rs adapts only below `rs_max_frequency`, where the orientation part of r_d
-//! vanishes. `orientation_gain = 0` is the paper's scheme. Derivation, the measured
-//! stability map and before/after figures: `docs/orientation-stability.md`.
-//!
 //! ## Timing convention
 //!
 //! Duties computed at step k are applied over the next PWM period (k+1 .. k+2), as with
 //! preloaded compare registers; the voltage the plant saw over (k .. k+1) is the command of
 //! step k-1, which is what the observer and the Rs estimator use.
 
-use crate::flux::{FluxModel, FluxModelConfig};
+pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
+use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
     SinCos, SinCosValue,
 };
-use crate::math::{clamp, is_finite, sqrt, wrap_angle_step};
+use crate::math::{clamp, is_finite, wrap_angle_step};
 use crate::observer::{
-    ObserverConfig, ObserverDesignError, ObserverInputs, ObserverPoles, ReducedOrderObserver,
+    ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
-use crate::params::{self, MachineParams};
-use crate::pi::{PiConfig, PiController};
-use crate::rs_estimator::{RsEstimator, RsEstimatorConfig, RsEstimatorInputs};
-use crate::svpwm::{linear_limit, modulate, modulate_with_inverse, SvpwmConfig};
-
-/// How many phase currents are measured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CurrentSensing {
-    /// Phases a and b measured; c = -a - b.
-    TwoPhase,
-    /// All three measured; the zero-sequence part is rejected.
-    ThreePhase,
-}
-
-/// Open-loop V/f commissioning settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct VfConfig {
-    /// Voltage per electrical frequency, V peak per rad/s (230 V rms line at 50 Hz:
-    /// 187.8 V / 314.16 rad/s = 0.598).
-    pub volts_per_rad_s: f32,
-    /// Low-frequency boost added to the voltage magnitude, V peak.
-    pub boost: f32,
-}
-
-/// Complete drive configuration (all user-facing settings; nothing here changes at run
-/// time). Units SI, speeds mechanical rad/s.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DriveConfig {
-    /// The controller's machine model (may differ from the real machine).
-    pub machine: MachineParams,
-    /// Control and PWM period, s.
-    pub control_period: f32,
-    /// d-axis (flux) current reference i_sd*, A peak.
-    pub flux_current: f32,
-    /// Stator current vector limit I_max, A peak.
-    pub current_limit: f32,
-    /// Phase current trip level, A (any phase above it faults).
-    pub overcurrent_trip: f32,
-    /// Lowest DC-bus voltage while active, V.
-    pub dc_bus_min: f32,
-    /// Highest DC-bus voltage, V.
-    pub dc_bus_max: f32,
-    /// Over-speed trip on the estimated speed, rad/s.
-    pub max_speed: f32,
-    /// Speed reference slew rate (trapezoid ramps), rad/s^2.
-    pub speed_ramp: f32,
-    /// Current-loop bandwidth, rad/s.
-    pub current_bandwidth: f32,
-    /// Speed-loop bandwidth, rad/s.
-    pub speed_bandwidth: f32,
-    /// Observer poles (rates, rad/s).
-    pub observer_poles: ObserverPoles,
-    /// Whether the stator-resistance estimator adapts.
-    pub rs_estimation: bool,
-    /// Initial stator-resistance estimate R0, ohm (eq. 19).
-    pub rs_initial: f32,
-    /// Convergence time constant of the Rs estimator, s.
-    pub rs_convergence_time: f32,
-    /// Rs adapts only below this |w_s|, rad/s electrical: there the d-axis residual is
-    /// dominated by the resistance error (its orientation part grows with w_s).
-    pub rs_max_frequency: f32,
-    /// With Rs estimation on, magnetizing also waits (at standstill, where the d-axis
-    /// residual is purely the resistance error) until the Rs estimate has settled, for at
-    /// most this long, s.
-    pub rs_identification_timeout: f32,
-    /// Orientation-correction gain k (dimensionless, 0 = the paper's scheme unchanged):
-    /// the frame frequency gets -k sign(w_s) r_d / lambda_ref. Regeneration is stable for
-    /// k > tau_r |w_slip| (see module docs).
-    pub orientation_gain: f32,
-    /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
-    pub orientation_fade: (f32, f32),
-    /// Inverter dead time, s (compensated).
-    pub dead_time: f32,
-    /// Inverter device on-state drop, V (compensated with the dead time).
-    pub device_drop: f32,
-    /// Current band of the dead-time compensation's linearised sign, A: the current
-    /// below which the inverter's dead-time error is proportional to the current (device
-    /// capacitances); a property of the power stage, to be measured at commissioning.
-    /// Default 50 mA, the inverter model's default. At 60 rpm, where the back-EMF is only
-    /// about 10 V, a mismatch shows as speed-estimate spikes at each current zero crossing.
-    pub dead_time_current_band: f32,
-    /// Measured phases.
-    pub current_sensing: CurrentSensing,
-    /// Flux within this fraction of its reference counts as settled.
-    pub flux_tolerance: f32,
-    /// Delay between sampling and the centre of the period the voltage is applied in, in
-    /// control periods (1.5 for preloaded compare registers).
-    pub delay_periods: f32,
-    /// Fault when the speed PI has been at its limit with |Omega_hat| below 10 % of the
-    /// reference for this long, s (locked rotor / stall).
-    pub stall_time: f32,
-    /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
-    pub max_load_torque_estimate: f32,
-    /// V/f mode settings.
-    pub vf: VfConfig,
-}
-
-impl DriveConfig {
-    /// The project's documented defaults for the paper's machine (Table 1): 5 kHz, 1.5 A
-    /// flux current, 4.67 A limit, 325 V bus, 1.5 us dead time.
-    pub fn paper_defaults() -> Self {
-        let machine = MachineParams::paper_table1();
-        Self {
-            machine,
-            control_period: params::DEFAULT_CONTROL_PERIOD,
-            flux_current: params::DEFAULT_FLUX_CURRENT,
-            current_limit: params::DEFAULT_CURRENT_LIMIT,
-            overcurrent_trip: 8.0,
-            dc_bus_min: 200.0,
-            dc_bus_max: 400.0,
-            max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
-            speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
-            current_bandwidth: 1000.0,
-            speed_bandwidth: 25.0,
-            observer_poles: ObserverPoles::DEFAULT,
-            rs_estimation: false,
-            rs_initial: machine.stator_resistance(),
-            rs_convergence_time: 0.2,
-            rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
-            rs_identification_timeout: 1.5,
-            orientation_gain: 2.0,
-            orientation_fade: (
-                2.0 * core::f32::consts::PI * 0.5,
-                2.0 * core::f32::consts::PI * 1.5,
-            ),
-            dead_time: 1.5e-6,
-            device_drop: 1.0,
-            dead_time_current_band: 0.05,
-            current_sensing: CurrentSensing::TwoPhase,
-            flux_tolerance: 0.02,
-            delay_periods: 1.5,
-            stall_time: 1.0,
-            max_load_torque_estimate: 15.0,
-            vf: VfConfig {
-                volts_per_rad_s: 187.8 / 314.16,
-                boost: 8.0,
-            },
-        }
-    }
-}
-
-/// Why a drive configuration was rejected.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ConfigError {
-    /// The named field is not finite and positive (or not in its documented range).
-    OutOfRange(&'static str),
-    /// The observer design failed.
-    Observer(ObserverDesignError),
-}
-
-impl core::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ConfigError::OutOfRange(name) => write!(f, "drive config: {name} out of range"),
-            ConfigError::Observer(e) => write!(f, "observer design: {e:?}"),
-        }
-    }
-}
-
-/// Operating state of the drive.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum DriveState {
-    /// Switches off, waiting for a start command.
-    Idle,
-    /// Building the rotor flux at zero torque, frame held.
-    Magnetizing,
-    /// Sensorless speed control.
-    Running,
-    /// Open-loop V/f (commissioning).
-    OpenLoop,
-    /// Switches off after a fault, until [`Drive::reset_fault`].
-    Fault,
-}
-
-impl DriveState {
-    /// Small integer code for logs and CSV files: 0 idle, 1 magnetizing, 2 running,
-    /// 3 open loop, 4 fault.
-    pub fn code(self) -> u8 {
-        match self {
-            DriveState::Idle => 0,
-            DriveState::Magnetizing => 1,
-            DriveState::Running => 2,
-            DriveState::OpenLoop => 3,
-            DriveState::Fault => 4,
-        }
-    }
-}
-
-/// Why the drive faulted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum FaultReason {
-    /// A phase current exceeded the trip level (or an ADC saturated).
-    OverCurrent,
-    /// DC bus above its maximum (e.g. regenerative braking without a chopper).
-    DcBusOverVoltage,
-    /// DC bus below its minimum while active.
-    DcBusUnderVoltage,
-    /// Estimated speed beyond the over-speed limit.
-    OverSpeed,
-    /// A current or bus sample was NaN or infinite.
-    NonFiniteInput,
-    /// An estimator left its plausible range (Rs at a clamp bound, observer non-finite or
-    /// load estimate implausible).
-    EstimatorOutOfRange,
-    /// The hardware break input (gate-driver fault, external over-current) fired.
-    HardwareBreak,
-    /// The control step did not finish before the next conversion.
-    DeadlineMissed,
-    /// Torque at its limit with no speed for `stall_time`, or a load estimate beyond the
-    /// plausible range while the torque is at its limit: locked rotor or overload.
-    Stall,
-}
-
-/// Commands refused by the drive.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CommandError {
-    /// The command does not apply in the present state (e.g. start while faulted).
-    WrongState(DriveState),
-    /// The value is not finite.
-    NotFinite,
-    /// The value is outside its documented range.
-    OutOfRange,
-}
-
-/// The drive's state machine and fault latch, shared by the f32 [`Drive`] and the
-/// fixed-point drive so that both obey the same commands: start only from `Idle`, stop to
-/// `Idle` unless faulted, the first fault reason latched until a deliberate reset.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Supervisor {
-    state: DriveState,
-    fault: Option<FaultReason>,
-}
-
-impl Default for Supervisor {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Supervisor {
-    /// Idle, no fault.
-    pub const fn new() -> Self {
-        Self {
-            state: DriveState::Idle,
-            fault: None,
-        }
-    }
-    /// Present state.
-    #[inline(always)]
-    pub fn state(&self) -> DriveState {
-        self.state
-    }
-    /// The latched fault, if any.
-    pub fn fault(&self) -> Option<FaultReason> {
-        self.fault
-    }
-    /// Idle -> `to` (`Magnetizing` or `OpenLoop`); any other state refuses.
-    pub fn start(&mut self, to: DriveState) -> Result<(), CommandError> {
-        if self.state != DriveState::Idle {
-            return Err(CommandError::WrongState(self.state));
-        }
-        self.state = to;
-        Ok(())
-    }
-    /// Any active state -> Idle; a faulted drive stays faulted.
-    pub fn stop(&mut self) {
-        if self.state != DriveState::Fault {
-            self.state = DriveState::Idle;
-        }
-    }
-    /// Fault -> Idle, clearing the latched reason.
-    pub fn reset_fault(&mut self) -> Result<(), CommandError> {
-        if self.state != DriveState::Fault {
-            return Err(CommandError::WrongState(self.state));
-        }
-        self.fault = None;
-        self.state = DriveState::Idle;
-        Ok(())
-    }
-    /// Enters Fault; the first reason is kept.
-    pub fn trip(&mut self, reason: FaultReason) {
-        self.state = DriveState::Fault;
-        if self.fault.is_none() {
-            self.fault = Some(reason);
-        }
-    }
-    /// Magnetizing -> Running (flux settled).
-    pub fn magnetized(&mut self) {
-        if self.state == DriveState::Magnetizing {
-            self.state = DriveState::Running;
-        }
-    }
-}
+use crate::orientation;
+use crate::pi::PiController;
+use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
+pub use crate::supervisor::{
+    CommandError, DriveState, EstimatorHealth, FaultReason, Gate, Supervisor,
+};
+use crate::svpwm::{linear_limit, modulate, Modulator, Svpwm, VoltageLimit};
 
 /// Samples of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -406,7 +111,7 @@ pub struct DriveTelemetry {
     pub stator_resistance_estimate: f32,
     /// Frame angle theta_s used for this step's samples (Park), rad electrical.
     pub angle: f32,
-    /// Frame frequency w_s, rad/s electrical.
+    /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
     pub stator_frequency: f32,
     /// Whether the modulator limited the voltage.
     pub voltage_saturated: bool,
@@ -420,7 +125,7 @@ pub enum StepRegion {
     FaultChecks,
     /// sin/cos of the frame angle, Clarke and Park.
     ClarkePark,
-    /// Reduced-order observer (eq. 12).
+    /// Speed observer (eq. 12 for the reduced-order observer).
     ObserverReduced,
     /// Stator-resistance estimator (eq. 19-20) and its residual filter.
     RsEstimator,
@@ -454,67 +159,99 @@ impl StepProbe for NoProbe {
     fn end(&mut self, _: StepRegion) {}
 }
 
-/// The sensorless IFOC drive. `S` supplies sin/cos (software by default, CORDIC on the G4).
+/// Output of the sense stage: this step's samples in both frames.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    /// Stator current, stationary frame, A.
+    pub i_ab: AlphaBeta,
+    /// Stator current, rotor-flux frame, A.
+    pub i_dq: Dq,
+    /// sin/cos of the frame angle the samples were taken at.
+    pub sc: SinCosValue,
+    /// Frame angle theta_s\[k\], rad electrical.
+    pub angle: f32,
+    /// DC bus, V (checked against `dc_bus_min` > 0 by the gate).
+    pub dc_bus: f32,
+}
+
+/// Output of the estimation stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// The speed observer's output (Omega_hat, T_L_hat, i_sq_hat).
+    pub observer: SpeedEstimate,
+    /// Rotor flux lambda_r after this step's update, Wb.
+    pub rotor_flux: f32,
+    /// Stator frequency w_s for the next period, rad/s electrical.
+    pub stator_frequency: f32,
+    /// Rs_hat after this step's update, ohm.
+    pub rs: f32,
+    /// Whether the flux was settled at the start of this step.
+    pub flux_settled: bool,
+}
+
+/// The voltage applied over the past period (the previous step's command): a type of its
+/// own so that it cannot be confused with this step's command.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Applied {
+    /// In the rotor-flux frame of its step, V.
+    pub v_dq: Dq,
+    /// In the stationary frame (at the advanced angle it acts at), V.
+    pub v_ab: AlphaBeta,
+}
+
+/// Estimation stage state: speed observer, Rs estimator, flux model and the residual
+/// filter of the standstill Rs identification.
 #[derive(Clone, Debug)]
-pub struct Drive<S: SinCos = FastSinCos> {
-    cfg: DriveConfig,
-    // precomputed configuration
-    pi_d: PiConfig,
-    pi_q: PiConfig,
-    pi_speed: PiConfig,
-    flux_cfg: FluxModelConfig,
-    obs_cfg: ObserverConfig,
-    rs_cfg: RsEstimatorConfig,
-    pwm_cfg: SvpwmConfig,
-    i_sd_ref: f32,
-    i_sq_limit: f32,
-    flux_reference: f32,
-    settled_flux: f32,
-    sigma_ls: f32,
-    referred_rotor_resistance: f32,
-    inv_rotor_time_constant: f32,
-    pole_pairs: f32,
-    torque_factor: f32,
-    ramp_step: f32,
-    orientation_gain_per_flux: f32,
-    orientation_fade_start: f32,
-    orientation_inv_fade_width: f32,
-    orientation_limit: f32,
-    overcurrent_trip: f32,
-    stall_steps: u32,
-    rs_timeout_steps: u32,
-    rs_settle_steps: u32,
-    implausible_limit: u32,
-    residual_filter: f32,
-    rs_settled_error: f32,
-    // state
-    sup: Supervisor,
+struct Estimator<O> {
+    observer: O,
+    rs: RsEstimator,
+    flux: FluxModel,
+    filtered_residual: f32,
+}
+
+/// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
+#[derive(Clone, Copy, Debug)]
+struct References {
     speed_target: f32,
     speed_reference: f32,
     speed_ctl: PiController,
-    d_ctl: PiController,
-    q_ctl: PiController,
-    flux: FluxModel,
-    observer: ReducedOrderObserver,
-    rs: RsEstimator,
-    applied_voltage: Dq,
-    stall_counter: u32,
-    implausible_steps: u32,
     magnetizing_steps: u32,
     rs_settled_steps: u32,
-    filtered_residual: f32,
-    vf_angle: f32,
-    vf_frequency: f32,
-    telemetry: DriveTelemetry,
-    sincos: S,
 }
 
-fn positive(v: f32, name: &'static str) -> Result<f32, ConfigError> {
-    if is_finite(v) && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(ConfigError::OutOfRange(name))
-    }
+/// Current-control stage state: the d and q PIs.
+#[derive(Clone, Copy, Debug)]
+struct CurrentControl {
+    d: PiController,
+    q: PiController,
+}
+
+/// Open-loop V/f state.
+#[derive(Clone, Copy, Debug, Default)]
+struct OpenLoop {
+    angle: f32,
+    frequency: f32,
+}
+
+/// The sensorless IFOC drive. `S` supplies sin/cos (software by default, CORDIC on the
+/// G4), `O` estimates the speed (the paper's reduced-order observer by default), `M`
+/// modulates (SVPWM by default).
+#[derive(Clone, Debug)]
+pub struct Drive<
+    S: SinCos = FastSinCos,
+    O: SpeedObserver = ReducedOrderObserver,
+    M: Modulator = Svpwm,
+> {
+    design: DriveDesign,
+    sup: Supervisor,
+    est: Estimator<O>,
+    refs: References,
+    cur: CurrentControl,
+    modulator: M,
+    sincos: S,
+    applied: Applied,
+    open_loop: OpenLoop,
+    telemetry: DriveTelemetry,
 }
 
 impl Drive<FastSinCos> {
@@ -525,145 +262,59 @@ impl Drive<FastSinCos> {
 }
 
 impl<S: SinCos> Drive<S> {
-    /// Validates `cfg`, precomputes every gain and reciprocal, and returns an idle drive.
+    /// Validates `cfg`, builds its [`DriveDesign`] and returns an idle drive.
     pub fn with_sincos(cfg: DriveConfig, sincos: S) -> Result<Self, ConfigError> {
-        let ts = positive(cfg.control_period, "control_period")?;
-        if ts > 0.01 {
-            return Err(ConfigError::OutOfRange("control_period"));
-        }
-        let i_max = positive(cfg.current_limit, "current_limit")?;
-        let i_d = positive(cfg.flux_current, "flux_current")?;
-        if i_d >= i_max {
-            return Err(ConfigError::OutOfRange("flux_current"));
-        }
-        positive(cfg.overcurrent_trip, "overcurrent_trip")?;
-        if cfg.overcurrent_trip < i_max {
-            return Err(ConfigError::OutOfRange("overcurrent_trip"));
-        }
-        positive(cfg.dc_bus_min, "dc_bus_min")?;
-        positive(cfg.dc_bus_max, "dc_bus_max")?;
-        if cfg.dc_bus_max <= cfg.dc_bus_min {
-            return Err(ConfigError::OutOfRange("dc_bus_max"));
-        }
-        positive(cfg.max_speed, "max_speed")?;
-        positive(cfg.speed_ramp, "speed_ramp")?;
-        positive(cfg.current_bandwidth, "current_bandwidth")?;
-        positive(cfg.speed_bandwidth, "speed_bandwidth")?;
-        if cfg.current_bandwidth * ts > 0.5 {
-            return Err(ConfigError::OutOfRange("current_bandwidth"));
-        }
-        if cfg.speed_bandwidth * 4.0 > cfg.current_bandwidth {
-            return Err(ConfigError::OutOfRange("speed_bandwidth"));
-        }
-        positive(cfg.rs_initial, "rs_initial")?;
-        positive(cfg.rs_convergence_time, "rs_convergence_time")?;
-        if !(is_finite(cfg.dead_time) && cfg.dead_time >= 0.0 && cfg.dead_time < 0.1 * ts) {
-            return Err(ConfigError::OutOfRange("dead_time"));
-        }
-        if !(is_finite(cfg.device_drop) && (0.0..=20.0).contains(&cfg.device_drop)) {
-            return Err(ConfigError::OutOfRange("device_drop"));
-        }
-        positive(cfg.dead_time_current_band, "dead_time_current_band")?;
-        let tol = positive(cfg.flux_tolerance, "flux_tolerance")?;
-        if tol >= 0.5 {
-            return Err(ConfigError::OutOfRange("flux_tolerance"));
-        }
-        if !(is_finite(cfg.delay_periods) && (0.0..=3.0).contains(&cfg.delay_periods)) {
-            return Err(ConfigError::OutOfRange("delay_periods"));
-        }
-        positive(cfg.rs_max_frequency, "rs_max_frequency")?;
-        positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
-        if !(is_finite(cfg.orientation_gain) && (0.0..=50.0).contains(&cfg.orientation_gain)) {
-            return Err(ConfigError::OutOfRange("orientation_gain"));
-        }
-        let (fa, fb) = cfg.orientation_fade;
-        if !(is_finite(fa) && is_finite(fb) && fa >= 0.0 && fb > fa) {
-            return Err(ConfigError::OutOfRange("orientation_fade"));
-        }
-        positive(cfg.stall_time, "stall_time")?;
-        positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
-        positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
-        if !(is_finite(cfg.vf.boost) && cfg.vf.boost >= 0.0) {
-            return Err(ConfigError::OutOfRange("vf.boost"));
-        }
+        Ok(Self::with_parts(
+            DriveDesign::new(cfg)?,
+            sincos,
+            ReducedOrderObserver::new(),
+            Svpwm,
+        ))
+    }
+}
 
-        let m = cfg.machine;
-        let flux_reference = m.rotor_flux_for(i_d);
-        let i_sq_limit = sqrt(i_max * i_max - i_d * i_d);
-        let obs_cfg =
-            ObserverConfig::new(&m, cfg.observer_poles, ts).map_err(ConfigError::Observer)?;
-        // the voltage limit of the current PIs follows the bus at run time; these static
-        // limits only bound the integrators before the first step
-        let v_static = linear_limit(cfg.dc_bus_max);
-        let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
-        rs_cfg.adapt = cfg.rs_estimation;
-        rs_cfg.max_stator_frequency = cfg.rs_max_frequency;
-        Ok(Self {
-            pi_d: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
-            pi_q: PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static),
-            pi_speed: PiConfig::speed_loop(&m, flux_reference, cfg.speed_bandwidth, ts, i_sq_limit),
-            flux_cfg: FluxModelConfig::new(&m, ts, flux_reference),
-            obs_cfg,
-            rs_cfg,
-            pwm_cfg: SvpwmConfig::new(
-                cfg.dead_time,
-                ts,
-                cfg.device_drop,
-                cfg.dead_time_current_band,
-            ),
-            i_sd_ref: i_d,
-            i_sq_limit,
-            flux_reference,
-            settled_flux: flux_reference * (1.0 - tol),
-            sigma_ls: m.transient_inductance(),
-            referred_rotor_resistance: m.referred_rotor_resistance(),
-            inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
-            pole_pairs: m.pole_pairs_f32(),
-            torque_factor: 1.5 * m.pole_pairs_f32(),
-            ramp_step: cfg.speed_ramp * ts,
-            orientation_gain_per_flux: cfg.orientation_gain / flux_reference,
-            orientation_fade_start: cfg.orientation_fade.0,
-            orientation_inv_fade_width: 1.0 / (cfg.orientation_fade.1 - cfg.orientation_fade.0),
-            // a correction beyond the rotor-frequency range means a wrong model: bound it
-            orientation_limit: 0.25 * cfg.max_speed * m.pole_pairs_f32(),
-            overcurrent_trip: cfg.overcurrent_trip,
-            stall_steps: (cfg.stall_time / ts) as u32,
-            rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
-            rs_settle_steps: (0.05 / ts) as u32,
-            implausible_limit: (0.02 / ts) as u32,
-            // 20 ms low-pass of the d-axis current-model error
-            residual_filter: (ts / 0.02).min(1.0),
-            // |error| below 0.3 % of i_sd* means |Rs_hat - Rs| below about 0.3 %
-            rs_settled_error: 0.003 * i_d,
+impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
+    /// An idle drive from a validated design and its parts.
+    pub fn with_parts(design: DriveDesign, sincos: S, observer: O, modulator: M) -> Self {
+        let rs_initial = design.config.rs_initial;
+        Self {
             sup: Supervisor::new(),
-            speed_target: 0.0,
-            speed_reference: 0.0,
-            speed_ctl: PiController::new(),
-            d_ctl: PiController::new(),
-            q_ctl: PiController::new(),
-            flux: FluxModel::new(),
-            observer: ReducedOrderObserver::new(),
-            rs: RsEstimator::new(cfg.rs_initial),
-            applied_voltage: Dq::default(),
-            stall_counter: 0,
-            implausible_steps: 0,
-            magnetizing_steps: 0,
-            rs_settled_steps: 0,
-            filtered_residual: 0.0,
-            vf_angle: 0.0,
-            vf_frequency: 0.0,
+            est: Estimator {
+                observer,
+                rs: RsEstimator::new(rs_initial),
+                flux: FluxModel::new(),
+                filtered_residual: 0.0,
+            },
+            refs: References {
+                speed_target: 0.0,
+                speed_reference: 0.0,
+                speed_ctl: PiController::new(),
+                magnetizing_steps: 0,
+                rs_settled_steps: 0,
+            },
+            cur: CurrentControl {
+                d: PiController::new(),
+                q: PiController::new(),
+            },
+            modulator,
+            sincos,
+            applied: Applied::default(),
+            open_loop: OpenLoop::default(),
             telemetry: DriveTelemetry {
-                stator_resistance_estimate: cfg.rs_initial,
+                stator_resistance_estimate: rs_initial,
                 ..DriveTelemetry::default()
             },
-            sincos,
-            cfg,
-        })
+            design,
+        }
     }
 
     /// The configuration the drive was built with.
     pub fn config(&self) -> &DriveConfig {
-        &self.cfg
+        &self.design.config
+    }
+    /// The design in use.
+    pub fn design(&self) -> &DriveDesign {
+        &self.design
     }
     /// Present state.
     pub fn state(&self) -> DriveState {
@@ -679,15 +330,19 @@ impl<S: SinCos> Drive<S> {
     }
     /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
     pub fn torque_current_limit(&self) -> f32 {
-        self.i_sq_limit
+        self.design.i_sq_limit
     }
     /// Rotor-flux reference L_M i_sd*, Wb.
     pub fn flux_reference(&self) -> f32 {
-        self.flux_reference
+        self.design.flux_reference
     }
-    /// Precomputed observer design.
+    /// Precomputed reduced-order observer design.
     pub fn observer_config(&self) -> &ObserverConfig {
-        &self.obs_cfg
+        &self.design.observer
+    }
+    /// The speed observer.
+    pub fn observer(&self) -> &O {
+        &self.est.observer
     }
 
     /// Sets the speed target (rad/s mechanical); the reference ramps to it at
@@ -696,8 +351,8 @@ impl<S: SinCos> Drive<S> {
         if !is_finite(speed) {
             return Err(CommandError::NotFinite);
         }
-        let lim = 0.9 * self.cfg.max_speed;
-        self.speed_target = clamp(speed, -lim, lim);
+        let lim = self.design.speed_target_limit;
+        self.refs.speed_target = clamp(speed, -lim, lim);
         Ok(())
     }
 
@@ -726,19 +381,35 @@ impl<S: SinCos> Drive<S> {
         self.sup.reset_fault()
     }
 
+    /// Swaps in a new design between two steps (built outside the interrupt with
+    /// [`DriveDesign::new`]). While the drive is active only a retuning is accepted: the
+    /// machine model, the period and the current sensing must stay those of the running
+    /// design (anything else needs `Idle`).
+    pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
+        let (old, new) = (&self.design.config, &design.config);
+        let retune = old.machine == new.machine
+            && old.control_period == new.control_period
+            && old.current_sensing == new.current_sensing;
+        let state = self.sup.state();
+        if !(retune || state == DriveState::Idle) {
+            return Err(CommandError::WrongState(state));
+        }
+        self.design = design;
+        Ok(())
+    }
+
     /// Changes the orientation-correction gain k at run time (outside the interrupt:
-    /// tuning or analysis; 0 restores the paper's scheme). Rejects non-finite or negative
-    /// values and values above 50, keeping the old gain.
+    /// tuning or analysis; 0 restores the paper's scheme) by swapping in a new design.
+    /// Rejects non-finite or negative values and values above 50, keeping the old gain.
     pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError> {
         if !is_finite(gain) {
             return Err(CommandError::NotFinite);
         }
-        if !(0.0..=50.0).contains(&gain) {
-            return Err(CommandError::OutOfRange);
-        }
-        self.cfg.orientation_gain = gain;
-        self.orientation_gain_per_flux = gain / self.flux_reference;
-        Ok(())
+        let design = self
+            .design
+            .with_orientation_gain(gain)
+            .map_err(|_| CommandError::OutOfRange)?;
+        self.set_design(design)
     }
 
     /// Forces a fault from outside (e.g. the hardware break input or a missed deadline).
@@ -747,71 +418,24 @@ impl<S: SinCos> Drive<S> {
     }
 
     fn reset_dynamic_state(&mut self) {
-        self.speed_reference = 0.0;
-        self.speed_ctl.reset();
-        self.d_ctl.reset();
-        self.q_ctl.reset();
-        self.flux = FluxModel::new();
-        self.observer = ReducedOrderObserver::new();
-        self.rs = RsEstimator::new(self.rs.stator_resistance_estimate);
-        self.applied_voltage = Dq::default();
-        self.stall_counter = 0;
-        self.implausible_steps = 0;
-        self.magnetizing_steps = 0;
-        self.rs_settled_steps = 0;
-        self.filtered_residual = 0.0;
-        self.vf_angle = 0.0;
-        self.vf_frequency = 0.0;
+        self.refs.speed_reference = 0.0;
+        self.refs.speed_ctl.reset();
+        self.refs.magnetizing_steps = 0;
+        self.refs.rs_settled_steps = 0;
+        self.cur.d.reset();
+        self.cur.q.reset();
+        self.est.flux = FluxModel::new();
+        self.est.observer.reset();
+        self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
+        self.est.filtered_residual = 0.0;
+        self.applied = Applied::default();
+        self.open_loop = OpenLoop::default();
     }
 
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput {
         self.sup.trip(reason);
-        self.applied_voltage = Dq::default();
+        self.applied = Applied::default();
         PwmOutput::OFF
-    }
-
-    /// Checks on the raw samples, before anything uses them.
-    fn check_inputs(&self, inp: &DriveInputs) -> Option<FaultReason> {
-        let [a, b, c_meas] = inp.phase_currents;
-        let c = match self.cfg.current_sensing {
-            CurrentSensing::TwoPhase => -a - b,
-            CurrentSensing::ThreePhase => c_meas,
-        };
-        // fast path: five comparisons, each false for NaN, so a good sample costs only
-        // these; the reason of a bad one is sorted out below
-        let trip = self.overcurrent_trip;
-        if a.abs() <= trip
-            && b.abs() <= trip
-            && c.abs() <= trip
-            && inp.dc_bus <= self.cfg.dc_bus_max
-            && inp.dc_bus >= self.cfg.dc_bus_min
-        {
-            return None;
-        }
-        self.classify_bad_inputs(a, b, c, inp.dc_bus)
-    }
-
-    #[cold]
-    #[inline(never)]
-    fn classify_bad_inputs(&self, a: f32, b: f32, c: f32, dc_bus: f32) -> Option<FaultReason> {
-        let inp = DriveInputs {
-            phase_currents: [a, b, c],
-            dc_bus,
-        };
-        if !(is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus)) {
-            return Some(FaultReason::NonFiniteInput);
-        }
-        let trip = self.overcurrent_trip;
-        if a.abs() > trip || b.abs() > trip || c.abs() > trip {
-            return Some(FaultReason::OverCurrent);
-        }
-        if inp.dc_bus > self.cfg.dc_bus_max {
-            return Some(FaultReason::DcBusOverVoltage);
-        }
-        if inp.dc_bus < self.cfg.dc_bus_min {
-            return Some(FaultReason::DcBusUnderVoltage);
-        }
-        None
     }
 
     /// One control step: samples in, PWM command out. Never panics and never returns a
@@ -826,289 +450,339 @@ impl<S: SinCos> Drive<S> {
     /// plausibility checks and the telemetry record, which the whole step includes).
     #[inline(always)]
     pub fn step_probed<P: StepProbe>(&mut self, inp: &DriveInputs, probe: &mut P) -> PwmOutput {
-        match self.sup.state() {
-            DriveState::Fault => return PwmOutput::OFF,
-            DriveState::Idle => {
-                // a non-finite or over-current sample while idle is still a fault; bus
-                // limits apply only when the drive is about to switch
-                return match self.check_inputs(inp) {
-                    Some(r @ (FaultReason::NonFiniteInput | FaultReason::OverCurrent)) => {
-                        self.enter_fault(r)
-                    }
-                    _ => PwmOutput::OFF,
-                };
-            }
-            _ => {}
-        }
+        // 1. gate: state machine and raw-sample checks
         probe.begin(StepRegion::FaultChecks);
-        let bad = self.check_inputs(inp);
+        let gate = self
+            .sup
+            .gate(&self.design.limits, inp.phase_currents, inp.dc_bus);
         probe.end(StepRegion::FaultChecks);
-        if let Some(reason) = bad {
+        let mode = match gate {
+            Gate::Run(mode) => mode,
+            Gate::Off(None) => return PwmOutput::OFF,
+            Gate::Off(Some(reason)) => return self.enter_fault(reason),
+        };
+        if mode == DriveState::OpenLoop {
+            return self.step_open_loop(inp);
+        }
+        let magnetizing = mode == DriveState::Magnetizing;
+        // 2. sense
+        probe.begin(StepRegion::ClarkePark);
+        let m = self.sense(inp);
+        probe.end(StepRegion::ClarkePark);
+        // 3. estimate
+        let e = self.estimate(&m, magnetizing, probe);
+        // 4. plausibility
+        let health = EstimatorHealth {
+            speed: e.observer.speed,
+            load_torque: e.observer.load_torque,
+            current: e.observer.current,
+            rs_at_bound: self.est.rs.at_bound,
+        };
+        let saturated = self.refs.speed_ctl.saturated();
+        if let Some(reason) = self
+            .sup
+            .plausibility(&self.design.limits, &health, saturated)
+        {
             return self.enter_fault(reason);
         }
-        let [a, b, c] = inp.phase_currents;
-        if self.sup.state() == DriveState::OpenLoop {
-            let (i_ab, phase_currents) = match self.cfg.current_sensing {
-                CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
-                CurrentSensing::ThreePhase => (clarke_three(a, b, c), [a, b, c]),
-            };
-            return self.step_open_loop(i_ab, inp.dc_bus, phase_currents);
+        // 5. references
+        probe.begin(StepRegion::SpeedPi);
+        let i_ref = match self.references(&m, &e, magnetizing) {
+            Ok(i_ref) => i_ref,
+            Err(reason) => return self.enter_fault(reason),
+        };
+        probe.end(StepRegion::SpeedPi);
+        // 6. current control, within the modulator's voltage limit
+        probe.begin(StepRegion::CurrentPi);
+        // the bus was checked against dc_bus_min > 0 by the gate: one division per step,
+        // shared by the voltage limit and the modulator
+        let inv_dc_bus = 1.0 / m.dc_bus;
+        let limit = self.modulator.voltage_limit(m.dc_bus, inv_dc_bus);
+        let v = self.current_control(&m, &e, i_ref, limit);
+        probe.end(StepRegion::CurrentPi);
+        // 7. modulation at the angle the voltage will act at
+        probe.begin(StepRegion::Svpwm);
+        let (v_ab, modulation) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
+        probe.end(StepRegion::Svpwm);
+        self.applied = Applied { v_dq: v, v_ab };
+        self.record(&m, &e, i_ref, v, modulation.saturated);
+        PwmOutput {
+            duties: modulation.duties,
+            enabled: true,
         }
+    }
 
-        probe.begin(StepRegion::ClarkePark);
-        let i_ab = match self.cfg.current_sensing {
+    /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
+    #[inline(always)]
+    fn sense(&mut self, inp: &DriveInputs) -> Measured {
+        let [a, b, c] = inp.phase_currents;
+        let i_ab = match self.design.limits.current_sensing {
             CurrentSensing::TwoPhase => clarke_two(a, b),
             CurrentSensing::ThreePhase => clarke_three(a, b, c),
         };
-        let ts = self.cfg.control_period;
-        let sample_angle = self.flux.angle;
-        let sc = self.sincos.sin_cos(sample_angle);
-        let i = park(i_ab, sc);
-        probe.end(StepRegion::ClarkePark);
-        let magnetizing = self.sup.state() == DriveState::Magnetizing;
-
-        // 3. observer (eq. 12), with the voltage applied over the past period
-        probe.begin(StepRegion::ObserverReduced);
-        let rseq = self.rs.stator_resistance_estimate + self.referred_rotor_resistance;
-        if !magnetizing {
-            self.observer.update(
-                &self.obs_cfg,
-                &ObserverInputs {
-                    i_sq: i.q,
-                    i_sd: i.d,
-                    stator_frequency: self.flux.stator_frequency,
-                    v_sq: self.applied_voltage.q,
-                    rotor_flux: self.flux.rotor_flux,
-                    inv_rotor_flux: self.flux.inv_rotor_flux,
-                    equivalent_resistance: rseq,
-                },
-            );
+        let angle = self.est.flux.angle;
+        let sc = self.sincos.sin_cos(angle);
+        Measured {
+            i_ab,
+            i_dq: park(i_ab, sc),
+            sc,
+            angle,
+            dc_bus: inp.dc_bus,
         }
-        let speed_est = self.observer.speed_estimate;
+    }
+
+    /// Estimation stage: speed observer, Rs estimator (eq. 19-20) and residual filter,
+    /// orientation correction, flux model, slip law and angle (eq. 13, 8).
+    #[inline(always)]
+    fn estimate<P: StepProbe>(
+        &mut self,
+        m: &Measured,
+        magnetizing: bool,
+        probe: &mut P,
+    ) -> Estimate {
+        let d = &self.design;
+        let est = &mut self.est;
+        let i = m.i_dq;
+        // observer, with the voltage applied over the past period and the flux state of
+        // the last step
+        probe.begin(StepRegion::ObserverReduced);
+        let observer = est.observer.update(
+            d,
+            &SpeedObserverInputs {
+                i_ab: m.i_ab,
+                i_dq: i,
+                v_ab: self.applied.v_ab,
+                v_dq: self.applied.v_dq,
+                stator_frequency: est.flux.stator_frequency,
+                rotor_flux: est.flux.rotor_flux,
+                inv_rotor_flux: est.flux.inv_rotor_flux,
+                equivalent_resistance: est.rs.stator_resistance_estimate
+                    + d.referred_rotor_resistance,
+                magnetizing,
+            },
+        );
         probe.end(StepRegion::ObserverReduced);
 
-        // 4. stator resistance (eq. 19-20): the current model of eq. (20) runs every step
+        // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
         // (its error is the d-axis residual), the resistance adapts only inside its gate
         probe.begin(StepRegion::RsEstimator);
-        let flux_settled = self.flux.rotor_flux >= self.settled_flux;
-        let ws_prev = self.flux.stator_frequency;
-        self.rs.update(
-            &self.rs_cfg,
+        let flux_settled = est.flux.rotor_flux >= d.settled_flux;
+        let ws_prev = est.flux.stator_frequency;
+        est.rs.update(
+            &d.rs,
             &RsEstimatorInputs {
                 i_sd: i.d,
                 i_sq: i.q,
-                v_sd: self.applied_voltage.d,
+                v_sd: self.applied.v_dq.d,
                 stator_frequency: ws_prev,
                 flux_settled,
             },
         );
-        let rs_hat = self.rs.stator_resistance_estimate;
-        self.filtered_residual +=
-            self.residual_filter * (self.rs.current_error - self.filtered_residual);
+        let rs = est.rs.stator_resistance_estimate;
+        est.filtered_residual +=
+            d.magnetizing.residual_filter * (est.rs.current_error - est.filtered_residual);
         probe.end(StepRegion::RsEstimator);
 
         probe.begin(StepRegion::FluxSlip);
-        // orientation correction (beyond the paper, see module docs): in field orientation
-        // the steady d-axis residual is r_d = Rs_hat e_d = -w_s lambda_q, so
-        // dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux; it fades in
-        // above the Rs-estimation band, where r_d is dominated by orientation.
-        let mut correction = 0.0;
-        if !magnetizing && flux_settled {
-            let w = clamp(
-                (ws_prev.abs() - self.orientation_fade_start) * self.orientation_inv_fade_width,
-                0.0,
-                1.0,
-            );
-            let r_d = rs_hat * self.rs.current_error;
-            let signed = if ws_prev >= 0.0 { -r_d } else { r_d };
-            correction = clamp(
-                self.orientation_gain_per_flux * w * signed,
-                -self.orientation_limit,
-                self.orientation_limit,
-            );
-        }
-
-        // 5. flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
-        self.flux.update(
-            &self.flux_cfg,
+        let correction = if !magnetizing && flux_settled {
+            orientation::correction(&d.orientation, ws_prev, rs, est.rs.current_error)
+        } else {
+            0.0
+        };
+        // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
+        est.flux.update(
+            &d.flux,
             i.d,
             i.q,
-            self.pole_pairs * speed_est + correction,
+            d.pole_pairs * observer.speed + correction,
             magnetizing,
         );
-        let ws = self.flux.stator_frequency;
-        let lambda = self.flux.rotor_flux;
         probe.end(StepRegion::FluxSlip);
+        Estimate {
+            observer,
+            rotor_flux: est.flux.rotor_flux,
+            stator_frequency: est.flux.stator_frequency,
+            rs,
+            flux_settled,
+        }
+    }
 
-        // estimator plausibility: a non-finite state faults at once; an implausible load
-        // estimate must persist for 20 ms (a current transient, e.g. a short, must trip on
-        // over-current first), and while the torque is at its limit it means a stall
-        if !(is_finite(speed_est)
-            && is_finite(self.observer.load_torque_estimate)
-            && is_finite(self.observer.current_estimate))
-            || (self.cfg.rs_estimation && self.rs.at_bound)
-        {
-            return self.enter_fault(FaultReason::EstimatorOutOfRange);
-        }
-        self.implausible_steps =
-            if self.observer.load_torque_estimate.abs() > self.cfg.max_load_torque_estimate {
-                self.implausible_steps.saturating_add(1)
-            } else {
-                0
-            };
-        if self.implausible_steps > self.implausible_limit {
-            return self.enter_fault(if self.speed_ctl.saturated() {
-                FaultReason::Stall
-            } else {
-                FaultReason::EstimatorOutOfRange
-            });
-        }
-        if speed_est.abs() > self.cfg.max_speed {
-            return self.enter_fault(FaultReason::OverSpeed);
-        }
-
-        // 6. references
-        probe.begin(StepRegion::SpeedPi);
-        let (i_sd_ref, i_sq_ref);
+    /// Reference stage: while magnetizing, i_sd* at zero torque until the flux (and, with
+    /// Rs estimation, the standstill identification) has settled; running, the speed ramp
+    /// and the speed PI with the current circle, and the stall detector.
+    #[inline(always)]
+    fn references(
+        &mut self,
+        m: &Measured,
+        e: &Estimate,
+        magnetizing: bool,
+    ) -> Result<Dq, FaultReason> {
+        let d = &self.design;
+        let r = &mut self.refs;
         if magnetizing {
-            i_sd_ref = self.i_sd_ref;
-            i_sq_ref = 0.0;
-            self.magnetizing_steps = self.magnetizing_steps.saturating_add(1);
-            self.rs_settled_steps = if self.filtered_residual.abs() < self.rs_settled_error {
-                self.rs_settled_steps.saturating_add(1)
+            let mag = &d.magnetizing;
+            r.magnetizing_steps = r.magnetizing_steps.saturating_add(1);
+            r.rs_settled_steps = if self.est.filtered_residual.abs() < mag.rs_settled_error {
+                r.rs_settled_steps.saturating_add(1)
             } else {
                 0
             };
             // standstill Rs identification: wait for 50 ms of settled residual
-            let rs_done = !self.cfg.rs_estimation
-                || self.rs_settled_steps > self.rs_settle_steps
-                || self.magnetizing_steps > self.rs_timeout_steps;
-            if flux_settled && rs_done {
+            let rs_done = !mag.identify_rs
+                || r.rs_settled_steps > mag.rs_settle_steps
+                || r.magnetizing_steps > mag.rs_timeout_steps;
+            if e.flux_settled && rs_done {
                 self.sup.magnetized();
-                self.observer.reset(i.q, 0.0, 0.0);
-                self.speed_ctl.reset();
+                self.est.observer.start_running(m.i_dq.q);
+                r.speed_ctl.reset();
             }
-        } else {
-            let dv = clamp(
-                self.speed_target - self.speed_reference,
-                -self.ramp_step,
-                self.ramp_step,
-            );
-            self.speed_reference += dv;
-            i_sd_ref = self.i_sd_ref;
-            i_sq_ref = self
-                .speed_ctl
-                .update(&self.pi_speed, self.speed_reference - speed_est, 0.0);
-            // stall: torque at its limit while the speed stays near zero
-            let stalled =
-                self.speed_ctl.saturated() && speed_est.abs() < 0.1 * self.speed_reference.abs();
-            self.stall_counter = if stalled { self.stall_counter + 1 } else { 0 };
-            if self.stall_counter > self.stall_steps {
-                return self.enter_fault(FaultReason::Stall);
-            }
+            return Ok(Dq {
+                d: d.i_sd_ref,
+                q: 0.0,
+            });
         }
-        probe.end(StepRegion::SpeedPi);
+        let dv = clamp(
+            r.speed_target - r.speed_reference,
+            -d.ramp_step,
+            d.ramp_step,
+        );
+        r.speed_reference += dv;
+        let speed = e.observer.speed;
+        let i_sq_ref = r
+            .speed_ctl
+            .update(&d.pi_speed, r.speed_reference - speed, 0.0);
+        let stall = self
+            .sup
+            .stall(&d.limits, r.speed_ctl.saturated(), speed, r.speed_reference);
+        match stall {
+            Some(reason) => Err(reason),
+            None => Ok(Dq {
+                d: d.i_sd_ref,
+                q: i_sq_ref,
+            }),
+        }
+    }
 
-        // 7. current PIs with decoupling feed-forward (eq. 9a, 9b)
-        probe.begin(StepRegion::CurrentPi);
-        // the bus was checked against dc_bus_min > 0 above: one division per step, shared
-        // by the voltage limit and the modulator
-        let inv_vdc = 1.0 / inp.dc_bus;
-        let v_max = linear_limit(inp.dc_bus) * 0.98;
-        let inv_v_max = inv_vdc * (1.0 / (0.98 * 0.577_350_26));
-        let ff_d = rs_hat * i_sd_ref + self.referred_rotor_resistance * i_sd_ref
-            - lambda * self.inv_rotor_time_constant
-            - ws * self.sigma_ls * i_sq_ref;
-        let ff_q = (rs_hat + self.referred_rotor_resistance) * i_sq_ref
-            + ws * self.sigma_ls * i_sd_ref
-            + self.pole_pairs * speed_est * lambda;
+    /// Current-control stage: d/q PIs with decoupling feed-forward (eq. 9a, 9b), the
+    /// voltage vector limited to `limit` with d-axis priority.
+    #[inline(always)]
+    fn current_control(
+        &mut self,
+        m: &Measured,
+        e: &Estimate,
+        i_ref: Dq,
+        limit: VoltageLimit,
+    ) -> Dq {
+        let d = &self.design;
+        let (rs, ws, lambda) = (e.rs, e.stator_frequency, e.rotor_flux);
+        let (i_sd_ref, i_sq_ref) = (i_ref.d, i_ref.q);
+        let ff_d = rs * i_sd_ref + d.referred_rotor_resistance * i_sd_ref
+            - lambda * d.inv_rotor_time_constant
+            - ws * d.transient_inductance * i_sq_ref;
+        let ff_q = (rs + d.referred_rotor_resistance) * i_sq_ref
+            + ws * d.transient_inductance * i_sd_ref
+            + d.pole_pairs * e.observer.speed * lambda;
+        let v_max = limit.max;
         let v_d = self
-            .d_ctl
-            .update_with_limits(&self.pi_d, i_sd_ref - i.d, ff_d, -v_max, v_max);
+            .cur
+            .d
+            .update_with_limits(&d.pi_d, i_sd_ref - m.i_dq.d, ff_d, -v_max, v_max);
         // q limit on the circle |v| <= v_max with d priority, sqrt(v_max^2 - v_d^2), without
         // a square root: the Taylor bound v_max - v_d^2/(2 v_max) while |v_d| <= v_max/2
         // (at most 1 % above the circle there), the chord sqrt(3) (v_max - |v_d|) beyond
         // (inside the circle, zero when v_d is at its limit)
         let ad = v_d.abs();
         let v_q_max = if ad <= 0.5 * v_max {
-            v_max - 0.5 * v_d * v_d * inv_v_max
+            v_max - 0.5 * v_d * v_d * limit.inv_max
         } else {
             1.732_050_8 * (v_max - ad)
         };
         let v_q =
-            self.q_ctl
-                .update_with_limits(&self.pi_q, i_sq_ref - i.q, ff_q, -v_q_max, v_q_max);
-        let v = Dq { d: v_d, q: v_q };
-        probe.end(StepRegion::CurrentPi);
+            self.cur
+                .q
+                .update_with_limits(&d.pi_q, i_sq_ref - m.i_dq.q, ff_q, -v_q_max, v_q_max);
+        Dq { d: v_d, q: v_q }
+    }
 
-        // 8. inverse Park at the angle the voltage will act at, then SVPWM
-        probe.begin(StepRegion::Svpwm);
-        let lead = ws * ts * self.cfg.delay_periods;
-        let rot = small_rotation(sc, lead);
+    /// Modulation stage: inverse Park at the angle the voltage will act at (advanced by
+    /// `delay_periods`), then the modulator with the current sign predicted for the
+    /// dead-time compensation. Returns the alpha-beta command and the modulation.
+    #[inline(always)]
+    fn modulate(
+        &mut self,
+        m: &Measured,
+        e: &Estimate,
+        v: Dq,
+        i_ref: Dq,
+        inv_dc_bus: f32,
+    ) -> (AlphaBeta, crate::svpwm::Modulation) {
+        let d = &self.design;
+        let lead = e.stator_frequency * d.ts * d.config.delay_periods;
+        let rot = small_rotation(m.sc, lead);
         let v_ab = inverse_park(v, rot);
         // dead-time compensation needs the current sign while the voltage acts: predict it
         // from the current reference at the same (advanced) angle, which is noise-free and
         // not 1.5 periods old like the samples
-        let i_ref_abc = inverse_clarke(inverse_park(
-            Dq {
-                d: i_sd_ref,
-                q: i_sq_ref,
-            },
-            rot,
-        ));
-        let m = modulate_with_inverse(&self.pwm_cfg, v_ab, inp.dc_bus, inv_vdc, i_ref_abc);
-        probe.end(StepRegion::Svpwm);
-        self.applied_voltage = v;
-
-        self.telemetry = DriveTelemetry {
-            speed_reference: self.speed_reference,
-            speed_estimate: speed_est,
-            load_torque_estimate: self.observer.load_torque_estimate,
-            torque_estimate: self.torque_factor * lambda * i.q,
-            current: i,
-            current_reference: Dq {
-                d: i_sd_ref,
-                q: i_sq_ref,
-            },
-            voltage: v,
-            rotor_flux: lambda,
-            stator_resistance_estimate: rs_hat,
-            angle: sample_angle,
-            stator_frequency: ws,
-            voltage_saturated: m.saturated,
-        };
-        PwmOutput {
-            duties: m.duties,
-            enabled: true,
-        }
+        let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
+        let out = self
+            .modulator
+            .modulate(d, v_ab, m.dc_bus, inv_dc_bus, i_ref_abc);
+        (v_ab, out)
     }
 
-    fn step_open_loop(&mut self, i_ab: AlphaBeta, dc_bus: f32, currents: [f32; 3]) -> PwmOutput {
-        let ts = self.cfg.control_period;
+    /// Telemetry record of a closed-loop step.
+    #[inline(always)]
+    fn record(&mut self, m: &Measured, e: &Estimate, i_ref: Dq, v: Dq, saturated: bool) {
+        self.telemetry = DriveTelemetry {
+            speed_reference: self.refs.speed_reference,
+            speed_estimate: e.observer.speed,
+            load_torque_estimate: e.observer.load_torque,
+            torque_estimate: self.design.torque_factor * e.rotor_flux * m.i_dq.q,
+            current: m.i_dq,
+            current_reference: i_ref,
+            voltage: v,
+            rotor_flux: e.rotor_flux,
+            stator_resistance_estimate: e.rs,
+            angle: m.angle,
+            stator_frequency: e.stator_frequency,
+            voltage_saturated: saturated,
+        };
+    }
+
+    fn step_open_loop(&mut self, inp: &DriveInputs) -> PwmOutput {
+        let d = &self.design;
+        let [a, b, c] = inp.phase_currents;
+        let (i_ab, currents) = match d.limits.current_sensing {
+            CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
+            CurrentSensing::ThreePhase => (clarke_three(a, b, c), [a, b, c]),
+        };
+        let r = &mut self.refs;
         let dv = clamp(
-            self.speed_target - self.speed_reference,
-            -self.ramp_step,
-            self.ramp_step,
+            r.speed_target - r.speed_reference,
+            -d.ramp_step,
+            d.ramp_step,
         );
-        self.speed_reference += dv;
-        self.vf_frequency = self.pole_pairs * self.speed_reference;
+        r.speed_reference += dv;
+        let ol = &mut self.open_loop;
+        ol.frequency = d.pole_pairs * r.speed_reference;
+        let vf = d.config.vf;
         let mag = clamp(
-            self.cfg.vf.boost + self.cfg.vf.volts_per_rad_s * self.vf_frequency.abs(),
+            vf.boost + vf.volts_per_rad_s * ol.frequency.abs(),
             0.0,
-            linear_limit(dc_bus),
+            linear_limit(inp.dc_bus),
         );
-        let sc = self.sincos.sin_cos(self.vf_angle);
+        let sc = self.sincos.sin_cos(ol.angle);
         let v = Dq { d: mag, q: 0.0 };
         let v_ab = inverse_park(v, sc);
-        let m = modulate(&self.pwm_cfg, v_ab, dc_bus, currents);
-        self.vf_angle = wrap_angle_step(self.vf_angle + self.vf_frequency * ts);
+        let m = modulate(&d.pwm, v_ab, inp.dc_bus, currents);
+        ol.angle = wrap_angle_step(ol.angle + ol.frequency * d.ts);
         self.telemetry = DriveTelemetry {
-            speed_reference: self.speed_reference,
+            speed_reference: r.speed_reference,
             current: park(i_ab, sc),
             voltage: v,
-            angle: self.vf_angle,
-            stator_frequency: self.vf_frequency,
-            stator_resistance_estimate: self.rs.stator_resistance_estimate,
+            angle: ol.angle,
+            stator_frequency: ol.frequency,
+            stator_resistance_estimate: self.est.rs.stator_resistance_estimate,
             voltage_saturated: m.saturated,
             ..DriveTelemetry::default()
         };
@@ -1137,6 +811,7 @@ fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::observer::ObserverDesignError;
     use proptest::prelude::*;
 
     fn drive() -> Drive {
@@ -1151,25 +826,36 @@ mod tests {
     }
 
     #[test]
-    fn config_validation_names_the_field() {
+    fn config_validation_names_the_field_and_the_rule() {
+        let mut c = DriveConfig::paper_defaults();
+        c.speed_bandwidth = 900.0;
+        let e = Drive::new(c).err().unwrap();
+        assert_eq!(
+            e,
+            ConfigError::Invalid {
+                field: "speed_bandwidth",
+                rule: "at most a quarter of current_bandwidth (MIN_LOOP_SEPARATION)"
+            }
+        );
+        extern crate std;
+        use std::string::ToString;
+        assert_eq!(
+            e.to_string(),
+            "drive config: speed_bandwidth: at most a quarter of current_bandwidth \
+             (MIN_LOOP_SEPARATION)"
+        );
         let mut c = DriveConfig::paper_defaults();
         c.control_period = 0.0;
         assert_eq!(
-            Drive::new(c).err(),
-            Some(ConfigError::OutOfRange("control_period"))
+            Drive::new(c).err().map(|e| e.field()),
+            Some("control_period")
         );
         let mut c = DriveConfig::paper_defaults();
         c.flux_current = 5.0;
-        assert_eq!(
-            Drive::new(c).err(),
-            Some(ConfigError::OutOfRange("flux_current"))
-        );
+        assert_eq!(Drive::new(c).err().map(|e| e.field()), Some("flux_current"));
         let mut c = DriveConfig::paper_defaults();
         c.dc_bus_max = 100.0;
-        assert_eq!(
-            Drive::new(c).err(),
-            Some(ConfigError::OutOfRange("dc_bus_max"))
-        );
+        assert_eq!(Drive::new(c).err().map(|e| e.field()), Some("dc_bus_max"));
         let mut c = DriveConfig::paper_defaults();
         c.observer_poles.p1 = f32::NAN;
         assert_eq!(
@@ -1179,8 +865,8 @@ mod tests {
         let mut c = DriveConfig::paper_defaults();
         c.speed_bandwidth = 900.0;
         assert_eq!(
-            Drive::new(c).err(),
-            Some(ConfigError::OutOfRange("speed_bandwidth"))
+            Drive::new(c).err().map(|e| e.field()),
+            Some("speed_bandwidth")
         );
     }
 
@@ -1292,7 +978,7 @@ mod tests {
         assert_eq!(d.config().orientation_gain, 0.0);
         assert_eq!(d.set_speed_target(f32::NAN), Err(CommandError::NotFinite));
         d.set_speed_target(1e6).unwrap();
-        assert!(d.speed_target <= 0.9 * d.config().max_speed);
+        assert!(d.refs.speed_target <= 0.9 * d.config().max_speed);
     }
 
     #[test]

@@ -425,6 +425,79 @@ impl FullOrderObserver {
     }
 }
 
+/// The full-order adaptive observer as the cascade's speed observer
+/// ([`crate::observer::SpeedObserver`]): its design and state together, so that
+/// `Drive<_, FullOrder>` runs the paper's baseline in the closed loop. It runs from the
+/// first magnetizing step (it estimates the flux itself) on the measured alpha-beta
+/// current and the alpha-beta voltage commanded for the past period; it has no load
+/// model (the load estimate is 0).
+#[derive(Clone, Debug)]
+pub struct FullOrder {
+    cfg: FullOrderConfig,
+    state: FullOrderObserver,
+}
+
+impl FullOrder {
+    /// Designs the observer for the controller's machine `m` at period `ts` (s) with the
+    /// defaults of [`FullOrderDesign::paper_defaults`].
+    pub fn new(m: &MachineParams, ts: f32) -> Result<Self, FullOrderDesignError> {
+        Self::with_design(m, FullOrderDesign::paper_defaults(m), ts)
+    }
+    /// Designs the observer with `design`.
+    pub fn with_design(
+        m: &MachineParams,
+        design: FullOrderDesign,
+        ts: f32,
+    ) -> Result<Self, FullOrderDesignError> {
+        Ok(Self {
+            cfg: FullOrderConfig::new(m, design, ts)?,
+            state: FullOrderObserver::new(),
+        })
+    }
+    /// The design in use.
+    pub fn config(&self) -> &FullOrderConfig {
+        &self.cfg
+    }
+    /// The observer state.
+    pub fn state(&self) -> &FullOrderObserver {
+        &self.state
+    }
+}
+
+impl crate::observer::SpeedObserver for FullOrder {
+    #[inline(always)]
+    fn update(
+        &mut self,
+        _design: &crate::DriveDesign,
+        x: &crate::observer::SpeedObserverInputs,
+    ) -> crate::observer::SpeedEstimate {
+        let speed = self.state.update(
+            &self.cfg,
+            x.v_ab.alpha,
+            x.v_ab.beta,
+            x.i_ab.alpha,
+            x.i_ab.beta,
+        );
+        crate::observer::SpeedEstimate {
+            speed,
+            load_torque: 0.0,
+            current: x.i_dq.q,
+        }
+    }
+    fn reset(&mut self) {
+        self.state = FullOrderObserver::new();
+    }
+    fn start_running(&mut self, _i_sq: f32) {}
+    #[inline(always)]
+    fn estimate(&self) -> crate::observer::SpeedEstimate {
+        crate::observer::SpeedEstimate {
+            speed: self.state.speed(&self.cfg),
+            load_torque: 0.0,
+            current: 0.0,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

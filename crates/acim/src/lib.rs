@@ -14,22 +14,35 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod math;
-pub mod model;
-pub mod params;
-
-pub use params::{MachineData, MachineParams, ParamError};
-pub mod drive;
-pub mod fixed;
+// control blocks
 pub mod flux;
 pub mod frames;
-pub mod full_order;
+pub mod math;
 pub mod observer;
+pub mod orientation;
+pub mod params;
 pub mod pi;
 pub mod rs_estimator;
 pub mod svpwm;
 
+// the cascade: configuration and design, supervision, the staged drive
+pub mod design;
+pub mod drive;
+pub mod supervisor;
+
+// the same cascade in fixed point, and the paper's baseline observer
+pub mod fixed;
+pub mod full_order;
+
+// the plant (moving to its own crate)
+pub mod model;
+
+pub use design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 pub use drive::{
-    CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
-    DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion, Supervisor,
+    Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
+    StepRegion,
 };
+pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
+pub use params::{MachineData, MachineParams, ParamError};
+pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};
+pub use svpwm::{Modulator, Svpwm};

@@ -48,6 +48,7 @@
 //! and [`ObserverConfig::discrete_stable`] checks the discrete characteristic polynomial
 //! built from the actual gains with Jury's test.
 
+use crate::frames::{AlphaBeta, Dq};
 use crate::math::is_finite;
 use crate::params::MachineParams;
 
@@ -302,6 +303,98 @@ impl ReducedOrderObserver {
         self.current_estimate += di;
         self.speed_estimate = w + dw;
         self.load_torque_estimate += dt;
+    }
+}
+
+/// What any speed observer may need from one step of the cascade (each implementation
+/// reads its fields; all are computed by the cascade anyway). Voltages are those applied
+/// over the past period (the previous step's command); flux quantities are the flux
+/// model's state before this step's update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedObserverInputs {
+    /// Measured stator current, stationary frame, A.
+    pub i_ab: AlphaBeta,
+    /// Measured stator current, rotor-flux frame, A.
+    pub i_dq: Dq,
+    /// Applied stator voltage, stationary frame, V.
+    pub v_ab: AlphaBeta,
+    /// Applied stator voltage, rotor-flux frame, V.
+    pub v_dq: Dq,
+    /// Stator frequency w_s of the frame, rad/s electrical.
+    pub stator_frequency: f32,
+    /// Model rotor flux lambda_r, Wb.
+    pub rotor_flux: f32,
+    /// 1 / max(lambda_r, guard), 1/Wb.
+    pub inv_rotor_flux: f32,
+    /// Rseq = Rs_hat + R_R, ohm.
+    pub equivalent_resistance: f32,
+    /// True while the drive builds the flux at standstill (frame held).
+    pub magnetizing: bool,
+}
+
+/// What a speed observer gives the cascade.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpeedEstimate {
+    /// Omega_hat, rad/s mechanical.
+    pub speed: f32,
+    /// T_L_hat, N m (0 for observers without a load model).
+    pub load_torque: f32,
+    /// The observer's estimate of i_sq, A (the measured i_sq for observers without one).
+    pub current: f32,
+}
+
+/// The seam for the speed estimator of the cascade: the paper's reduced-order observer
+/// ([`ReducedOrderObserver`]) and the full-order adaptive baseline
+/// ([`crate::full_order::FullOrder`]) both implement it, and [`crate::Drive`] takes one
+/// as a type parameter (zero cost in the interrupt: static dispatch, inlined).
+pub trait SpeedObserver {
+    /// One step. `design` is the drive's design (an observer may read its own part of
+    /// it, as the reduced-order observer reads [`crate::DriveDesign::observer`]).
+    fn update(&mut self, design: &crate::DriveDesign, x: &SpeedObserverInputs) -> SpeedEstimate;
+    /// Back to the initial state (a start command).
+    fn reset(&mut self);
+    /// Called when magnetizing ends, with the measured i_sq, A: the rotor is at rest.
+    fn start_running(&mut self, i_sq: f32);
+    /// The last estimate.
+    fn estimate(&self) -> SpeedEstimate;
+}
+
+impl SpeedObserver for ReducedOrderObserver {
+    /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
+    /// section 4).
+    #[inline(always)]
+    fn update(&mut self, design: &crate::DriveDesign, x: &SpeedObserverInputs) -> SpeedEstimate {
+        if !x.magnetizing {
+            ReducedOrderObserver::update(
+                self,
+                &design.observer,
+                &ObserverInputs {
+                    i_sq: x.i_dq.q,
+                    i_sd: x.i_dq.d,
+                    stator_frequency: x.stator_frequency,
+                    v_sq: x.v_dq.q,
+                    rotor_flux: x.rotor_flux,
+                    inv_rotor_flux: x.inv_rotor_flux,
+                    equivalent_resistance: x.equivalent_resistance,
+                },
+            );
+        }
+        SpeedObserver::estimate(self)
+    }
+    fn reset(&mut self) {
+        *self = Self::new();
+    }
+    #[inline(always)]
+    fn start_running(&mut self, i_sq: f32) {
+        ReducedOrderObserver::reset(self, i_sq, 0.0, 0.0);
+    }
+    #[inline(always)]
+    fn estimate(&self) -> SpeedEstimate {
+        SpeedEstimate {
+            speed: self.speed_estimate,
+            load_torque: self.load_torque_estimate,
+            current: self.current_estimate,
+        }
     }
 }
 

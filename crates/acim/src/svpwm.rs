@@ -14,7 +14,9 @@
 //!   whole hexagon max v_x - min v_x <= V_dc and the duties reproduce the command exactly.
 //! * Overmodulation/limit: outside the hexagon the vector is scaled down onto it (angle
 //!   kept, magnitude reduced: "minimum phase error" limiting) and `saturated` is reported
-//!   so the current controllers stop integrating.
+//!   (telemetry). The current controllers do not rely on it: they limit their own output
+//!   to the circle the modulator supplies ([`Modulator::voltage_limit`]), inside the
+//!   hexagon, so their integrators never wind up against the modulator.
 //! * Bus compensation: the measured V_dc divides the voltages, so the output voltage does
 //!   not depend on bus ripple. V_dc is floored at `min_bus_voltage` (no division by a
 //!   vanishing bus; the drive faults on under-voltage before that matters).
@@ -26,6 +28,9 @@
 
 use crate::frames::{inverse_clarke, AlphaBeta};
 use crate::math::clamp;
+
+/// 1/sqrt(3): the linear limit per volt of bus.
+pub const INV_SQRT3: f32 = 0.577_350_26;
 
 /// Modulator configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,7 +74,7 @@ pub struct Modulation {
 /// Largest voltage vector magnitude in the linear range at bus `dc_bus`: V_dc/sqrt(3).
 #[inline]
 pub fn linear_limit(dc_bus: f32) -> f32 {
-    dc_bus * 0.577_350_26
+    dc_bus * INV_SQRT3
 }
 
 /// Computes the duties for voltage command `v` (V, alpha-beta), measured bus `dc_bus` (V)
@@ -145,6 +150,64 @@ fn phase_duty(base: f32, vx: f32, inv_vdc: f32, comp: f32, inv_band: f32, i: f32
         0.0,
         1.0,
     )
+}
+
+/// Fraction of the linear limit V_dc/sqrt(3) the current controllers may use: 2 %
+/// margin inside the hexagon's inscribed circle for the dead-time compensation.
+pub const VOLTAGE_MARGIN: f32 = 0.98;
+
+/// The voltage the current controllers may ask for this step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VoltageLimit {
+    /// Largest |v_dq|, V peak.
+    pub max: f32,
+    /// 1 / `max`, 1/V.
+    pub inv_max: f32,
+}
+
+/// The seam for the PWM stage: turns an alpha-beta voltage into duties and supplies the
+/// voltage limit of the current controllers, so the two cannot disagree. Chosen by type
+/// parameter of [`crate::Drive`] (zero cost in the interrupt).
+pub trait Modulator {
+    /// The largest voltage vector the current loops may command at bus `dc_bus` (V, > 0)
+    /// with `inv_dc_bus` = 1/`dc_bus`.
+    fn voltage_limit(&self, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit;
+    /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
+    /// with `phase_currents` (A) predicted for the dead-time compensation.
+    fn modulate(
+        &self,
+        design: &crate::DriveDesign,
+        v: AlphaBeta,
+        dc_bus: f32,
+        inv_dc_bus: f32,
+        phase_currents: [f32; 3],
+    ) -> Modulation;
+}
+
+/// Min-max (symmetrical) SVPWM with dead-time compensation: this module's [`modulate`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Svpwm;
+
+impl Modulator for Svpwm {
+    /// 98 % of the inscribed circle V_dc/sqrt(3) ([`VOLTAGE_MARGIN`]).
+    #[inline(always)]
+    fn voltage_limit(&self, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+        VoltageLimit {
+            max: linear_limit(dc_bus) * VOLTAGE_MARGIN,
+            inv_max: inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3)),
+        }
+    }
+    #[inline(always)]
+    fn modulate(
+        &self,
+        design: &crate::DriveDesign,
+        v: AlphaBeta,
+        dc_bus: f32,
+        inv_dc_bus: f32,
+        phase_currents: [f32; 3],
+    ) -> Modulation {
+        modulate_with_inverse(&design.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+    }
 }
 
 #[cfg(test)]

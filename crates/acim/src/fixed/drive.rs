@@ -23,13 +23,14 @@
 //!   clamps the lead to 0.3 rad, which it never reaches below 2000 rpm);
 //! - duties leave as Q15 (`u16`, 32768 = 1.0), ready for a timer compare register.
 //!
-//! Configuration: [`FixedDrive::new`] takes the same [`DriveConfig`] as the f32 drive,
-//! validates it with [`Drive::new`], designs every block with the f32 design functions
-//! (`PiConfig::current_loop`, `ObserverConfig::new`, ...), and converts the results
-//! with the per-unit bases, checking that the configured ranges fit them. The derived
-//! constants that live privately in `drive.rs` (20 ms residual filter, 0.3 % settle
-//! threshold, 50 ms settle time, 20 ms implausibility time, correction limit
-//! 0.25 p max_speed, stall at 10 % of the reference) are repeated here with the same values.
+//! Configuration: [`FixedDrive::new`] takes the same [`DriveConfig`] as the f32 drive and
+//! builds the same [`DriveDesign`] (validated once, every derived constant computed once);
+//! [`FixedDrive::from_design`] converts that design with the per-unit bases, checking that
+//! the configured ranges fit them. Nothing is designed twice and no derived constant is
+//! copied by hand: the 20 ms residual filter, the settle thresholds, the implausibility
+//! time and the correction limit come from the design; the Q7.24 literals below are the
+//! design module's named fractions ([`crate::design::STALL_SPEED_FRACTION`],
+//! [`crate::svpwm::VOLTAGE_MARGIN`]) in Q7.24, checked by a test.
 
 use super::flux::{angle_gain, FixedFluxConfig, FixedFluxModel};
 use super::observer::{FixedObserver, FixedObserverConfig, FixedObserverInputs};
@@ -41,17 +42,14 @@ use super::trig::{
     angle_to_rad, clarke_three, clarke_two, inverse_clarke, inverse_park, park, sin_cos, DqQ24,
 };
 use super::PerUnitBases;
+use crate::design::DriveDesign;
 use crate::drive::{
-    CommandError, ConfigError, CurrentSensing, Drive, DriveConfig, DriveInputs, DriveState,
+    CommandError, ConfigError, CurrentSensing, DriveConfig, DriveInputs, DriveState,
     DriveTelemetry, FaultReason, NoProbe, PwmOutput, StepProbe, StepRegion, Supervisor,
 };
-use crate::flux::FluxModelConfig;
 use crate::frames::Dq;
 use crate::math::{is_finite, sqrt};
-use crate::observer::ObserverConfig;
-use crate::pi::PiConfig;
-use crate::rs_estimator::RsEstimatorConfig;
-use crate::svpwm::{linear_limit, SvpwmConfig};
+use crate::svpwm::{INV_SQRT3, VOLTAGE_MARGIN};
 
 /// Largest |signal| in pu the configuration may ask for (limits, trips, references): 2 pu
 /// leaves 64x before Q7.24 saturates (module docs, headroom).
@@ -230,31 +228,28 @@ impl FixedDrive {
     /// Validates `cfg` (as the f32 drive does, plus the fit to `bases`), designs every
     /// block with the f32 design functions and converts the coefficients; an idle drive.
     pub fn new(cfg: DriveConfig, bases: PerUnitBases) -> Result<Self, FixedConfigError> {
-        // the f32 drive's validation (and its design of the observer)
-        let reference = Drive::new(cfg).map_err(FixedConfigError::Drive)?;
+        Self::from_design(
+            &DriveDesign::new(cfg).map_err(FixedConfigError::Drive)?,
+            bases,
+        )
+    }
+
+    /// Converts the f32 design (validated once, every derived constant computed once) to
+    /// Q7.24 with `bases`, checking that every configured range fits them; an idle drive.
+    pub fn from_design(
+        design: &DriveDesign,
+        bases: PerUnitBases,
+    ) -> Result<Self, FixedConfigError> {
+        let d = design;
+        let cfg = d.config;
         let b = bases;
         let m = cfg.machine;
-        let ts = cfg.control_period;
-        let i_d = cfg.flux_current;
-        let flux_reference = reference.flux_reference();
-        let i_sq_limit = reference.torque_current_limit();
-        let v_static = linear_limit(cfg.dc_bus_max);
-        let mut rs_cfg = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
-        rs_cfg.adapt = cfg.rs_estimation;
-        rs_cfg.max_stator_frequency = cfg.rs_max_frequency;
-        let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
-        let pi_speed =
-            PiConfig::speed_loop(&m, flux_reference, cfg.speed_bandwidth, ts, i_sq_limit);
-        let obs = ObserverConfig::new(&m, cfg.observer_poles, ts)
-            .map_err(|e| FixedConfigError::Drive(ConfigError::Observer(e)))?;
-        let flux_cfg = FluxModelConfig::new(&m, ts, flux_reference);
-        let pwm = SvpwmConfig::new(
-            cfg.dead_time,
-            ts,
-            cfg.device_drop,
-            cfg.dead_time_current_band,
-        );
-        let pp = m.pole_pairs_f32();
+        let ts = d.ts;
+        let i_d = d.i_sd_ref;
+        let flux_reference = d.flux_reference;
+        let (pi_current, pi_speed, obs, flux_cfg, rs_cfg, pwm) =
+            (d.pi_d, d.pi_speed, d.observer, d.flux, d.rs, d.pwm);
+        let pp = d.pole_pairs;
         // range checks: everything the drive compares against or limits to must fit
         pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
         pu(cfg.current_limit, b.current, "current_limit")?;
@@ -288,7 +283,6 @@ impl FixedDrive {
             ));
         }
         let missing = FixedConfigError::NotRepresentable;
-        let (fa, fb) = cfg.orientation_fade;
         Ok(Self {
             pi_d: FixedPiConfig::from_f32(&pi_current, b.current, b.voltage)
                 .ok_or(missing("current PI"))?,
@@ -301,11 +295,7 @@ impl FixedDrive {
             rs_cfg: FixedRsConfig::from_f32(&rs_cfg, &b).ok_or(missing("Rs estimator"))?,
             pwm_cfg: FixedSvpwmConfig::from_f32(&pwm, &b).ok_or(missing("svpwm"))?,
             i_sd_ref: pu(i_d, b.current, "flux_current")?,
-            settled_flux: pu(
-                flux_reference * (1.0 - cfg.flux_tolerance),
-                b.flux,
-                "flux reference",
-            )?,
+            settled_flux: pu(d.settled_flux, b.flux, "flux reference")?,
             referred_rotor_resistance: pu(m.referred_rotor_resistance(), b.resistance(), "R_R")?,
             sigma_ls: gain(
                 m.transient_inductance() * b.frequency * b.current / b.voltage,
@@ -317,27 +307,30 @@ impl FixedDrive {
             torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "torque factor")?,
             lead_angle: angle_gain(b.frequency * ts * cfg.delay_periods)
                 .ok_or(missing("delay_periods"))?,
-            inv_v_max_per_inv_bus: gain(1.0 / (0.98 * 0.577_350_26), "voltage limit")?,
-            ramp_step: to_q24(cfg.speed_ramp * ts / b.speed),
+            inv_v_max_per_inv_bus: gain(1.0 / (VOLTAGE_MARGIN * INV_SQRT3), "voltage limit")?,
+            ramp_step: to_q24(d.ramp_step / b.speed),
             orientation_gain_per_flux: gain(
-                cfg.orientation_gain / flux_reference * b.voltage / b.frequency,
+                d.orientation.gain_per_flux * b.voltage / b.frequency,
                 "orientation_gain",
             )?,
-            orientation_fade_start: pu(fa, b.frequency, "orientation_fade")?,
-            orientation_inv_fade_width: gain(b.frequency / (fb - fa), "orientation_fade")?,
-            orientation_limit: pu(0.25 * cfg.max_speed * pp, b.frequency, "max_speed")?,
+            orientation_fade_start: pu(d.orientation.fade_start, b.frequency, "orientation_fade")?,
+            orientation_inv_fade_width: gain(
+                b.frequency / (cfg.orientation_fade.1 - cfg.orientation_fade.0),
+                "orientation_fade",
+            )?,
+            orientation_limit: pu(d.orientation.limit, b.frequency, "max_speed")?,
             overcurrent_trip: pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?,
             dc_bus_min: pu(cfg.dc_bus_min, b.voltage, "dc_bus_min")?,
             dc_bus_max: pu(cfg.dc_bus_max, b.voltage, "dc_bus_max")?,
             max_speed: pu(cfg.max_speed, b.speed, "max_speed")?,
             max_load_torque: pu(cfg.max_load_torque_estimate, b.torque, "max_load_torque")?,
-            speed_target_limit: pu(0.9 * cfg.max_speed, b.speed, "max_speed")?,
-            stall_steps: (cfg.stall_time / ts) as u32,
-            rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
-            rs_settle_steps: (0.05 / ts) as u32,
-            implausible_limit: (0.02 / ts) as u32,
-            residual_filter: gain((ts / 0.02).min(1.0), "control_period")?,
-            rs_settled_error: pu(0.003 * i_d, b.current, "flux_current")?,
+            speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
+            stall_steps: d.limits.stall_steps,
+            rs_timeout_steps: d.magnetizing.rs_timeout_steps,
+            rs_settle_steps: d.magnetizing.rs_settle_steps,
+            implausible_limit: d.limits.implausible_steps,
+            residual_filter: gain(d.magnetizing.residual_filter, "control_period")?,
+            rs_settled_error: pu(d.magnetizing.rs_settled_error, b.current, "flux_current")?,
             sup: Supervisor::new(),
             speed_target: 0,
             speed_reference: 0,
@@ -817,4 +810,33 @@ impl FixedDrive {
 fn duty_q15(d: i32) -> u16 {
     let q = clamp(d, 0, ONE).saturating_add(1 << 8) >> 9;
     q as u16
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::STALL_SPEED_FRACTION;
+
+    /// The Q7.24 literals are the design's named fractions, to the last code.
+    #[test]
+    fn literals_are_the_design_constants() {
+        // the two irrational literals were computed from the exact values (0.98/sqrt 3 is
+        // 9 492 603.5 codes, sqrt 3 is 29 058 990.9); the f32 constants land one code away
+        assert_eq!(V_MAX_PER_BUS + 1, to_q24(VOLTAGE_MARGIN * INV_SQRT3));
+        assert_eq!(SQRT3 - 1, to_q24(1.732_050_8));
+        assert_eq!(STALL_FRACTION, to_q24(STALL_SPEED_FRACTION));
+    }
+
+    /// The fixed drive is built from the same design as the f32 drive: a setting the
+    /// design rejects is rejected with the same error.
+    #[test]
+    fn rejects_what_the_design_rejects() {
+        let mut c = DriveConfig::paper_defaults();
+        c.speed_bandwidth = 900.0;
+        let bases = PerUnitBases::PAPER;
+        assert_eq!(
+            FixedDrive::new(c, bases).err(),
+            Some(FixedConfigError::Drive(DriveDesign::new(c).unwrap_err()))
+        );
+    }
 }

@@ -1,0 +1,513 @@
+//! Configuration and design: the user's settings ([`DriveConfig`]) and the one immutable
+//! [`DriveDesign`] derived from them outside the interrupt.
+//!
+//! Every derived constant of the cascade (gains, reciprocals, limits, step counts) is
+//! computed once here, validated once, and read by the stages of the f32 drive and by the
+//! fixed-point drive's conversion; nothing is re-derived inline. A rejected setting names
+//! the field and the rule it broke ([`ConfigError`]). A new design can be built in the
+//! background and swapped in between two steps ([`crate::Drive::set_design`]).
+
+use crate::flux::FluxModelConfig;
+use crate::math::{is_finite, sqrt};
+use crate::observer::{ObserverConfig, ObserverDesignError, ObserverPoles};
+use crate::params::{self, MachineParams};
+use crate::pi::PiConfig;
+use crate::rs_estimator::RsEstimatorConfig;
+use crate::svpwm::{linear_limit, SvpwmConfig};
+
+/// How many phase currents are measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CurrentSensing {
+    /// Phases a and b measured; c = -a - b.
+    TwoPhase,
+    /// All three measured; the zero-sequence part is rejected.
+    ThreePhase,
+}
+
+/// Open-loop V/f commissioning settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VfConfig {
+    /// Voltage per electrical frequency, V peak per rad/s (230 V rms line at 50 Hz:
+    /// 187.8 V / 314.16 rad/s = 0.598).
+    pub volts_per_rad_s: f32,
+    /// Low-frequency boost added to the voltage magnitude, V peak.
+    pub boost: f32,
+}
+
+/// Complete drive configuration (all user-facing settings; nothing here changes at run
+/// time). Units SI, speeds mechanical rad/s.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveConfig {
+    /// The controller's machine model (may differ from the real machine).
+    pub machine: MachineParams,
+    /// Control and PWM period, s.
+    pub control_period: f32,
+    /// d-axis (flux) current reference i_sd*, A peak.
+    pub flux_current: f32,
+    /// Stator current vector limit I_max, A peak.
+    pub current_limit: f32,
+    /// Phase current trip level, A (any phase above it faults).
+    pub overcurrent_trip: f32,
+    /// Lowest DC-bus voltage while active, V.
+    pub dc_bus_min: f32,
+    /// Highest DC-bus voltage, V.
+    pub dc_bus_max: f32,
+    /// Over-speed trip on the estimated speed, rad/s.
+    pub max_speed: f32,
+    /// Speed reference slew rate (trapezoid ramps), rad/s^2.
+    pub speed_ramp: f32,
+    /// Current-loop bandwidth, rad/s.
+    pub current_bandwidth: f32,
+    /// Speed-loop bandwidth, rad/s.
+    pub speed_bandwidth: f32,
+    /// Observer poles (rates, rad/s).
+    pub observer_poles: ObserverPoles,
+    /// Whether the stator-resistance estimator adapts.
+    pub rs_estimation: bool,
+    /// Initial stator-resistance estimate R0, ohm (eq. 19).
+    pub rs_initial: f32,
+    /// Convergence time constant of the Rs estimator, s.
+    pub rs_convergence_time: f32,
+    /// Rs adapts only below this |w_s|, rad/s electrical: there the d-axis residual is
+    /// dominated by the resistance error (its orientation part grows with w_s).
+    pub rs_max_frequency: f32,
+    /// With Rs estimation on, magnetizing also waits (at standstill, where the d-axis
+    /// residual is purely the resistance error) until the Rs estimate has settled, for at
+    /// most this long, s.
+    pub rs_identification_timeout: f32,
+    /// Orientation-correction gain k (dimensionless, 0 = the paper's scheme unchanged):
+    /// the stator frequency gets -k sign(w_s) r_d / lambda_ref. Regeneration is stable for
+    /// k > tau_r |w_slip| (see [`crate::orientation`]).
+    pub orientation_gain: f32,
+    /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
+    pub orientation_fade: (f32, f32),
+    /// Inverter dead time, s (compensated).
+    pub dead_time: f32,
+    /// Inverter device on-state drop, V (compensated with the dead time).
+    pub device_drop: f32,
+    /// Current band of the dead-time compensation's linearised sign, A: the current
+    /// below which the inverter's dead-time error is proportional to the current (device
+    /// capacitances); a property of the power stage, to be measured at commissioning.
+    /// Default 50 mA, the inverter model's default. At 60 rpm, where the back-EMF is only
+    /// about 10 V, a mismatch shows as speed-estimate spikes at each current zero crossing.
+    pub dead_time_current_band: f32,
+    /// Measured phases.
+    pub current_sensing: CurrentSensing,
+    /// Flux within this fraction of its reference counts as settled.
+    pub flux_tolerance: f32,
+    /// Delay between sampling and the centre of the period the voltage is applied in, in
+    /// control periods (1.5 for preloaded compare registers).
+    pub delay_periods: f32,
+    /// Fault when the speed PI has been at its limit with |Omega_hat| below 10 % of the
+    /// reference for this long, s (locked rotor / stall).
+    pub stall_time: f32,
+    /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
+    pub max_load_torque_estimate: f32,
+    /// V/f mode settings.
+    pub vf: VfConfig,
+}
+
+impl DriveConfig {
+    /// The project's documented defaults for the paper's machine (Table 1): 5 kHz, 1.5 A
+    /// flux current, 4.67 A limit, 325 V bus, 1.5 us dead time.
+    pub fn paper_defaults() -> Self {
+        let machine = MachineParams::paper_table1();
+        Self {
+            machine,
+            control_period: params::DEFAULT_CONTROL_PERIOD,
+            flux_current: params::DEFAULT_FLUX_CURRENT,
+            current_limit: params::DEFAULT_CURRENT_LIMIT,
+            overcurrent_trip: 8.0,
+            dc_bus_min: 200.0,
+            dc_bus_max: 400.0,
+            max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+            speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
+            current_bandwidth: 1000.0,
+            speed_bandwidth: 25.0,
+            observer_poles: ObserverPoles::DEFAULT,
+            rs_estimation: false,
+            rs_initial: machine.stator_resistance(),
+            rs_convergence_time: 0.2,
+            rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
+            rs_identification_timeout: 1.5,
+            orientation_gain: 2.0,
+            orientation_fade: (
+                2.0 * core::f32::consts::PI * 0.5,
+                2.0 * core::f32::consts::PI * 1.5,
+            ),
+            dead_time: 1.5e-6,
+            device_drop: 1.0,
+            dead_time_current_band: 0.05,
+            current_sensing: CurrentSensing::TwoPhase,
+            flux_tolerance: 0.02,
+            delay_periods: 1.5,
+            stall_time: 1.0,
+            max_load_torque_estimate: 15.0,
+            vf: VfConfig {
+                volts_per_rad_s: 187.8 / 314.16,
+                boost: 8.0,
+            },
+        }
+    }
+}
+
+/// Why a drive configuration was rejected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ConfigError {
+    /// `field` breaks `rule` (both human-readable, e.g. `"speed_bandwidth"` and
+    /// `"at most a quarter of current_bandwidth"`).
+    Invalid {
+        /// The offending field of [`DriveConfig`] (dotted for nested fields).
+        field: &'static str,
+        /// The rule it broke.
+        rule: &'static str,
+    },
+    /// The observer design failed.
+    Observer(ObserverDesignError),
+}
+
+impl ConfigError {
+    /// The field the error is about (`"observer_poles"` for a failed observer design).
+    pub fn field(&self) -> &'static str {
+        match self {
+            ConfigError::Invalid { field, .. } => field,
+            ConfigError::Observer(_) => "observer_poles",
+        }
+    }
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ConfigError::Invalid { field, rule } => write!(f, "drive config: {field}: {rule}"),
+            ConfigError::Observer(e) => write!(f, "observer design: {e:?}"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
+
+/// The rules, named once: each check below returns the field and the rule it broke.
+fn check(ok: bool, field: &'static str, rule: &'static str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::Invalid { field, rule })
+    }
+}
+
+const POSITIVE: &str = "must be finite and > 0";
+
+fn positive(v: f32, field: &'static str) -> Result<f32, ConfigError> {
+    check(is_finite(v) && v > 0.0, field, POSITIVE)?;
+    Ok(v)
+}
+
+/// Longest control period accepted, s (100 Hz: slower is not a current loop).
+pub const MAX_CONTROL_PERIOD: f32 = 0.01;
+/// Largest current-loop bandwidth x period: beyond 0.5 the discrete PI with a one-period
+/// delay loses its phase margin.
+pub const MAX_CURRENT_BANDWIDTH_PERIODS: f32 = 0.5;
+/// The current loop must be at least this many times faster than the speed loop (cascade
+/// separation).
+pub const MIN_LOOP_SEPARATION: f32 = 4.0;
+/// Largest dead time as a fraction of the period (the compensation is a duty offset).
+pub const MAX_DEAD_TIME_FRACTION: f32 = 0.1;
+/// Largest device drop accepted, V.
+pub const MAX_DEVICE_DROP: f32 = 20.0;
+/// Largest flux tolerance (fraction of the reference).
+pub const MAX_FLUX_TOLERANCE: f32 = 0.5;
+/// Largest sampling-to-voltage delay, periods.
+pub const MAX_DELAY_PERIODS: f32 = 3.0;
+/// Largest orientation-correction gain.
+pub const MAX_ORIENTATION_GAIN: f32 = 50.0;
+/// Speed targets are limited to this fraction of `max_speed` (the over-speed trip keeps
+/// a margin above any commanded speed).
+pub const SPEED_TARGET_FRACTION: f32 = 0.9;
+/// Stall: the speed estimate stays below this fraction of the reference while the speed
+/// PI is saturated.
+pub const STALL_SPEED_FRACTION: f32 = 0.1;
+/// The orientation correction is bounded by this fraction of p max_speed: a correction
+/// beyond the rotor-frequency range means a wrong model.
+pub const ORIENTATION_LIMIT_FRACTION: f32 = 0.25;
+/// An implausible load estimate must persist this long before it faults, s (a current
+/// transient, e.g. a short, must trip on over-current first).
+pub const IMPLAUSIBLE_TIME: f32 = 0.02;
+/// Standstill Rs identification: the residual must stay settled this long, s.
+pub const RS_SETTLE_TIME: f32 = 0.05;
+/// Time constant of the low-pass of the d-axis current-model error, s.
+pub const RESIDUAL_FILTER_TIME: f32 = 0.02;
+/// The Rs identification counts as settled when the filtered |error| is below this
+/// fraction of i_sd* (|Rs_hat - Rs| below about the same fraction).
+pub const RS_SETTLED_FRACTION: f32 = 0.003;
+
+/// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
+/// of the step reads only these.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupervisionLimits {
+    /// Measured phases (the third current is derived with two shunts).
+    pub current_sensing: CurrentSensing,
+    /// Phase current trip, A.
+    pub overcurrent_trip: f32,
+    /// Lowest DC bus while active, V.
+    pub dc_bus_min: f32,
+    /// Highest DC bus, V.
+    pub dc_bus_max: f32,
+    /// Over-speed trip on the estimated speed, rad/s.
+    pub max_speed: f32,
+    /// Largest plausible |T_L_hat|, N m.
+    pub max_load_torque: f32,
+    /// Steps an implausible load estimate may persist.
+    pub implausible_steps: u32,
+    /// Steps the stall condition may persist.
+    pub stall_steps: u32,
+    /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
+    pub rs_bound_faults: bool,
+}
+
+/// The orientation correction's constants ([`crate::orientation`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrientationDesign {
+    /// k / lambda_ref, 1/Wb.
+    pub gain_per_flux: f32,
+    /// |w_s| where the fade-in starts, rad/s electrical.
+    pub fade_start: f32,
+    /// 1 / (fade upper - fade lower), s/rad.
+    pub inv_fade_width: f32,
+    /// Largest |correction|, rad/s electrical.
+    pub limit: f32,
+}
+
+/// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MagnetizingDesign {
+    /// Whether magnetizing waits for the Rs identification.
+    pub identify_rs: bool,
+    /// Longest identification, steps.
+    pub rs_timeout_steps: u32,
+    /// Settled-residual time, steps.
+    pub rs_settle_steps: u32,
+    /// Settled-residual threshold, A.
+    pub rs_settled_error: f32,
+    /// Low-pass coefficient of the residual filter (Ts / 20 ms).
+    pub residual_filter: f32,
+}
+
+/// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
+/// interrupt) and never changed while it is in use. Read by the stages of the cascade;
+/// the fixed-point drive converts it with its per-unit bases.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveDesign {
+    /// The settings this design was built from.
+    pub config: DriveConfig,
+    /// Control period Ts, s.
+    pub ts: f32,
+    /// d-axis current PI (eq. 9a plant; pole cancellation).
+    pub pi_d: PiConfig,
+    /// q-axis current PI (eq. 9b plant).
+    pub pi_q: PiConfig,
+    /// Speed PI (J, k_t at the flux reference).
+    pub pi_speed: PiConfig,
+    /// Flux model and slip law (eq. 13, 8).
+    pub flux: FluxModelConfig,
+    /// Reduced-order observer (eq. 12, 14).
+    pub observer: ObserverConfig,
+    /// Rs estimator (eq. 19-20).
+    pub rs: RsEstimatorConfig,
+    /// Modulator (SVPWM with dead-time compensation).
+    pub pwm: SvpwmConfig,
+    /// i_sd*, A.
+    pub i_sd_ref: f32,
+    /// q-current limit sqrt(I_max^2 - i_sd*^2), A.
+    pub i_sq_limit: f32,
+    /// Rotor-flux reference L_M i_sd*, Wb.
+    pub flux_reference: f32,
+    /// Flux above which it counts as settled, Wb.
+    pub settled_flux: f32,
+    /// sigma Ls (L_sigma), H.
+    pub transient_inductance: f32,
+    /// R_R = (Lm/Lr)^2 Rr, ohm.
+    pub referred_rotor_resistance: f32,
+    /// 1 / tau_r, 1/s.
+    pub inv_rotor_time_constant: f32,
+    /// p.
+    pub pole_pairs: f32,
+    /// 1.5 p (Te = 1.5 p lambda_r i_sq).
+    pub torque_factor: f32,
+    /// Speed reference change per step, rad/s.
+    pub ramp_step: f32,
+    /// Largest |speed target|, rad/s.
+    pub speed_target_limit: f32,
+    /// Orientation correction.
+    pub orientation: OrientationDesign,
+    /// Magnetizing sequence.
+    pub magnetizing: MagnetizingDesign,
+    /// What the supervisor judges against.
+    pub limits: SupervisionLimits,
+}
+
+impl DriveDesign {
+    /// Validates `cfg` and derives every constant. Errors name the field and the rule.
+    pub fn new(cfg: DriveConfig) -> Result<Self, ConfigError> {
+        let ts = positive(cfg.control_period, "control_period")?;
+        check(
+            ts <= MAX_CONTROL_PERIOD,
+            "control_period",
+            "at most 10 ms (MAX_CONTROL_PERIOD)",
+        )?;
+        let i_max = positive(cfg.current_limit, "current_limit")?;
+        let i_d = positive(cfg.flux_current, "flux_current")?;
+        check(i_d < i_max, "flux_current", "must be below current_limit")?;
+        positive(cfg.overcurrent_trip, "overcurrent_trip")?;
+        check(
+            cfg.overcurrent_trip >= i_max,
+            "overcurrent_trip",
+            "must be at least current_limit",
+        )?;
+        positive(cfg.dc_bus_min, "dc_bus_min")?;
+        positive(cfg.dc_bus_max, "dc_bus_max")?;
+        check(
+            cfg.dc_bus_max > cfg.dc_bus_min,
+            "dc_bus_max",
+            "must be above dc_bus_min",
+        )?;
+        positive(cfg.max_speed, "max_speed")?;
+        positive(cfg.speed_ramp, "speed_ramp")?;
+        positive(cfg.current_bandwidth, "current_bandwidth")?;
+        positive(cfg.speed_bandwidth, "speed_bandwidth")?;
+        check(
+            cfg.current_bandwidth * ts <= MAX_CURRENT_BANDWIDTH_PERIODS,
+            "current_bandwidth",
+            "times control_period at most 0.5 (MAX_CURRENT_BANDWIDTH_PERIODS)",
+        )?;
+        check(
+            cfg.speed_bandwidth * MIN_LOOP_SEPARATION <= cfg.current_bandwidth,
+            "speed_bandwidth",
+            "at most a quarter of current_bandwidth (MIN_LOOP_SEPARATION)",
+        )?;
+        positive(cfg.rs_initial, "rs_initial")?;
+        positive(cfg.rs_convergence_time, "rs_convergence_time")?;
+        check(
+            is_finite(cfg.dead_time)
+                && cfg.dead_time >= 0.0
+                && cfg.dead_time < MAX_DEAD_TIME_FRACTION * ts,
+            "dead_time",
+            "must be >= 0 and below 10 % of control_period (MAX_DEAD_TIME_FRACTION)",
+        )?;
+        check(
+            is_finite(cfg.device_drop) && (0.0..=MAX_DEVICE_DROP).contains(&cfg.device_drop),
+            "device_drop",
+            "must be in 0 ..= 20 V (MAX_DEVICE_DROP)",
+        )?;
+        positive(cfg.dead_time_current_band, "dead_time_current_band")?;
+        let tol = positive(cfg.flux_tolerance, "flux_tolerance")?;
+        check(
+            tol < MAX_FLUX_TOLERANCE,
+            "flux_tolerance",
+            "must be below 0.5 (MAX_FLUX_TOLERANCE)",
+        )?;
+        check(
+            is_finite(cfg.delay_periods) && (0.0..=MAX_DELAY_PERIODS).contains(&cfg.delay_periods),
+            "delay_periods",
+            "must be in 0 ..= 3 periods (MAX_DELAY_PERIODS)",
+        )?;
+        positive(cfg.rs_max_frequency, "rs_max_frequency")?;
+        positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
+        check(
+            is_finite(cfg.orientation_gain)
+                && (0.0..=MAX_ORIENTATION_GAIN).contains(&cfg.orientation_gain),
+            "orientation_gain",
+            "must be in 0 ..= 50 (MAX_ORIENTATION_GAIN)",
+        )?;
+        let (fa, fb) = cfg.orientation_fade;
+        check(
+            is_finite(fa) && is_finite(fb) && fa >= 0.0 && fb > fa,
+            "orientation_fade",
+            "must be finite with 0 <= lower < upper",
+        )?;
+        positive(cfg.stall_time, "stall_time")?;
+        positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
+        positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
+        check(
+            is_finite(cfg.vf.boost) && cfg.vf.boost >= 0.0,
+            "vf.boost",
+            "must be finite and >= 0",
+        )?;
+
+        let m = cfg.machine;
+        let flux_reference = m.rotor_flux_for(i_d);
+        let i_sq_limit = sqrt(i_max * i_max - i_d * i_d);
+        let observer =
+            ObserverConfig::new(&m, cfg.observer_poles, ts).map_err(ConfigError::Observer)?;
+        // the voltage limit of the current PIs follows the bus at run time; these static
+        // limits only bound the integrators before the first step
+        let v_static = linear_limit(cfg.dc_bus_max);
+        let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
+        rs.adapt = cfg.rs_estimation;
+        rs.max_stator_frequency = cfg.rs_max_frequency;
+        let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
+        let pp = m.pole_pairs_f32();
+        Ok(Self {
+            config: cfg,
+            ts,
+            pi_d: pi_current,
+            pi_q: pi_current,
+            pi_speed: PiConfig::speed_loop(&m, flux_reference, cfg.speed_bandwidth, ts, i_sq_limit),
+            flux: FluxModelConfig::new(&m, ts, flux_reference),
+            observer,
+            rs,
+            pwm: SvpwmConfig::new(
+                cfg.dead_time,
+                ts,
+                cfg.device_drop,
+                cfg.dead_time_current_band,
+            ),
+            i_sd_ref: i_d,
+            i_sq_limit,
+            flux_reference,
+            settled_flux: flux_reference * (1.0 - tol),
+            transient_inductance: m.transient_inductance(),
+            referred_rotor_resistance: m.referred_rotor_resistance(),
+            inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
+            pole_pairs: pp,
+            torque_factor: 1.5 * pp,
+            ramp_step: cfg.speed_ramp * ts,
+            speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
+            orientation: OrientationDesign {
+                gain_per_flux: cfg.orientation_gain / flux_reference,
+                fade_start: fa,
+                inv_fade_width: 1.0 / (fb - fa),
+                limit: ORIENTATION_LIMIT_FRACTION * cfg.max_speed * pp,
+            },
+            magnetizing: MagnetizingDesign {
+                identify_rs: cfg.rs_estimation,
+                rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
+                rs_settle_steps: (RS_SETTLE_TIME / ts) as u32,
+                rs_settled_error: RS_SETTLED_FRACTION * i_d,
+                residual_filter: (ts / RESIDUAL_FILTER_TIME).min(1.0),
+            },
+            limits: SupervisionLimits {
+                current_sensing: cfg.current_sensing,
+                overcurrent_trip: cfg.overcurrent_trip,
+                dc_bus_min: cfg.dc_bus_min,
+                dc_bus_max: cfg.dc_bus_max,
+                max_speed: cfg.max_speed,
+                max_load_torque: cfg.max_load_torque_estimate,
+                implausible_steps: (IMPLAUSIBLE_TIME / ts) as u32,
+                stall_steps: (cfg.stall_time / ts) as u32,
+                rs_bound_faults: cfg.rs_estimation,
+            },
+        })
+    }
+
+    /// This design with another orientation gain (run-time tuning, built outside the
+    /// interrupt). Rejects non-finite values and values outside 0 ..= 50.
+    pub fn with_orientation_gain(&self, gain: f32) -> Result<Self, ConfigError> {
+        let mut cfg = self.config;
+        cfg.orientation_gain = gain;
+        Self::new(cfg)
+    }
+}

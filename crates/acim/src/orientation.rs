@@ -1,0 +1,74 @@
+//! Orientation correction (beyond the paper): a stator-frequency correction from the
+//! d-axis residual that stabilises field orientation in regeneration.
+//!
+//! The paper's orientation mode s^2 + s/tau_r + w_s w_slip = 0 (x = lambda_d - lambda_hat,
+//! y = lambda_q) is neutral at zero torque and unstable in regeneration. The steady d-axis
+//! residual r_d = (Rs - Rs_hat) i_sd - w_s y, which the eq. (20) current model already
+//! integrates (its error e_d is r_d/Rs_hat), drives a stator-frequency correction
+//! dw = -k sign(w_s) r_d / lambda_ref. The mode becomes
+//! s^2 + s(1/tau_r + k|w_s|) + k|w_s|/tau_r + w_s w_slip = 0, stable in regeneration for
+//! k > tau_r |w_slip|. It fades in between `orientation_fade` (no information at w_s = 0),
+//! and Rs adapts only below `rs_max_frequency`, where the orientation part of r_d
+//! vanishes. `orientation_gain = 0` is the paper's scheme. Derivation, the measured
+//! stability map and before/after figures: `docs/orientation-stability.md`.
+
+use crate::design::OrientationDesign;
+use crate::math::clamp;
+
+/// The correction dw (rad/s electrical) added to p Omega_hat before the slip law, from
+/// the stator frequency of the last step `stator_frequency` (rad/s electrical), the Rs
+/// estimate `rs_estimate` (ohm) and the d-axis current-model error `current_error` (A,
+/// eq. 20): in field orientation the steady residual is r_d = Rs_hat e_d = -w_s lambda_q,
+/// so dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux. Faded in over
+/// `fade`, bounded by `limit`. The caller applies it only with a settled flux and not
+/// while magnetizing.
+#[inline(always)]
+pub fn correction(
+    d: &OrientationDesign,
+    stator_frequency: f32,
+    rs_estimate: f32,
+    current_error: f32,
+) -> f32 {
+    let w = clamp(
+        (stator_frequency.abs() - d.fade_start) * d.inv_fade_width,
+        0.0,
+        1.0,
+    );
+    let r_d = rs_estimate * current_error;
+    let signed = if stator_frequency >= 0.0 { -r_d } else { r_d };
+    clamp(d.gain_per_flux * w * signed, -d.limit, d.limit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::{DriveConfig, DriveDesign};
+
+    fn design() -> OrientationDesign {
+        DriveDesign::new(DriveConfig::paper_defaults())
+            .unwrap()
+            .orientation
+    }
+
+    #[test]
+    fn silent_below_the_fade_and_full_above() {
+        let d = design();
+        // below the fade-in: nothing, whatever the residual
+        assert_eq!(correction(&d, 0.5 * d.fade_start, 10.0, 0.1), 0.0);
+        // above it: -k r_d / lambda_ref for w_s > 0, sign flipped for w_s < 0
+        let above = d.fade_start + 2.0 / d.inv_fade_width;
+        let c = correction(&d, above, 10.0, 0.01);
+        assert!((c - (-d.gain_per_flux * 0.1)).abs() < 1e-5, "{c}");
+        assert_eq!(correction(&d, -above, 10.0, 0.01), -c);
+    }
+
+    #[test]
+    fn bounded_and_nan_safe() {
+        let d = design();
+        let above = d.fade_start + 2.0 / d.inv_fade_width;
+        assert_eq!(correction(&d, above, 10.0, -1e9), d.limit);
+        assert_eq!(correction(&d, above, 10.0, 1e9), -d.limit);
+        let n = correction(&d, above, f32::NAN, 1.0);
+        assert!(n.abs() <= d.limit);
+    }
+}
