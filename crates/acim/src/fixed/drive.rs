@@ -839,4 +839,57 @@ mod tests {
             Some(FixedConfigError::Drive(DriveDesign::new(c).unwrap_err()))
         );
     }
+
+    use proptest::prelude::*;
+
+    fn drive() -> FixedDrive {
+        FixedDrive::new(DriveConfig::paper_defaults(), PerUnitBases::PAPER).unwrap()
+    }
+
+    /// Any Q7.24 current code, with the extremes (a saturated ADC maps to them) often.
+    fn any_code() -> impl Strategy<Value = i32> {
+        prop_oneof![
+            4 => -to_q24(1.0)..to_q24(1.0),
+            1 => Just(i32::MAX),
+            1 => Just(i32::MIN),
+            1 => any::<i32>(),
+        ]
+    }
+
+    fn any_bus_code() -> impl Strategy<Value = i32> {
+        prop_oneof![
+            4 => to_q24(0.45)..to_q24(1.05),
+            1 => any::<i32>(),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The fixed-point twin of the f32 drive's `never_emits_bad_duty`: whatever the
+        /// samples, the duties are in 0 ..= 32768 (Q15 of 1.0), a disabled output is the
+        /// neutral 16384, a fault keeps the switches off, and an over-range current faults.
+        #[test]
+        fn never_emits_bad_duty(
+            samples in proptest::collection::vec((any_code(), any_code(), any_code(), any_bus_code()), 1..400),
+            target in -to_q24(0.2)..to_q24(0.2),
+        ) {
+            let mut d = drive();
+            d.set_speed_target(target);
+            d.start().unwrap();
+            let trip = to_q24(DriveConfig::paper_defaults().overcurrent_trip / PerUnitBases::PAPER.current);
+            for (a, b, c, bus) in samples {
+                let was = d.state();
+                let out = d.step(&FixedInputs { phase_currents: [a, b, c], dc_bus: bus });
+                prop_assert!(out.duties.iter().all(|&x| x <= 32768));
+                if !out.enabled { prop_assert_eq!(out.duties, [16384; 3]); }
+                if d.state() == DriveState::Fault { prop_assert!(!out.enabled); }
+                let over = a.saturating_abs() > trip || b.saturating_abs() > trip
+                    || a.saturating_add(b).saturating_abs() > trip;
+                if over && was != DriveState::Fault {
+                    prop_assert_eq!(d.fault(), Some(FaultReason::OverCurrent));
+                    prop_assert_eq!(d.state(), DriveState::Fault);
+                }
+            }
+        }
+    }
 }
