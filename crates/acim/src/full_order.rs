@@ -218,11 +218,11 @@ impl FullOrderConfig {
             return Err(FullOrderDesignError::BadGain);
         }
         let ls = m.transient_inductance();
-        let rseq = m.equivalent_resistance();
+        let equivalent_resistance = m.equivalent_resistance();
         let rr = m.referred_rotor_resistance();
         let inv_tr = 1.0 / m.rotor_time_constant();
         let inv_ls = 1.0 / ls;
-        let a11 = -rseq * inv_ls;
+        let a11 = -equivalent_resistance * inv_ls;
         let pp = m.pole_pairs_f32();
         let inv_l2 = 1.0 / (design.nominal_flux * design.nominal_flux);
         // exponential (ZOH-exact) integration of the two diagonal decays, Euler for the
@@ -246,7 +246,7 @@ impl FullOrderConfig {
             half_ts: 0.5 * ts,
             g_i_re: h_i * (k - 1.0) * (a11 - inv_tr),
             g_i_im_w: h_i * (k - 1.0),
-            g_l_re: h_l * (k - 1.0) * (ls * inv_tr - k * rseq + (k + 1.0) * rr),
+            g_l_re: h_l * (k - 1.0) * (ls * inv_tr - k * equivalent_resistance + (k + 1.0) * rr),
             g_l_im_w: -h_l * (k - 1.0) * ls,
             kp: design.speed_kp * inv_l2,
             ki_ts: design.speed_ki * inv_l2 * ts,
@@ -547,13 +547,13 @@ mod tests {
         let c = cfg(&m);
         let k = c.design.pole_ratio as f64;
         let ls = m.transient_inductance() as f64;
-        let rseq = m.equivalent_resistance() as f64;
+        let equivalent_resistance = m.equivalent_resistance() as f64;
         let rr = m.referred_rotor_resistance() as f64;
         let itr = 1.0 / m.rotor_time_constant() as f64;
         for rpm in [0.0f64, 60.0, 500.0, 1500.0, 3000.0] {
             let w = 2.0 * rpm * core::f64::consts::PI / 30.0;
             // motor: s^2 - (a11 + a22) s + (a11 a22 - a12 a21), complex
-            let a11 = (-rseq / ls, 0.0);
+            let a11 = (-equivalent_resistance / ls, 0.0);
             let a12 = (itr / ls, -w / ls);
             let a21 = (rr, 0.0);
             let a22 = (-itr, w);

@@ -181,11 +181,11 @@ impl ObserverConfig {
     }
 
     /// Gains (K1, K2, K3) at rotor flux `rotor_flux` (Wb > 0) and equivalent resistance
-    /// `rseq` (ohm), in the paper's form (eq. 12). Units: 1/s, rad/(s^2 A), N m/(s A).
-    pub fn gains(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
+    /// `equivalent_resistance` Rseq (ohm), in the paper's form (eq. 12). Units: 1/s, rad/(s^2 A), N m/(s A).
+    pub fn gains(&self, rotor_flux: f32, equivalent_resistance: f32) -> (f32, f32, f32) {
         let inv = 1.0 / rotor_flux;
         (
-            self.a + rseq * self.inv_transient_inductance,
+            self.a + equivalent_resistance * self.inv_transient_inductance,
             self.g2 * inv - self.torque_per_inertia * rotor_flux,
             self.g3 * inv,
         )
@@ -193,9 +193,9 @@ impl ObserverConfig {
 
     /// Continuous error-dynamics characteristic polynomial (q2, q1, q0) of
     /// s^3 + q2 s^2 + q1 s + q0, rebuilt from the gains at `rotor_flux` (eq. 14).
-    pub fn error_polynomial(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
-        let (k1, k2, k3) = self.gains(rotor_flux, rseq);
-        let a = -rseq * self.inv_transient_inductance + k1;
+    pub fn error_polynomial(&self, rotor_flux: f32, equivalent_resistance: f32) -> (f32, f32, f32) {
+        let (k1, k2, k3) = self.gains(rotor_flux, equivalent_resistance);
+        let a = -equivalent_resistance * self.inv_transient_inductance + k1;
         let b = self.pole_pairs * rotor_flux * self.inv_transient_inductance;
         let c = self.torque_per_inertia * rotor_flux + k2;
         let f = self.friction_rate;
@@ -205,8 +205,12 @@ impl ObserverConfig {
 
     /// Discrete characteristic polynomial z^3 + a2 z^2 + a1 z + a0 of the Euler error
     /// matrix I + Ts A at `rotor_flux`, from the gains.
-    pub fn discrete_polynomial(&self, rotor_flux: f32, rseq: f32) -> (f32, f32, f32) {
-        let (q2, q1, q0) = self.error_polynomial(rotor_flux, rseq);
+    pub fn discrete_polynomial(
+        &self,
+        rotor_flux: f32,
+        equivalent_resistance: f32,
+    ) -> (f32, f32, f32) {
+        let (q2, q1, q0) = self.error_polynomial(rotor_flux, equivalent_resistance);
         let t = self.ts;
         (
             -3.0 + q2 * t,
@@ -217,8 +221,8 @@ impl ObserverConfig {
 
     /// Jury's stability test on the discrete error dynamics at `rotor_flux`: true when all
     /// three eigenvalues of I + Ts A lie strictly inside the unit circle.
-    pub fn discrete_stable(&self, rotor_flux: f32, rseq: f32) -> bool {
-        let (a2, a1, a0) = self.discrete_polynomial(rotor_flux, rseq);
+    pub fn discrete_stable(&self, rotor_flux: f32, equivalent_resistance: f32) -> bool {
+        let (a2, a1, a0) = self.discrete_polynomial(rotor_flux, equivalent_resistance);
         jury_cubic(a2, a1, a0)
     }
 }
@@ -238,7 +242,7 @@ pub struct ObserverInputs {
     pub i_sq: f32,
     /// Measured d-axis current i_sd, A.
     pub i_sd: f32,
-    /// dq-frame frequency w_s, rad/s electrical.
+    /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
     pub stator_frequency: f32,
     /// q-axis voltage applied over the period (the command), V.
     pub v_sq: f32,
@@ -435,7 +439,7 @@ mod tests {
     fn tracks_an_accelerating_machine() {
         let (m, c) = cfg();
         let lambda = m.rotor_flux_for(1.5);
-        let rseq = m.equivalent_resistance();
+        let equivalent_resistance = m.equivalent_resistance();
         let sl = m.transient_inductance();
         let ts = 200e-6;
         let (i_sq, i_sd, tl) = (2.0f32, 1.5f32, 1.2f32);
@@ -444,7 +448,7 @@ mod tests {
         for _ in 0..(0.3 / ts) as usize {
             let ws = 2.0 * w + m.referred_rotor_resistance() * i_sq / lambda;
             // the voltage that holds di_sq/dt = 0 in eq. (9b)
-            let v = rseq * i_sq + sl * ws * i_sd + 2.0 * lambda * w;
+            let v = equivalent_resistance * i_sq + sl * ws * i_sd + 2.0 * lambda * w;
             obs.update(
                 &c,
                 &ObserverInputs {
@@ -454,7 +458,7 @@ mod tests {
                     v_sq: v,
                     rotor_flux: lambda,
                     inv_rotor_flux: 1.0 / lambda,
-                    equivalent_resistance: rseq,
+                    equivalent_resistance,
                 },
             );
             let te = m.torque_constant(lambda) * i_sq;
@@ -476,13 +480,13 @@ mod tests {
     #[test]
     fn default_design_is_discrete_stable_and_places_poles() {
         let (m, c) = cfg();
-        let rseq = m.equivalent_resistance();
+        let equivalent_resistance = m.equivalent_resistance();
         let (c2, c1, c0) = ObserverPoles::DEFAULT.polynomial();
-        let (q2, q1, q0) = c.error_polynomial(m.rotor_flux_for(1.5), rseq);
+        let (q2, q1, q0) = c.error_polynomial(m.rotor_flux_for(1.5), equivalent_resistance);
         assert!((q2 - c2).abs() < 1e-3 * c2);
         assert!((q1 - c1).abs() < 1e-3 * c1);
         assert!((q0 - c0).abs() < 1e-3 * c0);
-        assert!(c.discrete_stable(m.rotor_flux_for(1.5), rseq));
+        assert!(c.discrete_stable(m.rotor_flux_for(1.5), equivalent_resistance));
     }
 
     #[test]
@@ -520,13 +524,13 @@ mod tests {
             let poles = ObserverPoles { p1, p2, p3 };
             let c = ObserverConfig::new(&m, poles, 200e-6).unwrap();
             let lambda = flux_frac * m.rotor_flux_for(1.5);
-            let rseq = m.stator_resistance() * rs_scale + m.referred_rotor_resistance();
+            let equivalent_resistance = m.stator_resistance() * rs_scale + m.referred_rotor_resistance();
             let (c2, c1, c0) = poles.polynomial();
-            let (q2, q1, q0) = c.error_polynomial(lambda, rseq);
+            let (q2, q1, q0) = c.error_polynomial(lambda, equivalent_resistance);
             prop_assert!((q2 - c2).abs() <= 1e-4 * c2);
             prop_assert!((q1 - c1).abs() <= 1e-3 * c1);
             prop_assert!((q0 - c0).abs() <= 1e-3 * c0);
-            prop_assert!(c.discrete_stable(lambda, rseq));
+            prop_assert!(c.discrete_stable(lambda, equivalent_resistance));
         }
 
         /// The step itself (not only the polynomial) contracts the error: from any initial
@@ -540,16 +544,16 @@ mod tests {
             let m = MachineParams::paper_table1();
             let c = ObserverConfig::new(&m, ObserverPoles::DEFAULT, 200e-6).unwrap();
             let lambda = m.rotor_flux_for(1.5);
-            let rseq = m.equivalent_resistance();
+            let equivalent_resistance = m.equivalent_resistance();
             let i_sd = 1.5;
             let kt = m.torque_constant(lambda);
             let load = kt * i_sq - m.viscous_friction() * speed;
             let ws = 2.0 * speed + m.referred_rotor_resistance() * i_sq / lambda;
-            let v = rseq * i_sq + m.transient_inductance() * ws * i_sd + 2.0 * lambda * speed;
+            let v = equivalent_resistance * i_sq + m.transient_inductance() * ws * i_sd + 2.0 * lambda * speed;
             let mut obs = ReducedOrderObserver::new();
             obs.reset(i_sq, speed + e0, load + t0);
             let u = ObserverInputs { i_sq, i_sd, stator_frequency: ws, v_sq: v, rotor_flux: lambda,
-                inv_rotor_flux: 1.0 / lambda, equivalent_resistance: rseq };
+                inv_rotor_flux: 1.0 / lambda, equivalent_resistance };
             for _ in 0..1500 { obs.update(&c, &u); }
             prop_assert!((obs.speed_estimate - speed).abs() < 0.05 * (1.0 + e0.abs() + t0.abs()));
             prop_assert!((obs.load_torque_estimate - load).abs() < 0.01 * (1.0 + e0.abs() + t0.abs()));

@@ -104,7 +104,7 @@ pub struct RsEstimatorInputs {
     pub i_sq: f32,
     /// Commanded v_sd over the period, V.
     pub v_sd: f32,
-    /// dq-frame frequency w_s, rad/s electrical.
+    /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
     pub stator_frequency: f32,
     /// Whether the flux model reports a settled flux (within tolerance of its reference).
     pub flux_settled: bool,

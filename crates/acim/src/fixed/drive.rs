@@ -39,7 +39,7 @@ use super::q::{clamp, from_q24, mul, reciprocal, to_q24, Gain, ONE};
 use super::rs_estimator::{FixedRsConfig, FixedRsEstimator, FixedRsInputs};
 use super::svpwm::{modulate, FixedSvpwmConfig};
 use super::trig::{
-    angle_to_rad, clarke_three, clarke_two, inverse_clarke, inverse_park, park, sin_cos, DqQ24,
+    angle_to_rad, clarke_three, clarke_two, inverse_clarke, inverse_park, park, sin_cos, FixedDq,
 };
 use super::PerUnitBases;
 use crate::design::DriveDesign;
@@ -118,11 +118,11 @@ pub struct FixedTelemetry {
     /// 1.5 p lambda_r i_sq, torque pu.
     pub torque_estimate: i32,
     /// Measured dq currents, current pu.
-    pub current: DqQ24,
+    pub current: FixedDq,
     /// dq current references, current pu.
-    pub current_reference: DqQ24,
+    pub current_reference: FixedDq,
     /// dq voltage command, voltage pu.
-    pub voltage: DqQ24,
+    pub voltage: FixedDq,
     /// lambda_r, flux pu.
     pub rotor_flux: i32,
     /// Rs_hat, resistance pu.
@@ -201,7 +201,7 @@ pub struct FixedDrive {
     flux: FixedFluxModel,
     observer: FixedObserver,
     rs: FixedRsEstimator,
-    applied_voltage: DqQ24,
+    applied_voltage: FixedDq,
     stall_counter: u32,
     implausible_steps: u32,
     magnetizing_steps: u32,
@@ -258,7 +258,7 @@ impl FixedDrive {
         pu(
             cfg.max_speed * pp * 1.25,
             b.frequency,
-            "max_speed (frame frequency)",
+            "max_speed (stator frequency)",
         )?;
         pu(1.2 * flux_reference, b.flux, "flux reference")?;
         pu(
@@ -340,7 +340,7 @@ impl FixedDrive {
             flux: FixedFluxModel::new(),
             observer: FixedObserver::new(),
             rs: FixedRsEstimator::new(pu(cfg.rs_initial, b.resistance(), "rs_initial")?),
-            applied_voltage: DqQ24::default(),
+            applied_voltage: FixedDq::default(),
             stall_counter: 0,
             implausible_steps: 0,
             magnetizing_steps: 0,
@@ -411,7 +411,7 @@ impl FixedDrive {
         self.flux = FixedFluxModel::new();
         self.observer = FixedObserver::new();
         self.rs = FixedRsEstimator::new(self.rs.stator_resistance_estimate);
-        self.applied_voltage = DqQ24::default();
+        self.applied_voltage = FixedDq::default();
         self.stall_counter = 0;
         self.implausible_steps = 0;
         self.magnetizing_steps = 0;
@@ -421,7 +421,7 @@ impl FixedDrive {
 
     fn enter_fault(&mut self, reason: FaultReason) -> FixedPwm {
         self.sup.trip(reason);
-        self.applied_voltage = DqQ24::default();
+        self.applied_voltage = FixedDq::default();
         FixedPwm::OFF
     }
 
@@ -682,7 +682,7 @@ impl FixedDrive {
             -v_q_max,
             v_q_max,
         );
-        let v = DqQ24 { d: v_d, q: v_q };
+        let v = FixedDq { d: v_d, q: v_q };
         probe.end(StepRegion::CurrentPi);
 
         // 8. inverse Park at the angle the voltage will act at, then SVPWM
@@ -691,7 +691,7 @@ impl FixedDrive {
         let rot = sin_cos(sample_angle.wrapping_add(lead as u32));
         let v_ab = inverse_park(v, rot);
         let i_ref_abc = inverse_clarke(inverse_park(
-            DqQ24 {
+            FixedDq {
                 d: i_sd_ref,
                 q: i_sq_ref,
             },
@@ -707,7 +707,7 @@ impl FixedDrive {
             load_torque_estimate: self.observer.load_torque_estimate,
             torque_estimate: self.torque_factor.apply(mul(lambda, i.q)),
             current: i,
-            current_reference: DqQ24 {
+            current_reference: FixedDq {
                 d: i_sd_ref,
                 q: i_sq_ref,
             },
@@ -778,7 +778,7 @@ impl FixedDrive {
     pub fn telemetry_si(&self) -> DriveTelemetry {
         let t = &self.telemetry;
         let b = &self.bases;
-        let dq = |v: DqQ24, base: f32| Dq {
+        let dq = |v: FixedDq, base: f32| Dq {
             d: from_q24(v.d) * base,
             q: from_q24(v.q) * base,
         };

@@ -68,7 +68,7 @@ pub struct FixedFluxModel {
     pub inv_rotor_flux: i32,
     /// Slip frequency, Q7.24 frequency pu.
     pub slip_frequency: i32,
-    /// Frame frequency w_s, Q7.24 frequency pu.
+    /// Stator frequency w_s, Q7.24 frequency pu.
     pub stator_frequency: i32,
     /// Frame angle theta_s, turn fraction.
     pub angle: Angle,

@@ -36,7 +36,7 @@
 //! | voltage (bus, phase peak) | 400 V | 400 V bus max; |v_dq| <= 231 V | 1.0 / 0.58 | 128x |
 //! | resistance | 40 ohm (V/I) | Rs clamp 26.3 + R_R 7.8 ohm | 0.85 | 150x |
 //! | mechanical speed | 2000 rpm (209.4 rad/s) | over-speed trip 2000 rpm | 1.0 | 128x |
-//! | frame frequency (elec.) | 2 pi 100 rad/s | p 2000 rpm + slip at 10 % flux (467 rad/s) | 1.41 | 90x |
+//! | stator frequency (elec.) | 2 pi 100 rad/s | p 2000 rpm + slip at 10 % flux (467 rad/s) | 1.41 | 90x |
 //! | rotor flux | 1 Wb | 1.2 x 0.781 Wb | 0.94 | 136x |
 //! | torque | 10 N m | 1.5 p lambda I_max = 10.9; load estimate limit 15 N m | 1.1 / 1.5 | 85x |
 //! | 1/lambda_r (slip law, observer) | 1/Wb | 1/(0.1 x 0.781) | 12.8 | 10x |

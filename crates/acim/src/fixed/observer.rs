@@ -75,7 +75,7 @@ pub struct FixedObserverInputs {
     pub i_sq: i32,
     /// Measured i_sd, current pu.
     pub i_sd: i32,
-    /// Frame frequency w_s, electrical frequency pu.
+    /// Stator frequency w_s, electrical frequency pu.
     pub stator_frequency: i32,
     /// q voltage applied over the period, voltage pu.
     pub v_sq: i32,

@@ -86,7 +86,7 @@ pub struct FixedRsInputs {
     pub i_sq: i32,
     /// Commanded v_sd over the period, voltage pu.
     pub v_sd: i32,
-    /// Frame frequency w_s, frequency pu.
+    /// Stator frequency w_s, frequency pu.
     pub stator_frequency: i32,
     /// Flux within tolerance of its reference.
     pub flux_settled: bool,

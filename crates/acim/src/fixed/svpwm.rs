@@ -9,7 +9,7 @@
 //! with the drive's voltage limit.
 
 use super::q::{clamp, mul, reciprocal, to_q24, Gain, HALF, ONE};
-use super::trig::{inverse_clarke, AlphaBetaQ24};
+use super::trig::{inverse_clarke, FixedAlphaBeta};
 use super::PerUnitBases;
 use crate::svpwm::SvpwmConfig;
 
@@ -43,7 +43,7 @@ pub struct FixedModulation {
     /// High-side duties a, b, c, Q7.24 in [0, 1.0].
     pub duties: [i32; 3],
     /// The voltage actually produced (after any overmodulation limit), voltage pu.
-    pub voltage: AlphaBetaQ24,
+    pub voltage: FixedAlphaBeta,
     /// True when the command was scaled onto the hexagon.
     pub saturated: bool,
 }
@@ -54,7 +54,7 @@ pub struct FixedModulation {
 #[inline(always)]
 pub fn modulate(
     cfg: &FixedSvpwmConfig,
-    v: AlphaBetaQ24,
+    v: FixedAlphaBeta,
     dc_bus: i32,
     inv_dc_bus: i32,
     phase_currents: [i32; 3],

@@ -35,7 +35,7 @@ use super::rs_estimator::{FixedRsConfig, FixedRsEstimator, FixedRsInputs};
 use super::svpwm::{modulate, FixedSvpwmConfig};
 use super::trig::{
     angle_from_rad, angle_to_rad, clarke_three, clarke_two, inverse_clarke, inverse_park, park,
-    sin_cos, AlphaBetaQ24, DqQ24,
+    sin_cos, FixedAlphaBeta, FixedDq,
 };
 use super::PerUnitBases;
 use crate::flux::{FluxModel, FluxModelConfig};
@@ -148,7 +148,7 @@ proptest! {
         let scq = sin_cos(angle_from_rad(th));
         let f = frames::inverse_clarke(frames::inverse_park(Dq { d: vd, q: vq }, sc32));
         let x = inverse_clarke(inverse_park(
-            DqQ24 { d: q(vd, B.voltage), q: q(vq, B.voltage) },
+            FixedDq { d: q(vd, B.voltage), q: q(vq, B.voltage) },
             scq,
         ));
         for k in 0..3 {
@@ -305,7 +305,7 @@ proptest! {
         let v = AlphaBeta { alpha: mag * lim * ang.cos(), beta: mag * lim * ang.sin() };
         let cur = [ia, ib, -ia - ib];
         let f = svpwm::modulate(&c, v, vdc, cur);
-        let vq = AlphaBetaQ24 { alpha: q(v.alpha, B.voltage), beta: q(v.beta, B.voltage) };
+        let vq = FixedAlphaBeta { alpha: q(v.alpha, B.voltage), beta: q(v.beta, B.voltage) };
         let bus = q(vdc, B.voltage);
         let x = modulate(&cq, vq, bus, super::q::reciprocal(bus),
             [q(cur[0], B.current), q(cur[1], B.current), q(cur[2], B.current)]);

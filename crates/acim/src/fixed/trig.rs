@@ -75,7 +75,7 @@ static QUARTER_SINE: [i32; 257] = build_table();
 /// sin and cos of one angle, Q7.24.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SinCosQ24 {
+pub struct FixedSinCos {
     /// sin(theta), Q7.24.
     pub sin: i32,
     /// cos(theta), Q7.24.
@@ -114,8 +114,8 @@ pub fn sin(a: Angle) -> i32 {
 
 /// sin and cos of a turn-fraction angle (cos = sin a quarter turn ahead).
 #[inline]
-pub fn sin_cos(a: Angle) -> SinCosQ24 {
-    SinCosQ24 {
+pub fn sin_cos(a: Angle) -> FixedSinCos {
+    FixedSinCos {
         sin: sin(a),
         cos: sin(a.wrapping_add(1 << 30)),
     }
@@ -124,7 +124,7 @@ pub fn sin_cos(a: Angle) -> SinCosQ24 {
 /// A stationary-frame vector, Q7.24 pu (current or voltage base).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct AlphaBetaQ24 {
+pub struct FixedAlphaBeta {
     /// alpha component.
     pub alpha: i32,
     /// beta component.
@@ -134,7 +134,7 @@ pub struct AlphaBetaQ24 {
 /// A rotating-frame vector, Q7.24 pu (current or voltage base).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DqQ24 {
+pub struct FixedDq {
     /// d (flux) axis component.
     pub d: i32,
     /// q (torque) axis component.
@@ -150,8 +150,8 @@ const ONE_THIRD: i32 = 5_592_405;
 
 /// Clarke from phases a and b with a + b + c = 0: alpha = a, beta = (a + 2b)/sqrt(3).
 #[inline]
-pub fn clarke_two(a: i32, b: i32) -> AlphaBetaQ24 {
-    AlphaBetaQ24 {
+pub fn clarke_two(a: i32, b: i32) -> FixedAlphaBeta {
+    FixedAlphaBeta {
         alpha: a,
         beta: mul(a.saturating_add(b).saturating_add(b), INV_SQRT3),
     }
@@ -160,8 +160,8 @@ pub fn clarke_two(a: i32, b: i32) -> AlphaBetaQ24 {
 /// Clarke from three phases, zero sequence rejected: alpha = (2a - b - c)/3,
 /// beta = (b - c)/sqrt(3).
 #[inline]
-pub fn clarke_three(a: i32, b: i32, c: i32) -> AlphaBetaQ24 {
-    AlphaBetaQ24 {
+pub fn clarke_three(a: i32, b: i32, c: i32) -> FixedAlphaBeta {
+    FixedAlphaBeta {
         alpha: mul(
             a.saturating_add(a).saturating_sub(b).saturating_sub(c),
             ONE_THIRD,
@@ -172,7 +172,7 @@ pub fn clarke_three(a: i32, b: i32, c: i32) -> AlphaBetaQ24 {
 
 /// Inverse Clarke: phases (a, b, c) of an alpha-beta vector, zero-sequence free.
 #[inline]
-pub fn inverse_clarke(v: AlphaBetaQ24) -> [i32; 3] {
+pub fn inverse_clarke(v: FixedAlphaBeta) -> [i32; 3] {
     let half_alpha = v.alpha >> 1;
     let k = mul(v.beta, SQRT3_2);
     [
@@ -184,8 +184,8 @@ pub fn inverse_clarke(v: AlphaBetaQ24) -> [i32; 3] {
 
 /// Park: d = alpha cos + beta sin, q = -alpha sin + beta cos (rotation by -theta).
 #[inline]
-pub fn park(v: AlphaBetaQ24, sc: SinCosQ24) -> DqQ24 {
-    DqQ24 {
+pub fn park(v: FixedAlphaBeta, sc: FixedSinCos) -> FixedDq {
+    FixedDq {
         d: mul(v.alpha, sc.cos).saturating_add(mul(v.beta, sc.sin)),
         q: mul(v.beta, sc.cos).saturating_sub(mul(v.alpha, sc.sin)),
     }
@@ -193,8 +193,8 @@ pub fn park(v: AlphaBetaQ24, sc: SinCosQ24) -> DqQ24 {
 
 /// Inverse Park: alpha = d cos - q sin, beta = d sin + q cos.
 #[inline]
-pub fn inverse_park(v: DqQ24, sc: SinCosQ24) -> AlphaBetaQ24 {
-    AlphaBetaQ24 {
+pub fn inverse_park(v: FixedDq, sc: FixedSinCos) -> FixedAlphaBeta {
+    FixedAlphaBeta {
         alpha: mul(v.d, sc.cos).saturating_sub(mul(v.q, sc.sin)),
         beta: mul(v.d, sc.sin).saturating_add(mul(v.q, sc.cos)),
     }
