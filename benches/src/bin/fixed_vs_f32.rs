@@ -31,8 +31,7 @@ mod fw {
     use acim::drive::{
         Drive, DriveConfig, DriveInputs, DriveState, NoProbe, StepProbe, StepRegion,
     };
-    use acim::fixed::observer::FixedObserverInputs;
-    use acim::fixed::{FixedDrive, FixedInputs, PerUnitBases};
+    use acim::fixed::{FixedDrive, FixedInputs, PerUnitBases, Q24};
     use acim::frames::{inverse_clarke, inverse_park, Dq, FastSinCos};
     use acim::observer::{ObserverInputs, ReducedOrderObserver};
     use core::hint::black_box;
@@ -195,14 +194,14 @@ mod fw {
         let ts = cfg.control_period;
         let bases = PerUnitBases::PAPER;
         let (Ok(mut f32_drive), Ok(mut fixed_drive)) =
-            (Drive::new(cfg), FixedDrive::new(cfg, bases))
+            (Drive::new(cfg), FixedDrive::with_bases(cfg, bases))
         else {
             hprintln!("ACIM-FIXED config rejected");
             debug::exit(debug::EXIT_FAILURE);
             loop {}
         };
         let obs_cfg = *f32_drive.observer_config();
-        let obs_fixed_cfg = acim::fixed::observer::FixedObserverConfig::from_f32(&obs_cfg, &bases);
+        let obs_fixed_cfg = acim::fixed::convert::observer(&obs_cfg, &bases);
         let mut st32 = Stats {
             s: [NEW; REGIONS.len()],
             t0: 0,
@@ -219,7 +218,7 @@ mod fw {
         let mut seed = 12345u32;
         let (mut i32_next, mut iq_next) = ([1.5f32, -0.75, -0.75], [1.5f32, -0.75, -0.75]);
         let mut obs32 = ReducedOrderObserver::new();
-        let mut obsq = acim::fixed::observer::FixedObserver::new();
+        let mut obsq = ReducedOrderObserver::<Q24>::new();
         let (mut measured, mut steps, mut faults) = (0u32, 0u32, 0u32);
         while measured < MEASURED && steps < 20_000 {
             steps += 1;
@@ -232,11 +231,11 @@ mod fw {
             let k = 1.0 / bases.current;
             let inpq = FixedInputs {
                 phase_currents: [
-                    acim::fixed::q::to_q24(iq_next[0] * k),
-                    acim::fixed::q::to_q24(iq_next[1] * k),
-                    acim::fixed::q::to_q24(iq_next[2] * k),
+                    Q24::from_pu(iq_next[0] * k),
+                    Q24::from_pu(iq_next[1] * k),
+                    Q24::from_pu(iq_next[2] * k),
                 ],
-                dc_bus: acim::fixed::q::to_q24(325.0 / bases.voltage),
+                dc_bus: Q24::from_pu(325.0 / bases.voltage),
             };
             if running && steps % 2 == 0 {
                 st32.begin();
@@ -266,19 +265,19 @@ mod fw {
                     equivalent_resistance: t.stator_resistance_estimate + 7.81,
                 };
                 st32.begin();
-                obs32.update(black_box(&obs_cfg), black_box(&u));
+                obs32.update(black_box(&obs_cfg.coeffs), black_box(&u));
                 st32.end(10);
                 black_box(&obs32);
                 if let Some(c) = obs_fixed_cfg.as_ref() {
                     let q = fixed_drive.telemetry();
-                    let uq = FixedObserverInputs {
+                    let uq = ObserverInputs {
                         i_sq: q.current.q,
                         i_sd: q.current.d,
                         stator_frequency: q.stator_frequency,
                         v_sq: q.voltage.q,
                         rotor_flux: q.rotor_flux,
-                        inv_rotor_flux: acim::fixed::q::reciprocal(q.rotor_flux),
-                        equivalent_resistance: q.stator_resistance_estimate + 3_276_000,
+                        inv_rotor_flux: Q24(acim::fixed::q::reciprocal(q.rotor_flux.0)),
+                        equivalent_resistance: q.stator_resistance_estimate + Q24(3_276_000),
                     };
                     stq.begin();
                     obsq.update(black_box(c), black_box(&uq));

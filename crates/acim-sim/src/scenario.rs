@@ -698,12 +698,12 @@ impl Scenario {
                     "\"fixed\" runs the sensorless mode only",
                 );
             }
-            acim::fixed::FixedDrive::new(drive, acim::fixed::PerUnitBases::PAPER).map_err(|e| {
-                ScenarioError {
+            acim::fixed::FixedDrive::with_bases(drive, acim::fixed::PerUnitBases::PAPER).map_err(
+                |e| ScenarioError {
                     field: "drive.arithmetic".into(),
                     allowed: format!("{e}"),
-                }
-            })?;
+                },
+            )?;
         }
         Ok(Validated {
             plant,

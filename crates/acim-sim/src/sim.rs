@@ -217,14 +217,12 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
             field: "drive".into(),
             allowed: format!("{e}"),
         })?),
-        Arithmetic::Fixed => {
-            SimDrive::Fixed(FixedDrive::new(v.drive, PerUnitBases::PAPER).map_err(|e| {
-                ScenarioError {
-                    field: "drive.arithmetic".into(),
-                    allowed: format!("{e}"),
-                }
-            })?)
-        }
+        Arithmetic::Fixed => SimDrive::Fixed(
+            FixedDrive::with_bases(v.drive, PerUnitBases::PAPER).map_err(|e| ScenarioError {
+                field: "drive.arithmetic".into(),
+                allowed: format!("{e}"),
+            })?,
+        ),
     };
     let ts = sc.drive.control_period_s;
     let n = (sc.duration_s / ts).round() as usize;

@@ -9,11 +9,12 @@
 
 use crate::flux::FluxModelConfig;
 use crate::math::{is_finite, sqrt};
-use crate::observer::{ObserverConfig, ObserverDesignError, ObserverPoles};
+use crate::num::Num;
+use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
 use crate::rs_estimator::RsEstimatorConfig;
-use crate::svpwm::{linear_limit, SvpwmConfig};
+use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
 
 /// How many phase currents are measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -247,43 +248,45 @@ pub const RS_SETTLED_FRACTION: f32 = 0.003;
 /// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
 /// of the step reads only these.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SupervisionLimits {
+pub struct SupervisionLimits<N = f32> {
     /// Measured phases (the third current is derived with two shunts).
     pub current_sensing: CurrentSensing,
     /// Phase current trip, A.
-    pub overcurrent_trip: f32,
+    pub overcurrent_trip: N,
     /// Lowest DC bus while active, V.
-    pub dc_bus_min: f32,
+    pub dc_bus_min: N,
     /// Highest DC bus, V.
-    pub dc_bus_max: f32,
+    pub dc_bus_max: N,
     /// Over-speed trip on the estimated speed, rad/s.
-    pub max_speed: f32,
+    pub max_speed: N,
     /// Largest plausible |T_L_hat|, N m.
-    pub max_load_torque: f32,
+    pub max_load_torque: N,
     /// Steps an implausible load estimate may persist.
     pub implausible_steps: u32,
     /// Steps the stall condition may persist.
     pub stall_steps: u32,
+    /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`]).
+    pub stall_fraction: N,
     /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
     pub rs_bound_faults: bool,
 }
 
 /// The orientation correction's constants ([`crate::orientation`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OrientationDesign {
+pub struct OrientationDesign<N: Num = f32> {
     /// k / lambda_ref, 1/Wb.
-    pub gain_per_flux: f32,
+    pub gain_per_flux: N::Gain,
     /// |w_s| where the fade-in starts, rad/s electrical.
-    pub fade_start: f32,
+    pub fade_start: N,
     /// 1 / (fade upper - fade lower), s/rad.
-    pub inv_fade_width: f32,
+    pub inv_fade_width: N::Gain,
     /// Largest |correction|, rad/s electrical.
-    pub limit: f32,
+    pub limit: N,
 }
 
 /// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MagnetizingDesign {
+pub struct MagnetizingDesign<N: Num = f32> {
     /// Whether magnetizing waits for the Rs identification.
     pub identify_rs: bool,
     /// Longest identification, steps.
@@ -291,9 +294,74 @@ pub struct MagnetizingDesign {
     /// Settled-residual time, steps.
     pub rs_settle_steps: u32,
     /// Settled-residual threshold, A.
-    pub rs_settled_error: f32,
+    pub rs_settled_error: N,
     /// Low-pass coefficient of the residual filter (Ts / 20 ms).
-    pub residual_filter: f32,
+    pub residual_filter: N::Gain,
+}
+
+/// Open-loop V/f constants.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VfDesign<N: Num = f32> {
+    /// Voltage per electrical frequency, V per rad/s.
+    pub volts_per_rad_s: N::Gain,
+    /// Low-frequency boost, V.
+    pub boost: N,
+}
+
+/// What the control step reads, in the arithmetic `N`: every gain, reciprocal and limit
+/// of the cascade. Built once from a [`DriveDesign`] by [`Num::coeffs`] (the identity
+/// for f32 SI; a conversion with the per-unit bases in fixed point, which checks that
+/// every value fits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveCoeffs<N: Num = f32> {
+    /// d-axis current PI.
+    pub pi_d: PiConfig<N>,
+    /// q-axis current PI.
+    pub pi_q: PiConfig<N>,
+    /// Speed PI.
+    pub pi_speed: PiConfig<N>,
+    /// Flux model and slip law (eq. 13, 8).
+    pub flux: FluxModelConfig<N>,
+    /// Reduced-order observer step (eq. 12).
+    pub observer: ObserverCoeffs<N>,
+    /// Rs estimator (eq. 19-20).
+    pub rs: RsEstimatorConfig<N>,
+    /// Modulator.
+    pub pwm: SvpwmConfig<N>,
+    /// Initial Rs estimate R0, ohm.
+    pub rs_initial: N,
+    /// i_sd*, A.
+    pub i_sd_ref: N,
+    /// Flux above which it counts as settled, Wb.
+    pub settled_flux: N,
+    /// sigma Ls: (frequency x current) -> voltage.
+    pub transient_inductance: N::Gain,
+    /// R_R, ohm.
+    pub referred_rotor_resistance: N,
+    /// 1/tau_r: flux -> voltage (lambda_r / tau_r).
+    pub inv_rotor_time_constant: N::Gain,
+    /// p: mechanical speed -> electrical frequency.
+    pub pole_pairs: N::Gain,
+    /// p: (speed x flux) -> voltage (the back-EMF p Omega lambda_r).
+    pub back_emf: N::Gain,
+    /// 1.5 p: (flux x current) -> torque.
+    pub torque_factor: N::Gain,
+    /// Speed reference change per step, rad/s.
+    pub ramp_step: N,
+    /// Largest |speed target|, rad/s.
+    pub speed_target_limit: N,
+    /// The voltage lead of the inverse Park (delay compensation).
+    pub lead: N::Lead,
+    /// 1/V_dc -> 1/v_max: 1/(0.98/sqrt 3) (the current loops' voltage limit).
+    pub voltage_limit_per_inv_bus: N::Gain,
+    /// Orientation correction.
+    pub orientation: OrientationDesign<N>,
+    /// Magnetizing sequence.
+    pub magnetizing: MagnetizingDesign<N>,
+    /// What the supervisor judges against.
+    pub limits: SupervisionLimits<N>,
+    /// Open-loop V/f.
+    pub vf: VfDesign<N>,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -498,9 +566,16 @@ impl DriveDesign {
                 max_load_torque: cfg.max_load_torque_estimate,
                 implausible_steps: (IMPLAUSIBLE_TIME / ts) as u32,
                 stall_steps: (cfg.stall_time / ts) as u32,
+                stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.rs_estimation,
             },
         })
+    }
+
+    /// This design's step coefficients in the arithmetic `N` (`bases`: `()` for f32 SI,
+    /// the per-unit bases in fixed point).
+    pub fn coeffs<N: Num>(&self, bases: &N::Bases) -> Result<DriveCoeffs<N>, ConfigError> {
+        N::coeffs(self, bases)
     }
 
     /// This design with another orientation gain (run-time tuning, built outside the
@@ -509,5 +584,41 @@ impl DriveDesign {
         let mut cfg = self.config;
         cfg.orientation_gain = gain;
         Self::new(cfg)
+    }
+}
+
+impl DriveCoeffs<f32> {
+    /// The f32 SI coefficients of `d` (copies: the design is already in SI).
+    pub(crate) fn si(d: &DriveDesign) -> Self {
+        let cfg = &d.config;
+        Self {
+            pi_d: d.pi_d,
+            pi_q: d.pi_q,
+            pi_speed: d.pi_speed,
+            flux: d.flux,
+            observer: d.observer.coeffs,
+            rs: d.rs,
+            pwm: d.pwm,
+            rs_initial: cfg.rs_initial,
+            i_sd_ref: d.i_sd_ref,
+            settled_flux: d.settled_flux,
+            transient_inductance: d.transient_inductance,
+            referred_rotor_resistance: d.referred_rotor_resistance,
+            inv_rotor_time_constant: d.inv_rotor_time_constant,
+            pole_pairs: d.pole_pairs,
+            back_emf: d.pole_pairs,
+            torque_factor: d.torque_factor,
+            ramp_step: d.ramp_step,
+            speed_target_limit: d.speed_target_limit,
+            lead: (d.ts, cfg.delay_periods),
+            voltage_limit_per_inv_bus: 1.0 / (VOLTAGE_MARGIN * INV_SQRT3),
+            orientation: d.orientation,
+            magnetizing: d.magnetizing,
+            limits: d.limits,
+            vf: VfDesign {
+                volts_per_rad_s: cfg.vf.volts_per_rad_s,
+                boost: cfg.vf.boost,
+            },
+        }
     }
 }

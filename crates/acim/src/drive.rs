@@ -41,13 +41,14 @@
 //! preloaded compare registers; the voltage the plant saw over (k .. k+1) is the command of
 //! step k-1, which is what the observer and the Rs estimator use.
 
+use crate::design::DriveCoeffs;
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
     SinCos, SinCosValue,
 };
-use crate::math::{clamp, is_finite, wrap_angle_step};
+use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
@@ -57,62 +58,63 @@ use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
 pub use crate::supervisor::{
     CommandError, DriveState, EstimatorHealth, FaultReason, Gate, Supervisor,
 };
-use crate::svpwm::{linear_limit, modulate, Modulator, Svpwm, VoltageLimit};
+use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
 
-/// Samples of one control step.
+/// Samples of one control step (A and V; pu in fixed point).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DriveInputs {
+pub struct DriveInputs<N = f32> {
     /// Phase currents a, b, c (A); with two-phase sensing c is ignored.
-    pub phase_currents: [f32; 3],
+    pub phase_currents: [N; 3],
     /// DC-bus voltage, V.
-    pub dc_bus: f32,
+    pub dc_bus: N,
 }
 
 /// PWM command of one step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PwmOutput {
+pub struct PwmOutput<N = f32> {
     /// High-side duties of phases a, b, c in [0, 1] (0.5 when disabled).
-    pub duties: [f32; 3],
+    pub duties: [N; 3],
     /// False: all six switches off (timer main output disabled).
     pub enabled: bool,
 }
 
-impl PwmOutput {
+impl<N: Num> PwmOutput<N> {
     /// All switches off.
     pub const OFF: Self = Self {
-        duties: [0.5; 3],
+        duties: [N::HALF; 3],
         enabled: false,
     };
 }
 
-/// What the last step computed, for telemetry and evaluation.
+/// What the last step computed, for telemetry and evaluation (SI in f32, pu in fixed
+/// point).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DriveTelemetry {
+pub struct DriveTelemetry<N: Num = f32> {
     /// Ramped speed reference, rad/s.
-    pub speed_reference: f32,
+    pub speed_reference: N,
     /// Estimated speed Omega_hat, rad/s.
-    pub speed_estimate: f32,
+    pub speed_estimate: N,
     /// Estimated load torque T_L_hat, N m.
-    pub load_torque_estimate: f32,
+    pub load_torque_estimate: N,
     /// Estimated electromagnetic torque 1.5 p lambda_r i_sq, N m.
-    pub torque_estimate: f32,
+    pub torque_estimate: N,
     /// Measured dq currents, A.
-    pub current: Dq,
+    pub current: Dq<N>,
     /// dq current references, A.
-    pub current_reference: Dq,
+    pub current_reference: Dq<N>,
     /// dq voltage command, V.
-    pub voltage: Dq,
+    pub voltage: Dq<N>,
     /// Model rotor flux lambda_r, Wb.
-    pub rotor_flux: f32,
+    pub rotor_flux: N,
     /// Stator-resistance estimate, ohm.
-    pub stator_resistance_estimate: f32,
+    pub stator_resistance_estimate: N,
     /// Frame angle theta_s used for this step's samples (Park), rad electrical.
-    pub angle: f32,
+    pub angle: N::Angle,
     /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
-    pub stator_frequency: f32,
+    pub stator_frequency: N,
     /// Whether the modulator limited the voltage.
     pub voltage_saturated: bool,
 }
@@ -161,30 +163,30 @@ impl StepProbe for NoProbe {
 
 /// Output of the sense stage: this step's samples in both frames.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Measured {
+pub struct Measured<N: Num = f32> {
     /// Stator current, stationary frame, A.
-    pub i_ab: AlphaBeta,
+    pub i_ab: AlphaBeta<N>,
     /// Stator current, rotor-flux frame, A.
-    pub i_dq: Dq,
+    pub i_dq: Dq<N>,
     /// sin/cos of the frame angle the samples were taken at.
-    pub sc: SinCosValue,
+    pub sc: SinCosValue<N>,
     /// Frame angle theta_s\[k\], rad electrical.
-    pub angle: f32,
+    pub angle: N::Angle,
     /// DC bus, V (checked against `dc_bus_min` > 0 by the gate).
-    pub dc_bus: f32,
+    pub dc_bus: N,
 }
 
 /// Output of the estimation stage.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Estimate {
+pub struct Estimate<N = f32> {
     /// The speed observer's output (Omega_hat, T_L_hat, i_sq_hat).
-    pub observer: SpeedEstimate,
+    pub observer: SpeedEstimate<N>,
     /// Rotor flux lambda_r after this step's update, Wb.
-    pub rotor_flux: f32,
+    pub rotor_flux: N,
     /// Stator frequency w_s for the next period, rad/s electrical.
-    pub stator_frequency: f32,
+    pub stator_frequency: N,
     /// Rs_hat after this step's update, ohm.
-    pub rs: f32,
+    pub rs: N,
     /// Whether the flux was settled at the start of this step.
     pub flux_settled: bool,
 }
@@ -192,66 +194,65 @@ pub struct Estimate {
 /// The voltage applied over the past period (the previous step's command): a type of its
 /// own so that it cannot be confused with this step's command.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Applied {
+pub struct Applied<N = f32> {
     /// In the rotor-flux frame of its step, V.
-    pub v_dq: Dq,
+    pub v_dq: Dq<N>,
     /// In the stationary frame (at the advanced angle it acts at), V.
-    pub v_ab: AlphaBeta,
+    pub v_ab: AlphaBeta<N>,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
 /// filter of the standstill Rs identification.
 #[derive(Clone, Debug)]
-struct Estimator<O> {
+struct Estimator<N: Num, O> {
     observer: O,
-    rs: RsEstimator,
-    flux: FluxModel,
-    filtered_residual: f32,
+    rs: RsEstimator<N>,
+    flux: FluxModel<N>,
+    filtered_residual: N,
 }
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
 #[derive(Clone, Copy, Debug)]
-struct References {
-    speed_target: f32,
-    speed_reference: f32,
-    speed_ctl: PiController,
+struct References<N> {
+    speed_target: N,
+    speed_reference: N,
+    speed_ctl: PiController<N>,
     magnetizing_steps: u32,
     rs_settled_steps: u32,
 }
 
 /// Current-control stage state: the d and q PIs.
 #[derive(Clone, Copy, Debug)]
-struct CurrentControl {
-    d: PiController,
-    q: PiController,
+struct CurrentControl<N> {
+    d: PiController<N>,
+    q: PiController<N>,
 }
 
 /// Open-loop V/f state.
 #[derive(Clone, Copy, Debug, Default)]
-struct OpenLoop {
-    angle: f32,
-    frequency: f32,
+struct OpenLoop<N: Num> {
+    angle: N::Angle,
+    frequency: N,
 }
 
-/// The sensorless IFOC drive. `S` supplies sin/cos (software by default, CORDIC on the
-/// G4), `O` estimates the speed (the paper's reduced-order observer by default), `M`
-/// modulates (SVPWM by default).
+/// The sensorless IFOC drive, one cascade for both arithmetics. `S` supplies sin/cos
+/// (software by default, CORDIC on the G4, a table in fixed point), `N` is the arithmetic
+/// (f32 SI by default, [`crate::fixed::Q24`] per unit), `O` estimates the speed (the
+/// paper's reduced-order observer by default), `M` modulates (SVPWM by default).
 #[derive(Clone, Debug)]
-pub struct Drive<
-    S: SinCos = FastSinCos,
-    O: SpeedObserver = ReducedOrderObserver,
-    M: Modulator = Svpwm,
-> {
+pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = Svpwm> {
     design: DriveDesign,
+    coeffs: DriveCoeffs<N>,
+    bases: N::Bases,
     sup: Supervisor,
-    est: Estimator<O>,
-    refs: References,
-    cur: CurrentControl,
+    est: Estimator<N, O>,
+    refs: References<N>,
+    cur: CurrentControl<N>,
     modulator: M,
     sincos: S,
-    applied: Applied,
-    open_loop: OpenLoop,
-    telemetry: DriveTelemetry,
+    applied: Applied<N>,
+    open_loop: OpenLoop<N>,
+    telemetry: DriveTelemetry<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -262,32 +263,40 @@ impl Drive<FastSinCos> {
 }
 
 impl<S: SinCos> Drive<S> {
-    /// Validates `cfg`, builds its [`DriveDesign`] and returns an idle drive.
+    /// Validates `cfg`, builds its [`DriveDesign`] and returns an idle f32 drive.
     pub fn with_sincos(cfg: DriveConfig, sincos: S) -> Result<Self, ConfigError> {
-        Ok(Self::with_parts(
+        Self::with_parts(
             DriveDesign::new(cfg)?,
+            (),
             sincos,
             ReducedOrderObserver::new(),
             Svpwm,
-        ))
+        )
     }
 }
 
-impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
-    /// An idle drive from a validated design and its parts.
-    pub fn with_parts(design: DriveDesign, sincos: S, observer: O, modulator: M) -> Self {
-        let rs_initial = design.config.rs_initial;
-        Self {
+impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, M> {
+    /// An idle drive from a validated design (converted to `N` with `bases`) and its parts.
+    pub fn with_parts(
+        design: DriveDesign,
+        bases: N::Bases,
+        sincos: S,
+        observer: O,
+        modulator: M,
+    ) -> Result<Self, ConfigError> {
+        let coeffs = N::coeffs(&design, &bases)?;
+        let rs_initial = coeffs.rs_initial;
+        Ok(Self {
             sup: Supervisor::new(),
             est: Estimator {
                 observer,
                 rs: RsEstimator::new(rs_initial),
                 flux: FluxModel::new(),
-                filtered_residual: 0.0,
+                filtered_residual: N::ZERO,
             },
             refs: References {
-                speed_target: 0.0,
-                speed_reference: 0.0,
+                speed_target: N::ZERO,
+                speed_reference: N::ZERO,
                 speed_ctl: PiController::new(),
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
@@ -305,16 +314,26 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
                 ..DriveTelemetry::default()
             },
             design,
-        }
+            coeffs,
+            bases,
+        })
     }
 
     /// The configuration the drive was built with.
     pub fn config(&self) -> &DriveConfig {
         &self.design.config
     }
-    /// The design in use.
+    /// The design in use (f32 SI).
     pub fn design(&self) -> &DriveDesign {
         &self.design
+    }
+    /// The step's coefficients in this drive's arithmetic.
+    pub fn coeffs(&self) -> &DriveCoeffs<N> {
+        &self.coeffs
+    }
+    /// The per-unit bases (`()` for f32 SI).
+    pub fn bases(&self) -> &N::Bases {
+        &self.bases
     }
     /// Present state.
     pub fn state(&self) -> DriveState {
@@ -325,7 +344,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         self.sup.fault()
     }
     /// Quantities computed by the last step.
-    pub fn telemetry(&self) -> &DriveTelemetry {
+    pub fn telemetry(&self) -> &DriveTelemetry<N> {
         &self.telemetry
     }
     /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
@@ -336,7 +355,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     pub fn flux_reference(&self) -> f32 {
         self.design.flux_reference
     }
-    /// Precomputed reduced-order observer design.
+    /// Precomputed reduced-order observer design (f32 SI).
     pub fn observer_config(&self) -> &ObserverConfig {
         &self.design.observer
     }
@@ -347,12 +366,12 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
 
     /// Sets the speed target (rad/s mechanical); the reference ramps to it at
     /// `speed_ramp`. Clamped to +/- 90 % of `max_speed`.
-    pub fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
-        if !is_finite(speed) {
+    pub fn set_speed_target(&mut self, speed: N) -> Result<(), CommandError> {
+        if !speed.is_finite() {
             return Err(CommandError::NotFinite);
         }
-        let lim = self.design.speed_target_limit;
-        self.refs.speed_target = clamp(speed, -lim, lim);
+        let lim = self.coeffs.speed_target_limit;
+        self.refs.speed_target = speed.clamp(-lim, lim);
         Ok(())
     }
 
@@ -384,7 +403,8 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     /// Swaps in a new design between two steps (built outside the interrupt with
     /// [`DriveDesign::new`]). While the drive is active only a retuning is accepted: the
     /// machine model, the period and the current sensing must stay those of the running
-    /// design (anything else needs `Idle`).
+    /// design (anything else needs `Idle`). A design whose coefficients do not fit this
+    /// arithmetic is refused and the old one kept.
     pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
         let (old, new) = (&self.design.config, &design.config);
         let retune = old.machine == new.machine
@@ -394,6 +414,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         if !(retune || state == DriveState::Idle) {
             return Err(CommandError::WrongState(state));
         }
+        self.coeffs = N::coeffs(&design, &self.bases).map_err(|_| CommandError::OutOfRange)?;
         self.design = design;
         Ok(())
     }
@@ -402,7 +423,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     /// tuning or analysis; 0 restores the paper's scheme) by swapping in a new design.
     /// Rejects non-finite or negative values and values above 50, keeping the old gain.
     pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError> {
-        if !is_finite(gain) {
+        if !crate::math::is_finite(gain) {
             return Err(CommandError::NotFinite);
         }
         let design = self
@@ -413,12 +434,12 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     }
 
     /// Forces a fault from outside (e.g. the hardware break input or a missed deadline).
-    pub fn trip(&mut self, reason: FaultReason) -> PwmOutput {
+    pub fn trip(&mut self, reason: FaultReason) -> PwmOutput<N> {
         self.enter_fault(reason)
     }
 
     fn reset_dynamic_state(&mut self) {
-        self.refs.speed_reference = 0.0;
+        self.refs.speed_reference = N::ZERO;
         self.refs.speed_ctl.reset();
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
@@ -427,12 +448,12 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         self.est.flux = FluxModel::new();
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
-        self.est.filtered_residual = 0.0;
+        self.est.filtered_residual = N::ZERO;
         self.applied = Applied::default();
         self.open_loop = OpenLoop::default();
     }
 
-    fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput {
+    fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
         self.sup.trip(reason);
         self.applied = Applied::default();
         PwmOutput::OFF
@@ -441,7 +462,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     /// One control step: samples in, PWM command out. Never panics and never returns a
     /// non-finite or out-of-range duty: bad input faults the drive (switches off) instead.
     #[inline]
-    pub fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+    pub fn step(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
         self.step_probed(inp, &mut NoProbe)
     }
 
@@ -449,12 +470,16 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     /// (the regions do not cover the state machine's bookkeeping, the estimator
     /// plausibility checks and the telemetry record, which the whole step includes).
     #[inline(always)]
-    pub fn step_probed<P: StepProbe>(&mut self, inp: &DriveInputs, probe: &mut P) -> PwmOutput {
+    pub fn step_probed<P: StepProbe>(
+        &mut self,
+        inp: &DriveInputs<N>,
+        probe: &mut P,
+    ) -> PwmOutput<N> {
         // 1. gate: state machine and raw-sample checks
         probe.begin(StepRegion::FaultChecks);
         let gate = self
             .sup
-            .gate(&self.design.limits, inp.phase_currents, inp.dc_bus);
+            .gate(&self.coeffs.limits, inp.phase_currents, inp.dc_bus);
         probe.end(StepRegion::FaultChecks);
         let mode = match gate {
             Gate::Run(mode) => mode,
@@ -481,7 +506,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         let saturated = self.refs.speed_ctl.saturated();
         if let Some(reason) = self
             .sup
-            .plausibility(&self.design.limits, &health, saturated)
+            .plausibility(&self.coeffs.limits, &health, saturated)
         {
             return self.enter_fault(reason);
         }
@@ -494,10 +519,12 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         probe.end(StepRegion::SpeedPi);
         // 6. current control, within the modulator's voltage limit
         probe.begin(StepRegion::CurrentPi);
-        // the bus was checked against dc_bus_min > 0 by the gate: one division per step,
+        // the bus was checked against dc_bus_min > 0 by the gate: one reciprocal per step,
         // shared by the voltage limit and the modulator
-        let inv_dc_bus = 1.0 / m.dc_bus;
-        let limit = self.modulator.voltage_limit(m.dc_bus, inv_dc_bus);
+        let inv_dc_bus = m.dc_bus.recip();
+        let limit = self
+            .modulator
+            .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 7. modulation at the angle the voltage will act at
@@ -514,9 +541,9 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
 
     /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
     #[inline(always)]
-    fn sense(&mut self, inp: &DriveInputs) -> Measured {
+    fn sense(&mut self, inp: &DriveInputs<N>) -> Measured<N> {
         let [a, b, c] = inp.phase_currents;
-        let i_ab = match self.design.limits.current_sensing {
+        let i_ab = match self.coeffs.limits.current_sensing {
             CurrentSensing::TwoPhase => clarke_two(a, b),
             CurrentSensing::ThreePhase => clarke_three(a, b, c),
         };
@@ -536,18 +563,18 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     #[inline(always)]
     fn estimate<P: StepProbe>(
         &mut self,
-        m: &Measured,
+        m: &Measured<N>,
         magnetizing: bool,
         probe: &mut P,
-    ) -> Estimate {
-        let d = &self.design;
+    ) -> Estimate<N> {
+        let c = &self.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
         // observer, with the voltage applied over the past period and the flux state of
         // the last step
         probe.begin(StepRegion::ObserverReduced);
         let observer = est.observer.update(
-            d,
+            c,
             &SpeedObserverInputs {
                 i_ab: m.i_ab,
                 i_dq: i,
@@ -557,7 +584,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
                 rotor_flux: est.flux.rotor_flux,
                 inv_rotor_flux: est.flux.inv_rotor_flux,
                 equivalent_resistance: est.rs.stator_resistance_estimate
-                    + d.referred_rotor_resistance,
+                    + c.referred_rotor_resistance,
                 magnetizing,
             },
         );
@@ -566,10 +593,10 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
         // (its error is the d-axis residual), the resistance adapts only inside its gate
         probe.begin(StepRegion::RsEstimator);
-        let flux_settled = est.flux.rotor_flux >= d.settled_flux;
+        let flux_settled = est.flux.rotor_flux >= c.settled_flux;
         let ws_prev = est.flux.stator_frequency;
         est.rs.update(
-            &d.rs,
+            &c.rs,
             &RsEstimatorInputs {
                 i_sd: i.d,
                 i_sq: i.q,
@@ -579,22 +606,25 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
             },
         );
         let rs = est.rs.stator_resistance_estimate;
-        est.filtered_residual +=
-            d.magnetizing.residual_filter * (est.rs.current_error - est.filtered_residual);
+        est.filtered_residual = est.filtered_residual
+            + N::gain(
+                c.magnetizing.residual_filter,
+                est.rs.current_error - est.filtered_residual,
+            );
         probe.end(StepRegion::RsEstimator);
 
         probe.begin(StepRegion::FluxSlip);
         let correction = if !magnetizing && flux_settled {
-            orientation::correction(&d.orientation, ws_prev, rs, est.rs.current_error)
+            orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error)
         } else {
-            0.0
+            N::ZERO
         };
         // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
         est.flux.update(
-            &d.flux,
+            &c.flux,
             i.d,
             i.q,
-            d.pole_pairs * observer.speed + correction,
+            N::gain(c.pole_pairs, observer.speed) + correction,
             magnetizing,
         );
         probe.end(StepRegion::FluxSlip);
@@ -613,14 +643,14 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     #[inline(always)]
     fn references(
         &mut self,
-        m: &Measured,
-        e: &Estimate,
+        m: &Measured<N>,
+        e: &Estimate<N>,
         magnetizing: bool,
-    ) -> Result<Dq, FaultReason> {
-        let d = &self.design;
+    ) -> Result<Dq<N>, FaultReason> {
+        let c = &self.coeffs;
         let r = &mut self.refs;
         if magnetizing {
-            let mag = &d.magnetizing;
+            let mag = &c.magnetizing;
             r.magnetizing_steps = r.magnetizing_steps.saturating_add(1);
             r.rs_settled_steps = if self.est.filtered_residual.abs() < mag.rs_settled_error {
                 r.rs_settled_steps.saturating_add(1)
@@ -637,27 +667,23 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
                 r.speed_ctl.reset();
             }
             return Ok(Dq {
-                d: d.i_sd_ref,
-                q: 0.0,
+                d: c.i_sd_ref,
+                q: N::ZERO,
             });
         }
-        let dv = clamp(
-            r.speed_target - r.speed_reference,
-            -d.ramp_step,
-            d.ramp_step,
-        );
-        r.speed_reference += dv;
+        let dv = (r.speed_target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
+        r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
         let i_sq_ref = r
             .speed_ctl
-            .update(&d.pi_speed, r.speed_reference - speed, 0.0);
+            .update(&c.pi_speed, r.speed_reference - speed, N::ZERO);
         let stall = self
             .sup
-            .stall(&d.limits, r.speed_ctl.saturated(), speed, r.speed_reference);
+            .stall(&c.limits, r.speed_ctl.saturated(), speed, r.speed_reference);
         match stall {
             Some(reason) => Err(reason),
             None => Ok(Dq {
-                d: d.i_sd_ref,
+                d: c.i_sd_ref,
                 q: i_sq_ref,
             }),
         }
@@ -668,39 +694,41 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     #[inline(always)]
     fn current_control(
         &mut self,
-        m: &Measured,
-        e: &Estimate,
-        i_ref: Dq,
-        limit: VoltageLimit,
-    ) -> Dq {
-        let d = &self.design;
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        i_ref: Dq<N>,
+        limit: VoltageLimit<N>,
+    ) -> Dq<N> {
+        let c = &self.coeffs;
         let (rs, ws, lambda) = (e.rs, e.stator_frequency, e.rotor_flux);
         let (i_sd_ref, i_sq_ref) = (i_ref.d, i_ref.q);
-        let ff_d = rs * i_sd_ref + d.referred_rotor_resistance * i_sd_ref
-            - lambda * d.inv_rotor_time_constant
-            - ws * d.transient_inductance * i_sq_ref;
-        let ff_q = (rs + d.referred_rotor_resistance) * i_sq_ref
-            + ws * d.transient_inductance * i_sd_ref
-            + d.pole_pairs * e.observer.speed * lambda;
+        // eq. (9a): v_sd = Rseq i_sd - lambda_r/tau_r - sigma Ls w_s i_sq
+        let ff_d = N::sum_times(rs, c.referred_rotor_resistance, i_sd_ref)
+            - N::gain(c.inv_rotor_time_constant, lambda)
+            - N::gain_mul(c.transient_inductance, ws, i_sq_ref);
+        // eq. (9b): v_sq = Rseq i_sq + sigma Ls w_s i_sd + p Omega lambda_r
+        let ff_q = (rs + c.referred_rotor_resistance) * i_sq_ref
+            + N::gain_mul(c.transient_inductance, ws, i_sd_ref)
+            + N::gain_mul(c.back_emf, e.observer.speed, lambda);
         let v_max = limit.max;
         let v_d = self
             .cur
             .d
-            .update_with_limits(&d.pi_d, i_sd_ref - m.i_dq.d, ff_d, -v_max, v_max);
+            .update_with_limits(&c.pi_d, i_sd_ref - m.i_dq.d, ff_d, -v_max, v_max);
         // q limit on the circle |v| <= v_max with d priority, sqrt(v_max^2 - v_d^2), without
         // a square root: the Taylor bound v_max - v_d^2/(2 v_max) while |v_d| <= v_max/2
         // (at most 1 % above the circle there), the chord sqrt(3) (v_max - |v_d|) beyond
         // (inside the circle, zero when v_d is at its limit)
         let ad = v_d.abs();
-        let v_q_max = if ad <= 0.5 * v_max {
-            v_max - 0.5 * v_d * v_d * limit.inv_max
+        let v_q_max = if ad <= v_max.half() {
+            v_max - (v_d * v_d).half() * limit.inv_max
         } else {
-            1.732_050_8 * (v_max - ad)
+            N::SQRT3 * (v_max - ad)
         };
         let v_q =
             self.cur
                 .q
-                .update_with_limits(&d.pi_q, i_sq_ref - m.i_dq.q, ff_q, -v_q_max, v_q_max);
+                .update_with_limits(&c.pi_q, i_sq_ref - m.i_dq.q, ff_q, -v_q_max, v_q_max);
         Dq { d: v_d, q: v_q }
     }
 
@@ -710,15 +738,14 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
     #[inline(always)]
     fn modulate(
         &mut self,
-        m: &Measured,
-        e: &Estimate,
-        v: Dq,
-        i_ref: Dq,
-        inv_dc_bus: f32,
-    ) -> (AlphaBeta, crate::svpwm::Modulation) {
-        let d = &self.design;
-        let lead = e.stator_frequency * d.ts * d.config.delay_periods;
-        let rot = small_rotation(m.sc, lead);
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        v: Dq<N>,
+        i_ref: Dq<N>,
+        inv_dc_bus: N,
+    ) -> (AlphaBeta<N>, Modulation<N>) {
+        let c = &self.coeffs;
+        let rot = N::rotate_ahead(&mut self.sincos, m.sc, m.angle, e.stator_frequency, c.lead);
         let v_ab = inverse_park(v, rot);
         // dead-time compensation needs the current sign while the voltage acts: predict it
         // from the current reference at the same (advanced) angle, which is noise-free and
@@ -726,18 +753,25 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
         let out = self
             .modulator
-            .modulate(d, v_ab, m.dc_bus, inv_dc_bus, i_ref_abc);
+            .modulate(c, v_ab, m.dc_bus, inv_dc_bus, i_ref_abc);
         (v_ab, out)
     }
 
     /// Telemetry record of a closed-loop step.
     #[inline(always)]
-    fn record(&mut self, m: &Measured, e: &Estimate, i_ref: Dq, v: Dq, saturated: bool) {
+    fn record(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        i_ref: Dq<N>,
+        v: Dq<N>,
+        saturated: bool,
+    ) {
         self.telemetry = DriveTelemetry {
             speed_reference: self.refs.speed_reference,
             speed_estimate: e.observer.speed,
             load_torque_estimate: e.observer.load_torque,
-            torque_estimate: self.design.torque_factor * e.rotor_flux * m.i_dq.q,
+            torque_estimate: N::gain_mul(self.coeffs.torque_factor, e.rotor_flux, m.i_dq.q),
             current: m.i_dq,
             current_reference: i_ref,
             voltage: v,
@@ -749,33 +783,27 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
         };
     }
 
-    fn step_open_loop(&mut self, inp: &DriveInputs) -> PwmOutput {
-        let d = &self.design;
-        let [a, b, c] = inp.phase_currents;
-        let (i_ab, currents) = match d.limits.current_sensing {
+    /// Open-loop V/f (commissioning): the voltage boost + V/f |w| at the frequency
+    /// p * speed reference, no estimation.
+    fn step_open_loop(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
+        let c = &self.coeffs;
+        let [a, b, cc] = inp.phase_currents;
+        let (i_ab, currents) = match c.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
-            CurrentSensing::ThreePhase => (clarke_three(a, b, c), [a, b, c]),
+            CurrentSensing::ThreePhase => (clarke_three(a, b, cc), [a, b, cc]),
         };
         let r = &mut self.refs;
-        let dv = clamp(
-            r.speed_target - r.speed_reference,
-            -d.ramp_step,
-            d.ramp_step,
-        );
-        r.speed_reference += dv;
+        let dv = (r.speed_target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
+        r.speed_reference = r.speed_reference + dv;
         let ol = &mut self.open_loop;
-        ol.frequency = d.pole_pairs * r.speed_reference;
-        let vf = d.config.vf;
-        let mag = clamp(
-            vf.boost + vf.volts_per_rad_s * ol.frequency.abs(),
-            0.0,
-            linear_limit(inp.dc_bus),
-        );
+        ol.frequency = N::gain(c.pole_pairs, r.speed_reference);
+        let mag = (c.vf.boost + N::gain(c.vf.volts_per_rad_s, ol.frequency.abs()))
+            .clamp(N::ZERO, linear_limit(inp.dc_bus));
         let sc = self.sincos.sin_cos(ol.angle);
-        let v = Dq { d: mag, q: 0.0 };
+        let v = Dq { d: mag, q: N::ZERO };
         let v_ab = inverse_park(v, sc);
-        let m = modulate(&d.pwm, v_ab, inp.dc_bus, currents);
-        ol.angle = wrap_angle_step(ol.angle + ol.frequency * d.ts);
+        let out = modulate(&c.pwm, v_ab, inp.dc_bus, currents);
+        ol.angle = N::advance(ol.angle, ol.frequency, c.flux.ts);
         self.telemetry = DriveTelemetry {
             speed_reference: r.speed_reference,
             current: park(i_ab, sc),
@@ -783,34 +811,20 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Drive<S, O, M> {
             angle: ol.angle,
             stator_frequency: ol.frequency,
             stator_resistance_estimate: self.est.rs.stator_resistance_estimate,
-            voltage_saturated: m.saturated,
+            voltage_saturated: out.saturated,
             ..DriveTelemetry::default()
         };
         PwmOutput {
-            duties: m.duties,
+            duties: out.duties,
             enabled: true,
         }
-    }
-}
-
-/// sin/cos of (theta + delta) from sin/cos of theta and a small delta (|delta| < 0.3 rad)
-/// by the angle-sum formula with 3rd/4th-order series for delta (error < 2e-5 at 0.3 rad,
-/// < 1e-7 at the 0.1 rad of 1500 rpm and 1.5 periods).
-#[inline]
-fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
-    let d = clamp(delta, -0.3, 0.3);
-    let d2 = d * d;
-    let sd = d * (1.0 - d2 * (1.0 / 6.0));
-    let cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0));
-    SinCosValue {
-        sin: sc.sin * cd + sc.cos * sd,
-        cos: sc.cos * cd - sc.sin * sd,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frames::small_rotation;
     use crate::observer::ObserverDesignError;
     use proptest::prelude::*;
 

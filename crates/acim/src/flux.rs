@@ -9,26 +9,28 @@
 //! `min_flux` (a configured fraction of the nominal flux), so start-up from zero flux cannot
 //! produce an infinite slip.
 
-use crate::math::{is_finite, wrap_angle_step};
+use crate::num::Num;
 use crate::params::MachineParams;
 
-/// Precomputed coefficients of the flux model and slip law.
+/// Precomputed coefficients of the flux model and slip law (designed in f32 SI; in fixed
+/// point the gains also carry the per-unit base conversions).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FluxModelConfig {
+pub struct FluxModelConfig<N: Num = f32> {
     /// g = 1 - e^(-Ts/tau_r), dimensionless.
-    pub blend: f32,
+    pub blend: N::Gain,
     /// L_M = Lm^2/Lr, H (Wb/A).
-    pub magnetizing_inductance: f32,
+    pub magnetizing_inductance: N::Gain,
     /// Slip gain L_M/tau_r = (Lm/Lr)^2 Rr, ohm (rad/s per A/Wb).
-    pub slip_gain: f32,
+    pub slip_gain: N::Gain,
     /// Smallest flux used as a divisor in the slip law, Wb.
-    pub min_flux: f32,
-    /// Control period, s.
-    pub ts: f32,
+    pub min_flux: N,
+    /// Control period, s (the angle advance per rad/s; turn counts per frequency pu in
+    /// fixed point).
+    pub ts: N::Gain,
 }
 
-impl FluxModelConfig {
+impl FluxModelConfig<f32> {
     /// Coefficients for machine `m` (the controller's copy) at period `ts` (s);
     /// `nominal_flux` (Wb) sets the divisor guard at 10 % of it.
     pub fn new(m: &MachineParams, ts: f32, nominal_flux: f32) -> Self {
@@ -61,29 +63,24 @@ pub(crate) fn one_minus_exp_neg_small(x: f32) -> f32 {
 /// State of the flux model and frame angle.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FluxModel {
+pub struct FluxModel<N: Num = f32> {
     /// Estimated rotor flux amplitude lambda_r (Wb, referred to the stator).
-    pub rotor_flux: f32,
+    pub rotor_flux: N,
     /// 1 / max(lambda_r, min_flux), 1/Wb, refreshed every step (also used by the observer).
-    pub inv_rotor_flux: f32,
+    pub inv_rotor_flux: N,
     /// Slip frequency w_s - p Omega, rad/s electrical.
-    pub slip_frequency: f32,
-    /// Stator (dq-frame) frequency w_s, rad/s electrical.
-    pub stator_frequency: f32,
-    /// dq-frame angle theta_s, rad electrical, wrapped to [-pi, pi).
-    pub angle: f32,
+    pub slip_frequency: N,
+    /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
+    pub stator_frequency: N,
+    /// dq-frame angle theta_s, rad electrical wrapped to [-pi, pi) (a turn fraction in
+    /// fixed point).
+    pub angle: N::Angle,
 }
 
-impl FluxModel {
+impl<N: Num> FluxModel<N> {
     /// Zero flux, angle 0.
-    pub const fn new() -> Self {
-        Self {
-            rotor_flux: 0.0,
-            inv_rotor_flux: 0.0,
-            slip_frequency: 0.0,
-            stator_frequency: 0.0,
-            angle: 0.0,
-        }
+    pub fn new() -> Self {
+        Self::default()
     }
 
     /// One step: slip (eq. 8) from the present flux and the measured i_sq, stator
@@ -94,10 +91,10 @@ impl FluxModel {
     #[inline(always)]
     pub fn update(
         &mut self,
-        cfg: &FluxModelConfig,
-        i_sd: f32,
-        i_sq: f32,
-        rotor_speed_elec: f32,
+        cfg: &FluxModelConfig<N>,
+        i_sd: N,
+        i_sq: N,
+        rotor_speed_elec: N,
         hold_angle: bool,
     ) {
         let divisor = if self.rotor_flux > cfg.min_flux {
@@ -105,20 +102,18 @@ impl FluxModel {
         } else {
             cfg.min_flux
         };
-        self.inv_rotor_flux = 1.0 / divisor;
-        self.slip_frequency = cfg.slip_gain * i_sq * self.inv_rotor_flux;
+        self.inv_rotor_flux = divisor.recip();
+        self.slip_frequency = N::gain_mul(cfg.slip_gain, i_sq, self.inv_rotor_flux);
         self.stator_frequency = if hold_angle {
-            0.0
+            N::ZERO
         } else {
             rotor_speed_elec + self.slip_frequency
         };
-        self.angle = wrap_angle_step(self.angle + self.stator_frequency * cfg.ts);
-        let next =
-            self.rotor_flux + cfg.blend * (cfg.magnetizing_inductance * i_sd - self.rotor_flux);
+        self.angle = N::advance(self.angle, self.stator_frequency, cfg.ts);
+        let target = N::gain(cfg.magnetizing_inductance, i_sd);
+        let next = self.rotor_flux + N::gain(cfg.blend, target - self.rotor_flux);
         // a non-finite current would poison the state: keep the last flux instead
-        if is_finite(next) {
-            self.rotor_flux = next;
-        }
+        self.rotor_flux = next.finite_or(self.rotor_flux);
     }
 }
 

@@ -468,7 +468,7 @@ impl crate::observer::SpeedObserver for FullOrder {
     #[inline(always)]
     fn update(
         &mut self,
-        _design: &crate::DriveDesign,
+        _coeffs: &crate::DriveCoeffs<f32>,
         x: &crate::observer::SpeedObserverInputs,
     ) -> crate::observer::SpeedEstimate {
         let speed = self.state.update(

@@ -18,6 +18,7 @@
 pub mod flux;
 pub mod frames;
 pub mod math;
+pub mod num;
 pub mod observer;
 pub mod orientation;
 pub mod params;
@@ -30,18 +31,19 @@ pub mod design;
 pub mod drive;
 pub mod supervisor;
 
-// the same cascade in fixed point, and the paper's baseline observer
+// the fixed-point arithmetic, and the paper's baseline observer
 pub mod fixed;
 pub mod full_order;
 
 // the plant (moving to its own crate)
 pub mod model;
 
-pub use design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
+pub use design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, VfConfig};
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
     StepRegion,
 };
+pub use num::Num;
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
 pub use params::{MachineData, MachineParams, ParamError};
 pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};

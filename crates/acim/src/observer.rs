@@ -48,8 +48,10 @@
 //! and [`ObserverConfig::discrete_stable`] checks the discrete characteristic polynomial
 //! built from the actual gains with Jury's test.
 
+use crate::design::DriveCoeffs;
 use crate::frames::{AlphaBeta, Dq};
 use crate::math::is_finite;
+use crate::num::Num;
 use crate::params::MachineParams;
 
 /// The three requested observer poles, given as positive rates p_i (rad/s): the
@@ -120,15 +122,33 @@ pub struct ObserverConfig {
     pub g3: f32,
     /// The requested poles.
     pub poles: ObserverPoles,
-    // the same coefficients times Ts, for the step
-    ts_a: f32,
-    ts_inv_l: f32,
-    ts_p_inv_l: f32,
-    ts_torque_per_inertia: f32,
-    ts_inv_inertia: f32,
-    ts_friction_rate: f32,
-    ts_g2: f32,
-    ts_g3: f32,
+    /// The coefficients of the step (all times Ts).
+    pub coeffs: ObserverCoeffs<f32>,
+}
+
+/// The coefficients of one observer step (eq. 12), all multiplied by Ts; in fixed point
+/// they also carry the per-unit base conversions (see [`crate::fixed`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ObserverCoeffs<N: Num = f32> {
+    /// Ts a (current error -> current).
+    pub ts_a: N::Gain,
+    /// Ts/(sigma Ls): volts -> current.
+    pub ts_inv_l: N::Gain,
+    /// Ts p/(sigma Ls): (flux x speed) -> current.
+    pub ts_p_inv_l: N::Gain,
+    /// Ts: (stator frequency x current) -> current.
+    pub ts: N::Gain,
+    /// Ts 1.5 p/J: (flux x current) -> speed.
+    pub ts_torque_per_inertia: N::Gain,
+    /// Ts/J: torque -> speed.
+    pub ts_inv_inertia: N::Gain,
+    /// Ts B/J (speed -> speed).
+    pub ts_friction_rate: N::Gain,
+    /// Ts g2: (current / flux) -> speed.
+    pub ts_g2: N::Gain,
+    /// Ts g3: (current / flux) -> torque.
+    pub ts_g3: N::Gain,
 }
 
 impl ObserverConfig {
@@ -169,14 +189,17 @@ impl ObserverConfig {
             g2,
             g3,
             poles,
-            ts_a: ts * a,
-            ts_inv_l: ts / sigma_ls,
-            ts_p_inv_l: ts * pp / sigma_ls,
-            ts_torque_per_inertia: ts * 1.5 * pp / j,
-            ts_inv_inertia: ts / j,
-            ts_friction_rate: ts * f,
-            ts_g2: ts * g2,
-            ts_g3: ts * g3,
+            coeffs: ObserverCoeffs {
+                ts_a: ts * a,
+                ts_inv_l: ts / sigma_ls,
+                ts_p_inv_l: ts * pp / sigma_ls,
+                ts,
+                ts_torque_per_inertia: ts * 1.5 * pp / j,
+                ts_inv_inertia: ts / j,
+                ts_friction_rate: ts * f,
+                ts_g2: ts * g2,
+                ts_g3: ts * g3,
+            },
         })
     }
 
@@ -237,47 +260,43 @@ pub fn jury_cubic(a2: f32, a1: f32, a0: f32) -> bool {
 /// Measured and model inputs of one observer step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ObserverInputs {
-    /// Measured q-axis current i_sq, A.
-    pub i_sq: f32,
-    /// Measured d-axis current i_sd, A.
-    pub i_sd: f32,
+pub struct ObserverInputs<N = f32> {
+    /// Measured i_sq, A.
+    pub i_sq: N,
+    /// Measured i_sd, A.
+    pub i_sd: N,
     /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
-    pub stator_frequency: f32,
-    /// q-axis voltage applied over the period (the command), V.
-    pub v_sq: f32,
-    /// Rotor flux from the flux model (eq. 13), Wb.
-    pub rotor_flux: f32,
-    /// 1/lambda_r guarded against zero (from the flux model), 1/Wb.
-    pub inv_rotor_flux: f32,
-    /// Equivalent resistance Rseq = Rs_hat + (Lm/Lr)^2 Rr, ohm.
-    pub equivalent_resistance: f32,
+    pub stator_frequency: N,
+    /// q voltage applied over the period, V.
+    pub v_sq: N,
+    /// Rotor flux lambda_r, Wb.
+    pub rotor_flux: N,
+    /// 1/lambda_r (guarded), 1/Wb.
+    pub inv_rotor_flux: N,
+    /// Rseq = Rs_hat + R_R, ohm.
+    pub equivalent_resistance: N,
 }
 
-/// Observer state: estimated q-axis current, mechanical speed and load torque.
+/// Observer state: the estimates.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ReducedOrderObserver {
+pub struct ReducedOrderObserver<N = f32> {
     /// i_sq_hat, A.
-    pub current_estimate: f32,
+    pub current_estimate: N,
     /// Omega_hat, rad/s mechanical.
-    pub speed_estimate: f32,
-    /// T_L_hat (load torque, friction excluded), N m.
-    pub load_torque_estimate: f32,
+    pub speed_estimate: N,
+    /// T_L_hat, N m.
+    pub load_torque_estimate: N,
 }
 
-impl ReducedOrderObserver {
+impl<N: Num> ReducedOrderObserver<N> {
     /// All estimates zero.
-    pub const fn new() -> Self {
-        Self {
-            current_estimate: 0.0,
-            speed_estimate: 0.0,
-            load_torque_estimate: 0.0,
-        }
+    pub fn new() -> Self {
+        Self::default()
     }
 
-    /// Restarts from a known state (e.g. i_sq measured, speed 0, load 0 at start-up).
-    pub fn reset(&mut self, i_sq: f32, speed: f32, load_torque: f32) {
+    /// Restarts from a known state (e.g. after magnetizing: the measured i_sq, speed 0).
+    pub fn reset(&mut self, i_sq: N, speed: N, load_torque: N) {
         self.current_estimate = i_sq;
         self.speed_estimate = speed;
         self.load_torque_estimate = load_torque;
@@ -286,27 +305,28 @@ impl ReducedOrderObserver {
     /// One forward-Euler step of eq. (12), with Ts folded into the precomputed
     /// coefficients. About 20 multiply-adds, no division.
     #[inline(always)]
-    pub fn update(&mut self, cfg: &ObserverConfig, u: &ObserverInputs) {
+    pub fn update(&mut self, cfg: &ObserverCoeffs<N>, u: &ObserverInputs<N>) {
         let e = self.current_estimate - u.i_sq;
         let lambda = u.rotor_flux;
         let w = self.speed_estimate;
         // Ts [a e + (v_sq - Rseq i_sq - p lambda Omega_hat)/(sigma Ls) - w_s i_sd]
-        let di = cfg.ts_a * e + cfg.ts_inv_l * (u.v_sq - u.equivalent_resistance * u.i_sq)
-            - cfg.ts_p_inv_l * lambda * w
-            - cfg.ts * u.stator_frequency * u.i_sd;
+        let di = N::gain(cfg.ts_a, e)
+            + N::gain(cfg.ts_inv_l, u.v_sq - u.equivalent_resistance * u.i_sq)
+            - N::gain_mul(cfg.ts_p_inv_l, lambda, w)
+            - N::gain_mul(cfg.ts, u.stator_frequency, u.i_sd);
         let e_per_flux = u.inv_rotor_flux * e;
         // Ts [(1.5 p lambda i_hat - T_hat - B Omega_hat)/J + K2 e] with
         // K2 = g2/lambda - (1.5 p/J) lambda: the two torque terms combine to
         // (1.5 p lambda/J)(i_hat - e) = (1.5 p lambda/J) i_sq
-        let dw = cfg.ts_torque_per_inertia * lambda * u.i_sq
-            - cfg.ts_inv_inertia * self.load_torque_estimate
-            - cfg.ts_friction_rate * w
-            + cfg.ts_g2 * e_per_flux;
+        let dw = N::gain_mul(cfg.ts_torque_per_inertia, lambda, u.i_sq)
+            - N::gain(cfg.ts_inv_inertia, self.load_torque_estimate)
+            - N::gain(cfg.ts_friction_rate, w)
+            + N::gain(cfg.ts_g2, e_per_flux);
         // Ts K3 e
-        let dt = cfg.ts_g3 * e_per_flux;
-        self.current_estimate += di;
+        let dt = N::gain(cfg.ts_g3, e_per_flux);
+        self.current_estimate = self.current_estimate + di;
         self.speed_estimate = w + dw;
-        self.load_torque_estimate += dt;
+        self.load_torque_estimate = self.load_torque_estimate + dt;
     }
 }
 
@@ -315,63 +335,63 @@ impl ReducedOrderObserver {
 /// over the past period (the previous step's command); flux quantities are the flux
 /// model's state before this step's update.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SpeedObserverInputs {
+pub struct SpeedObserverInputs<N = f32> {
     /// Measured stator current, stationary frame, A.
-    pub i_ab: AlphaBeta,
+    pub i_ab: AlphaBeta<N>,
     /// Measured stator current, rotor-flux frame, A.
-    pub i_dq: Dq,
+    pub i_dq: Dq<N>,
     /// Applied stator voltage, stationary frame, V.
-    pub v_ab: AlphaBeta,
+    pub v_ab: AlphaBeta<N>,
     /// Applied stator voltage, rotor-flux frame, V.
-    pub v_dq: Dq,
+    pub v_dq: Dq<N>,
     /// Stator frequency w_s of the frame, rad/s electrical.
-    pub stator_frequency: f32,
+    pub stator_frequency: N,
     /// Model rotor flux lambda_r, Wb.
-    pub rotor_flux: f32,
+    pub rotor_flux: N,
     /// 1 / max(lambda_r, guard), 1/Wb.
-    pub inv_rotor_flux: f32,
+    pub inv_rotor_flux: N,
     /// Rseq = Rs_hat + R_R, ohm.
-    pub equivalent_resistance: f32,
+    pub equivalent_resistance: N,
     /// True while the drive builds the flux at standstill (frame held).
     pub magnetizing: bool,
 }
 
 /// What a speed observer gives the cascade.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct SpeedEstimate {
+pub struct SpeedEstimate<N = f32> {
     /// Omega_hat, rad/s mechanical.
-    pub speed: f32,
+    pub speed: N,
     /// T_L_hat, N m (0 for observers without a load model).
-    pub load_torque: f32,
+    pub load_torque: N,
     /// The observer's estimate of i_sq, A (the measured i_sq for observers without one).
-    pub current: f32,
+    pub current: N,
 }
 
 /// The seam for the speed estimator of the cascade: the paper's reduced-order observer
 /// ([`ReducedOrderObserver`]) and the full-order adaptive baseline
 /// ([`crate::full_order::FullOrder`]) both implement it, and [`crate::Drive`] takes one
 /// as a type parameter (zero cost in the interrupt: static dispatch, inlined).
-pub trait SpeedObserver {
-    /// One step. `design` is the drive's design (an observer may read its own part of
-    /// it, as the reduced-order observer reads [`crate::DriveDesign::observer`]).
-    fn update(&mut self, design: &crate::DriveDesign, x: &SpeedObserverInputs) -> SpeedEstimate;
+pub trait SpeedObserver<N: Num = f32> {
+    /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
+    /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).
+    fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
     /// Back to the initial state (a start command).
     fn reset(&mut self);
-    /// Called when magnetizing ends, with the measured i_sq, A: the rotor is at rest.
-    fn start_running(&mut self, i_sq: f32);
+    /// Called when magnetizing ends, with the measured i_sq: the rotor is at rest.
+    fn start_running(&mut self, i_sq: N);
     /// The last estimate.
-    fn estimate(&self) -> SpeedEstimate;
+    fn estimate(&self) -> SpeedEstimate<N>;
 }
 
-impl SpeedObserver for ReducedOrderObserver {
+impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
     /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
     /// section 4).
     #[inline(always)]
-    fn update(&mut self, design: &crate::DriveDesign, x: &SpeedObserverInputs) -> SpeedEstimate {
+    fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N> {
         if !x.magnetizing {
             ReducedOrderObserver::update(
                 self,
-                &design.observer,
+                &coeffs.observer,
                 &ObserverInputs {
                     i_sq: x.i_dq.q,
                     i_sd: x.i_dq.d,
@@ -389,11 +409,11 @@ impl SpeedObserver for ReducedOrderObserver {
         *self = Self::new();
     }
     #[inline(always)]
-    fn start_running(&mut self, i_sq: f32) {
-        ReducedOrderObserver::reset(self, i_sq, 0.0, 0.0);
+    fn start_running(&mut self, i_sq: N) {
+        ReducedOrderObserver::reset(self, i_sq, N::ZERO, N::ZERO);
     }
     #[inline(always)]
-    fn estimate(&self) -> SpeedEstimate {
+    fn estimate(&self) -> SpeedEstimate<N> {
         SpeedEstimate {
             speed: self.speed_estimate,
             load_torque: self.load_torque_estimate,
@@ -450,7 +470,7 @@ mod tests {
             // the voltage that holds di_sq/dt = 0 in eq. (9b)
             let v = equivalent_resistance * i_sq + sl * ws * i_sd + 2.0 * lambda * w;
             obs.update(
-                &c,
+                &c.coeffs,
                 &ObserverInputs {
                     i_sq,
                     i_sd,
@@ -554,7 +574,7 @@ mod tests {
             obs.reset(i_sq, speed + e0, load + t0);
             let u = ObserverInputs { i_sq, i_sd, stator_frequency: ws, v_sq: v, rotor_flux: lambda,
                 inv_rotor_flux: 1.0 / lambda, equivalent_resistance };
-            for _ in 0..1500 { obs.update(&c, &u); }
+            for _ in 0..1500 { obs.update(&c.coeffs, &u); }
             prop_assert!((obs.speed_estimate - speed).abs() < 0.05 * (1.0 + e0.abs() + t0.abs()));
             prop_assert!((obs.load_torque_estimate - load).abs() < 0.01 * (1.0 + e0.abs() + t0.abs()));
         }

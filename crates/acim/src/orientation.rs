@@ -13,7 +13,7 @@
 //! stability map and before/after figures: `docs/orientation-stability.md`.
 
 use crate::design::OrientationDesign;
-use crate::math::clamp;
+use crate::num::Num;
 
 /// The correction dw (rad/s electrical) added to p Omega_hat before the slip law, from
 /// the stator frequency of the last step `stator_frequency` (rad/s electrical), the Rs
@@ -23,20 +23,20 @@ use crate::math::clamp;
 /// `fade`, bounded by `limit`. The caller applies it only with a settled flux and not
 /// while magnetizing.
 #[inline(always)]
-pub fn correction(
-    d: &OrientationDesign,
-    stator_frequency: f32,
-    rs_estimate: f32,
-    current_error: f32,
-) -> f32 {
-    let w = clamp(
-        (stator_frequency.abs() - d.fade_start) * d.inv_fade_width,
-        0.0,
-        1.0,
-    );
+pub fn correction<N: Num>(
+    d: &OrientationDesign<N>,
+    stator_frequency: N,
+    rs_estimate: N,
+    current_error: N,
+) -> N {
+    let w = N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE);
     let r_d = rs_estimate * current_error;
-    let signed = if stator_frequency >= 0.0 { -r_d } else { r_d };
-    clamp(d.gain_per_flux * w * signed, -d.limit, d.limit)
+    let signed = if stator_frequency >= N::ZERO {
+        -r_d
+    } else {
+        r_d
+    };
+    N::gain_mul(d.gain_per_flux, w, signed).clamp(-d.limit, d.limit)
 }
 
 #[cfg(test)]
@@ -44,7 +44,7 @@ mod tests {
     use super::*;
     use crate::design::{DriveConfig, DriveDesign};
 
-    fn design() -> OrientationDesign {
+    fn design() -> OrientationDesign<f32> {
         DriveDesign::new(DriveConfig::paper_defaults())
             .unwrap()
             .orientation

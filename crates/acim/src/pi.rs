@@ -6,24 +6,26 @@
 //! saturated and the error pushes further into the limit (conditional integration), and
 //! the integral itself is kept inside the output limits, so it cannot wind up.
 
-use crate::math::clamp;
+use crate::num::Num;
 use crate::params::MachineParams;
 
-/// Gains and limits of one PI controller (configuration, apart from state).
+/// Gains and limits of one PI controller (configuration, apart from state). Designed in
+/// f32 SI ([`PiConfig::current_loop`], [`PiConfig::speed_loop`]); the fixed-point copy is
+/// converted from it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PiConfig {
+pub struct PiConfig<N: Num = f32> {
     /// Proportional gain (output unit per error unit).
-    pub kp: f32,
+    pub kp: N::Gain,
     /// Integral gain times the control period, ki*Ts (output unit per error unit per step).
-    pub ki_ts: f32,
+    pub ki_ts: N::Gain,
     /// Lower output limit.
-    pub out_min: f32,
+    pub out_min: N,
     /// Upper output limit.
-    pub out_max: f32,
+    pub out_max: N,
 }
 
-impl PiConfig {
+impl PiConfig<f32> {
     /// Gains from kp and ki (1/s) at period `ts` (s), with symmetric limits +/- `limit`.
     pub fn new(kp: f32, ki: f32, ts: f32, limit: f32) -> Self {
         Self {
@@ -66,23 +68,23 @@ impl PiConfig {
 /// State of one PI controller.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PiController {
-    integral: f32,
+pub struct PiController<N = f32> {
+    integral: N,
     saturated: bool,
 }
 
-impl PiController {
+impl<N: Num> PiController<N> {
     /// A controller at rest (zero integral).
-    pub const fn new() -> Self {
+    pub fn new() -> Self {
         Self {
-            integral: 0.0,
+            integral: N::ZERO,
             saturated: false,
         }
     }
 
     /// One step with the configured limits; see [`PiController::update_with_limits`].
     #[inline(always)]
-    pub fn update(&mut self, cfg: &PiConfig, error: f32, feedforward: f32) -> f32 {
+    pub fn update(&mut self, cfg: &PiConfig<N>, error: N, feedforward: N) -> N {
         self.update_with_limits(cfg, error, feedforward, cfg.out_min, cfg.out_max)
     }
 
@@ -92,26 +94,26 @@ impl PiController {
     #[inline(always)]
     pub fn update_with_limits(
         &mut self,
-        cfg: &PiConfig,
-        error: f32,
-        feedforward: f32,
-        lo: f32,
-        hi: f32,
-    ) -> f32 {
-        let p = cfg.kp * error;
-        let candidate = self.integral + cfg.ki_ts * error;
+        cfg: &PiConfig<N>,
+        error: N,
+        feedforward: N,
+        lo: N,
+        hi: N,
+    ) -> N {
+        let p = N::gain(cfg.kp, error);
+        let candidate = self.integral + N::gain(cfg.ki_ts, error);
         let unsat = feedforward + p + candidate;
         let out;
         if unsat > hi {
             out = hi;
             // integrate only if that moves the output back toward the range
-            if error < 0.0 {
+            if error < N::ZERO {
                 self.integral = candidate;
             }
             self.saturated = true;
         } else if unsat < lo {
             out = lo;
-            if error > 0.0 {
+            if error > N::ZERO {
                 self.integral = candidate;
             }
             self.saturated = true;
@@ -121,14 +123,15 @@ impl PiController {
             out = unsat;
             self.saturated = false;
         }
-        self.integral = clamp(self.integral, lo, hi);
-        clamp(out, lo, hi)
+        self.integral = self.integral.clamp(lo, hi);
+        // a NaN in f32 (all comparisons false above) is mapped into range here
+        out.into_range(lo, hi)
     }
 
     /// Bumpless reset: sets the integral so that, with zero error and feed-forward
     /// `feedforward`, the next output equals `output`.
-    pub fn reset_to(&mut self, cfg: &PiConfig, output: f32, feedforward: f32) {
-        self.integral = clamp(output - feedforward, cfg.out_min, cfg.out_max);
+    pub fn reset_to(&mut self, cfg: &PiConfig<N>, output: N, feedforward: N) {
+        self.integral = (output - feedforward).clamp(cfg.out_min, cfg.out_max);
         self.saturated = false;
     }
 
@@ -138,7 +141,7 @@ impl PiController {
     }
 
     /// Present integral term (output units).
-    pub fn integral(&self) -> f32 {
+    pub fn integral(&self) -> N {
         self.integral
     }
 

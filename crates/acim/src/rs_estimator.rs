@@ -39,35 +39,37 @@
 //! [`min_resistance`, `max_resistance`]; reaching a bound is reported so the drive can
 //! raise an "estimator out of range" fault.
 
-use crate::math::clamp;
+use crate::num::Num;
 use crate::params::MachineParams;
 
-/// Configuration of the stator-resistance estimator.
+/// Configuration of the stator-resistance estimator (designed in f32 SI; in fixed point
+/// the gains carry the per-unit base conversions and the clamps are in the finer
+/// integrator format, [`Num::Fine`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct RsEstimatorConfig {
-    /// Control period Ts, s.
-    pub ts: f32,
+pub struct RsEstimatorConfig<N: Num = f32> {
+    /// Control period Ts, s: (stator frequency x current) -> current.
+    pub ts: N::Gain,
     /// Ts/(sigma Ls), s/H.
-    pub ts_over_transient_inductance: f32,
+    pub ts_over_transient_inductance: N::Gain,
     /// Adaptation gain alpha times Ts, ohm per A per step.
-    pub alpha_ts: f32,
+    pub alpha_ts: N::Gain,
     /// Lower clamp of the estimate, ohm.
-    pub min_resistance: f32,
+    pub min_resistance: N::Fine,
     /// Upper clamp of the estimate, ohm.
-    pub max_resistance: f32,
+    pub max_resistance: N::Fine,
     /// Adapt only with |i_sd| at least this, A.
-    pub min_flux_current: f32,
+    pub min_flux_current: N,
     /// Adapt only with |i_sq| at most this, A.
-    pub max_torque_current: f32,
+    pub max_torque_current: N,
     /// Adapt only with |w_s| at most this, rad/s electrical.
-    pub max_stator_frequency: f32,
+    pub max_stator_frequency: N,
     /// Whether the resistance adapts at all (the current model of eq. 20 always runs: the
     /// drive's orientation correction uses its error).
     pub adapt: bool,
 }
 
-impl RsEstimatorConfig {
+impl RsEstimatorConfig<f32> {
     /// Design for machine `m` (nominal Rs), period `ts` (s), a convergence time constant
     /// `tau` (s) at flux current `flux_current` (A). Band: 0.5 to 2.5 times nominal Rs
     /// (copper from -50 C to well past insulation class limits; a bound reached means a
@@ -97,15 +99,15 @@ impl RsEstimatorConfig {
 /// Measured and commanded quantities for one estimator step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct RsEstimatorInputs {
+pub struct RsEstimatorInputs<N = f32> {
     /// Measured i_sd, A.
-    pub i_sd: f32,
+    pub i_sd: N,
     /// Measured i_sq, A.
-    pub i_sq: f32,
+    pub i_sq: N,
     /// Commanded v_sd over the period, V.
-    pub v_sd: f32,
+    pub v_sd: N,
     /// Stator frequency w_s (of the rotor-flux frame), rad/s electrical.
-    pub stator_frequency: f32,
+    pub stator_frequency: N,
     /// Whether the flux model reports a settled flux (within tolerance of its reference).
     pub flux_settled: bool,
 }
@@ -113,27 +115,31 @@ pub struct RsEstimatorInputs {
 /// State of the stator-resistance estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct RsEstimator {
+pub struct RsEstimator<N: Num = f32> {
+    /// The integrator of eq. (19) ([`Num::Fine`]: the estimate itself in f32).
+    resistance: N::Fine,
     /// Rs_hat, ohm.
-    pub stator_resistance_estimate: f32,
+    pub stator_resistance_estimate: N,
     /// i_sd_hat of eq. (20), A.
-    pub current_estimate: f32,
+    pub current_estimate: N,
     /// Whether the last step adapted (inside the gate).
     pub adapting: bool,
     /// i_sd_hat - i_sd at the last step, A: in steady state r_d / Rs_hat, where r_d is the
     /// d-axis voltage residual of the field-oriented model.
-    pub current_error: f32,
+    pub current_error: N,
     /// Whether the estimate sits at a clamp bound.
     pub at_bound: bool,
 }
 
-impl RsEstimator {
+impl<N: Num> RsEstimator<N> {
     /// Starts from an initial resistance `r0` (ohm) (eq. 19's R0).
-    pub const fn new(r0: f32) -> Self {
+    pub fn new(r0: N) -> Self {
+        let resistance = N::to_fine(r0);
         Self {
-            stator_resistance_estimate: r0,
-            current_estimate: 0.0,
-            current_error: 0.0,
+            resistance,
+            stator_resistance_estimate: N::from_fine(resistance),
+            current_estimate: N::ZERO,
+            current_error: N::ZERO,
             adapting: false,
             at_bound: false,
         }
@@ -141,34 +147,36 @@ impl RsEstimator {
 
     /// One step: Euler update of eq. (20) and, inside the gate, of the corrected eq. (19).
     #[inline]
-    pub fn update(&mut self, cfg: &RsEstimatorConfig, u: &RsEstimatorInputs) -> f32 {
+    pub fn update(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>) -> N {
         let rs = self.stator_resistance_estimate;
         let e = self.current_estimate - u.i_sd;
-        self.current_error = if crate::math::is_finite(e) { e } else { 0.0 };
+        self.current_error = e.finite_or(N::ZERO);
         self.adapting = cfg.adapt
             && u.flux_settled
             && u.i_sd.abs() >= cfg.min_flux_current
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;
-        if self.adapting && crate::math::is_finite(e) {
-            let step = cfg.alpha_ts * e;
-            let signed = if u.i_sd >= 0.0 { step } else { -step };
-            let next = clamp(rs + signed, cfg.min_resistance, cfg.max_resistance);
-            self.at_bound = next <= cfg.min_resistance || next >= cfg.max_resistance;
-            self.stator_resistance_estimate = next;
+        if self.adapting && e.is_finite() {
+            let (next, at_bound) = N::fine_step(
+                self.resistance,
+                cfg.alpha_ts,
+                e,
+                u.i_sd >= N::ZERO,
+                cfg.min_resistance,
+                cfg.max_resistance,
+            );
+            self.resistance = next;
+            self.at_bound = at_bound;
+            self.stator_resistance_estimate = N::from_fine(next);
         }
         // sigma Ls di_hat/dt = -Rs_hat i_hat + sigma Ls w_s i_sq + v_sd (eq. 20)
-        let di = cfg.ts_over_transient_inductance * (u.v_sd - rs * self.current_estimate)
-            + cfg.ts * u.stator_frequency * u.i_sq;
+        let di = N::gain(
+            cfg.ts_over_transient_inductance,
+            u.v_sd - rs * self.current_estimate,
+        ) + N::gain_mul(cfg.ts, u.stator_frequency, u.i_sq);
         let next_i = self.current_estimate + di;
         // keep the model finite; a bad sample resets it to the measurement
-        self.current_estimate = if crate::math::is_finite(next_i) {
-            next_i
-        } else if crate::math::is_finite(u.i_sd) {
-            u.i_sd
-        } else {
-            0.0
-        };
+        self.current_estimate = next_i.finite_or(u.i_sd.finite_or(N::ZERO));
         self.stator_resistance_estimate
     }
 }

@@ -8,8 +8,8 @@
 //! same step. The counters the decisions need live here too, so resetting the supervisor
 //! resets them all.
 
-use crate::design::{CurrentSensing, SupervisionLimits, STALL_SPEED_FRACTION};
-use crate::math::is_finite;
+use crate::design::{CurrentSensing, SupervisionLimits};
+use crate::num::Num;
 
 /// Operating state of the drive.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -81,13 +81,13 @@ pub enum CommandError {
 
 /// What the estimation stage hands the supervisor's plausibility check.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EstimatorHealth {
+pub struct EstimatorHealth<N = f32> {
     /// Omega_hat, rad/s.
-    pub speed: f32,
+    pub speed: N,
     /// T_L_hat, N m.
-    pub load_torque: f32,
+    pub load_torque: N,
     /// i_sq_hat, A.
-    pub current: f32,
+    pub current: N,
     /// Whether the Rs estimate sits at a clamp bound.
     pub rs_at_bound: bool,
 }
@@ -183,7 +183,12 @@ impl Supervisor {
     /// still fault on a non-finite or over-current sample (bus limits apply only when the
     /// drive is about to switch); otherwise check the raw samples and run.
     #[inline(always)]
-    pub fn gate(&mut self, limits: &SupervisionLimits, currents: [f32; 3], dc_bus: f32) -> Gate {
+    pub fn gate<N: Num>(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        currents: [N; 3],
+        dc_bus: N,
+    ) -> Gate {
         match self.state {
             DriveState::Fault => Gate::Off(None),
             DriveState::Idle => match check_samples(limits, currents, dc_bus) {
@@ -209,13 +214,13 @@ impl Supervisor {
     /// first), and while the speed PI is saturated it means a stall; an estimated speed
     /// beyond `max_speed` is over-speed.
     #[inline(always)]
-    pub fn plausibility(
+    pub fn plausibility<N: Num>(
         &mut self,
-        limits: &SupervisionLimits,
-        h: &EstimatorHealth,
+        limits: &SupervisionLimits<N>,
+        h: &EstimatorHealth<N>,
         speed_pi_saturated: bool,
     ) -> Option<FaultReason> {
-        if !(is_finite(h.speed) && is_finite(h.load_torque) && is_finite(h.current))
+        if !(h.speed.is_finite() && h.load_torque.is_finite() && h.current.is_finite())
             || (limits.rs_bound_faults && h.rs_at_bound)
         {
             return Some(FaultReason::EstimatorOutOfRange);
@@ -241,15 +246,15 @@ impl Supervisor {
     /// Stall: torque at its limit (speed PI saturated) while the speed estimate stays
     /// below 10 % of the reference for more than `stall_steps`.
     #[inline(always)]
-    pub fn stall(
+    pub fn stall<N: Num>(
         &mut self,
-        limits: &SupervisionLimits,
+        limits: &SupervisionLimits<N>,
         speed_pi_saturated: bool,
-        speed_estimate: f32,
-        speed_reference: f32,
+        speed_estimate: N,
+        speed_reference: N,
     ) -> Option<FaultReason> {
         let stalled = speed_pi_saturated
-            && speed_estimate.abs() < STALL_SPEED_FRACTION * speed_reference.abs();
+            && speed_estimate.abs() < limits.stall_fraction * speed_reference.abs();
         self.stall_steps = if stalled {
             self.stall_steps.saturating_add(1)
         } else {
@@ -266,10 +271,10 @@ impl Supervisor {
 /// Checks on the raw samples, before anything uses them: non-finite, over-current (the
 /// third phase derived with two shunts), bus window.
 #[inline(always)]
-pub fn check_samples(
-    limits: &SupervisionLimits,
-    currents: [f32; 3],
-    dc_bus: f32,
+pub fn check_samples<N: Num>(
+    limits: &SupervisionLimits<N>,
+    currents: [N; 3],
+    dc_bus: N,
 ) -> Option<FaultReason> {
     let [a, b, c_meas] = currents;
     let c = match limits.current_sensing {
@@ -292,14 +297,14 @@ pub fn check_samples(
 
 #[cold]
 #[inline(never)]
-fn classify_bad_samples(
-    limits: &SupervisionLimits,
-    a: f32,
-    b: f32,
-    c: f32,
-    dc_bus: f32,
+fn classify_bad_samples<N: Num>(
+    limits: &SupervisionLimits<N>,
+    a: N,
+    b: N,
+    c: N,
+    dc_bus: N,
 ) -> Option<FaultReason> {
-    if !(is_finite(a) && is_finite(b) && is_finite(c) && is_finite(dc_bus)) {
+    if !(a.is_finite() && b.is_finite() && c.is_finite() && dc_bus.is_finite()) {
         return Some(FaultReason::NonFiniteInput);
     }
     let trip = limits.overcurrent_trip;
@@ -320,7 +325,7 @@ mod tests {
     use super::*;
     use crate::design::{DriveConfig, DriveDesign};
 
-    fn limits() -> SupervisionLimits {
+    fn limits() -> SupervisionLimits<f32> {
         DriveDesign::new(DriveConfig::paper_defaults())
             .unwrap()
             .limits

@@ -26,8 +26,10 @@
 //!   by (t_d/T_pwm + V_drop/V_dc) sat(i_x/i_band): a sign function made linear within
 //!   +/- `current_band` so that it does not chatter around zero crossings.
 
+use crate::design::DriveCoeffs;
 use crate::frames::{inverse_clarke, AlphaBeta};
 use crate::math::clamp;
+use crate::num::Num;
 
 /// 1/sqrt(3): the linear limit per volt of bus.
 pub const INV_SQRT3: f32 = 0.577_350_26;
@@ -35,18 +37,18 @@ pub const INV_SQRT3: f32 = 0.577_350_26;
 /// Modulator configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SvpwmConfig {
+pub struct SvpwmConfig<N: Num = f32> {
     /// Dead time over PWM period, t_d/T_pwm (dimensionless duty).
-    pub dead_time_duty: f32,
+    pub dead_time_duty: N,
     /// Device (IGBT/diode) on-state drop, V.
-    pub device_drop: f32,
+    pub device_drop: N,
     /// 1/current_band, 1/A: slope of the linearised sign used for dead-time compensation.
-    pub inv_current_band: f32,
+    pub inv_current_band: N::Gain,
     /// Smallest bus voltage used as divisor, V.
-    pub min_bus_voltage: f32,
+    pub min_bus_voltage: N,
 }
 
-impl SvpwmConfig {
+impl SvpwmConfig<f32> {
     /// Dead time `dead_time` (s) at PWM period `pwm_period` (s) and device drop
     /// `device_drop` (V); compensation linear within +/- `current_band` (A, > 0).
     pub fn new(dead_time: f32, pwm_period: f32, device_drop: f32, current_band: f32) -> Self {
@@ -62,74 +64,74 @@ impl SvpwmConfig {
 /// Output of the modulator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Modulation {
-    /// High-side duty of phases a, b, c, each in [0, 1].
-    pub duties: [f32; 3],
-    /// The voltage vector actually produced (after any overmodulation limit), V.
-    pub voltage: AlphaBeta,
-    /// True when the command was outside the hexagon and was scaled down.
+pub struct Modulation<N = f32> {
+    /// High-side duties a, b, c in [0, 1].
+    pub duties: [N; 3],
+    /// The voltage actually produced (the command, scaled onto the hexagon if it was
+    /// outside), V.
+    pub voltage: AlphaBeta<N>,
+    /// Whether the command was outside the hexagon.
     pub saturated: bool,
 }
 
 /// Largest voltage vector magnitude in the linear range at bus `dc_bus`: V_dc/sqrt(3).
 #[inline]
-pub fn linear_limit(dc_bus: f32) -> f32 {
-    dc_bus * INV_SQRT3
+pub fn linear_limit<N: Num>(dc_bus: N) -> N {
+    dc_bus * N::INV_SQRT3
 }
 
-/// Computes the duties for voltage command `v` (V, alpha-beta), measured bus `dc_bus` (V)
-/// and measured phase currents `phase_currents` (A, for dead-time compensation).
+/// Duties for the voltage vector `v` (V, stationary frame) at bus `dc_bus` (V), with the
+/// phase currents `phase_currents` (A) for dead-time compensation. The bus is floored at
+/// `min_bus_voltage` (one reciprocal here; the drive's step uses
+/// [`modulate_with_inverse`] with the reciprocal it already has).
 #[inline]
-pub fn modulate(
-    cfg: &SvpwmConfig,
-    v: AlphaBeta,
-    dc_bus: f32,
-    phase_currents: [f32; 3],
-) -> Modulation {
+pub fn modulate<N: Num>(
+    cfg: &SvpwmConfig<N>,
+    v: AlphaBeta<N>,
+    dc_bus: N,
+    phase_currents: [N; 3],
+) -> Modulation<N> {
     let vdc = if dc_bus > cfg.min_bus_voltage {
         dc_bus
     } else {
         cfg.min_bus_voltage
     };
-    modulate_with_inverse(cfg, v, vdc, 1.0 / vdc, phase_currents)
+    modulate_with_inverse(cfg, v, vdc, vdc.recip(), phase_currents)
 }
 
-/// [`modulate`] for a caller that has already checked `dc_bus` (>= `min_bus_voltage`) and
-/// computed `inv_dc_bus` = 1/`dc_bus` (the drive shares that one division with its
-/// voltage limit).
+/// [`modulate`] with the bus already checked (> 0) and its reciprocal `inv_dc_bus` given.
 #[inline(always)]
-pub fn modulate_with_inverse(
-    cfg: &SvpwmConfig,
-    v: AlphaBeta,
-    dc_bus: f32,
-    inv_dc_bus: f32,
-    phase_currents: [f32; 3],
-) -> Modulation {
+pub fn modulate_with_inverse<N: Num>(
+    cfg: &SvpwmConfig<N>,
+    v: AlphaBeta<N>,
+    dc_bus: N,
+    inv_dc_bus: N,
+    phase_currents: [N; 3],
+) -> Modulation<N> {
     let vdc = dc_bus;
     let inv_vdc = inv_dc_bus;
     let [mut a, mut b, mut c] = inverse_clarke(v);
-    // comparisons, not f32::max/min (those call fmaxf/fminf on the M4)
     let (hi_ab, lo_ab) = if a > b { (a, b) } else { (b, a) };
     let max = if c > hi_ab { c } else { hi_ab };
     let min = if c < lo_ab { c } else { lo_ab };
     let span = max - min;
     let mut out = v;
     let mut saturated = false;
-    let mut offset = -0.5 * (max + min);
+    let mut offset = N::neg_mean(max, min);
     if span > vdc {
-        // onto the hexagon: scale every phase (and the vector) by vdc/span < 1
-        let k = vdc / span;
-        a *= k;
-        b *= k;
-        c *= k;
-        offset *= k;
-        out.alpha *= k;
-        out.beta *= k;
+        // outside the hexagon: scale onto it, angle kept
+        let k = N::ratio(vdc, span);
+        a = a * k;
+        b = b * k;
+        c = c * k;
+        offset = offset * k;
+        out.alpha = out.alpha * k;
+        out.beta = out.beta * k;
         saturated = true;
     }
     let dt = cfg.dead_time_duty + cfg.device_drop * inv_vdc;
     let s = cfg.inv_current_band;
-    let base = 0.5 + offset * inv_vdc;
+    let base = N::HALF + offset * inv_vdc;
     Modulation {
         duties: [
             phase_duty(base, a, inv_vdc, dt, s, phase_currents[0]),
@@ -141,15 +143,12 @@ pub fn modulate_with_inverse(
     }
 }
 
-/// One phase: 1/2 + (v_x + v_0)/V_dc plus the dead-time/drop compensation
-/// (t_d/T + V_drop/V_dc) sat(i_x/i_band), clamped to [0, 1].
+/// One phase: base duty plus the phase voltage over the bus plus the dead-time and
+/// device-drop compensation times the linearised current sign, clamped to [0, 1].
 #[inline(always)]
-fn phase_duty(base: f32, vx: f32, inv_vdc: f32, comp: f32, inv_band: f32, i: f32) -> f32 {
-    clamp(
-        base + vx * inv_vdc + comp * clamp(i * inv_band, -1.0, 1.0),
-        0.0,
-        1.0,
-    )
+fn phase_duty<N: Num>(base: N, vx: N, inv_vdc: N, comp: N, inv_band: N::Gain, i: N) -> N {
+    let sign = N::gain(inv_band, i).clamp(-N::ONE, N::ONE);
+    (base + vx * inv_vdc + comp * sign).clamp(N::ZERO, N::ONE)
 }
 
 /// Fraction of the linear limit V_dc/sqrt(3) the current controllers may use: 2 %
@@ -158,55 +157,56 @@ pub const VOLTAGE_MARGIN: f32 = 0.98;
 
 /// The voltage the current controllers may ask for this step.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct VoltageLimit {
+pub struct VoltageLimit<N = f32> {
     /// Largest |v_dq|, V peak.
-    pub max: f32,
+    pub max: N,
     /// 1 / `max`, 1/V.
-    pub inv_max: f32,
+    pub inv_max: N,
 }
 
 /// The seam for the PWM stage: turns an alpha-beta voltage into duties and supplies the
 /// voltage limit of the current controllers, so the two cannot disagree. Chosen by type
 /// parameter of [`crate::Drive`] (zero cost in the interrupt).
-pub trait Modulator {
+pub trait Modulator<N: Num = f32> {
     /// The largest voltage vector the current loops may command at bus `dc_bus` (V, > 0)
     /// with `inv_dc_bus` = 1/`dc_bus`.
-    fn voltage_limit(&self, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit;
+    fn voltage_limit(&self, coeffs: &DriveCoeffs<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
     /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
     /// with `phase_currents` (A) predicted for the dead-time compensation.
     fn modulate(
         &self,
-        design: &crate::DriveDesign,
-        v: AlphaBeta,
-        dc_bus: f32,
-        inv_dc_bus: f32,
-        phase_currents: [f32; 3],
-    ) -> Modulation;
+        coeffs: &DriveCoeffs<N>,
+        v: AlphaBeta<N>,
+        dc_bus: N,
+        inv_dc_bus: N,
+        phase_currents: [N; 3],
+    ) -> Modulation<N>;
 }
 
 /// Min-max (symmetrical) SVPWM with dead-time compensation: this module's [`modulate`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Svpwm;
 
-impl Modulator for Svpwm {
+impl Modulator<f32> for Svpwm {
     /// 98 % of the inscribed circle V_dc/sqrt(3) ([`VOLTAGE_MARGIN`]).
     #[inline(always)]
-    fn voltage_limit(&self, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+    fn voltage_limit(&self, _: &DriveCoeffs<f32>, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
         VoltageLimit {
             max: linear_limit(dc_bus) * VOLTAGE_MARGIN,
+            // (the coefficient is 1/(0.98/sqrt 3), folded at compile time here)
             inv_max: inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3)),
         }
     }
     #[inline(always)]
     fn modulate(
         &self,
-        design: &crate::DriveDesign,
+        coeffs: &DriveCoeffs<f32>,
         v: AlphaBeta,
         dc_bus: f32,
         inv_dc_bus: f32,
         phase_currents: [f32; 3],
     ) -> Modulation {
-        modulate_with_inverse(&design.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+        modulate_with_inverse(&coeffs.pwm, v, dc_bus, inv_dc_bus, phase_currents)
     }
 }
 

@@ -1,15 +1,15 @@
 //! # Fixed-point control path (per unit, Q7.24 in `i32`)
 //!
-//! The observer and the control step for cores without an FPU (Cortex-M0+/M3; the paper's
-//! ADMC201 coprocessor was fixed point too): Clarke/Park with a table sin/cos
-//! ([`trig`]), the PI controllers ([`pi`]), the flux model, slip law and frame angle
-//! (eq. 13, 8; [`flux`]), the reduced-order observer (eq. 12/14; [`observer`]), the
-//! stator-resistance estimator (eq. 19-20, corrected sign; [`rs_estimator`]), SVPWM with
-//! bus and dead-time compensation ([`svpwm`]) and the whole drive ([`FixedDrive`]). Each
-//! block has the structure of its f32 counterpart and takes its coefficients from the f32
-//! design (`ObserverConfig`, `PiConfig`, `FluxModelConfig`, `RsEstimatorConfig`,
-//! `SvpwmConfig`), converted once at construction, so the designs stay single-sourced.
-//! The step uses no float, no division beyond one hardware `UDIV` per reciprocal, no
+//! The control step for cores without an FPU (Cortex-M0+/M3; the paper's ADMC201
+//! coprocessor was fixed point too) is not a second copy: every block (PI, flux model and
+//! slip law, reduced-order observer, Rs estimator, SVPWM, the frame transforms) and the
+//! drive's cascade itself are written once over [`crate::num::Num`] and instantiated
+//! here with [`Q24`]. This module holds only what the arithmetic itself needs: the Q7.24
+//! type and its saturating operations, gains and reciprocal ([`q`]), the turn-fraction
+//! angle and table sin/cos ([`trig`]), the conversion of the f32 design to per unit
+//! ([`convert`]) and the fixed-point specifics of the drive (the modulator's voltage
+//! limit, Q15 duties, the SI boundary: [`drive`]). The designs stay single-sourced in
+//! f32. The step uses no float, no division beyond one hardware `UDIV` per reciprocal, no
 //! allocation and no panicking operation.
 //!
 //! ## Number format: why hand-written Q7.24
@@ -42,7 +42,7 @@
 //! | 1/lambda_r (slip law, observer) | 1/Wb | 1/(0.1 x 0.781) | 12.8 | 10x |
 //! | duty | 1 | [0, 1] | 1 | 128x |
 //!
-//! [`FixedDrive::new`] checks every configured limit, trip and reference against 2 pu
+//! [`FixedDrive::with_bases`] checks every configured limit, trip and reference against 2 pu
 //! and rejects a configuration that does not fit. Products of two signals are formed only
 //! for pairs whose product stays below 20 pu (e.g. i_sq x 1/lambda <= 1.2 x 12.8). Beyond
 //! that, every operation saturates: a fault (a shorted phase, a bad sample) cannot wrap a
@@ -60,17 +60,18 @@
 //! in `tests/fixed_point.rs` (the closed-loop paper scenarios with
 //! `drive.arithmetic = "fixed"` in the simulator).
 
+pub mod convert;
 pub mod drive;
-pub mod flux;
-pub mod observer;
-pub mod pi;
 pub mod q;
-pub mod rs_estimator;
-pub mod svpwm;
 pub mod trig;
 
 #[cfg(test)]
 mod tests;
 
-pub use drive::{FixedConfigError, FixedDrive, FixedInputs, FixedPwm, FixedTelemetry};
-pub use q::{Gain, PerUnitBases};
+pub use drive::{FixedDrive, FixedInputs, FixedPwm, FixedTelemetry};
+pub use q::{Gain, PerUnitBases, Q24};
+pub use trig::TableSinCos;
+
+/// Why a fixed-point drive configuration was rejected: the same error as the f32 drive's
+/// (a value that does not fit the per-unit bases names its field).
+pub type FixedConfigError = crate::design::ConfigError;

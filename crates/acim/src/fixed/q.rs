@@ -206,6 +206,175 @@ impl PerUnitBases {
     }
 }
 
+/// A Q7.24 signal (`value_pu * 2^24` in an `i32`) with saturating arithmetic: `+`, `-`
+/// and unary `-` saturate, `*` is [`mul`] (rounded, saturated). The cascade's fixed-point
+/// [`Num`](crate::num::Num).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(transparent)]
+pub struct Q24(pub i32);
+
+impl Q24 {
+    /// The value nearest to `x` pu (configuration and the SI boundary only).
+    pub fn from_pu(x: f32) -> Self {
+        Q24(to_q24(x))
+    }
+    /// The value in pu (telemetry and the SI boundary only).
+    pub fn to_pu(self) -> f32 {
+        from_q24(self.0)
+    }
+}
+
+impl core::ops::Add for Q24 {
+    type Output = Q24;
+    #[inline(always)]
+    fn add(self, rhs: Q24) -> Q24 {
+        Q24(self.0.saturating_add(rhs.0))
+    }
+}
+
+impl core::ops::Sub for Q24 {
+    type Output = Q24;
+    #[inline(always)]
+    fn sub(self, rhs: Q24) -> Q24 {
+        Q24(self.0.saturating_sub(rhs.0))
+    }
+}
+
+impl core::ops::Neg for Q24 {
+    type Output = Q24;
+    #[inline(always)]
+    fn neg(self) -> Q24 {
+        Q24(0i32.saturating_sub(self.0))
+    }
+}
+
+impl core::ops::Mul for Q24 {
+    type Output = Q24;
+    #[inline(always)]
+    fn mul(self, rhs: Q24) -> Q24 {
+        Q24(mul(self.0, rhs.0))
+    }
+}
+
+/// Extra fraction bits of the Rs integrator (Q1.30 in an `i32`).
+const RS_EXTRA_BITS: u32 = 6;
+
+impl crate::num::Num for Q24 {
+    type Gain = Gain;
+    type Angle = super::trig::Angle;
+    /// Angle counts of the voltage lead per frequency pu.
+    type Lead = Gain;
+    /// Q1.30: six bits finer than the signal, so that alpha Ts e (1e-6 pu per step at a
+    /// settled residual) still moves it.
+    type Fine = i32;
+    type Bases = PerUnitBases;
+
+    const ZERO: Self = Q24(0);
+    const ONE: Self = Q24(ONE);
+    const HALF: Self = Q24(HALF);
+    const INV_SQRT3: Self = Q24(9_686_330);
+    const SQRT3_2: Self = Q24(14_529_495);
+    const ONE_THIRD: Self = Q24(5_592_405);
+    const SQRT3: Self = Q24(29_058_991);
+
+    #[inline(always)]
+    fn gain(g: Gain, x: Q24) -> Q24 {
+        Q24(g.apply(x.0))
+    }
+    #[inline(always)]
+    fn gain_mul(g: Gain, a: Q24, b: Q24) -> Q24 {
+        Q24(g.apply(mul(a.0, b.0)))
+    }
+    #[inline(always)]
+    fn abs(self) -> Q24 {
+        Q24(self.0.saturating_abs())
+    }
+    #[inline(always)]
+    fn half(self) -> Q24 {
+        Q24(self.0 >> 1)
+    }
+    #[inline(always)]
+    fn twice(self) -> Q24 {
+        Q24(self.0.saturating_add(self.0))
+    }
+    #[inline(always)]
+    fn clamp(self, lo: Q24, hi: Q24) -> Q24 {
+        Q24(clamp(self.0, lo.0, hi.0))
+    }
+    #[inline(always)]
+    fn into_range(self, _lo: Q24, _hi: Q24) -> Q24 {
+        self
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn recip(self) -> Q24 {
+        Q24(reciprocal(self.0))
+    }
+    #[inline(always)]
+    fn ratio(num: Q24, den: Q24) -> Q24 {
+        Q24(mul(num.0, reciprocal(den.0)))
+    }
+    #[inline(always)]
+    fn neg_mean(a: Q24, b: Q24) -> Q24 {
+        // each halved first: no overflow
+        Q24(0i32.saturating_sub((a.0 >> 1).saturating_add(b.0 >> 1)))
+    }
+    #[inline(always)]
+    fn advance(angle: u32, frequency: Q24, per_step: Gain) -> u32 {
+        // a signed increment added modulo one turn: the intended wrap of an angle
+        angle.wrapping_add(per_step.apply(frequency.0) as u32)
+    }
+    #[inline(always)]
+    fn rotate_ahead<S: crate::frames::SinCos<Q24>>(
+        sincos: &mut S,
+        _sc: crate::frames::SinCosValue<Q24>,
+        theta: u32,
+        frequency: Q24,
+        lead: Gain,
+    ) -> crate::frames::SinCosValue<Q24> {
+        // the exact rotation from the table (no series needed)
+        sincos.sin_cos(theta.wrapping_add(lead.apply(frequency.0) as u32))
+    }
+    fn angle_to_rad(a: u32) -> f32 {
+        super::trig::angle_to_rad(a)
+    }
+    fn coeffs(
+        design: &crate::design::DriveDesign,
+        bases: &PerUnitBases,
+    ) -> Result<crate::design::DriveCoeffs<Q24>, crate::design::ConfigError> {
+        super::convert::coeffs(design, bases)
+    }
+    #[inline(always)]
+    fn sum_times(a: Q24, b: Q24, x: Q24) -> Q24 {
+        (a + b) * x
+    }
+    #[inline(always)]
+    fn to_fine(x: Q24) -> i32 {
+        let r0 = clamp(x.0, -(1 << 25), (1 << 25) - 1);
+        r0 << RS_EXTRA_BITS
+    }
+    #[inline(always)]
+    fn from_fine(x: i32) -> Q24 {
+        // rounded (|x| < 2^31 - 2^5: no overflow)
+        Q24(x.saturating_add(1 << (RS_EXTRA_BITS - 1)) >> RS_EXTRA_BITS)
+    }
+    #[inline(always)]
+    fn fine_step(acc: i32, g: Gain, e: Q24, positive: bool, lo: i32, hi: i32) -> (i32, bool) {
+        let step = g.apply(e.0);
+        let signed = if positive {
+            step
+        } else {
+            0i32.saturating_sub(step)
+        };
+        let next = clamp(acc.saturating_add(signed), lo, hi);
+        (next, next <= lo || next >= hi)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

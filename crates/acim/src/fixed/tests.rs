@@ -27,19 +27,13 @@
 
 extern crate std;
 
-use super::flux::{FixedFluxConfig, FixedFluxModel};
-use super::observer::{FixedObserver, FixedObserverConfig, FixedObserverInputs};
-use super::pi::{FixedPiConfig, FixedPiController};
-use super::q::{from_q24, to_q24};
-use super::rs_estimator::{FixedRsConfig, FixedRsEstimator, FixedRsInputs};
-use super::svpwm::{modulate, FixedSvpwmConfig};
-use super::trig::{
-    angle_from_rad, angle_to_rad, clarke_three, clarke_two, inverse_clarke, inverse_park, park,
-    sin_cos, FixedAlphaBeta, FixedDq,
-};
+use super::convert;
+use super::q::{to_q24, Q24};
+use super::trig::{angle_from_rad, angle_to_rad, sin_cos};
 use super::PerUnitBases;
 use crate::flux::{FluxModel, FluxModelConfig};
 use crate::frames::{self, AlphaBeta, Dq, FastSinCos};
+use crate::num::Num;
 use crate::observer::{ObserverConfig, ObserverInputs, ObserverPoles, ReducedOrderObserver};
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
@@ -54,12 +48,16 @@ fn m() -> MachineParams {
     MachineParams::paper_table1()
 }
 
-fn q(x: f32, base: f32) -> i32 {
-    to_q24(x / base)
+fn q(x: f32, base: f32) -> Q24 {
+    Q24(to_q24(x / base))
 }
 
-fn si(x: i32, base: f32) -> f32 {
-    from_q24(x) * base
+fn pu(x: Q24) -> f32 {
+    x.to_pu()
+}
+
+fn si(x: Q24, base: f32) -> f32 {
+    x.to_pu() * base
 }
 
 /// Angle difference wrapped to (-pi, pi], rad.
@@ -95,7 +93,10 @@ fn sin_cos_accuracy() {
         let a = (k * 4096 + 1234) as u32;
         let sc = sin_cos(a);
         let th = a as f64 * core::f64::consts::TAU / 4_294_967_296.0;
-        let (s, c) = (sc.sin as f64 / 16_777_216.0, sc.cos as f64 / 16_777_216.0);
+        let (s, c) = (
+            sc.sin.0 as f64 / 16_777_216.0,
+            sc.cos.0 as f64 / 16_777_216.0,
+        );
         worst = worst.max((s - th.sin()).abs()).max((c - th.cos()).abs());
         worst_norm = worst_norm.max((s * s + c * c - 1.0).abs());
     }
@@ -109,7 +110,7 @@ fn sin_cos_accuracy() {
         (3 << 30, -(1 << 24), 0),
     ] {
         let v = sin_cos(a);
-        assert_eq!((v.sin, v.cos), (s, c), "{a:#x}");
+        assert_eq!((v.sin.0, v.cos.0), (s, c), "{a:#x}");
     }
     assert!((angle_to_rad(angle_from_rad(3.0)) - 3.0).abs() < 1e-6);
     assert!((angle_to_rad(angle_from_rad(-3.0)) + 3.0).abs() < 1e-6);
@@ -127,15 +128,15 @@ proptest! {
         let sc32 = FastSinCos::eval(th);
         let scq = sin_cos(angle_from_rad(th));
         let two = frames::park(frames::clarke_two(ia, ib), sc32);
-        let twoq = park(clarke_two(q(ia, B.current), q(ib, B.current)), scq);
+        let twoq = frames::park(frames::clarke_two(q(ia, B.current), q(ib, B.current)), scq);
         let three = frames::park(frames::clarke_three(ia, ib, ic), sc32);
-        let threeq = park(
-            clarke_three(q(ia, B.current), q(ib, B.current), q(ic, B.current)),
+        let threeq = frames::park(
+            frames::clarke_three(q(ia, B.current), q(ib, B.current), q(ic, B.current)),
             scq,
         );
         for (f, x) in [(two, twoq), (three, threeq)] {
-            prop_assert!((f.d / B.current - from_q24(x.d)).abs() < 2e-5, "{f:?} {x:?}");
-            prop_assert!((f.q / B.current - from_q24(x.q)).abs() < 2e-5, "{f:?} {x:?}");
+            prop_assert!((f.d / B.current - pu(x.d)).abs() < 2e-5, "{f:?} {x:?}");
+            prop_assert!((f.q / B.current - pu(x.q)).abs() < 2e-5, "{f:?} {x:?}");
         }
     }
 
@@ -147,12 +148,12 @@ proptest! {
         let sc32 = FastSinCos::eval(th);
         let scq = sin_cos(angle_from_rad(th));
         let f = frames::inverse_clarke(frames::inverse_park(Dq { d: vd, q: vq }, sc32));
-        let x = inverse_clarke(inverse_park(
-            FixedDq { d: q(vd, B.voltage), q: q(vq, B.voltage) },
+        let x = frames::inverse_clarke(frames::inverse_park(
+            Dq { d: q(vd, B.voltage), q: q(vq, B.voltage) },
             scq,
         ));
         for k in 0..3 {
-            prop_assert!((f[k] / B.voltage - from_q24(x[k])).abs() < 2e-5, "{f:?} {x:?}");
+            prop_assert!((f[k] / B.voltage - pu(x[k])).abs() < 2e-5, "{f:?} {x:?}");
         }
     }
 
@@ -171,8 +172,8 @@ proptest! {
         let spd = PiConfig::speed_loop(&m, m.rotor_flux_for(1.5), speed_bw, TS, 4.42);
         // (design, error base, output base, error scale in SI)
         for (c, eb, ob, scale) in [(cur, B.current, B.voltage, 2.0f32), (spd, B.speed, B.current, 50.0)] {
-            let cq = FixedPiConfig::from_f32(&c, eb, ob).unwrap();
-            let (mut pf, mut pq) = (PiController::new(), FixedPiController::new());
+            let cq = convert::pi(&c, eb, ob).unwrap();
+            let (mut pf, mut pq) = (PiController::new(), PiController::<Q24>::new());
             let (lo, hi) = (-lim * ob, lim * ob);
             for (k, e) in errors.iter().enumerate() {
                 let e = e * scale;
@@ -180,9 +181,9 @@ proptest! {
                     (pf.update_with_limits(&c, e, ff * ob, lo, hi),
                      pq.update_with_limits(&cq, q(e, eb), q(ff * ob, ob), q(lo, ob), q(hi, ob)))
                 } else {
-                    (pf.update(&c, e, 0.0), pq.update(&cq, q(e, eb), 0))
+                    (pf.update(&c, e, 0.0), pq.update(&cq, q(e, eb), Q24(0)))
                 };
-                prop_assert!((uf / ob - from_q24(uq)).abs() < 1e-5, "step {k}: {uf} vs {}", si(uq, ob));
+                prop_assert!((uf / ob - pu(uq)).abs() < 1e-5, "step {k}: {uf} vs {}", si(uq, ob));
                 prop_assert_eq!(pf.saturated(), pq.saturated());
             }
         }
@@ -198,8 +199,8 @@ proptest! {
         let m = m();
         let nominal = m.rotor_flux_for(1.5);
         let cf = FluxModelConfig::new(&m, TS, nominal);
-        let cq = FixedFluxConfig::from_f32(&cf, &B).unwrap();
-        let (mut f, mut x) = (FluxModel::new(), FixedFluxModel::new());
+        let cq = convert::flux(&cf, &B).unwrap();
+        let (mut f, mut x) = (FluxModel::new(), FluxModel::<Q24>::new());
         let w_elec = 2.0 * rpm * crate::math::RPM_TO_RAD_S;
         // the f32 angle itself rounds to its ulp at pi (2.4e-7 rad) every step; both are
         // compared with the f64 sum of the f32 model's w_s Ts
@@ -211,9 +212,9 @@ proptest! {
             let hold = k < 1000;
             f.update(&cf, d, qq, w_elec, hold);
             x.update(&cq, q(d, B.current), q(qq, B.current), q(w_elec, B.frequency), hold);
-            prop_assert!((f.rotor_flux / B.flux - from_q24(x.rotor_flux)).abs() < 2e-5,
+            prop_assert!((f.rotor_flux / B.flux - pu(x.rotor_flux)).abs() < 2e-5,
                 "step {k}: flux {} vs {}", f.rotor_flux, si(x.rotor_flux, B.flux));
-            prop_assert!((f.stator_frequency / B.frequency - from_q24(x.stator_frequency)).abs() < 1e-4,
+            prop_assert!((f.stator_frequency / B.frequency - pu(x.stator_frequency)).abs() < 1e-4,
                 "step {k}: w_s {} vs {}", f.stator_frequency, si(x.stator_frequency, B.frequency));
             angle_ref += f.stator_frequency as f64 * TS as f64;
             let da = wrapped_f64(angle_ref - angle_to_rad(x.angle) as f64);
@@ -234,7 +235,7 @@ proptest! {
     ) {
         let m = m();
         let c = ObserverConfig::new(&m, ObserverPoles::DEFAULT, TS).unwrap();
-        let cq = FixedObserverConfig::from_f32(&c, &B).unwrap();
+        let cq = convert::observer(&c, &B).unwrap();
         let lambda = flux_frac * m.rotor_flux_for(1.5);
         let rseq = m.stator_resistance() * rs_scale + m.referred_rotor_resistance();
         let speed = rpm * crate::math::RPM_TO_RAD_S;
@@ -242,24 +243,24 @@ proptest! {
         let load = m.torque_constant(lambda) * i_sq - m.viscous_friction() * speed;
         let ws = 2.0 * speed + m.referred_rotor_resistance() * i_sq / lambda;
         let v = rseq * i_sq + m.transient_inductance() * ws * i_sd + 2.0 * lambda * speed;
-        let (mut f, mut x) = (ReducedOrderObserver::new(), FixedObserver::new());
+        let (mut f, mut x) = (ReducedOrderObserver::new(), ReducedOrderObserver::<Q24>::new());
         f.reset(i_sq, speed + e0, load + t0);
         x.reset(q(i_sq, B.current), q(speed + e0, B.speed), q(load + t0, B.torque));
         let inv = 1.0 / lambda;
         let mut worst = [0.0f32; 3];
         for k in 0..2000usize {
             let i_meas = i_sq + noise[k % 32];
-            f.update(&c, &ObserverInputs { i_sq: i_meas, i_sd, stator_frequency: ws, v_sq: v,
+            f.update(&c.coeffs, &ObserverInputs { i_sq: i_meas, i_sd, stator_frequency: ws, v_sq: v,
                 rotor_flux: lambda, inv_rotor_flux: inv, equivalent_resistance: rseq });
-            x.update(&cq, &FixedObserverInputs {
+            x.update(&cq, &ObserverInputs {
                 i_sq: q(i_meas, B.current), i_sd: q(i_sd, B.current),
                 stator_frequency: q(ws, B.frequency), v_sq: q(v, B.voltage),
-                rotor_flux: q(lambda, B.flux), inv_rotor_flux: to_q24(inv * B.flux),
+                rotor_flux: q(lambda, B.flux), inv_rotor_flux: Q24(to_q24(inv * B.flux)),
                 equivalent_resistance: q(rseq, B.resistance()) });
             let d = [
-                (f.current_estimate / B.current - from_q24(x.current_estimate)).abs(),
-                (f.speed_estimate / B.speed - from_q24(x.speed_estimate)).abs(),
-                (f.load_torque_estimate / B.torque - from_q24(x.load_torque_estimate)).abs(),
+                (f.current_estimate / B.current - pu(x.current_estimate)).abs(),
+                (f.speed_estimate / B.speed - pu(x.speed_estimate)).abs(),
+                (f.load_torque_estimate / B.torque - pu(x.load_torque_estimate)).abs(),
             ];
             for j in 0..3 { worst[j] = worst[j].max(d[j]); }
         }
@@ -275,18 +276,18 @@ proptest! {
     ) {
         let m = m();
         let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
-        let cq = FixedRsConfig::from_f32(&c, &B).unwrap();
+        let cq = convert::rs_estimator(&c, &B).unwrap();
         let v_sd = rs_true * i_sd - m.transient_inductance() * ws * i_sq;
-        let (mut f, mut x) = (RsEstimator::new(r0), FixedRsEstimator::new(q(r0, B.resistance())));
+        let (mut f, mut x) = (RsEstimator::new(r0), RsEstimator::<Q24>::new(q(r0, B.resistance())));
         for k in 0..5000usize {
             let rf = f.update(&c, &RsEstimatorInputs { i_sd, i_sq, v_sd, stator_frequency: ws,
                 flux_settled: settled });
-            let rq = x.update(&cq, &FixedRsInputs { i_sd: q(i_sd, B.current), i_sq: q(i_sq, B.current),
+            let rq = x.update(&cq, &RsEstimatorInputs { i_sd: q(i_sd, B.current), i_sq: q(i_sq, B.current),
                 v_sd: q(v_sd, B.voltage), stator_frequency: q(ws, B.frequency),
                 flux_settled: settled });
-            prop_assert!((rf / B.resistance() - from_q24(rq)).abs() < 1e-4,
+            prop_assert!((rf / B.resistance() - pu(rq)).abs() < 1e-4,
                 "step {k}: {rf} vs {}", si(rq, B.resistance()));
-            prop_assert!((f.current_estimate / B.current - from_q24(x.current_estimate)).abs() < 2e-5,
+            prop_assert!((f.current_estimate / B.current - pu(x.current_estimate)).abs() < 2e-5,
                 "step {k}: {} vs {}", f.current_estimate, si(x.current_estimate, B.current));
             prop_assert_eq!(f.adapting, x.adapting);
         }
@@ -300,19 +301,19 @@ proptest! {
         ia in -0.2f32..0.2, ib in -8.0f32..8.0,
     ) {
         let c = SvpwmConfig::new(1.5e-6, TS, 1.0, 0.05);
-        let cq = FixedSvpwmConfig::from_f32(&c, &B).unwrap();
+        let cq = convert::svpwm(&c, &B).unwrap();
         let lim = svpwm::linear_limit(vdc);
         let v = AlphaBeta { alpha: mag * lim * ang.cos(), beta: mag * lim * ang.sin() };
         let cur = [ia, ib, -ia - ib];
         let f = svpwm::modulate(&c, v, vdc, cur);
-        let vq = FixedAlphaBeta { alpha: q(v.alpha, B.voltage), beta: q(v.beta, B.voltage) };
+        let vq = AlphaBeta { alpha: q(v.alpha, B.voltage), beta: q(v.beta, B.voltage) };
         let bus = q(vdc, B.voltage);
-        let x = modulate(&cq, vq, bus, super::q::reciprocal(bus),
+        let x = svpwm::modulate_with_inverse(&cq, vq, bus, bus.recip(),
             [q(cur[0], B.current), q(cur[1], B.current), q(cur[2], B.current)]);
         prop_assert_eq!(f.saturated, x.saturated);
         for k in 0..3 {
-            prop_assert!((f.duties[k] - from_q24(x.duties[k])).abs() < 2e-5,
-                "{:?} vs {:?}", f.duties, x.duties.map(from_q24));
+            prop_assert!((f.duties[k] - pu(x.duties[k])).abs() < 2e-5,
+                "{:?} vs {:?}", f.duties, x.duties.map(pu));
         }
     }
 }

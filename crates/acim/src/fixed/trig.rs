@@ -18,7 +18,8 @@
 //! three quarters; cos(theta) = sin(theta + pi/2). About 20 instructions per value, no
 //! multiply beyond the interpolation, 1 KiB of flash.
 
-use super::q::{mul, FRAC_BITS};
+use super::q::{FRAC_BITS, Q24};
+use crate::frames::{SinCos, SinCosValue};
 
 /// Frame angle: fraction of one electrical turn, 2^32 counts per turn (wraps by design).
 pub type Angle = u32;
@@ -72,16 +73,6 @@ const fn build_table() -> [i32; 257] {
 /// sin over the first quarter turn, 257 points, Q7.24.
 static QUARTER_SINE: [i32; 257] = build_table();
 
-/// sin and cos of one angle, Q7.24.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FixedSinCos {
-    /// sin(theta), Q7.24.
-    pub sin: i32,
-    /// cos(theta), Q7.24.
-    pub cos: i32,
-}
-
 /// sin of a turn-fraction angle, Q7.24 (see the module docs for the accuracy).
 #[inline]
 pub fn sin(a: Angle) -> i32 {
@@ -112,90 +103,22 @@ pub fn sin(a: Angle) -> i32 {
     }
 }
 
-/// sin and cos of a turn-fraction angle (cos = sin a quarter turn ahead).
+/// sin and cos of `a` (Q7.24) from the table.
 #[inline]
-pub fn sin_cos(a: Angle) -> FixedSinCos {
-    FixedSinCos {
-        sin: sin(a),
-        cos: sin(a.wrapping_add(1 << 30)),
+pub fn sin_cos(a: Angle) -> SinCosValue<Q24> {
+    SinCosValue {
+        sin: Q24(sin(a)),
+        cos: Q24(sin(a.wrapping_add(1 << 30))),
     }
 }
 
-/// A stationary-frame vector, Q7.24 pu (current or voltage base).
+/// The table sin/cos as the cascade's [`SinCos`] for Q7.24.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FixedAlphaBeta {
-    /// alpha component.
-    pub alpha: i32,
-    /// beta component.
-    pub beta: i32,
-}
+pub struct TableSinCos;
 
-/// A rotating-frame vector, Q7.24 pu (current or voltage base).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FixedDq {
-    /// d (flux) axis component.
-    pub d: i32,
-    /// q (torque) axis component.
-    pub q: i32,
-}
-
-/// 1/sqrt(3) in Q7.24.
-const INV_SQRT3: i32 = 9_686_330;
-/// sqrt(3)/2 in Q7.24.
-const SQRT3_2: i32 = 14_529_495;
-/// 1/3 in Q7.24.
-const ONE_THIRD: i32 = 5_592_405;
-
-/// Clarke from phases a and b with a + b + c = 0: alpha = a, beta = (a + 2b)/sqrt(3).
-#[inline]
-pub fn clarke_two(a: i32, b: i32) -> FixedAlphaBeta {
-    FixedAlphaBeta {
-        alpha: a,
-        beta: mul(a.saturating_add(b).saturating_add(b), INV_SQRT3),
-    }
-}
-
-/// Clarke from three phases, zero sequence rejected: alpha = (2a - b - c)/3,
-/// beta = (b - c)/sqrt(3).
-#[inline]
-pub fn clarke_three(a: i32, b: i32, c: i32) -> FixedAlphaBeta {
-    FixedAlphaBeta {
-        alpha: mul(
-            a.saturating_add(a).saturating_sub(b).saturating_sub(c),
-            ONE_THIRD,
-        ),
-        beta: mul(b.saturating_sub(c), INV_SQRT3),
-    }
-}
-
-/// Inverse Clarke: phases (a, b, c) of an alpha-beta vector, zero-sequence free.
-#[inline]
-pub fn inverse_clarke(v: FixedAlphaBeta) -> [i32; 3] {
-    let half_alpha = v.alpha >> 1;
-    let k = mul(v.beta, SQRT3_2);
-    [
-        v.alpha,
-        k.saturating_sub(half_alpha),
-        0i32.saturating_sub(half_alpha).saturating_sub(k),
-    ]
-}
-
-/// Park: d = alpha cos + beta sin, q = -alpha sin + beta cos (rotation by -theta).
-#[inline]
-pub fn park(v: FixedAlphaBeta, sc: FixedSinCos) -> FixedDq {
-    FixedDq {
-        d: mul(v.alpha, sc.cos).saturating_add(mul(v.beta, sc.sin)),
-        q: mul(v.beta, sc.cos).saturating_sub(mul(v.alpha, sc.sin)),
-    }
-}
-
-/// Inverse Park: alpha = d cos - q sin, beta = d sin + q cos.
-#[inline]
-pub fn inverse_park(v: FixedDq, sc: FixedSinCos) -> FixedAlphaBeta {
-    FixedAlphaBeta {
-        alpha: mul(v.d, sc.cos).saturating_sub(mul(v.q, sc.sin)),
-        beta: mul(v.d, sc.sin).saturating_add(mul(v.q, sc.cos)),
+impl SinCos<Q24> for TableSinCos {
+    #[inline(always)]
+    fn sin_cos(&mut self, theta: Angle) -> SinCosValue<Q24> {
+        sin_cos(theta)
     }
 }

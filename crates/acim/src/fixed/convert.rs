@@ -1,0 +1,248 @@
+//! The f32 SI design converted to Q7.24 per unit: every coefficient of the cascade
+//! ([`DriveCoeffs<Q24>`]) from the one [`DriveDesign`], with range checks.
+//!
+//! The designs stay single-sourced in f32 (`PiConfig::current_loop`, `ObserverConfig::new`,
+//! `FluxModelConfig::new`, `RsEstimatorConfig::new`, `SvpwmConfig::new` and
+//! [`DriveDesign::new`]); here each coefficient is only rescaled by its per-unit bases.
+//! Gains ([`Gain`]) carry the base factors of their input and output; limits and
+//! references must fit 2 pu (64x below saturation, module docs) or the conversion fails
+//! naming the quantity.
+
+use super::q::{to_q24, Gain, Q24};
+use super::trig::COUNTS_PER_RAD;
+use super::PerUnitBases;
+use crate::design::{
+    ConfigError, DriveCoeffs, DriveDesign, MagnetizingDesign, OrientationDesign, SupervisionLimits,
+    VfDesign,
+};
+use crate::flux::FluxModelConfig;
+use crate::math::is_finite;
+use crate::observer::{ObserverCoeffs, ObserverConfig};
+use crate::pi::PiConfig;
+use crate::rs_estimator::RsEstimatorConfig;
+use crate::svpwm::SvpwmConfig;
+
+/// Largest |signal| in pu the configuration may ask for (limits, trips, references): 2 pu
+/// leaves 64x before Q7.24 saturates (module docs, headroom).
+const MAX_CONFIGURED_PU: f32 = 2.0;
+
+/// Extra fraction bits of the Rs integrator ([`crate::num::Num::Fine`], Q1.30).
+const RS_EXTRA: f32 = 64.0;
+
+fn not_representable(field: &'static str) -> ConfigError {
+    ConfigError::Invalid {
+        field,
+        rule: "does not fit the per-unit bases (above 2 pu, or a gain beyond 2^30)",
+    }
+}
+
+/// `x / base` in Q7.24 if |x/base| <= 2 pu.
+fn pu(x: f32, base: f32, field: &'static str) -> Result<Q24, ConfigError> {
+    let v = x / base;
+    if is_finite(v) && v.abs() <= MAX_CONFIGURED_PU {
+        Ok(Q24(to_q24(v)))
+    } else {
+        Err(not_representable(field))
+    }
+}
+
+fn gain(x: f32, field: &'static str) -> Result<Gain, ConfigError> {
+    Gain::from_f32(x).ok_or(not_representable(field))
+}
+
+/// Gain from a Q7.24 frequency (pu) to angle counts for an angle of `rad_per_pu` radians
+/// per 1.0 pu.
+pub(crate) fn angle_gain(rad_per_pu: f32) -> Option<Gain> {
+    Gain::from_f32(rad_per_pu * COUNTS_PER_RAD / (1u32 << super::q::FRAC_BITS) as f32)
+}
+
+/// A PI designed in SI with the error's base `error_base` and the output's base
+/// `output_base`. `None` if a gain is not representable.
+pub fn pi(cfg: &PiConfig, error_base: f32, output_base: f32) -> Option<PiConfig<Q24>> {
+    let k = error_base / output_base;
+    Some(PiConfig {
+        kp: Gain::from_f32(cfg.kp * k)?,
+        ki_ts: Gain::from_f32(cfg.ki_ts * k)?,
+        out_min: Q24(to_q24(cfg.out_min / output_base)),
+        out_max: Q24(to_q24(cfg.out_max / output_base)),
+    })
+}
+
+/// The flux model and slip law.
+pub fn flux(cfg: &FluxModelConfig, b: &PerUnitBases) -> Option<FluxModelConfig<Q24>> {
+    Some(FluxModelConfig {
+        blend: Gain::from_f32(cfg.blend)?,
+        magnetizing_inductance: Gain::from_f32(cfg.magnetizing_inductance * b.current / b.flux)?,
+        slip_gain: Gain::from_f32(cfg.slip_gain * b.current / (b.flux * b.frequency))?,
+        min_flux: Q24(to_q24(cfg.min_flux / b.flux)),
+        ts: angle_gain(b.frequency * cfg.ts)?,
+    })
+}
+
+/// The observer step (eq. 12): currents of I_base, speed of Omega_base (mechanical), load
+/// of T_base, voltage of V_base, Rseq of R_base = V_base/I_base, flux of lambda_base, w_s
+/// of the electrical frequency base.
+pub fn observer(cfg: &ObserverConfig, b: &PerUnitBases) -> Option<ObserverCoeffs<Q24>> {
+    let ts = cfg.ts;
+    let g = Gain::from_f32;
+    Some(ObserverCoeffs {
+        ts_a: g(ts * cfg.a)?,
+        ts_inv_l: g(ts * cfg.inv_transient_inductance * b.voltage / b.current)?,
+        ts_p_inv_l: g(
+            ts * cfg.pole_pairs * cfg.inv_transient_inductance * b.flux * b.speed / b.current,
+        )?,
+        ts: g(ts * b.frequency)?,
+        ts_torque_per_inertia: g(ts * cfg.torque_per_inertia * b.flux * b.current / b.speed)?,
+        ts_inv_inertia: g(ts * cfg.inv_inertia * b.torque / b.speed)?,
+        ts_friction_rate: g(ts * cfg.friction_rate)?,
+        ts_g2: g(ts * cfg.g2 * b.current / (b.flux * b.speed))?,
+        ts_g3: g(ts * cfg.g3 * b.current / (b.flux * b.torque))?,
+    })
+}
+
+/// A resistance in the Rs integrator's Q1.30 (below 2 pu).
+fn to_q30(x: f32) -> Option<i32> {
+    if is_finite(x) && x.abs() < 1.99 {
+        Some(to_q24(x * RS_EXTRA))
+    } else {
+        None
+    }
+}
+
+/// The Rs estimator; its clamps in the integrator's Q1.30.
+pub fn rs_estimator(cfg: &RsEstimatorConfig, b: &PerUnitBases) -> Option<RsEstimatorConfig<Q24>> {
+    let r_base = b.resistance();
+    Some(RsEstimatorConfig {
+        ts: Gain::from_f32(cfg.ts * b.frequency)?,
+        ts_over_transient_inductance: Gain::from_f32(
+            cfg.ts_over_transient_inductance * b.voltage / b.current,
+        )?,
+        alpha_ts: Gain::from_f32(cfg.alpha_ts * b.current / r_base * RS_EXTRA)?,
+        min_resistance: to_q30(cfg.min_resistance / r_base)?,
+        max_resistance: to_q30(cfg.max_resistance / r_base)?,
+        min_flux_current: Q24(to_q24(cfg.min_flux_current / b.current)),
+        max_torque_current: Q24(to_q24(cfg.max_torque_current / b.current)),
+        max_stator_frequency: Q24(to_q24(cfg.max_stator_frequency / b.frequency)),
+        adapt: cfg.adapt,
+    })
+}
+
+/// The modulator (duties are dimensionless; voltages of V_base, currents of I_base).
+pub fn svpwm(cfg: &SvpwmConfig, b: &PerUnitBases) -> Option<SvpwmConfig<Q24>> {
+    Some(SvpwmConfig {
+        dead_time_duty: Q24(to_q24(cfg.dead_time_duty)),
+        device_drop: Q24(to_q24(cfg.device_drop / b.voltage)),
+        inv_current_band: Gain::from_f32(cfg.inv_current_band * b.current)?,
+        min_bus_voltage: Q24(to_q24(cfg.min_bus_voltage / b.voltage)),
+    })
+}
+
+/// The whole cascade's coefficients; fails naming the first quantity that does not fit.
+pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, ConfigError> {
+    let cfg = d.config;
+    let m = cfg.machine;
+    let ts = d.ts;
+    let pp = d.pole_pairs;
+    let flux_reference = d.flux_reference;
+    // range checks: everything the drive compares against or limits to must fit
+    pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
+    pu(cfg.current_limit, b.current, "current_limit")?;
+    pu(cfg.dc_bus_max, b.voltage, "dc_bus_max")?;
+    pu(cfg.max_speed, b.speed, "max_speed")?;
+    pu(cfg.max_speed * pp * 1.25, b.frequency, "max_speed")?;
+    pu(1.2 * flux_reference, b.flux, "flux_current")?;
+    pu(
+        cfg.max_load_torque_estimate,
+        b.torque,
+        "max_load_torque_estimate",
+    )?;
+    pu(
+        m.torque_constant(flux_reference) * cfg.current_limit,
+        b.torque,
+        "current_limit",
+    )?;
+    pu(
+        2.5 * m.stator_resistance() + m.referred_rotor_resistance(),
+        b.resistance(),
+        "machine",
+    )?;
+    // the reciprocal's domain: at least 2^-6 pu
+    if cfg.dc_bus_min / b.voltage < 0.02 {
+        return Err(not_representable("dc_bus_min"));
+    }
+    if d.flux.min_flux / b.flux < 0.02 {
+        return Err(not_representable("flux_current"));
+    }
+    let missing = not_representable;
+    let pi_current = pi(&d.pi_d, b.current, b.voltage).ok_or(missing("current_bandwidth"))?;
+    Ok(DriveCoeffs {
+        pi_d: pi_current,
+        pi_q: pi_current,
+        pi_speed: pi(&d.pi_speed, b.speed, b.current).ok_or(missing("speed_bandwidth"))?,
+        flux: flux(&d.flux, b).ok_or(missing("machine"))?,
+        observer: observer(&d.observer, b).ok_or(missing("observer_poles"))?,
+        rs: rs_estimator(&d.rs, b).ok_or(missing("rs_convergence_time"))?,
+        pwm: svpwm(&d.pwm, b).ok_or(missing("dead_time_current_band"))?,
+        rs_initial: pu(cfg.rs_initial, b.resistance(), "rs_initial")?,
+        i_sd_ref: pu(d.i_sd_ref, b.current, "flux_current")?,
+        settled_flux: pu(d.settled_flux, b.flux, "flux_current")?,
+        transient_inductance: gain(
+            m.transient_inductance() * b.frequency * b.current / b.voltage,
+            "machine",
+        )?,
+        referred_rotor_resistance: pu(m.referred_rotor_resistance(), b.resistance(), "machine")?,
+        inv_rotor_time_constant: gain(b.flux / (m.rotor_time_constant() * b.voltage), "machine")?,
+        pole_pairs: gain(pp * b.speed / b.frequency, "machine")?,
+        back_emf: gain(pp * b.speed * b.flux / b.voltage, "machine")?,
+        torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "machine")?,
+        ramp_step: Q24(to_q24(d.ramp_step / b.speed)),
+        speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
+        lead: angle_gain(b.frequency * ts * cfg.delay_periods).ok_or(missing("delay_periods"))?,
+        voltage_limit_per_inv_bus: gain(
+            1.0 / (crate::svpwm::VOLTAGE_MARGIN * crate::svpwm::INV_SQRT3),
+            "dc_bus_min",
+        )?,
+        orientation: OrientationDesign {
+            gain_per_flux: gain(
+                d.orientation.gain_per_flux * b.voltage / b.frequency,
+                "orientation_gain",
+            )?,
+            fade_start: pu(d.orientation.fade_start, b.frequency, "orientation_fade")?,
+            inv_fade_width: gain(
+                b.frequency / (cfg.orientation_fade.1 - cfg.orientation_fade.0),
+                "orientation_fade",
+            )?,
+            limit: pu(d.orientation.limit, b.frequency, "max_speed")?,
+        },
+        magnetizing: MagnetizingDesign {
+            identify_rs: d.magnetizing.identify_rs,
+            rs_timeout_steps: d.magnetizing.rs_timeout_steps,
+            rs_settle_steps: d.magnetizing.rs_settle_steps,
+            rs_settled_error: pu(d.magnetizing.rs_settled_error, b.current, "flux_current")?,
+            residual_filter: gain(d.magnetizing.residual_filter, "control_period")?,
+        },
+        limits: SupervisionLimits {
+            current_sensing: d.limits.current_sensing,
+            overcurrent_trip: pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?,
+            dc_bus_min: pu(cfg.dc_bus_min, b.voltage, "dc_bus_min")?,
+            dc_bus_max: pu(cfg.dc_bus_max, b.voltage, "dc_bus_max")?,
+            max_speed: pu(cfg.max_speed, b.speed, "max_speed")?,
+            max_load_torque: pu(
+                cfg.max_load_torque_estimate,
+                b.torque,
+                "max_load_torque_estimate",
+            )?,
+            implausible_steps: d.limits.implausible_steps,
+            stall_steps: d.limits.stall_steps,
+            stall_fraction: Q24(to_q24(d.limits.stall_fraction)),
+            rs_bound_faults: d.limits.rs_bound_faults,
+        },
+        vf: VfDesign {
+            volts_per_rad_s: gain(
+                cfg.vf.volts_per_rad_s * b.frequency / b.voltage,
+                "vf.volts_per_rad_s",
+            )?,
+            boost: pu(cfg.vf.boost, b.voltage, "vf.boost")?,
+        },
+    })
+}

@@ -1,0 +1,249 @@
+//! The arithmetic the cascade is generic over: [`f32`] in SI units and
+//! [`Q24`](crate::fixed::Q24) (saturating Q7.24 in per unit).
+//!
+//! Every block and the drive itself are written once, over [`Num`]; the two arithmetics
+//! differ only where this trait says so. The methods exist because the two arithmetics
+//! need different operations for the same equation (a gain with its own binary point, a
+//! reciprocal by Newton iteration, a turn-fraction angle, a finer integrator for Rs),
+//! and because each instantiation reproduces the hand-written code it replaced bit for
+//! bit: where the f32 code multiplied `(g a) b` and the fixed-point code `g (a b)`,
+//! [`Num::gain_mul`] keeps both. Everything here is `#[inline(always)]` and compiles to
+//! the operations the two hand-written copies had (the cycle bench checks it).
+
+use core::fmt::Debug;
+use core::ops::{Add, Mul, Neg, Sub};
+
+/// `defmt::Format` when the `defmt` feature is on (the firmware logs the generic
+/// types), nothing otherwise.
+#[cfg(feature = "defmt")]
+pub trait MaybeFormat: defmt::Format {}
+#[cfg(feature = "defmt")]
+impl<T: defmt::Format> MaybeFormat for T {}
+/// `defmt::Format` when the `defmt` feature is on (the firmware logs the generic
+/// types), nothing otherwise.
+#[cfg(not(feature = "defmt"))]
+pub trait MaybeFormat {}
+#[cfg(not(feature = "defmt"))]
+impl<T> MaybeFormat for T {}
+
+/// A number the control step computes with: plain `+ - *` (saturating in fixed point), a
+/// constant-factor type, an angle type and the few operations the arithmetics do
+/// differently.
+pub trait Num:
+    Copy
+    + Debug
+    + MaybeFormat
+    + Default
+    + PartialEq
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Neg<Output = Self>
+{
+    /// A constant factor (a design coefficient): `f32`, or a fixed-point gain with its own
+    /// binary point that also carries the per-unit base conversion.
+    type Gain: Copy + Debug + PartialEq + MaybeFormat;
+    /// The frame angle: radians in `f32`, a `u32` turn fraction in fixed point.
+    type Angle: Copy + Debug + Default + PartialEq + MaybeFormat;
+    /// What the voltage-lead rotation needs (see [`Num::rotate_ahead`]).
+    type Lead: Copy + Debug + PartialEq + MaybeFormat;
+    /// The Rs integrator's state (`f32`, or Q1.30 for six more bits than the signal).
+    type Fine: Copy + Debug + PartialEq + MaybeFormat;
+    /// Per-unit bases of this arithmetic (`()` for SI f32).
+    type Bases: Copy + Debug + PartialEq + MaybeFormat;
+
+    /// 0.
+    const ZERO: Self;
+    /// 1 (1.0 in SI, 1.0 pu).
+    const ONE: Self;
+    /// 0.5 (the neutral duty).
+    const HALF: Self;
+    /// 1/sqrt(3) (Clarke).
+    const INV_SQRT3: Self;
+    /// sqrt(3)/2 (inverse Clarke).
+    const SQRT3_2: Self;
+    /// 1/3 (three-phase Clarke).
+    const ONE_THIRD: Self;
+    /// sqrt(3) (the chord of the q-voltage limit).
+    const SQRT3: Self;
+
+    /// `g x`.
+    fn gain(g: Self::Gain, x: Self) -> Self;
+    /// `g a b`: `(g a) b` in f32, `g (a b)` in fixed point (one gain on a product).
+    fn gain_mul(g: Self::Gain, a: Self, b: Self) -> Self;
+    /// |x| (saturating).
+    fn abs(self) -> Self;
+    /// x / 2 (exact in f32; an arithmetic shift in fixed point).
+    fn half(self) -> Self;
+    /// 2 x.
+    fn twice(self) -> Self;
+    /// `self` limited to [lo, hi] (lo <= hi); NaN maps into the range.
+    fn clamp(self, lo: Self, hi: Self) -> Self;
+    /// `self` limited to [lo, hi] where only f32 can leave it (a NaN): the identity in
+    /// fixed point, whose results are in range by construction.
+    fn into_range(self, lo: Self, hi: Self) -> Self;
+    /// Whether finite (always in fixed point).
+    fn is_finite(self) -> bool;
+    /// `self` if finite, else `fallback` (the identity in fixed point).
+    #[inline(always)]
+    fn finite_or(self, fallback: Self) -> Self {
+        if self.is_finite() {
+            self
+        } else {
+            fallback
+        }
+    }
+    /// 1/x for x above the caller's guard (> 0): a division in f32, a Newton reciprocal in
+    /// fixed point.
+    fn recip(self) -> Self;
+    /// `num / den` for 0 < num < den (the overmodulation scale).
+    fn ratio(num: Self, den: Self) -> Self;
+    /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
+    fn neg_mean(a: Self, b: Self) -> Self;
+
+    /// The angle advanced by `frequency` over one period (`per_step` is Ts, or its
+    /// turn-count equivalent), wrapped to one turn.
+    fn advance(angle: Self::Angle, frequency: Self, per_step: Self::Gain) -> Self::Angle;
+    /// sin/cos at the angle the voltage acts at: `theta` (with `sc` its sin/cos) advanced by
+    /// the lead of `frequency` over `lead` (the computation and PWM delay).
+    fn rotate_ahead<S: crate::frames::SinCos<Self>>(
+        sincos: &mut S,
+        sc: crate::frames::SinCosValue<Self>,
+        theta: Self::Angle,
+        frequency: Self,
+        lead: Self::Lead,
+    ) -> crate::frames::SinCosValue<Self>;
+    /// The angle in radians (telemetry).
+    fn angle_to_rad(a: Self::Angle) -> f32;
+
+    /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
+    /// fixed point checks that every value fits its per-unit range.
+    fn coeffs(
+        design: &crate::design::DriveDesign,
+        bases: &Self::Bases,
+    ) -> Result<crate::design::DriveCoeffs<Self>, crate::design::ConfigError>;
+    /// `(a + b) x`: distributed as `a x + b x` in f32 (the order its feed-forward always
+    /// had), one product in fixed point.
+    fn sum_times(a: Self, b: Self, x: Self) -> Self;
+
+    /// The Rs integrator state holding `x`.
+    fn to_fine(x: Self) -> Self::Fine;
+    /// The signal value of an Rs integrator state (rounded).
+    fn from_fine(x: Self::Fine) -> Self;
+    /// One Rs adaptation step, eq. (19) with the corrected sign: `acc + sign * g e`,
+    /// clamped to [lo, hi]; returns the new state and whether it sits at a bound.
+    fn fine_step(
+        acc: Self::Fine,
+        g: Self::Gain,
+        e: Self,
+        positive: bool,
+        lo: Self::Fine,
+        hi: Self::Fine,
+    ) -> (Self::Fine, bool);
+}
+
+impl Num for f32 {
+    type Gain = f32;
+    type Angle = f32;
+    /// (Ts, delay in periods): the lead is w_s Ts delay.
+    type Lead = (f32, f32);
+    type Fine = f32;
+    type Bases = ();
+
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const HALF: Self = 0.5;
+    const INV_SQRT3: Self = 0.577_350_26;
+    const SQRT3_2: Self = 0.866_025_4;
+    const ONE_THIRD: Self = 1.0 / 3.0;
+    const SQRT3: Self = 1.732_050_8;
+
+    #[inline(always)]
+    fn gain(g: f32, x: f32) -> f32 {
+        g * x
+    }
+    #[inline(always)]
+    fn gain_mul(g: f32, a: f32, b: f32) -> f32 {
+        g * a * b
+    }
+    #[inline(always)]
+    fn abs(self) -> f32 {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn half(self) -> f32 {
+        0.5 * self
+    }
+    #[inline(always)]
+    fn twice(self) -> f32 {
+        2.0 * self
+    }
+    #[inline(always)]
+    fn clamp(self, lo: f32, hi: f32) -> f32 {
+        crate::math::clamp(self, lo, hi)
+    }
+    #[inline(always)]
+    fn into_range(self, lo: f32, hi: f32) -> f32 {
+        crate::math::clamp(self, lo, hi)
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        crate::math::is_finite(self)
+    }
+    #[inline(always)]
+    fn recip(self) -> f32 {
+        1.0 / self
+    }
+    #[inline(always)]
+    fn ratio(num: f32, den: f32) -> f32 {
+        num / den
+    }
+    #[inline(always)]
+    fn neg_mean(a: f32, b: f32) -> f32 {
+        -0.5 * (a + b)
+    }
+    #[inline(always)]
+    fn advance(angle: f32, frequency: f32, per_step: f32) -> f32 {
+        crate::math::wrap_angle_step(angle + frequency * per_step)
+    }
+    #[inline(always)]
+    fn rotate_ahead<S: crate::frames::SinCos<f32>>(
+        _sincos: &mut S,
+        sc: crate::frames::SinCosValue<f32>,
+        _theta: f32,
+        frequency: f32,
+        lead: (f32, f32),
+    ) -> crate::frames::SinCosValue<f32> {
+        crate::frames::small_rotation(sc, frequency * lead.0 * lead.1)
+    }
+    #[inline(always)]
+    fn angle_to_rad(a: f32) -> f32 {
+        a
+    }
+    fn coeffs(
+        design: &crate::design::DriveDesign,
+        _: &(),
+    ) -> Result<crate::design::DriveCoeffs<f32>, crate::design::ConfigError> {
+        Ok(crate::design::DriveCoeffs::si(design))
+    }
+    #[inline(always)]
+    fn sum_times(a: f32, b: f32, x: f32) -> f32 {
+        a * x + b * x
+    }
+    #[inline(always)]
+    fn to_fine(x: f32) -> f32 {
+        x
+    }
+    #[inline(always)]
+    fn from_fine(x: f32) -> f32 {
+        x
+    }
+    #[inline(always)]
+    fn fine_step(acc: f32, g: f32, e: f32, positive: bool, lo: f32, hi: f32) -> (f32, bool) {
+        let step = g * e;
+        let signed = if positive { step } else { -step };
+        let next = crate::math::clamp(acc + signed, lo, hi);
+        (next, next <= lo || next >= hi)
+    }
+}
