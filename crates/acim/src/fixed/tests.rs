@@ -158,7 +158,9 @@ proptest! {
     }
 
     /// Current and speed PIs (the drive's designs, bandwidths over a range) on random
-    /// error sequences with saturation, with varying limits: output and integral.
+    /// error sequences with saturation, with varying limits: output, integral and the
+    /// saturation flag. Holds over 200 000 cases (`PROPTEST_CASES=200000`); before the
+    /// anti-windup was made continuous, the integrals drifted 8 % apart there.
     #[test]
     fn pi_matches_f32(
         bandwidth in 200.0f32..2400.0,
@@ -177,14 +179,25 @@ proptest! {
             let (lo, hi) = (-lim * ob, lim * ob);
             for (k, e) in errors.iter().enumerate() {
                 let e = e * scale;
-                let (uf, uq) = if k % 2 == 0 {
+                let (uf, uq, unsat, l, h) = if k % 2 == 0 {
+                    let unsat = ff * ob + c.kp * e + pf.integral() + c.ki_ts * e;
                     (pf.update_with_limits(&c, e, ff * ob, lo, hi),
-                     pq.update_with_limits(&cq, q(e, eb), q(ff * ob, ob), q(lo, ob), q(hi, ob)))
+                     pq.update_with_limits(&cq, q(e, eb), q(ff * ob, ob), q(lo, ob), q(hi, ob)),
+                     unsat, lo, hi)
                 } else {
-                    (pf.update(&c, e, 0.0), pq.update(&cq, q(e, eb), Q24(0)))
+                    let unsat = c.kp * e + pf.integral() + c.ki_ts * e;
+                    (pf.update(&c, e, 0.0), pq.update(&cq, q(e, eb), Q24(0)), unsat, c.out_min, c.out_max)
                 };
                 prop_assert!((uf / ob - pu(uq)).abs() < 1e-5, "step {k}: {uf} vs {}", si(uq, ob));
-                prop_assert_eq!(pf.saturated(), pq.saturated());
+                // the integrals stay together (the anti-windup is continuous in its inputs)
+                prop_assert!((pf.integral() / ob - pu(pq.integral())).abs() < 1e-5,
+                    "step {k}: integral {} vs {}", pf.integral(), si(pq.integral(), ob));
+                // the flag is a comparison with the limit: within the output tolerance of
+                // the limit either answer is right, elsewhere both must agree
+                let at_edge = ((unsat - h) / ob).abs() < 1e-5 || ((unsat - l) / ob).abs() < 1e-5;
+                if !at_edge {
+                    prop_assert_eq!(pf.saturated(), pq.saturated(), "step {}", k);
+                }
             }
         }
     }
