@@ -3,6 +3,7 @@
 
 pub mod builtins;
 pub mod metrics;
+pub mod observers;
 pub mod output;
 pub mod plot;
 pub mod scenario;

@@ -18,7 +18,9 @@ const USAGE: &str = "usage:
   acim-sim list                             list built-in scenarios
   acim-sim run <name|file.toml> [--out DIR] [--set key=value]...
   acim-sim figures [--out DIR]              regenerate docs/figures/*.png and metrics.md
-  acim-sim stability [DIR]                  orientation stability map (docs/stability)";
+  acim-sim stability [DIR]                  orientation stability map (docs/stability)
+  acim-sim observers [FILE] [--out DIR]     reduced- vs full-order observer, closed loop
+                                            (table to FILE, default docs/observers.md)";
 
 fn load(spec: &str) -> Result<Scenario, String> {
     if let Some(s) = builtins::get(spec) {
@@ -271,6 +273,26 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 pts.len() / 2,
                 unstable(gains[1]),
                 pts.len() / 2
+            );
+        }
+        Some("observers") => {
+            let file = positional
+                .first()
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("docs/observers.md"));
+            let rows = acim_sim::observers::compare(&out)?;
+            let cycles =
+                acim_sim::observers::bench_cycles(Path::new("benches/results/cycles.json"));
+            let md = acim_sim::observers::markdown(&rows, cycles);
+            print!("{md}");
+            if let Some(dir) = file.parent() {
+                std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            }
+            std::fs::write(&file, &md).map_err(|e| format!("{}: {e}", file.display()))?;
+            println!(
+                "\nwrote {} (run outputs in {})",
+                file.display(),
+                out.display()
             );
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),

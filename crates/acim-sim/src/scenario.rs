@@ -133,8 +133,20 @@ pub enum Arithmetic {
     /// f32 SI (the default).
     #[default]
     F32,
-    /// Fixed point, per unit (sensorless mode only).
+    /// Fixed point, per unit (Q7.24): the same cascade, sensorless or V/f.
     Fixed,
+}
+
+/// The drive's speed observer: the paper's reduced-order observer (eq. 12) or the
+/// full-order adaptive observer it is compared with (`acim::full_order`, f32 only).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObserverKind {
+    /// Reduced-order observer of i_sq, speed and load torque (the default).
+    #[default]
+    Reduced,
+    /// Full-order adaptive (Kubota-type) observer, the paper's baseline.
+    FullOrder,
 }
 
 /// Drive (controller) settings.
@@ -179,6 +191,8 @@ pub struct DriveSpec {
     pub orientation_gain: f32,
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
+    /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
+    pub observer: ObserverKind,
 }
 
 impl Default for DriveSpec {
@@ -205,6 +219,7 @@ impl Default for DriveSpec {
             stall_time_s: d.stall_time,
             orientation_gain: d.orientation_gain,
             arithmetic: Arithmetic::F32,
+            observer: ObserverKind::Reduced,
         }
     }
 }
@@ -691,13 +706,21 @@ impl Scenario {
             field: "drive".into(),
             allowed: format!("{e}"),
         })?;
-        if d.arithmetic == Arithmetic::Fixed {
-            if d.mode == ControlMode::Vf {
+        if d.observer == ObserverKind::FullOrder {
+            if d.arithmetic == Arithmetic::Fixed {
                 return err(
-                    "drive.arithmetic",
-                    "\"fixed\" runs the sensorless mode only",
+                    "drive.observer",
+                    "\"full-order\" runs in f32 only (drive.arithmetic = \"f32\")",
                 );
             }
+            acim::full_order::FullOrder::new(&drive.machine, drive.control_period).map_err(
+                |e| ScenarioError {
+                    field: "drive.observer".into(),
+                    allowed: format!("a valid full-order design ({e:?})"),
+                },
+            )?;
+        }
+        if d.arithmetic == Arithmetic::Fixed {
             acim::fixed::FixedDrive::with_bases(drive, acim::fixed::PerUnitBases::PAPER).map_err(
                 |e| ScenarioError {
                     field: "drive.arithmetic".into(),

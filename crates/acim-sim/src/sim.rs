@@ -7,14 +7,17 @@
 //! k the duties of step k-1 act. A switch-off (fault or stop) acts at once (the timer's
 //! main output is cleared immediately, not preloaded).
 
-use crate::scenario::{Arithmetic, ControlMode, Scenario, ScenarioError, Validated};
+use crate::scenario::{Arithmetic, ControlMode, ObserverKind, Scenario, ScenarioError, Validated};
 use acim::fixed::{FixedDrive, PerUnitBases};
+use acim::frames::FastSinCos;
+use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
 use acim::model::{
     BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, InductionMachine,
     Inverter, InverterConfig, LoadTorque, Plant, PwmMode,
 };
-use acim::{CommandError, Drive, DriveInputs, DriveState, DriveTelemetry, FaultReason, PwmOutput};
+use acim::{Controller, DriveDesign, Svpwm};
+use acim::{Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
 use serde::Serialize;
 
 /// The CSV header: the required columns first, then extra ones.
@@ -155,56 +158,44 @@ pub(crate) fn wrap_deg(x: f32) -> f32 {
     d
 }
 
-/// The drive under test: f32, or fixed point behind its SI boundary conversion
-/// (`drive.arithmetic`).
-enum SimDrive {
-    F32(Drive),
-    Fixed(FixedDrive),
-}
-
-impl SimDrive {
-    fn start(&mut self) -> Result<(), CommandError> {
-        match self {
-            SimDrive::F32(d) => d.start(),
-            SimDrive::Fixed(d) => d.start(),
+/// The drive under test, chosen at run time (`drive.arithmetic`, `drive.observer`): an
+/// f32 drive with either speed observer, or the fixed-point drive behind its SI boundary.
+/// The loop itself only sees [`Controller`].
+pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, ScenarioError> {
+    let bad = |field: &'static str| {
+        move |e: acim::ConfigError| ScenarioError {
+            field: field.into(),
+            allowed: format!("{e}"),
         }
-    }
-    fn start_open_loop(&mut self) -> Result<(), CommandError> {
-        match self {
-            SimDrive::F32(d) => d.start_open_loop(),
-            SimDrive::Fixed(_) => Err(CommandError::WrongState(DriveState::Idle)),
+    };
+    Ok(match (sc.drive.arithmetic, sc.drive.observer) {
+        (Arithmetic::F32, ObserverKind::Reduced) => {
+            Box::new(Drive::new(v.drive).map_err(bad("drive"))?)
         }
-    }
-    fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
-        match self {
-            SimDrive::F32(d) => d.set_speed_target(speed),
-            SimDrive::Fixed(d) => d.set_speed_target_si(speed),
+        (Arithmetic::F32, ObserverKind::FullOrder) => {
+            let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
+            let observer =
+                FullOrder::new(&v.drive.machine, v.drive.control_period).map_err(|e| {
+                    ScenarioError {
+                        field: "drive.observer".into(),
+                        allowed: format!("a valid full-order design ({e:?})"),
+                    }
+                })?;
+            let d: Drive<FastSinCos, f32, FullOrder> =
+                Drive::with_parts(design, (), FastSinCos, observer, Svpwm).map_err(bad("drive"))?;
+            Box::new(d)
         }
-    }
-    fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
-        match self {
-            SimDrive::F32(d) => d.step(inp),
-            SimDrive::Fixed(d) => d.step_si(inp),
+        (Arithmetic::Fixed, ObserverKind::Reduced) => Box::new(
+            FixedDrive::with_bases(v.drive, PerUnitBases::PAPER)
+                .map_err(bad("drive.arithmetic"))?,
+        ),
+        (Arithmetic::Fixed, ObserverKind::FullOrder) => {
+            return Err(ScenarioError {
+                field: "drive.observer".into(),
+                allowed: "\"full-order\" runs in f32 only".into(),
+            })
         }
-    }
-    fn telemetry(&self) -> DriveTelemetry {
-        match self {
-            SimDrive::F32(d) => *d.telemetry(),
-            SimDrive::Fixed(d) => d.telemetry_si(),
-        }
-    }
-    fn state(&self) -> DriveState {
-        match self {
-            SimDrive::F32(d) => d.state(),
-            SimDrive::Fixed(d) => d.state(),
-        }
-    }
-    fn fault(&self) -> Option<FaultReason> {
-        match self {
-            SimDrive::F32(d) => d.fault(),
-            SimDrive::Fixed(d) => d.fault(),
-        }
-    }
+    })
 }
 
 /// Runs a scenario to its end (or, after a fault, on with the switches off so the
@@ -212,18 +203,7 @@ impl SimDrive {
 pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
     let v = sc.validate()?;
     let mut plant = build_plant(sc, &v);
-    let mut drive = match sc.drive.arithmetic {
-        Arithmetic::F32 => SimDrive::F32(Drive::new(v.drive).map_err(|e| ScenarioError {
-            field: "drive".into(),
-            allowed: format!("{e}"),
-        })?),
-        Arithmetic::Fixed => SimDrive::Fixed(
-            FixedDrive::with_bases(v.drive, PerUnitBases::PAPER).map_err(|e| ScenarioError {
-                field: "drive.arithmetic".into(),
-                allowed: format!("{e}"),
-            })?,
-        ),
-    };
+    let mut drive = build_drive(sc, &v)?;
     let ts = sc.drive.control_period_s;
     let n = (sc.duration_s / ts).round() as usize;
     let mut rows = Vec::with_capacity(n);

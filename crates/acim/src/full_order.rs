@@ -427,10 +427,13 @@ impl FullOrderObserver {
 
 /// The full-order adaptive observer as the cascade's speed observer
 /// ([`crate::observer::SpeedObserver`]): its design and state together, so that
-/// `Drive<_, FullOrder>` runs the paper's baseline in the closed loop. It runs from the
-/// first magnetizing step (it estimates the flux itself) on the measured alpha-beta
-/// current and the alpha-beta voltage commanded for the past period; it has no load
-/// model (the load estimate is 0).
+/// `Drive<_, f32, FullOrder>` runs the paper's baseline in the closed loop. It runs from
+/// the first magnetizing step (it estimates the flux itself) on the measured alpha-beta
+/// current and the alpha-beta voltage commanded for the past period, with its speed held
+/// at zero until magnetizing ends (the rotor is at rest, as the reduced-order observer
+/// assumes); it has no load model (the load estimate is 0). Its design uses the
+/// controller's machine model as built: unlike the reduced-order observer it does not
+/// follow the Rs estimate.
 #[derive(Clone, Debug)]
 pub struct FullOrder {
     cfg: FullOrderConfig,
@@ -471,13 +474,19 @@ impl crate::observer::SpeedObserver for FullOrder {
         _coeffs: &crate::DriveCoeffs<f32>,
         x: &crate::observer::SpeedObserverInputs,
     ) -> crate::observer::SpeedEstimate {
-        let speed = self.state.update(
+        let mut speed = self.state.update(
             &self.cfg,
             x.v_ab.alpha,
             x.v_ab.beta,
             x.i_ab.alpha,
             x.i_ab.beta,
         );
+        if x.magnetizing {
+            // at rest while the flux builds: the adaptation starts with speed control
+            self.state.speed_integral = 0.0;
+            self.state.speed_elec = 0.0;
+            speed = 0.0;
+        }
         crate::observer::SpeedEstimate {
             speed,
             load_torque: 0.0,

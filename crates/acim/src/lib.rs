@@ -27,6 +27,7 @@ pub mod rs_estimator;
 pub mod svpwm;
 
 // the cascade: configuration and design, supervision, the staged drive
+pub mod controller;
 pub mod design;
 pub mod drive;
 pub mod supervisor;
@@ -38,6 +39,7 @@ pub mod full_order;
 // the plant (moving to its own crate)
 pub mod model;
 
+pub use controller::Controller;
 pub use design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, VfConfig};
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,

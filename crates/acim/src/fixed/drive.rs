@@ -15,10 +15,11 @@ use super::trig::TableSinCos;
 use super::PerUnitBases;
 use crate::design::{ConfigError, DriveCoeffs, DriveConfig, DriveDesign};
 use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
+use crate::frames::SinCos;
 use crate::frames::{AlphaBeta, Dq};
 use crate::math::is_finite;
 use crate::num::Num;
-use crate::observer::ReducedOrderObserver;
+use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
 use crate::svpwm::{modulate_with_inverse, Modulation, Modulator, Svpwm, VoltageLimit};
 
@@ -87,9 +88,11 @@ impl FixedDrive {
             Svpwm,
         )
     }
+}
 
-    // ---- simulator boundary (f32 <-> per unit); not for the control interrupt ----
-
+/// The simulator boundary (f32 SI <-> per unit) of any fixed-point drive; not for the
+/// control interrupt.
+impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, M> {
     /// Sets the speed target in rad/s mechanical (boundary conversion).
     pub fn set_speed_target_si(&mut self, speed: f32) -> Result<(), CommandError> {
         if !is_finite(speed) {

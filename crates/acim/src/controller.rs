@@ -1,0 +1,111 @@
+//! One small interface to run any drive of this crate in a closed loop with SI samples:
+//! the simulator, the tests and the host tools drive an f32 drive with any speed observer,
+//! or the fixed-point drive behind its SI boundary, through [`Controller`] alone.
+
+use crate::design::DriveConfig;
+use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
+use crate::fixed::Q24;
+use crate::frames::SinCos;
+use crate::observer::SpeedObserver;
+use crate::supervisor::{CommandError, DriveState, FaultReason};
+use crate::svpwm::Modulator;
+
+/// A drive as its owner sees it: commands, one step of SI samples in and duties out, state
+/// and SI telemetry.
+pub trait Controller {
+    /// Idle -> Magnetizing (sensorless speed control after the flux is built).
+    fn start(&mut self) -> Result<(), CommandError>;
+    /// Idle -> OpenLoop (V/f).
+    fn start_open_loop(&mut self) -> Result<(), CommandError>;
+    /// Any active state -> Idle (switches off at once).
+    fn stop(&mut self);
+    /// Fault -> Idle.
+    fn reset_fault(&mut self) -> Result<(), CommandError>;
+    /// The speed target, rad/s mechanical.
+    fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError>;
+    /// One control step: phase currents (A) and bus (V) in, duties out.
+    fn step(&mut self, inp: &DriveInputs) -> PwmOutput;
+    /// Forces a fault from outside (hardware break, missed deadline).
+    fn trip(&mut self, reason: FaultReason) -> PwmOutput;
+    /// Present state.
+    fn state(&self) -> DriveState;
+    /// The latched fault, if any.
+    fn fault(&self) -> Option<FaultReason>;
+    /// What the last step computed, SI.
+    fn telemetry(&self) -> DriveTelemetry;
+    /// The configuration the drive was built with.
+    fn config(&self) -> &DriveConfig;
+}
+
+impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, M> {
+    fn start(&mut self) -> Result<(), CommandError> {
+        Drive::start(self)
+    }
+    fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        Drive::start_open_loop(self)
+    }
+    fn stop(&mut self) {
+        Drive::stop(self)
+    }
+    fn reset_fault(&mut self) -> Result<(), CommandError> {
+        Drive::reset_fault(self)
+    }
+    fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
+        Drive::set_speed_target(self, speed)
+    }
+    fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+        Drive::step(self, inp)
+    }
+    fn trip(&mut self, reason: FaultReason) -> PwmOutput {
+        Drive::trip(self, reason)
+    }
+    fn state(&self) -> DriveState {
+        Drive::state(self)
+    }
+    fn fault(&self) -> Option<FaultReason> {
+        Drive::fault(self)
+    }
+    fn telemetry(&self) -> DriveTelemetry {
+        *Drive::telemetry(self)
+    }
+    fn config(&self) -> &DriveConfig {
+        Drive::config(self)
+    }
+}
+
+impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Drive<S, Q24, O, M> {
+    fn start(&mut self) -> Result<(), CommandError> {
+        Drive::start(self)
+    }
+    fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        Drive::start_open_loop(self)
+    }
+    fn stop(&mut self) {
+        Drive::stop(self)
+    }
+    fn reset_fault(&mut self) -> Result<(), CommandError> {
+        Drive::reset_fault(self)
+    }
+    fn set_speed_target(&mut self, speed: f32) -> Result<(), CommandError> {
+        self.set_speed_target_si(speed)
+    }
+    fn step(&mut self, inp: &DriveInputs) -> PwmOutput {
+        self.step_si(inp)
+    }
+    fn trip(&mut self, reason: FaultReason) -> PwmOutput {
+        Drive::trip(self, reason);
+        PwmOutput::OFF
+    }
+    fn state(&self) -> DriveState {
+        Drive::state(self)
+    }
+    fn fault(&self) -> Option<FaultReason> {
+        Drive::fault(self)
+    }
+    fn telemetry(&self) -> DriveTelemetry {
+        self.telemetry_si()
+    }
+    fn config(&self) -> &DriveConfig {
+        Drive::config(self)
+    }
+}
