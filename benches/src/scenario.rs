@@ -28,7 +28,7 @@ use acim::drive::{Drive, DriveConfig, DriveInputs, DriveState, PwmOutput, StepPr
 use acim::frames::{clarke_two, inverse_park, FastSinCos};
 use acim::full_order::{FullOrderConfig, FullOrderDesign, FullOrderObserver};
 use acim::math::RPM_TO_RAD_S;
-use acim::model::{LoadTorque, Plant};
+use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
 pub const REGIONS: [&str; 12] = [
@@ -318,6 +318,9 @@ pub fn run() -> Summary {
     };
     let mut plant = Plant::paper_default(1);
     plant.set_substeps(PLANT_SUBSTEPS);
+    // the duties computed at a step act over the period after (preloaded compare
+    // registers), the timing the drive compensates for
+    let mut pwm = PwmPreload::new();
     let target = SPEED_TARGET_RPM * RPM_TO_RAD_S;
     let _ = drive.set_speed_target(target);
     let _ = drive.start();
@@ -370,7 +373,7 @@ pub fn run() -> Summary {
         } else {
             LoadTorque::None
         };
-        plant.run_period(out.duties, out.enabled, load);
+        plant.run_pwm_period(pwm.advance(out), load);
         s.steps += 1;
         if on {
             s.measured += 1;

@@ -1,4 +1,4 @@
-//! Host simulator for the `acim` drive: scenarios, the closed loop against the in-crate
+//! Host simulator for the `acim` drive: scenarios, the closed loop against the `acim-plant`
 //! motor model, metrics, CSV/JSON output and paper-style plots.
 
 pub mod builtins;

@@ -2,8 +2,8 @@
 //! link, speed and load profiles, injected faults and metric windows. Read from TOML
 //! (`scenarios/example.toml` documents every field) or taken from the built-in list.
 
-use acim::model::{CurrentChannels, LoadTorque};
 use acim::{MachineData, MachineParams};
+use acim_plant::{CurrentChannels, LoadTorque};
 use serde::{Deserialize, Serialize};
 
 /// An error in a scenario, naming the field and the allowed range.

@@ -1,23 +1,23 @@
-//! The closed loop: the real `acim::Drive` against the in-crate plant model, one control
-//! period at a time, seeing only the sampled currents and bus voltage.
+//! The closed loop: any [`Controller`] (the real `acim::Drive`, f32 or fixed point, with
+//! either observer) against the `acim-plant` model, one control period at a time, seeing
+//! only the sampled currents and bus voltage.
 //!
 //! Timing per period k (matching the firmware): the plant is sampled at the period
 //! boundary (PWM centre of the low-side-on interval), the drive computes duties, and those
-//! duties are applied over the next period (preloaded compare registers), so during period
-//! k the duties of step k-1 act. A switch-off (fault or stop) acts at once (the timer's
-//! main output is cleared immediately, not preloaded).
+//! duties are applied over the next period: the plant's [`PwmPreload`] is the one timing
+//! model (a switch-off acts at once).
 
 use crate::scenario::{Arithmetic, ControlMode, ObserverKind, Scenario, ScenarioError, Validated};
 use acim::fixed::{FixedDrive, PerUnitBases};
 use acim::frames::FastSinCos;
 use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
-use acim::model::{
-    BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, InductionMachine,
-    Inverter, InverterConfig, LoadTorque, Plant, PwmMode,
-};
 use acim::{Controller, DriveDesign, Svpwm};
-use acim::{Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
+use acim::{Drive, DriveInputs, DriveState, FaultReason};
+use acim_plant::{
+    BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, DcLink, FaultInjector,
+    FaultPlan, InductionMachine, Inverter, InverterConfig, LoadTorque, Plant, PwmMode, PwmPreload,
+};
 use serde::Serialize;
 
 /// The CSV header: the required columns first, then extra ones.
@@ -148,6 +148,27 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     plant
 }
 
+/// The scenario's DC link (stiff when its capacitance is 0).
+pub(crate) fn build_dc_link(sc: &Scenario) -> DcLink {
+    DcLink::new(
+        sc.dc_link.source_v,
+        sc.dc_link.capacitance_f,
+        sc.dc_link.source_resistance_ohm,
+    )
+}
+
+/// The scenario's injected faults.
+pub(crate) fn fault_plan(sc: &Scenario) -> FaultPlan {
+    let f = &sc.faults;
+    FaultPlan {
+        bus_sag_at_s: f.bus_sag_at_s,
+        bus_sag_to_v: f.bus_sag_to_v,
+        locked_rotor_at_s: f.locked_rotor_at_s,
+        phase_short_at_s: f.phase_short_at_s,
+        nan_sample_at_s: f.nan_sample_at_s,
+    }
+}
+
 pub(crate) fn wrap_deg(x: f32) -> f32 {
     let mut d = x.to_degrees() % 360.0;
     if d > 180.0 {
@@ -224,12 +245,10 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         allowed: format!("{e:?}"),
     })?;
 
-    let mut pending = PwmOutput::OFF;
-    let mut source_v = sc.dc_link.source_v;
-    let mut bus_v = sc.dc_link.source_v;
-    let mut short_active = false;
+    let mut pwm = PwmPreload::new();
+    let mut dc_link = build_dc_link(sc);
+    let mut faults = FaultInjector::new(fault_plan(sc));
     let mut fault_time = None;
-    let mut nan_done = false;
 
     for k in 0..n {
         let t = k as f32 * ts;
@@ -241,21 +260,12 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
             load = load_points[li].load();
             li += 1;
         }
-        let f = &sc.faults;
-        if f.bus_sag_at_s.is_some_and(|ta| t >= ta) {
-            source_v = f.bus_sag_to_v;
-        }
-        if f.locked_rotor_at_s.is_some_and(|ta| t >= ta) && !plant.machine().is_locked() {
-            plant.machine_mut().set_locked(true);
-        }
-        short_active = short_active || f.phase_short_at_s.is_some_and(|ta| t >= ta);
+        faults.begin_period(t, &mut plant, &mut dc_link);
+        let bus_v = dc_link.bus_voltage();
 
         // sample at the period boundary
         let mut meas = plant.sample();
-        if !nan_done && f.nan_sample_at_s.is_some_and(|ta| t >= ta) {
-            meas.phase_currents[0] = f32::NAN;
-            nan_done = true;
-        }
+        faults.corrupt_sample(t, &mut meas);
         let out = drive.step(&DriveInputs {
             phase_currents: meas.phase_currents,
             dc_bus: meas.dc_bus,
@@ -268,7 +278,7 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         let tel = drive.telemetry();
         let m = plant.machine();
         let lam = m.lambda_r();
-        let flux_angle = lam[1].atan2(lam[0]);
+        let flux_angle = lam.beta.atan2(lam.alpha);
         rows.push(Row {
             t_s: t,
             speed_ref_rpm: tel.speed_reference * RAD_S_TO_RPM,
@@ -287,7 +297,7 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
             v_sq_v: tel.voltage.q,
             state: drive.state().code(),
             dc_bus_v: bus_v,
-            rotor_flux_true: (lam[0] * lam[0] + lam[1] * lam[1]).sqrt(),
+            rotor_flux_true: (lam.alpha * lam.alpha + lam.beta * lam.beta).sqrt(),
             orientation_error_deg: if drive.state() == DriveState::Running {
                 wrap_deg(tel.angle - flux_angle)
             } else {
@@ -297,24 +307,10 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         });
 
         // apply: a switch-off acts at once, new duties from the next period
-        let applied = if out.enabled { pending } else { PwmOutput::OFF };
-        let mut duties = applied.duties;
-        if short_active && applied.enabled {
-            duties[0] = 0.0; // failed low-side switch holds phase a at DC-
-        }
+        let applied = faults.inverter_command(pwm.advance(out));
         plant.set_dc_bus(bus_v);
-        plant.run_period(duties, applied.enabled, load);
-        pending = out;
-
-        // DC link: diode rectifier + capacitor (stiff when capacitance is 0)
-        if sc.dc_link.capacitance_f > 0.0 {
-            let i_dc = plant.last_period().dc_current;
-            let i_src = ((source_v - bus_v) / sc.dc_link.source_resistance_ohm).max(0.0);
-            bus_v += ts * (i_src - i_dc) / sc.dc_link.capacitance_f;
-            bus_v = bus_v.max(0.0);
-        } else {
-            bus_v = source_v;
-        }
+        plant.run_pwm_period(applied, load);
+        dc_link.step(plant.last_period().dc_current, ts);
     }
     Ok(RunResult {
         scenario: sc.clone(),
@@ -322,6 +318,6 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         fault: drive.fault(),
         fault_time_s: fault_time,
         final_state: drive.state(),
-        switches_off_at_end: !pending.enabled,
+        switches_off_at_end: !pwm.preloaded().enabled,
     })
 }

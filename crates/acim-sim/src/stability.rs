@@ -16,8 +16,8 @@
 
 use crate::scenario::{LoadKind, LoadPoint, Scenario, ScenarioError, SpeedPoint};
 use acim::math::RPM_TO_RAD_S;
-use acim::model::LoadTorque;
-use acim::{Drive, DriveInputs, DriveState, PwmOutput};
+use acim::{Drive, DriveInputs, DriveState};
+use acim_plant::{LoadTorque, PwmPreload};
 use serde::Serialize;
 
 /// One measured operating point.
@@ -100,7 +100,7 @@ pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, Scen
     let ts = sc.drive.control_period_s;
     let _ = drive.set_speed_target(speed_rpm * RPM_TO_RAD_S);
     let _ = drive.start();
-    let mut pending = PwmOutput::OFF;
+    let mut pwm = PwmPreload::new();
     let settle_s = 2.0;
     let pre_s = 0.1;
     let obs_s = 0.6;
@@ -137,7 +137,7 @@ pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, Scen
             break;
         }
         let lam = plant.machine().lambda_r();
-        let err = crate::sim::wrap_deg(drive.telemetry().angle - lam[1].atan2(lam[0]));
+        let err = crate::sim::wrap_deg(drive.telemetry().angle - lam.beta.atan2(lam.alpha));
         if t >= settle_s {
             phi.push(err);
             if t > settle_s + pre_s && err.abs() > 30.0 {
@@ -145,14 +145,13 @@ pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, Scen
                 break;
             }
         }
-        let applied = if out.enabled { pending } else { PwmOutput::OFF };
+        let applied = pwm.advance(out);
         let load = if loaded {
             LoadTorque::Active { torque: load_nm }
         } else {
             LoadTorque::None
         };
-        plant.run_period(applied.duties, applied.enabled, load);
-        pending = out;
+        plant.run_pwm_period(applied, load);
     }
     // deviation from the equilibrium just before the step
     let pre = (pre_s / ts) as usize;

@@ -20,7 +20,7 @@
 //! dlambda/dt = a21 i + a22 lambda                 a21 = R_R,  a22 = -1/tau_r + j w
 //! ```
 //!
-//! (the same equations as the plant model in [`crate::model`], written for lambda).
+//! (the same equations as the plant model in the `acim-plant` crate, written for lambda).
 //!
 //! ## Observer (Kubota 1993, eq. 7 there)
 //!
@@ -510,8 +510,6 @@ impl crate::observer::SpeedObserver for FullOrder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::RPM_TO_RAD_S;
-    use crate::model::{InductionMachine, LoadTorque};
 
     const TS: f32 = 200e-6;
 
@@ -593,62 +591,6 @@ mod tests {
             );
             assert!(got < 0.999, "{rpm} rpm: {got}");
         }
-    }
-
-    /// Runs the motor model (RK4, 4 sub-steps per period) fed by a rotating voltage at the
-    /// synchronous frequency of `rpm`, with the observer starting from `initial_rpm` and
-    /// zero flux. Returns (true rpm, estimated rpm, worst |error| in rpm over the last
-    /// `check` seconds).
-    fn run(rpm: f32, initial_rpm: f32, seconds: f32, check: f32) -> (f32, f32, f32) {
-        let m = MachineParams::paper_table1();
-        let c = cfg(&m);
-        let mut machine = InductionMachine::new(m);
-        let speed = rpm * RPM_TO_RAD_S;
-        machine.set_speed(speed);
-        // zero-slip voltage for 1.5 A magnetising current: |v| = 1.5 |Rs + j w Ls|
-        let ws = speed * m.pole_pairs_f32();
-        let (r, x) = (m.stator_resistance(), ws * m.stator_inductance());
-        let vmag = 1.5 * crate::math::sqrt(r * r + x * x);
-        let mut obs = FullOrderObserver::with_speed(&c, initial_rpm * RPM_TO_RAD_S);
-        let n = (seconds / TS) as usize;
-        let n_check = (check / TS) as usize;
-        let mut theta = 0.0f32;
-        let mut worst = 0.0f32;
-        let mut est = 0.0;
-        for k in 0..n {
-            let (s, co) = (theta as f64).sin_cos();
-            let (va, vb) = (vmag * co as f32, vmag * s as f32);
-            let [ia, ib] = machine.current_alpha_beta();
-            est = obs.update(&c, va, vb, ia, ib) / RPM_TO_RAD_S;
-            if k >= n - n_check {
-                worst = worst.max((est - machine.speed() / RPM_TO_RAD_S).abs());
-            }
-            for _ in 0..4 {
-                machine.step(va, vb, LoadTorque::None, TS / 4.0);
-            }
-            theta = crate::math::wrap_angle(theta + ws * TS);
-        }
-        (machine.speed() / RPM_TO_RAD_S, est, worst)
-    }
-
-    #[test]
-    fn converges_to_500_rpm_from_standstill_estimate() {
-        let (truth, est, worst) = run(500.0, 0.0, 0.8, 0.3);
-        assert!((truth - 500.0).abs() < 20.0, "plant at {truth} rpm");
-        assert!(
-            worst < 3.0,
-            "estimate {est} rpm vs {truth} rpm, worst {worst}"
-        );
-    }
-
-    #[test]
-    fn converges_to_60_rpm_from_a_wrong_estimate() {
-        let (truth, est, worst) = run(60.0, 300.0, 0.8, 0.3);
-        assert!((truth - 60.0).abs() < 10.0, "plant at {truth} rpm");
-        assert!(
-            worst < 1.0,
-            "estimate {est} rpm vs {truth} rpm, worst {worst}"
-        );
     }
 
     #[test]

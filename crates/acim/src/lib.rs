@@ -36,9 +36,6 @@ pub mod supervisor;
 pub mod fixed;
 pub mod full_order;
 
-// the plant (moving to its own crate)
-pub mod model;
-
 pub use controller::Controller;
 pub use design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, VfConfig};
 pub use drive::{

@@ -1,23 +1,24 @@
-//! Simulated power stage for the hardware-free self-test: the core crate's motor model
-//! (`acim::model::Plant`) behind this board's ADC (the inverse of [`Converter`], so the
-//! firmware's real count-to-unit path is exercised) and a PWM with preloaded compare
-//! registers (duties computed at step k act over the next period, as on TIM1).
+//! Simulated power stage for the hardware-free self-test: the motor model
+//! (`acim_plant::Plant`) behind this board's ADC (the inverse of [`Converter`], so the
+//! firmware's real count-to-unit path is exercised) and the plant's PWM timing model
+//! ([`PwmPreload`]: duties computed at step k act over the next period, as with TIM1's
+//! preloaded compare registers; a switch-off acts at once).
 //!
 //! This is the only file that uses the model's API.
 
 use crate::convert::{Converter, RawSample};
 use acim::math::RAD_S_TO_RPM;
-use acim::model::{
-    BusVoltageSensor, CurrentSensors, InductionMachine, Inverter, LoadTorque, Plant,
-};
 use acim::{MachineParams, PwmOutput};
+use acim_plant::{
+    BusVoltageSensor, CurrentSensors, InductionMachine, Inverter, LoadTorque, Plant, PwmPreload,
+};
 
 /// Motor model + simulated ADC + one-period PWM preload.
 pub struct SimulatedStage {
     plant: Plant,
     conv: Converter,
-    /// The command running over the present period (written at the previous step).
-    active: PwmOutput,
+    /// The compare registers' preload.
+    pwm: PwmPreload,
     load: LoadTorque,
 }
 
@@ -34,7 +35,7 @@ impl SimulatedStage {
         Self {
             plant,
             conv,
-            active: PwmOutput::OFF,
+            pwm: PwmPreload::new(),
             load: LoadTorque::None,
         }
     }
@@ -58,17 +59,17 @@ impl SimulatedStage {
         }
     }
 
-    /// Runs the present period with the command written one step earlier, then preloads
-    /// `next` (what the compare registers and MOE would hold from the next update event).
+    /// Runs the present period with the command written one step earlier (all off at
+    /// once if `next` switches off), then preloads `next` (what the compare registers and
+    /// MOE would hold from the next update event).
     pub fn run_period(&mut self, next: PwmOutput) {
-        let a = self.active;
-        self.plant.run_period(a.duties, a.enabled, self.load);
-        self.active = next;
+        let applied = self.pwm.advance(next);
+        self.plant.run_pwm_period(applied, self.load);
     }
 
     /// Replaces the preloaded command with all switches off (what clearing MOE does).
     pub fn switch_off(&mut self) {
-        self.active = PwmOutput::OFF;
+        self.pwm.switch_off();
     }
 
     /// The model's true mechanical speed, rpm.

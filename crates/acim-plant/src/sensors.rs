@@ -11,7 +11,7 @@
 //! (carrier trough), where the ripple of a centre-aligned PWM current crosses its
 //! period average.
 
-use crate::math::is_finite;
+use acim::math::is_finite;
 
 /// xorshift64* pseudo-random generator (Vigna 2016): tiny, no_std, reproducible.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -35,9 +35,10 @@
 //! the machine integrates each power with the same RK4 weights as the states and keeps the
 //! sums in an [`EnergyAccount`].
 
-use super::load::LoadTorque;
-use crate::math::{is_finite, wrap_angle};
-use crate::params::MachineParams;
+use crate::load::LoadTorque;
+use acim::frames::{inverse_clarke, AlphaBeta};
+use acim::math::{is_finite, wrap_angle};
+use acim::params::MachineParams;
 
 /// Default number of RK4 sub-steps per control period.
 pub const DEFAULT_SUBSTEPS: u32 = 10;
@@ -296,25 +297,34 @@ impl InductionMachine {
     }
 
     /// Stator current (i_alpha, i_beta), A.
-    pub fn current_alpha_beta(&self) -> [f32; 2] {
-        [self.x.i_alpha, self.x.i_beta]
+    pub fn current_alpha_beta(&self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: self.x.i_alpha,
+            beta: self.x.i_beta,
+        }
     }
 
     /// Phase currents (i_a, i_b, i_c), A (inverse amplitude-invariant Clarke; they sum to 0
     /// because the star point is isolated).
     pub fn phase_currents(&self) -> [f32; 3] {
-        super::inverse_clarke(self.x.i_alpha, self.x.i_beta)
+        inverse_clarke(self.current_alpha_beta())
     }
 
     /// Rotor flux linkage psi_r (alpha, beta), Wb (the model state).
-    pub fn psi_r(&self) -> [f32; 2] {
-        [self.x.psi_alpha, self.x.psi_beta]
+    pub fn psi_r(&self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: self.x.psi_alpha,
+            beta: self.x.psi_beta,
+        }
     }
 
     /// Inverse-Gamma rotor flux lambda_r = (Lm/Lr) psi_r (alpha, beta), Wb: the
     /// `lambda_r` of the paper's eq. (8), (13) and of the controller.
-    pub fn lambda_r(&self) -> [f32; 2] {
-        [self.c.kr * self.x.psi_alpha, self.c.kr * self.x.psi_beta]
+    pub fn lambda_r(&self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: self.c.kr * self.x.psi_alpha,
+            beta: self.c.kr * self.x.psi_beta,
+        }
     }
 
     /// Mechanical speed Omega, rad/s.
@@ -343,11 +353,11 @@ impl InductionMachine {
     }
 
     /// Rotor current i_r = (psi_r - Lm i_s)/Lr (alpha, beta), A.
-    pub fn rotor_current(&self) -> [f32; 2] {
-        [
-            (self.x.psi_alpha - self.c.lm * self.x.i_alpha) * self.c.inv_lr,
-            (self.x.psi_beta - self.c.lm * self.x.i_beta) * self.c.inv_lr,
-        ]
+    pub fn rotor_current(&self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: (self.x.psi_alpha - self.c.lm * self.x.i_alpha) * self.c.inv_lr,
+            beta: (self.x.psi_beta - self.c.lm * self.x.i_beta) * self.c.inv_lr,
+        }
     }
 
     /// Stored magnetic energy W_m = 0.75 (sigma Ls |i_s|^2 + |psi_r|^2/Lr), J.
@@ -530,13 +540,13 @@ impl InductionMachine {
     /// terminals (back-EMF), V: with i_s = 0 and di_s/dt = 0, eq. (1a, 1b) give
     /// `v_s = -(Lm/Lr)(1/tau_r - j p Omega) psi_r`. Used by the inverter model to decide
     /// whether the freewheeling diodes conduct when the gates are off.
-    pub fn open_circuit_voltage(&self) -> [f32; 2] {
+    pub fn open_circuit_voltage(&self) -> AlphaBeta {
         let c = &self.c;
         let we = c.p * self.x.speed;
-        [
-            -c.kr * (c.inv_tau_r * self.x.psi_alpha + we * self.x.psi_beta),
-            -c.kr * (c.inv_tau_r * self.x.psi_beta - we * self.x.psi_alpha),
-        ]
+        AlphaBeta {
+            alpha: -c.kr * (c.inv_tau_r * self.x.psi_alpha + we * self.x.psi_beta),
+            beta: -c.kr * (c.inv_tau_r * self.x.psi_beta - we * self.x.psi_alpha),
+        }
     }
 
     /// One RK4 step of `dt` seconds with the stator open (disconnected, or all inverter
@@ -619,10 +629,10 @@ mod tests {
         for _ in 0..50_000 {
             m.step(10.5, 0.0, LoadTorque::None, 20e-6);
         }
-        assert!((m.current_alpha_beta()[0] - 1.0).abs() < 1e-3);
-        assert!((m.psi_r()[0] - 0.54).abs() < 1e-3);
+        assert!((m.current_alpha_beta().alpha - 1.0).abs() < 1e-3);
+        assert!((m.psi_r().alpha - 0.54).abs() < 1e-3);
         assert!(m.torque().abs() < 1e-5);
-        assert!((m.lambda_r()[0] - 0.54 * 0.54 / 0.56).abs() < 1e-3);
+        assert!((m.lambda_r().alpha - 0.54 * 0.54 / 0.56).abs() < 1e-3);
         assert_eq!(m.speed(), 0.0);
     }
 

@@ -1,11 +1,17 @@
-//! Induction-motor plant model for simulation and the hardware-free self-test: machine
-//! (paper eq. 1-3 in the stationary frame), load torque, inverter (averaged or
-//! switching-level) and sensors.
+//! # acim-plant: the induction-motor plant the drive is tested against
+//!
+//! What the simulator, the closed-loop tests, the cycle bench and the firmware's
+//! hardware-free self-test all run the `acim` drive against: the machine (paper eq. 1-3
+//! in the stationary frame), load torque, inverter (averaged or switching-level), the one
+//! PWM timing model ([`PwmPreload`]: duties computed at step k act over the next period),
+//! sensors, the DC link ([`DcLink`]) and fault injection ([`FaultInjector`]).
 //!
 //! Everything is `no_std`, allocation-free, f32-only and panic-free; no trigonometry is
 //! needed at run time because the machine is integrated in the stationary alpha-beta frame.
+//! Frames and transforms are the control library's ([`acim::frames`]), so the plant and
+//! the controller cannot disagree on a convention.
 //!
-//! Conventions (crate-wide): SI units; amplitude-invariant Clarke
+//! Conventions (those of `acim`): SI units; amplitude-invariant Clarke
 //! (`i_alpha = i_a`, `i_beta = (i_a + 2 i_b)/sqrt3`), so alpha-beta values are peak phase
 //! values; speeds in rad/s mechanical, electrical speed `p Omega`; torque
 //! `Te = 1.5 p (Lm/Lr)(psi_alpha i_beta - psi_beta i_alpha)`.
@@ -14,21 +20,35 @@
 //! [`DEFAULT_SUBSTEPS`] = 10 RK4 steps of 20 us):
 //!
 //! ```
-//! use acim::model::{LoadTorque, Plant};
+//! use acim::PwmOutput;
+//! use acim_plant::{LoadTorque, Plant, PwmPreload};
 //! let mut plant = Plant::paper_default(1);
+//! let mut pwm = PwmPreload::new();
 //! for _ in 0..100 {
 //!     let m = plant.sample(); // ADC values at the period boundary (PWM centre)
 //!     let _ = m;
-//!     // ... controller computes the duties from m ...
-//!     plant.run_period([0.5, 0.5, 0.5], true, LoadTorque::None);
+//!     // ... the controller computes its command from m ...
+//!     let command = PwmOutput { duties: [0.5; 3], enabled: true };
+//!     plant.run_pwm_period(pwm.advance(command), LoadTorque::None);
 //! }
 //! assert!(plant.machine().speed().abs() < 1e-3);
 //! ```
 
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+mod dc_link;
+mod faults;
 mod inverter;
 mod load;
 mod machine;
+mod pwm;
 mod sensors;
+
+pub use dc_link::DcLink;
+pub use faults::{FaultInjector, FaultPlan};
+pub use pwm::PwmPreload;
 
 pub use inverter::{
     sanitize_duty, smooth_sign, Inverter, InverterConfig, InverterOutput, LegState, SwitchInterval,
@@ -42,39 +62,10 @@ pub use sensors::{
     Measurements, Rng, DEFAULT_BUS_FULL_SCALE, DEFAULT_CURRENT_FULL_SCALE,
 };
 
-use crate::params::MachineParams;
+use acim::frames::{inverse_clarke, park, AlphaBeta, Dq, SinCosValue};
+use acim::params::MachineParams;
+use acim::PwmOutput;
 use machine::{StageSource, StepSourceIntegral};
-
-const INV_SQRT3: f32 = 0.577_350_26;
-const SQRT3_2: f32 = 0.866_025_4;
-
-/// Amplitude-invariant Clarke of three phase quantities (zero sequence dropped):
-/// alpha = (2a - b - c)/3, beta = (b - c)/sqrt3.
-pub(crate) fn clarke(x: [f32; 3]) -> [f32; 2] {
-    let [a, b, c] = x;
-    [(2.0 * a - b - c) * (1.0 / 3.0), (b - c) * INV_SQRT3]
-}
-
-/// Inverse amplitude-invariant Clarke (no zero sequence).
-pub(crate) fn inverse_clarke(alpha: f32, beta: f32) -> [f32; 3] {
-    [
-        alpha,
-        -0.5 * alpha + SQRT3_2 * beta,
-        -0.5 * alpha - SQRT3_2 * beta,
-    ]
-}
-
-/// Clamp without `core`'s `lo <= hi` assertion (so no panic path): a NaN `x` gives `lo`.
-/// Callers pass `lo <= hi`.
-pub(crate) fn clampf(x: f32, lo: f32, hi: f32) -> f32 {
-    if x > hi {
-        hi
-    } else if x >= lo {
-        x
-    } else {
-        lo
-    }
-}
 
 fn max3(a: f32, b: f32, c: f32) -> f32 {
     let m = if a > b { a } else { b };
@@ -238,11 +229,14 @@ impl Plant {
         };
         // period-averaged terminal voltages (gates on, or all off: diode conduction)
         let averaged = move |ia: f32, ib: f32| {
-            let out = inv.averaged_output(duties, enabled, inverse_clarke(ia, ib));
-            let [v_alpha, v_beta] = out.alpha_beta;
+            let i = AlphaBeta {
+                alpha: ia,
+                beta: ib,
+            };
+            let out = inv.averaged_output(duties, enabled, inverse_clarke(i));
             StageSource {
-                v_alpha,
-                v_beta,
+                v_alpha: out.alpha_beta.alpha,
+                v_beta: out.alpha_beta.beta,
                 p_dc: vdc * out.dc_current,
             }
         };
@@ -259,11 +253,14 @@ impl Plant {
                 let h = len / n as f32;
                 let legs = iv.legs;
                 let src = move |ia: f32, ib: f32| {
-                    let out = inv.output(legs, inverse_clarke(ia, ib), band);
-                    let [v_alpha, v_beta] = out.alpha_beta;
+                    let i = AlphaBeta {
+                        alpha: ia,
+                        beta: ib,
+                    };
+                    let out = inv.output(legs, inverse_clarke(i), band);
                     StageSource {
-                        v_alpha,
-                        v_beta,
+                        v_alpha: out.alpha_beta.alpha,
+                        v_beta: out.alpha_beta.beta,
                         p_dc: vdc * out.dc_current,
                     }
                 };
@@ -280,16 +277,15 @@ impl Plant {
                     .phase_currents()
                     .iter()
                     .all(|i| i.abs() <= band);
-                let [ea, eb] = self.machine.open_circuit_voltage();
-                let [e1, e2, e3] = inverse_clarke(ea, eb);
+                let [e1, e2, e3] = inverse_clarke(self.machine.open_circuit_voltage());
                 let spread = max3(e1, e2, e3) - min3(e1, e2, e3);
                 if small && spread <= limit {
                     // every diode blocked: open stator, the terminals show the back-EMF
                     self.machine.step_open_circuit(load, h_max);
-                    let [ea, eb] = self.machine.open_circuit_voltage();
+                    let e = self.machine.open_circuit_voltage();
                     add(StepSourceIntegral {
-                        v_alpha_dt: ea * h_max,
-                        v_beta_dt: eb * h_max,
+                        v_alpha_dt: e.alpha * h_max,
+                        v_beta_dt: e.beta * h_max,
                         e_dc: 0.0,
                         e_in: 0.0,
                     });
@@ -315,6 +311,12 @@ impl Plant {
             input_power: acc.e_in * inv_t,
         };
         self.periods = self.periods.wrapping_add(1);
+    }
+
+    /// Runs one PWM period with the command the inverter applies over it (the output of
+    /// [`PwmPreload::advance`]), load `load` held over the period.
+    pub fn run_pwm_period(&mut self, applied: PwmOutput, load: LoadTorque) {
+        self.run_period(applied.duties, applied.enabled, load);
     }
 
     /// Samples the sensors at the period boundary (call after [`Plant::run_period`]).
@@ -380,7 +382,7 @@ impl Plant {
     }
 
     /// True stator current (i_alpha, i_beta), A.
-    pub fn current_alpha_beta(&self) -> [f32; 2] {
+    pub fn current_alpha_beta(&self) -> AlphaBeta {
         self.machine.current_alpha_beta()
     }
 
@@ -389,14 +391,10 @@ impl Plant {
         self.machine.phase_currents()
     }
 
-    /// True stator current in a frame at electrical angle `(cos, sin)` of theta:
-    /// (i_d, i_q) = Park(i_alpha, i_beta) (the caller supplies cos/sin, no trig here).
-    pub fn current_dq(&self, cos_theta: f32, sin_theta: f32) -> [f32; 2] {
-        let [a, b] = self.machine.current_alpha_beta();
-        [
-            a * cos_theta + b * sin_theta,
-            -a * sin_theta + b * cos_theta,
-        ]
+    /// True stator current in the frame at electrical angle theta, given by its sin/cos:
+    /// Park of (i_alpha, i_beta), A (the caller supplies sin/cos, no trig here).
+    pub fn current_dq(&self, theta: SinCosValue) -> Dq {
+        park(self.machine.current_alpha_beta(), theta)
     }
 
     /// True mechanical speed, rad/s.
@@ -420,13 +418,18 @@ impl Default for Plant {
 mod tests {
     use super::*;
 
+    /// The plant's phase currents are the library's inverse Clarke of its alpha-beta
+    /// current: a zero-sum set whose two-channel Clarke gives the state back.
     #[test]
-    fn clarke_round_trip() {
-        let [a, b, c] = inverse_clarke(1.0, 2.0);
+    fn phase_currents_use_the_library_transforms() {
+        let mut p = Plant::ideal(MachineParams::paper_table1(), 300.0);
+        let mut st = p.machine().state();
+        st.i_alpha = 1.0;
+        st.i_beta = 2.0;
+        p.machine_mut().set_state(st);
+        let [a, b, c] = p.phase_currents();
         assert!((a + b + c).abs() < 1e-6);
-        let [al, be] = clarke([a, b, c]);
-        assert!((al - 1.0).abs() < 1e-6 && (be - 2.0).abs() < 1e-6);
-        // i_beta = (i_a + 2 i_b)/sqrt3 for zero-sum currents
-        assert!((be - (a + 2.0 * b) * INV_SQRT3).abs() < 1e-6);
+        let i = acim::frames::clarke_two(a, b);
+        assert!((i.alpha - 1.0).abs() < 1e-6 && (i.beta - 2.0).abs() < 1e-6);
     }
 }

@@ -3,8 +3,7 @@
 //! Sign convention: a load torque is positive when it opposes positive (forward) rotation,
 //! so the mechanics read J dOmega/dt = Te - B Omega - T_L(Omega).
 
-use super::clampf;
-use crate::math::is_finite;
+use acim::math::{clamp, is_finite};
 
 /// Half-width of the linear zone of [`LoadTorque::Passive`], rad/s (mechanical).
 ///
@@ -55,7 +54,7 @@ impl LoadTorque {
             LoadTorque::None => 0.0,
             LoadTorque::Passive { torque } => {
                 if is_finite(omega) {
-                    torque.abs() * clampf(omega * (1.0 / PASSIVE_SPEED_BAND), -1.0, 1.0)
+                    torque.abs() * clamp(omega * (1.0 / PASSIVE_SPEED_BAND), -1.0, 1.0)
                 } else {
                     0.0
                 }

@@ -1,14 +1,26 @@
-//! Physics tests of the plant model (`acim::model`): steady state against the per-phase
+//! Physics tests of the plant model (`acim_plant`): steady state against the per-phase
 //! equivalent circuit, energy balance, free acceleration, inverter and sensor behaviour.
 //!
 //! The reference computations are in f64 with std trig; the model itself is f32.
 
-use acim::model::{
+use acim::frames::AlphaBeta;
+use acim::{MachineData, MachineParams};
+use acim_plant::{
     Adc, BusSensorConfig, BusVoltageSensor, CurrentChannels, CurrentSensorConfig, CurrentSensors,
     InductionMachine, Inverter, InverterConfig, LegState, LoadTorque, MachineState, Plant, PwmMode,
     Rng,
 };
-use acim::{MachineData, MachineParams};
+
+/// (alpha, beta) as an array, for the f64 reference computations.
+trait Pair {
+    fn pair(self) -> [f32; 2];
+}
+
+impl Pair for AlphaBeta {
+    fn pair(self) -> [f32; 2] {
+        [self.alpha, self.beta]
+    }
+}
 use std::f64::consts::PI;
 
 /// Peak phase voltage of 230 V rms line-to-line: 230 sqrt(2)/sqrt(3).
@@ -153,7 +165,7 @@ fn vf_steady_state_matches_equivalent_circuit() {
     let (mut w_first, mut w_second) = (0.0f64, 0.0f64);
     for j in 0..n_avg {
         run(&mut m, &mut k);
-        let [ia, ib] = m.current_alpha_beta();
+        let [ia, ib] = m.current_alpha_beta().pair();
         i_sum += (ia as f64).hypot(ib as f64);
         te_sum += m.torque() as f64;
         w_sum += m.speed() as f64;
@@ -391,7 +403,7 @@ fn locked_rotor_current_matches_equivalent_circuit() {
         let (va, vb) = v_ab(v, w, (k as f64 + 0.5) * DT as f64);
         m.step(va, vb, LoadTorque::Passive { torque: 1.0 }, DT);
         if k >= steps - n_avg {
-            let [a, b] = m.current_alpha_beta();
+            let [a, b] = m.current_alpha_beta().pair();
             i_last += (a as f64).hypot(b as f64) / n_avg as f64;
             te += m.torque() as f64 / n_avg as f64;
         }
@@ -424,10 +436,10 @@ fn averaged_voltage_is_duty_times_vdc_minus_common_mode() {
         assert!((out.phase[k] - expect_phase[k]).abs() < 1e-3);
     }
     let ab = clarke(expect_phase);
-    assert!((out.alpha_beta[0] - ab[0]).abs() < 1e-3);
-    assert!((out.alpha_beta[1] - ab[1]).abs() < 1e-3);
+    assert!((out.alpha_beta.alpha - ab[0]).abs() < 1e-3);
+    assert!((out.alpha_beta.beta - ab[1]).abs() < 1e-3);
     // v_alpha = v_a for a zero-sum set
-    assert!((out.alpha_beta[0] - 80.0).abs() < 1e-3);
+    assert!((out.alpha_beta.alpha - 80.0).abs() < 1e-3);
     // DC-link current: sum d_x i_x
     assert!((out.dc_current - (0.7 - 0.2 - 0.1)).abs() < 1e-5);
     // NaN duty reads 0.5, out of range is clamped
@@ -557,12 +569,12 @@ fn plant_switched_and_averaged_periods_agree() {
     plant.set_mode(PwmMode::Averaged);
     plant.run_period(duties, true, load);
     let avg_rep = plant.last_period();
-    let avg_i = plant.current_alpha_beta();
+    let avg_i = plant.current_alpha_beta().pair();
     plant.machine_mut().set_state(start);
     plant.set_mode(PwmMode::Switched);
     plant.run_period(duties, true, load);
     let sw_rep = plant.last_period();
-    let sw_i = plant.current_alpha_beta();
+    let sw_i = plant.current_alpha_beta().pair();
     eprintln!(
         "one period: averaged v = ({:.3}, {:.3}) V, i = ({:.4}, {:.4}) A; switched v = ({:.3}, {:.3}) V, \
          i = ({:.4}, {:.4}) A; P_dc {:.2} / {:.2} W, P_in {:.2} / {:.2} W",
@@ -595,7 +607,7 @@ fn disabled_inverter_currents_decay_to_zero() {
             let (va, vb) = v_ab(V_PEAK, w, (k as f64 + 0.5) * DT as f64);
             plant.machine_mut().step(va, vb, LoadTorque::None, DT);
         }
-        let i0 = plant.machine().current_alpha_beta();
+        let i0 = plant.machine().current_alpha_beta().pair();
         let i0 = (i0[0] as f64).hypot(i0[1] as f64);
         let mut zero_at = None;
         let mut max_after = 0.0f64;
@@ -604,7 +616,7 @@ fn disabled_inverter_currents_decay_to_zero() {
         for k in 0..2500 {
             // 0.5 s
             plant.run_period([0.3, 0.6, 0.9], false, LoadTorque::None);
-            let [a, b] = plant.machine().current_alpha_beta();
+            let [a, b] = plant.machine().current_alpha_beta().pair();
             let mag = (a as f64).hypot(b as f64);
             assert!(mag.is_finite() && mag < 2.0 * i0 + 1.0);
             if k >= 25 {
@@ -621,7 +633,7 @@ fn disabled_inverter_currents_decay_to_zero() {
             }
             last_ia = ia;
         }
-        let psi = plant.machine().psi_r();
+        let psi = plant.machine().psi_r().pair();
         eprintln!(
             "{mode:?} disabled: |i_s| before {i0:.3} A, exactly 0 after {zero_at:?} periods, \
              max after 5 ms {max_after:.2e} A, |psi_r| after 0.5 s {:.2e} Wb, speed {:.1} rad/s",
@@ -661,11 +673,11 @@ fn disabled_inverter_rectifies_when_back_emf_exceeds_bus() {
     for _ in 0..2500 {
         plant.run_period([0.5; 3], false, LoadTorque::None);
         e_dc += plant.last_period().dc_power as f64 * 200e-6;
-        let [a, b] = plant.current_alpha_beta();
+        let [a, b] = plant.current_alpha_beta().pair();
         i_max = i_max.max((a as f64).hypot(b as f64));
         assert!(a.is_finite() && b.is_finite());
     }
-    let [a, b] = plant.current_alpha_beta();
+    let [a, b] = plant.current_alpha_beta().pair();
     let acc = plant.machine().energy();
     let res = plant.machine().energy_residual() as f64;
     eprintln!(

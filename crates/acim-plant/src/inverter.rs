@@ -79,8 +79,8 @@
 //! over each one. With this choice the period average of the switched pole voltage equals
 //! the averaged model exactly for a fixed current sign.
 
-use super::{clampf as clamp, clarke};
-use crate::math::is_finite;
+use acim::frames::{clarke_three, AlphaBeta};
+use acim::math::{clamp, is_finite};
 
 /// Default dead time, s.
 pub const DEFAULT_DEAD_TIME: f32 = 1.5e-6;
@@ -146,7 +146,7 @@ pub struct InverterOutput {
     /// Phase-to-neutral voltages v_xn (pole minus common mode), V.
     pub phase: [f32; 3],
     /// Amplitude-invariant Clarke of the phase voltages, (v_alpha, v_beta), V.
-    pub alpha_beta: [f32; 2],
+    pub alpha_beta: AlphaBeta,
     /// DC-link current drawn from the positive rail, A.
     pub dc_current: f32,
 }
@@ -161,7 +161,7 @@ pub struct Inverter {
 
 impl Default for Inverter {
     fn default() -> Self {
-        Self::new(InverterConfig::default(), crate::params::DEFAULT_DC_BUS)
+        Self::new(InverterConfig::default(), acim::params::DEFAULT_DC_BUS)
     }
 }
 
@@ -307,7 +307,7 @@ impl Inverter {
         InverterOutput {
             pole,
             phase,
-            alpha_beta: clarke(phase),
+            alpha_beta: clarke_three(phase[0], phase[1], phase[2]),
             dc_current: idc,
         }
     }

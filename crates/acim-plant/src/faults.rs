@@ -1,0 +1,123 @@
+//! Fault injection: the hardware failures a drive must detect, applied to the plant at
+//! given times so that scenarios and tests share one definition of each fault.
+
+use crate::{DcLink, Measurements, Plant};
+use acim::PwmOutput;
+
+/// When each fault starts, s from the start of the run (`None`: never).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FaultPlan {
+    /// Mains sag: the DC-link source drops to [`FaultPlan::bus_sag_to_v`].
+    pub bus_sag_at_s: Option<f32>,
+    /// Source voltage after the sag, V.
+    pub bus_sag_to_v: f32,
+    /// The rotor locks (speed held at zero).
+    pub locked_rotor_at_s: Option<f32>,
+    /// Phase a's low-side switch fails short: phase a is held at DC- while the gates are
+    /// enabled.
+    pub phase_short_at_s: Option<f32>,
+    /// One phase-current sample (phase a) reads NaN (a corrupted ADC transfer).
+    pub nan_sample_at_s: Option<f32>,
+}
+
+/// Applies a [`FaultPlan`] to a plant, its DC link, its samples and its inverter command.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FaultInjector {
+    plan: FaultPlan,
+    short_active: bool,
+    nan_done: bool,
+}
+
+impl FaultInjector {
+    /// An injector for `plan`, nothing injected yet.
+    pub fn new(plan: FaultPlan) -> Self {
+        Self {
+            plan,
+            short_active: false,
+            nan_done: false,
+        }
+    }
+
+    /// The plan.
+    pub fn plan(&self) -> &FaultPlan {
+        &self.plan
+    }
+
+    /// At the start of the period beginning at `t` (s): applies the faults that are due
+    /// to the plant and the DC link.
+    pub fn begin_period(&mut self, t: f32, plant: &mut Plant, dc_link: &mut DcLink) {
+        let p = &self.plan;
+        if p.bus_sag_at_s.is_some_and(|ta| t >= ta) {
+            dc_link.set_source_voltage(p.bus_sag_to_v);
+        }
+        if p.locked_rotor_at_s.is_some_and(|ta| t >= ta) && !plant.machine().is_locked() {
+            plant.machine_mut().set_locked(true);
+        }
+        self.short_active = self.short_active || p.phase_short_at_s.is_some_and(|ta| t >= ta);
+    }
+
+    /// Corrupts the sample taken at `t` (s) if the plan says so (once).
+    pub fn corrupt_sample(&mut self, t: f32, m: &mut Measurements) {
+        if !self.nan_done && self.plan.nan_sample_at_s.is_some_and(|ta| t >= ta) {
+            m.phase_currents[0] = f32::NAN;
+            self.nan_done = true;
+        }
+    }
+
+    /// What the inverter really applies for the command `applied`: with a shorted
+    /// low-side switch, phase a sits at DC- whenever the gates are enabled.
+    pub fn inverter_command(&self, applied: PwmOutput) -> PwmOutput {
+        let mut out = applied;
+        if self.short_active && out.enabled {
+            out.duties[0] = 0.0;
+        }
+        out
+    }
+
+    /// Whether the phase short has happened.
+    pub fn phase_short_active(&self) -> bool {
+        self.short_active
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use acim::MachineParams;
+
+    #[test]
+    fn faults_start_at_their_time() {
+        let plan = FaultPlan {
+            bus_sag_at_s: Some(1.0),
+            bus_sag_to_v: 150.0,
+            locked_rotor_at_s: Some(2.0),
+            phase_short_at_s: Some(3.0),
+            nan_sample_at_s: Some(4.0),
+        };
+        let mut f = FaultInjector::new(plan);
+        let mut plant = Plant::ideal(MachineParams::paper_table1(), 325.0);
+        let mut link = DcLink::stiff(325.0);
+        let on = PwmOutput {
+            duties: [0.7; 3],
+            enabled: true,
+        };
+        f.begin_period(0.5, &mut plant, &mut link);
+        assert_eq!(link.source_voltage(), 325.0);
+        assert_eq!(f.inverter_command(on), on);
+        f.begin_period(2.5, &mut plant, &mut link);
+        assert_eq!(link.source_voltage(), 150.0);
+        assert!(plant.machine().is_locked());
+        assert_eq!(f.inverter_command(on), on);
+        f.begin_period(3.0, &mut plant, &mut link);
+        assert_eq!(f.inverter_command(on).duties, [0.0, 0.7, 0.7]);
+        assert_eq!(f.inverter_command(PwmOutput::OFF), PwmOutput::OFF);
+        let mut m = plant.sample();
+        f.corrupt_sample(3.9, &mut m);
+        assert!(m.phase_currents[0].is_finite());
+        f.corrupt_sample(4.0, &mut m);
+        assert!(m.phase_currents[0].is_nan());
+        let mut m = plant.sample();
+        f.corrupt_sample(4.2, &mut m);
+        assert!(m.phase_currents[0].is_finite(), "one NaN sample only");
+    }
+}
