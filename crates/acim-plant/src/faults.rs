@@ -18,6 +18,22 @@ pub struct FaultPlan {
     pub phase_short_at_s: Option<f32>,
     /// One phase-current sample (phase a) reads NaN (a corrupted ADC transfer).
     pub nan_sample_at_s: Option<f32>,
+    /// A motor phase opens (cable or contactor): phase [`FaultPlan::open_phase`] carries
+    /// no current from then on.
+    pub open_phase_at_s: Option<f32>,
+    /// The phase that opens, 0..=2 (a, b, c).
+    pub open_phase: usize,
+    /// One current channel sticks (amplifier or ADC input stuck).
+    pub current_sensor_stuck_at_s: Option<f32>,
+    /// The stuck channel, 0..=2.
+    pub current_sensor_stuck_channel: usize,
+    /// The value it reads, A (`None`: the last value before the fault).
+    pub current_sensor_stuck_value_a: Option<f32>,
+    /// Every current channel reads its zero-current code (sense cable off, amplifiers at
+    /// their bias).
+    pub current_sensors_zero_at_s: Option<f32>,
+    /// Offset drift of channel a from the start, A/s (thermal drift of the amplifier).
+    pub current_sensor_offset_drift_a_per_s: f32,
 }
 
 /// Applies a [`FaultPlan`] to a plant, its DC link, its samples and its inverter command.
@@ -26,6 +42,10 @@ pub struct FaultInjector {
     plan: FaultPlan,
     short_active: bool,
     nan_done: bool,
+    /// The samples of the last period (the value a channel sticks at by default).
+    last_sample: [f32; 3],
+    /// The value the stuck channel reads, once stuck.
+    stuck_value: Option<f32>,
 }
 
 impl FaultInjector {
@@ -35,6 +55,8 @@ impl FaultInjector {
             plan,
             short_active: false,
             nan_done: false,
+            last_sample: [0.0; 3],
+            stuck_value: None,
         }
     }
 
@@ -54,14 +76,37 @@ impl FaultInjector {
             plant.machine_mut().set_locked(true);
         }
         self.short_active = self.short_active || p.phase_short_at_s.is_some_and(|ta| t >= ta);
+        if p.open_phase_at_s.is_some_and(|ta| t >= ta) {
+            plant.set_open_phase(Some(p.open_phase));
+        }
     }
 
-    /// Corrupts the sample taken at `t` (s) if the plan says so (once).
+    /// Corrupts the sample taken at `t` (s) as the plan says: offset drift, a stuck
+    /// channel, all channels at zero, one NaN.
     pub fn corrupt_sample(&mut self, t: f32, m: &mut Measurements) {
-        if !self.nan_done && self.plan.nan_sample_at_s.is_some_and(|ta| t >= ta) {
+        let p = &self.plan;
+        if p.current_sensor_offset_drift_a_per_s != 0.0 {
+            m.phase_currents[0] += p.current_sensor_offset_drift_a_per_s * t;
+        }
+        if p.current_sensor_stuck_at_s.is_some_and(|ta| t >= ta) {
+            let ch = p.current_sensor_stuck_channel.min(2);
+            let v = match self.stuck_value {
+                Some(v) => v,
+                None => p
+                    .current_sensor_stuck_value_a
+                    .unwrap_or(self.last_sample[ch]),
+            };
+            self.stuck_value = Some(v);
+            m.phase_currents[ch] = v;
+        }
+        if p.current_sensors_zero_at_s.is_some_and(|ta| t >= ta) {
+            m.phase_currents = [0.0; 3];
+        }
+        if !self.nan_done && p.nan_sample_at_s.is_some_and(|ta| t >= ta) {
             m.phase_currents[0] = f32::NAN;
             self.nan_done = true;
         }
+        self.last_sample = m.phase_currents;
     }
 
     /// What the inverter really applies for the command `applied`: with a shorted
@@ -93,6 +138,7 @@ mod tests {
             locked_rotor_at_s: Some(2.0),
             phase_short_at_s: Some(3.0),
             nan_sample_at_s: Some(4.0),
+            ..FaultPlan::default()
         };
         let mut f = FaultInjector::new(plan);
         let mut plant = Plant::ideal(MachineParams::paper_table1(), 325.0);
@@ -119,5 +165,34 @@ mod tests {
         let mut m = plant.sample();
         f.corrupt_sample(4.2, &mut m);
         assert!(m.phase_currents[0].is_finite(), "one NaN sample only");
+    }
+
+    #[test]
+    fn sensor_faults_corrupt_the_samples() {
+        let plan = FaultPlan {
+            current_sensor_stuck_at_s: Some(1.0),
+            current_sensor_stuck_channel: 1,
+            current_sensors_zero_at_s: Some(2.0),
+            current_sensor_offset_drift_a_per_s: 0.5,
+            ..FaultPlan::default()
+        };
+        let mut f = FaultInjector::new(plan);
+        let mut m = Measurements {
+            phase_currents: [1.0, 2.0, -3.0],
+            dc_bus: 300.0,
+            channels: crate::CurrentChannels::Three,
+        };
+        f.corrupt_sample(0.5, &mut m);
+        assert_eq!(m.phase_currents, [1.25, 2.0, -3.0]);
+        // stuck at the last value of channel 1
+        let mut m2 = m;
+        m2.phase_currents = [0.0, 7.0, -7.0];
+        f.corrupt_sample(1.0, &mut m2);
+        assert_eq!(m2.phase_currents, [0.5, 2.0, -7.0]);
+        m2.phase_currents = [0.0, 9.0, -9.0];
+        f.corrupt_sample(1.5, &mut m2);
+        assert_eq!(m2.phase_currents[1], 2.0);
+        f.corrupt_sample(2.0, &mut m2);
+        assert_eq!(m2.phase_currents, [0.0; 3]);
     }
 }

@@ -127,6 +127,8 @@ pub struct Plant {
     load: LoadTorque,
     report: PeriodReport,
     periods: u64,
+    /// An open motor phase (0..=2), if any.
+    open_phase: Option<usize>,
 }
 
 impl Plant {
@@ -147,6 +149,7 @@ impl Plant {
             load: LoadTorque::None,
             report: PeriodReport::default(),
             periods: 0,
+            open_phase: None,
         };
         p.update_freewheel_slope();
         p
@@ -266,6 +269,7 @@ impl Plant {
                 };
                 for _ in 0..n {
                     add(self.machine.step_with(h, load, &src));
+                    self.constrain_open_phase();
                 }
             }
         } else if !enabled {
@@ -291,11 +295,13 @@ impl Plant {
                     });
                 } else {
                     add(self.machine.step_with(h_max, load, &averaged));
+                    self.constrain_open_phase();
                 }
             }
         } else {
             for _ in 0..self.substeps {
                 add(self.machine.step_with(h_max, load, &averaged));
+                self.constrain_open_phase();
             }
         }
         let inv_t = 1.0 / t;
@@ -317,6 +323,37 @@ impl Plant {
     /// [`PwmPreload::advance`]), load `load` held over the period.
     pub fn run_pwm_period(&mut self, applied: PwmOutput, load: LoadTorque) {
         self.run_period(applied.duties, applied.enabled, load);
+    }
+
+    /// Opens motor phase `phase` (0..=2; `None` reconnects it): from then on that phase
+    /// carries no current. Modelled by removing the stator-current component along the
+    /// phase's axis after every integration step (the terminal floats to whatever voltage
+    /// keeps its current at zero; the small inductive energy of that component is lost,
+    /// as in the arc of a real opening).
+    pub fn set_open_phase(&mut self, phase: Option<usize>) {
+        self.open_phase = phase.map(|p| p.min(2));
+    }
+
+    /// The open phase, if any.
+    pub fn open_phase(&self) -> Option<usize> {
+        self.open_phase
+    }
+
+    fn constrain_open_phase(&mut self) {
+        if let Some(k) = self.open_phase {
+            // unit vector of phase k in the amplitude-invariant alpha-beta plane: the
+            // phase current is its projection (inverse Clarke)
+            let (ua, ub) = match k {
+                0 => (1.0, 0.0),
+                1 => (-0.5, 0.866_025_4),
+                _ => (-0.5, -0.866_025_4),
+            };
+            let mut st = self.machine.state();
+            let along = ua * st.i_alpha + ub * st.i_beta;
+            st.i_alpha -= along * ua;
+            st.i_beta -= along * ub;
+            self.machine.set_state(st);
+        }
     }
 
     /// Samples the sensors at the period boundary (call after [`Plant::run_period`]).
@@ -417,6 +454,32 @@ impl Default for Plant {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// With phase b open, its current stays zero while the others carry current.
+    #[test]
+    fn an_open_phase_carries_no_current() {
+        let mut p = Plant::ideal(MachineParams::paper_table1(), 300.0);
+        p.set_open_phase(Some(1));
+        for k in 0..200 {
+            let th = k as f32 * 0.05;
+            let d = [
+                0.5 + 0.3 * libm_free_cos(th),
+                0.5 + 0.3 * libm_free_cos(th - 2.094),
+                0.5 + 0.3 * libm_free_cos(th + 2.094),
+            ];
+            p.run_period(d, true, LoadTorque::None);
+            let i = p.phase_currents();
+            assert!(i[1].abs() < 1e-4, "{i:?}");
+        }
+        assert!(p.phase_currents()[0].abs() > 0.1);
+    }
+
+    /// cos by a short Taylor series after range reduction (tests only; no libm here).
+    fn libm_free_cos(x: f32) -> f32 {
+        let x = acim::math::wrap_angle(x);
+        let x2 = x * x;
+        1.0 - x2 / 2.0 + x2 * x2 / 24.0 - x2 * x2 * x2 / 720.0 + x2 * x2 * x2 * x2 / 40320.0
+    }
 
     /// The plant's phase currents are the library's inverse Clarke of its alpha-beta
     /// current: a zero-sum set whose two-channel Clarke gives the state back.

@@ -247,6 +247,66 @@ pub fn all() -> Vec<Scenario> {
     s.faults.nan_sample_at_s = Some(3.0);
     v.push(s);
 
+    // faults the drive must detect without trusting its estimates (issue 12)
+    let mut s = fault(
+        "fault-open-phase",
+        "motor phase b opens at 3 s (500 rpm, 1 N m): current-regulation trip",
+    );
+    s.load_profile = vec![load(2.0, LoadKind::Passive, 1.0)];
+    s.faults.open_phase_at_s = Some(3.0);
+    s.faults.open_phase = 1;
+    v.push(s);
+
+    let mut s = fault(
+        "fault-sensor-stuck",
+        "current channel a sticks at its last value at 3 s (two shunts, 500 rpm)",
+    );
+    s.faults.current_sensor_stuck_at_s = Some(3.0);
+    v.push(s);
+
+    let mut s = fault(
+        "fault-sensor-stuck-3shunt",
+        "current channel a sticks at its last value at 3 s (three shunts, 500 rpm)",
+    );
+    s.sensors.channels = 3;
+    s.faults.current_sensor_stuck_at_s = Some(3.0);
+    v.push(s);
+
+    let mut s = fault(
+        "fault-sensors-zero",
+        "every current channel reads 0 A from 3 s (sense cable off, 500 rpm)",
+    );
+    s.faults.current_sensors_zero_at_s = Some(3.0);
+    v.push(s);
+
+    let mut s = fault(
+        "fault-sensors-zero-at-start",
+        "every current channel reads 0 A from power-up: magnetizing must not hang",
+    );
+    s.faults.current_sensors_zero_at_s = Some(0.0);
+    s.windows = vec![];
+    v.push(s);
+
+    let mut s = fault(
+        "fault-offset-drift",
+        "channel a's offset drifts by 0.5 A/s from power-up (500 rpm)",
+    );
+    s.duration_s = 10.0;
+    s.faults.current_sensor_offset_drift_a_per_s = 0.5;
+    v.push(s);
+
+    for (rpm, nm) in [(500.0f32, 5.0f32), (500.0, 8.0), (500.0, 12.0)] {
+        let mut s = base(
+            &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
+            "an overhauling (active) load at 500 rpm: held within the torque capability, a clean fault beyond",
+            5.0,
+        );
+        s.speed_profile = vec![sp(0.5, rpm)];
+        s.load_profile = vec![load(2.5, LoadKind::Active, -nm)];
+        s.windows = vec![win("before-load", 2.0, 2.5)];
+        v.push(s);
+    }
+
     v
 }
 

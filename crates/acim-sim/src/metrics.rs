@@ -93,6 +93,13 @@ pub struct Metrics {
     /// Whether the drive stayed in control: no fault, and |speed - ref| (10 ms average)
     /// stayed below 100 rpm whenever running.
     pub control_kept: bool,
+    /// Largest |true phase current| while switching, A.
+    pub peak_current_a: f32,
+    /// Largest |true speed|, rpm.
+    pub peak_speed_rpm: f32,
+    /// Time spent switching with the true speed beyond 110 % of `max_speed` or a true
+    /// phase current beyond the trip, s.
+    pub switching_beyond_limits_s: f32,
     /// Largest |speed - ref| while running (10 ms average), rpm.
     pub speed_err_max_running_rpm: f32,
     /// Per-window steady-state metrics.
@@ -268,6 +275,17 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             max_running = max_running.max(spd_avg[k].abs());
         }
     }
+    // the scenario keeps the library's max_speed
+    let max_speed_rpm = acim::DriveConfig::paper_defaults().max_speed * acim::math::RAD_S_TO_RPM;
+    let trip = sc.drive.overcurrent_trip_a;
+    let ts = sc.drive.control_period_s;
+    let switching = || rows.iter().filter(|r| r.pwm_enabled);
+    let peak_current_a = switching().fold(0.0f32, |m, r| m.max(r.i_phase_peak_a));
+    let peak_speed_rpm = rows.iter().fold(0.0f32, |m, r| m.max(r.speed_rpm.abs()));
+    let switching_beyond_limits_s = switching()
+        .filter(|r| r.speed_rpm.abs() > 1.1 * max_speed_rpm || r.i_phase_peak_a > trip)
+        .count() as f32
+        * ts;
     Metrics {
         name: sc.name.clone(),
         description: sc.description.clone(),
@@ -278,6 +296,9 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         final_state: format!("{:?}", r.final_state),
         control_kept: r.fault.is_none() && max_running < 100.0,
         speed_err_max_running_rpm: max_running,
+        peak_current_a,
+        peak_speed_rpm,
+        switching_beyond_limits_s,
         windows,
         load_steps,
         rs,

@@ -187,7 +187,8 @@ pub struct DriveSpec {
     pub device_drop_comp_v: f32,
     /// Stall (locked rotor) detection time, s.
     pub stall_time_s: f32,
-    /// Orientation-correction gain (0: the paper's scheme unchanged).
+    /// Orientation-correction gain at light load (0: the paper's scheme unchanged); under
+    /// load the drive raises it to 1.25 |i_sq| / i_sd*.
     pub orientation_gain: f32,
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
@@ -372,6 +373,20 @@ pub struct FaultSpec {
     pub locked_rotor_at_s: Option<f32>,
     /// One phase-a current sample is NaN at this time, s.
     pub nan_sample_at_s: Option<f32>,
+    /// Motor phase `open_phase` opens at this time (it carries no current from then), s.
+    pub open_phase_at_s: Option<f32>,
+    /// The phase that opens, 0..=2 (a, b, c).
+    pub open_phase: usize,
+    /// Current channel `current_sensor_stuck_channel` sticks at this time, s.
+    pub current_sensor_stuck_at_s: Option<f32>,
+    /// The stuck channel, 0..=2.
+    pub current_sensor_stuck_channel: usize,
+    /// The value the stuck channel reads, A (default: its last value).
+    pub current_sensor_stuck_value_a: Option<f32>,
+    /// Every current channel reads its zero-current code from this time, s.
+    pub current_sensors_zero_at_s: Option<f32>,
+    /// Offset drift of channel a from the start, A/s.
+    pub current_sensor_offset_drift_a_per_s: f32,
 }
 
 /// A time window over which steady-state metrics are computed.
@@ -651,6 +666,15 @@ impl Scenario {
             ("faults.bus_sag_at_s", f.bus_sag_at_s),
             ("faults.locked_rotor_at_s", f.locked_rotor_at_s),
             ("faults.nan_sample_at_s", f.nan_sample_at_s),
+            ("faults.open_phase_at_s", f.open_phase_at_s),
+            (
+                "faults.current_sensor_stuck_at_s",
+                f.current_sensor_stuck_at_s,
+            ),
+            (
+                "faults.current_sensors_zero_at_s",
+                f.current_sensors_zero_at_s,
+            ),
         ] {
             if let Some(t) = t {
                 check_range(name, t, 0.0, self.duration_s)?;
@@ -659,6 +683,27 @@ impl Scenario {
         if f.bus_sag_at_s.is_some() {
             check_range("faults.bus_sag_to_v", f.bus_sag_to_v, 0.0, 2000.0)?;
         }
+        if f.open_phase > 2 {
+            return Err(ScenarioError {
+                field: "faults.open_phase".into(),
+                allowed: "0, 1 or 2 (phase a, b, c)".into(),
+            });
+        }
+        if f.current_sensor_stuck_channel > 2 {
+            return Err(ScenarioError {
+                field: "faults.current_sensor_stuck_channel".into(),
+                allowed: "0, 1 or 2 (phase a, b, c)".into(),
+            });
+        }
+        if let Some(v) = f.current_sensor_stuck_value_a {
+            check_range("faults.current_sensor_stuck_value_a", v, -1000.0, 1000.0)?;
+        }
+        check_range(
+            "faults.current_sensor_offset_drift_a_per_s",
+            f.current_sensor_offset_drift_a_per_s,
+            -100.0,
+            100.0,
+        )?;
         for (i, w) in self.windows.iter().enumerate() {
             check_range(
                 &format!("windows[{i}].from_s"),

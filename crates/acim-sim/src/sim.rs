@@ -21,7 +21,7 @@ use acim_plant::{
 use serde::Serialize;
 
 /// The CSV header: the required columns first, then extra ones.
-pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled";
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz";
 
 /// One recorded control step.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -66,13 +66,21 @@ pub struct Row {
     pub orientation_error_deg: f32,
     /// PWM outputs enabled.
     pub pwm_enabled: bool,
+    /// Largest |true phase current| at the sampling instant, A.
+    pub i_phase_peak_a: f32,
+    /// The drive's control monitor: mean |i* - i|, A.
+    pub current_error_a: f32,
+    /// The drive's control monitor: mean current-loop integral (model residual), V.
+    pub model_residual_v: f32,
+    /// The drive's stator frequency w_s / 2 pi, Hz (electrical).
+    pub stator_frequency_hz: f32,
 }
 
 impl Row {
     /// CSV line for this row (same column order as [`CSV_HEADER`]).
     pub fn csv(&self) -> String {
         format!(
-            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{}",
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4}",
             self.t_s,
             self.speed_ref_rpm,
             self.speed_rpm,
@@ -93,6 +101,10 @@ impl Row {
             self.rotor_flux_true,
             self.orientation_error_deg,
             self.pwm_enabled as u8,
+            self.i_phase_peak_a,
+            self.current_error_a,
+            self.model_residual_v,
+            self.stator_frequency_hz,
         )
     }
 }
@@ -166,6 +178,13 @@ pub(crate) fn fault_plan(sc: &Scenario) -> FaultPlan {
         locked_rotor_at_s: f.locked_rotor_at_s,
         phase_short_at_s: f.phase_short_at_s,
         nan_sample_at_s: f.nan_sample_at_s,
+        open_phase_at_s: f.open_phase_at_s,
+        open_phase: f.open_phase,
+        current_sensor_stuck_at_s: f.current_sensor_stuck_at_s,
+        current_sensor_stuck_channel: f.current_sensor_stuck_channel,
+        current_sensor_stuck_value_a: f.current_sensor_stuck_value_a,
+        current_sensors_zero_at_s: f.current_sensors_zero_at_s,
+        current_sensor_offset_drift_a_per_s: f.current_sensor_offset_drift_a_per_s,
     }
 }
 
@@ -304,6 +323,13 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
                 0.0
             },
             pwm_enabled: out.enabled,
+            i_phase_peak_a: m
+                .phase_currents()
+                .iter()
+                .fold(0.0f32, |a, x| a.max(x.abs())),
+            current_error_a: tel.current_error,
+            model_residual_v: tel.model_residual,
+            stator_frequency_hz: tel.stator_frequency * (1.0 / acim::math::TAU),
         });
 
         // apply: a switch-off acts at once, new duties from the next period

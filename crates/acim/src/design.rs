@@ -80,7 +80,10 @@ pub struct DriveConfig {
     pub rs_identification_timeout: f32,
     /// Orientation-correction gain k (dimensionless, 0 = the paper's scheme unchanged):
     /// the stator frequency gets -k sign(w_s) r_d / lambda_ref. Regeneration is stable for
-    /// k > tau_r |w_slip| (see [`crate::orientation`]).
+    /// k > tau_r |w_slip| (see [`crate::orientation`]). This is the gain at light load;
+    /// under load the drive raises it to [`ORIENTATION_GAIN_MARGIN`] tau_r |w_slip| =
+    /// [`ORIENTATION_GAIN_MARGIN`] |i_sq| / i_sd* (the slip law w_slip = i_sq /
+    /// (tau_r i_sd*)), so the condition holds at every torque up to the current limit.
     pub orientation_gain: f32,
     /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
     pub orientation_fade: (f32, f32),
@@ -225,6 +228,14 @@ pub const MAX_FLUX_TOLERANCE: f32 = 0.5;
 pub const MAX_DELAY_PERIODS: f32 = 3.0;
 /// Largest orientation-correction gain.
 pub const MAX_ORIENTATION_GAIN: f32 = 50.0;
+/// Overload: the speed loop settles in this many of its time constants (1 /
+/// speed_bandwidth); torque at the limit with a large speed error beyond that is a fault.
+pub const OVERLOAD_SPEED_LOOP_CONSTANTS: f32 = 5.0;
+/// Overload: the speed error counts beyond this fraction of the reference.
+pub const OVERLOAD_FRACTION: f32 = 0.5;
+/// Under load the orientation gain is at least this multiple of the stability bound
+/// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
+pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
 /// Speed targets are limited to this fraction of `max_speed` (the over-speed trip keeps
 /// a margin above any commanded speed).
 pub const SPEED_TARGET_FRACTION: f32 = 0.9;
@@ -244,11 +255,31 @@ pub const RESIDUAL_FILTER_TIME: f32 = 0.02;
 /// The Rs identification counts as settled when the filtered |error| is below this
 /// fraction of i_sd* (|Rs_hat - Rs| below about the same fraction).
 pub const RS_SETTLED_FRACTION: f32 = 0.003;
+/// The control monitor's leaky means span this many current-loop time constants
+/// (1 / current_bandwidth): long enough that a reference step (settled in about 3) does
+/// not count, short enough to detect within tens of milliseconds.
+pub const MONITOR_FILTER_LOOP_CONSTANTS: f32 = 10.0;
+/// Current regulation fails when the mean |i* - i| exceeds this fraction of i_sd*: a dead
+/// sensor or an open phase leaves at least the whole i_sd* unmet.
+pub const CURRENT_ERROR_FRACTION: f32 = 0.5;
+/// Three shunts: the mean |a + b + c| may reach this fraction of the over-current trip
+/// (gain and offset errors of a few per cent of full scale).
+pub const CURRENT_SUM_FRACTION: f32 = 0.05;
+/// The model may be off by this fraction of the stator resistance (the paper's fig. 8:
+/// +50 %, without the estimator) at the full current limit before the voltage residual
+/// counts as lost control.
+pub const RESIDUAL_RS_TOLERANCE: f32 = 0.5;
+/// ... plus this fraction of the linear voltage limit at the highest bus (inverter
+/// non-linearity, flux and inductance errors).
+pub const RESIDUAL_VOLTAGE_FRACTION: f32 = 0.05;
+/// Magnetizing gives up after this many rotor time constants beyond the standstill Rs
+/// identification's own timeout (the flux settles in about 3).
+pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
 
 /// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
 /// of the step reads only these.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SupervisionLimits<N = f32> {
+pub struct SupervisionLimits<N: Num = f32> {
     /// Measured phases (the third current is derived with two shunts).
     pub current_sensing: CurrentSensing,
     /// Phase current trip, A.
@@ -265,10 +296,40 @@ pub struct SupervisionLimits<N = f32> {
     pub implausible_steps: u32,
     /// Steps the stall condition may persist.
     pub stall_steps: u32,
+    /// Steps the overload condition may persist (leaky): [`OVERLOAD_SPEED_LOOP_CONSTANTS`]
+    /// / speed_bandwidth.
+    pub overload_steps: u32,
+    /// Overload: speed error beyond this fraction of |reference| ([`OVERLOAD_FRACTION`]).
+    pub overload_fraction: N,
+    /// ... and beyond this floor, rad/s ([`OVERLOAD_FRACTION`] of 100 rpm, so that a
+    /// reversal through zero does not count).
+    pub overload_speed_floor: N,
     /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`]).
     pub stall_fraction: N,
     /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
     pub rs_bound_faults: bool,
+    /// The control monitor's leaky-mean gain Ts / T_f, T_f =
+    /// [`MONITOR_FILTER_LOOP_CONSTANTS`] / current_bandwidth.
+    pub monitor_filter: N::Gain,
+    /// Largest mean |i* - i|, A: [`CURRENT_ERROR_FRACTION`] i_sd*.
+    pub current_error_limit: N,
+    /// Largest mean |a + b + c| with three shunts, A: [`CURRENT_SUM_FRACTION`] of the trip.
+    pub current_sum_limit: N,
+    /// Largest mean current-loop integral |I_d| + |I_q|, V: [`RESIDUAL_RS_TOLERANCE`] Rs
+    /// current_limit + [`RESIDUAL_VOLTAGE_FRACTION`] of the linear limit at `dc_bus_max`.
+    pub model_residual_limit: N,
+    /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
+    /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r.
+    pub magnetizing_timeout_steps: u32,
+    /// Largest stator resistance the current-response check allows, ohm:
+    /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs.
+    pub impedance_resistance: N,
+    /// Largest inductance the current-response check allows, H: Ls (the machine's
+    /// impedance is below Rs_max + |w_s| Ls at any slip).
+    pub impedance_inductance: N::Gain,
+    /// The current-response check judges only above this mean voltage, V: Rs
+    /// current_limit (the voltage of the largest current at standstill).
+    pub impedance_voltage_floor: N,
 }
 
 /// The orientation correction's constants ([`crate::orientation`]).
@@ -276,6 +337,9 @@ pub struct SupervisionLimits<N = f32> {
 pub struct OrientationDesign<N: Num = f32> {
     /// k / lambda_ref, 1/Wb.
     pub gain_per_flux: N::Gain,
+    /// c in the load scheduling k(i_sq) = k max(1, c |i_sq|), 1/A:
+    /// [`ORIENTATION_GAIN_MARGIN`] / (k i_sd*).
+    pub load_factor_per_current: N::Gain,
     /// |w_s| where the fade-in starts, rad/s electrical.
     pub fade_start: N,
     /// 1 / (fade upper - fade lower), s/rad.
@@ -546,6 +610,13 @@ impl DriveDesign {
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
+                // k(i_sq) = max(k, margin |i_sq| / i_sd*) = k max(1, c |i_sq|); the
+                // paper's scheme (k = 0) stays uncorrected at any load
+                load_factor_per_current: if cfg.orientation_gain > 0.0 {
+                    ORIENTATION_GAIN_MARGIN / (cfg.orientation_gain * i_d)
+                } else {
+                    0.0
+                },
                 fade_start: fa,
                 inv_fade_width: 1.0 / (fb - fa),
                 limit: ORIENTATION_LIMIT_FRACTION * cfg.max_speed * pp,
@@ -566,8 +637,27 @@ impl DriveDesign {
                 max_load_torque: cfg.max_load_torque_estimate,
                 implausible_steps: (IMPLAUSIBLE_TIME / ts) as u32,
                 stall_steps: (cfg.stall_time / ts) as u32,
+                overload_steps: (OVERLOAD_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32,
+                overload_fraction: OVERLOAD_FRACTION,
+                overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
                 stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.rs_estimation,
+                monitor_filter: (ts * cfg.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
+                    .min(1.0),
+                current_error_limit: CURRENT_ERROR_FRACTION * i_d,
+                current_sum_limit: CURRENT_SUM_FRACTION * cfg.overcurrent_trip,
+                model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
+                    + RESIDUAL_VOLTAGE_FRACTION * v_static,
+                impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance(),
+                impedance_inductance: m.stator_inductance(),
+                impedance_voltage_floor: m.stator_resistance() * i_max,
+                magnetizing_timeout_steps: ((if cfg.rs_estimation {
+                    cfg.rs_identification_timeout
+                } else {
+                    0.0
+                } + MAGNETIZING_TIMEOUT_TAU_R
+                    * m.rotor_time_constant())
+                    / ts) as u32,
             },
         })
     }

@@ -56,7 +56,7 @@ use crate::orientation;
 use crate::pi::PiController;
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
 pub use crate::supervisor::{
-    CommandError, DriveState, EstimatorHealth, FaultReason, Gate, Supervisor,
+    CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, Supervisor,
 };
 use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
 
@@ -117,6 +117,10 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub stator_frequency: N,
     /// Whether the modulator limited the voltage.
     pub voltage_saturated: bool,
+    /// The control monitor's mean |i* - i|, A ([`ControlMonitor`]).
+    pub current_error: N,
+    /// The control monitor's mean current-loop integral (model voltage residual), V.
+    pub model_residual: N,
 }
 
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
@@ -174,6 +178,8 @@ pub struct Measured<N: Num = f32> {
     pub angle: N::Angle,
     /// DC bus, V (checked against `dc_bus_min` > 0 by the gate).
     pub dc_bus: N,
+    /// i_a + i_b + i_c with three shunts (0 with two), A.
+    pub current_sum: N,
 }
 
 /// Output of the estimation stage.
@@ -251,6 +257,7 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     modulator: M,
     sincos: S,
     applied: Applied<N>,
+    monitor: ControlMonitor<N>,
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
 }
@@ -308,6 +315,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             modulator,
             sincos,
             applied: Applied::default(),
+            monitor: ControlMonitor::new(),
             open_loop: OpenLoop::default(),
             telemetry: DriveTelemetry {
                 stator_resistance_estimate: rs_initial,
@@ -450,12 +458,16 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.filtered_residual = N::ZERO;
         self.applied = Applied::default();
+        self.monitor = ControlMonitor::new();
         self.open_loop = OpenLoop::default();
     }
 
+    /// Trips the supervisor and switches off. The speed target is cleared: a restart
+    /// after a fault needs a new speed command.
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
         self.sup.trip(reason);
         self.applied = Applied::default();
+        self.refs.speed_target = N::ZERO;
         PwmOutput::OFF
     }
 
@@ -527,6 +539,24 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
+        // 6b. consistency of the control, independent of the estimates
+        let residual = Dq {
+            d: self.cur.d.integral(),
+            q: self.cur.q.integral(),
+        };
+        let voltage_limited = self.cur.d.saturated() || self.cur.q.saturated();
+        if let Some(reason) = self.monitor.check(
+            &self.coeffs.limits,
+            i_ref,
+            m.i_dq,
+            v,
+            residual,
+            m.current_sum,
+            e.stator_frequency,
+            voltage_limited,
+        ) {
+            return self.enter_fault(reason);
+        }
         // 7. modulation at the angle the voltage will act at
         probe.begin(StepRegion::Svpwm);
         let (v_ab, modulation) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
@@ -543,9 +573,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     #[inline(always)]
     fn sense(&mut self, inp: &DriveInputs<N>) -> Measured<N> {
         let [a, b, c] = inp.phase_currents;
-        let i_ab = match self.coeffs.limits.current_sensing {
-            CurrentSensing::TwoPhase => clarke_two(a, b),
-            CurrentSensing::ThreePhase => clarke_three(a, b, c),
+        let (i_ab, current_sum) = match self.coeffs.limits.current_sensing {
+            CurrentSensing::TwoPhase => (clarke_two(a, b), N::ZERO),
+            CurrentSensing::ThreePhase => (clarke_three(a, b, c), a + b + c),
         };
         let angle = self.est.flux.angle;
         let sc = self.sincos.sin_cos(angle);
@@ -555,6 +585,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             sc,
             angle,
             dc_bus: inp.dc_bus,
+            current_sum,
         }
     }
 
@@ -615,7 +646,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
 
         probe.begin(StepRegion::FluxSlip);
         let correction = if !magnetizing && flux_settled {
-            orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error)
+            orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
         } else {
             N::ZERO
         };
@@ -652,6 +683,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         if magnetizing {
             let mag = &c.magnetizing;
             r.magnetizing_steps = r.magnetizing_steps.saturating_add(1);
+            if let Some(reason) = self.sup.magnetizing(&c.limits, r.magnetizing_steps) {
+                return Err(reason);
+            }
             r.rs_settled_steps = if self.est.filtered_residual.abs() < mag.rs_settled_error {
                 r.rs_settled_steps.saturating_add(1)
             } else {
@@ -780,6 +814,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             angle: m.angle,
             stator_frequency: e.stator_frequency,
             voltage_saturated: saturated,
+            current_error: self.monitor.current_error,
+            model_residual: self.monitor.model_residual,
         };
     }
 

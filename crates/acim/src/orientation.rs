@@ -19,7 +19,9 @@ use crate::num::Num;
 /// the stator frequency of the last step `stator_frequency` (rad/s electrical), the Rs
 /// estimate `rs_estimate` (ohm) and the d-axis current-model error `current_error` (A,
 /// eq. 20): in field orientation the steady residual is r_d = Rs_hat e_d = -w_s lambda_q,
-/// so dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux. Faded in over
+/// so dw = -k sign(w_s) r_d / lambda_ref turns the frame toward the flux. Under load
+/// the gain becomes k max(1, c |i_sq|) with `torque_current` = i_sq (A), so that it stays
+/// above the stability bound tau_r |w_slip| = |i_sq| / i_sd*. Faded in over
 /// `fade`, bounded by `limit`. The caller applies it only with a settled flux and not
 /// while magnetizing.
 #[inline(always)]
@@ -28,6 +30,7 @@ pub fn correction<N: Num>(
     stator_frequency: N,
     rs_estimate: N,
     current_error: N,
+    torque_current: N,
 ) -> N {
     let w = N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE);
     let r_d = rs_estimate * current_error;
@@ -36,7 +39,10 @@ pub fn correction<N: Num>(
     } else {
         r_d
     };
-    N::gain_mul(d.gain_per_flux, w, signed).clamp(-d.limit, d.limit)
+    // load scheduling: k(i_sq) = k max(1, c |i_sq|) keeps k above tau_r |w_slip|
+    let load = N::gain(d.load_factor_per_current, torque_current.abs());
+    let scale = if load > N::ONE { load } else { N::ONE };
+    (N::gain_mul(d.gain_per_flux, w, signed) * scale).clamp(-d.limit, d.limit)
 }
 
 #[cfg(test)]
@@ -54,21 +60,21 @@ mod tests {
     fn silent_below_the_fade_and_full_above() {
         let d = design();
         // below the fade-in: nothing, whatever the residual
-        assert_eq!(correction(&d, 0.5 * d.fade_start, 10.0, 0.1), 0.0);
+        assert_eq!(correction(&d, 0.5 * d.fade_start, 10.0, 0.1, 0.0), 0.0);
         // above it: -k r_d / lambda_ref for w_s > 0, sign flipped for w_s < 0
         let above = d.fade_start + 2.0 / d.inv_fade_width;
-        let c = correction(&d, above, 10.0, 0.01);
+        let c = correction(&d, above, 10.0, 0.01, 0.0);
         assert!((c - (-d.gain_per_flux * 0.1)).abs() < 1e-5, "{c}");
-        assert_eq!(correction(&d, -above, 10.0, 0.01), -c);
+        assert_eq!(correction(&d, -above, 10.0, 0.01, 0.0), -c);
     }
 
     #[test]
     fn bounded_and_nan_safe() {
         let d = design();
         let above = d.fade_start + 2.0 / d.inv_fade_width;
-        assert_eq!(correction(&d, above, 10.0, -1e9), d.limit);
-        assert_eq!(correction(&d, above, 10.0, 1e9), -d.limit);
-        let n = correction(&d, above, f32::NAN, 1.0);
+        assert_eq!(correction(&d, above, 10.0, -1e9, 0.0), d.limit);
+        assert_eq!(correction(&d, above, 10.0, 1e9, 0.0), -d.limit);
+        let n = correction(&d, above, f32::NAN, 1.0, f32::NAN);
         assert!(n.abs() <= d.limit);
     }
 }

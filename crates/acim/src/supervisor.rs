@@ -9,6 +9,7 @@
 //! resets them all.
 
 use crate::design::{CurrentSensing, SupervisionLimits};
+use crate::frames::Dq;
 use crate::num::Num;
 
 /// Operating state of the drive.
@@ -65,6 +66,23 @@ pub enum FaultReason {
     /// Torque at its limit with no speed for `stall_time`, or a load estimate beyond the
     /// plausible range while the torque is at its limit: locked rotor or overload.
     Stall,
+    /// The measured current does not follow its reference (open phase, dead or stuck
+    /// current sensor, voltage saturation): judged on the measurements, not the estimates.
+    CurrentRegulation,
+    /// The current loops need a voltage the machine model does not explain (the speed or
+    /// flux estimate is wrong: runaway under an overhauling load, lost orientation).
+    LossOfControl,
+    /// Three-shunt sensing: the phase currents do not sum to zero.
+    CurrentSensor,
+    /// Torque at its limit with the speed far from its reference for longer than the
+    /// speed loop settles: a load beyond the drive's torque capability (or control lost
+    /// where the machine is unobservable).
+    Overload,
+    /// Magnetizing did not finish within its timeout (flux never settled).
+    MagnetizingTimeout,
+    /// The applied voltage drives far less measured current than the machine's largest
+    /// impedance allows: current sensing dead (all channels at zero) or motor disconnected.
+    NoCurrentResponse,
 }
 
 /// Commands refused by the drive.
@@ -112,6 +130,7 @@ pub struct Supervisor {
     fault: Option<FaultReason>,
     implausible_steps: u32,
     stall_steps: u32,
+    overload_steps: u32,
 }
 
 impl Default for Supervisor {
@@ -128,6 +147,7 @@ impl Supervisor {
             fault: None,
             implausible_steps: 0,
             stall_steps: 0,
+            overload_steps: 0,
         }
     }
     /// Present state.
@@ -148,6 +168,7 @@ impl Supervisor {
         self.state = to;
         self.implausible_steps = 0;
         self.stall_steps = 0;
+        self.overload_steps = 0;
         Ok(())
     }
     /// Any active state -> Idle; a faulted drive stays faulted.
@@ -243,8 +264,24 @@ impl Supervisor {
         None
     }
 
+    /// Magnetizing timeout: the flux (and the standstill Rs identification) must settle
+    /// within `magnetizing_timeout_steps`.
+    #[inline(always)]
+    pub fn magnetizing<N: Num>(
+        &self,
+        limits: &SupervisionLimits<N>,
+        magnetizing_steps: u32,
+    ) -> Option<FaultReason> {
+        if magnetizing_steps > limits.magnetizing_timeout_steps {
+            Some(FaultReason::MagnetizingTimeout)
+        } else {
+            None
+        }
+    }
+
     /// Stall: torque at its limit (speed PI saturated) while the speed estimate stays
-    /// below 10 % of the reference for more than `stall_steps`.
+    /// below 10 % of the reference, integrated with a leak (up one step while stalled,
+    /// down one step otherwise) beyond `stall_steps`.
     #[inline(always)]
     pub fn stall<N: Num>(
         &mut self,
@@ -255,13 +292,129 @@ impl Supervisor {
     ) -> Option<FaultReason> {
         let stalled = speed_pi_saturated
             && speed_estimate.abs() < limits.stall_fraction * speed_reference.abs();
+        // leaky integration: a step out of the stall condition drains one step instead of
+        // clearing the count, so a load that pushes the speed estimate over the threshold
+        // now and then cannot hold the detector off
         self.stall_steps = if stalled {
             self.stall_steps.saturating_add(1)
         } else {
-            0
+            self.stall_steps.saturating_sub(1)
+        };
+        // overload: torque at its limit while the speed is more than half the reference
+        // away from it, longer than the speed loop takes to settle (the load beats the
+        // drive, or the drive lost the machine where it is unobservable)
+        let band = speed_reference.abs() * limits.overload_fraction;
+        let band = if band > limits.overload_speed_floor {
+            band
+        } else {
+            limits.overload_speed_floor
+        };
+        let overloaded = speed_pi_saturated && (speed_estimate - speed_reference).abs() > band;
+        self.overload_steps = if overloaded {
+            self.overload_steps.saturating_add(1)
+        } else {
+            self.overload_steps.saturating_sub(1)
         };
         if self.stall_steps > limits.stall_steps {
             Some(FaultReason::Stall)
+        } else if self.overload_steps > limits.overload_steps {
+            // with no speed at all it is a stall, found sooner
+            Some(if stalled {
+                FaultReason::Stall
+            } else {
+                FaultReason::Overload
+            })
+        } else {
+            None
+        }
+    }
+}
+
+/// Estimate-independent consistency of the running control, judged on the measured
+/// currents, the current references and the voltage the current loops need beyond the
+/// machine model (their integrators: in steady state the feed-forward of eq. 9a-9b
+/// holds the model's voltage, so the integral is the part the model does not explain).
+/// Each signal is a leaky mean over `monitor_filter` (first order, time constant from
+/// the design); see [`SupervisionLimits`] for how each threshold follows from the
+/// configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlMonitor<N: Num = f32> {
+    /// Leaky mean of |i_sd* - i_sd| + |i_sq* - i_sq|, A.
+    pub current_error: N,
+    /// Leaky mean of |I_d| + |I_q|, the current-loop integrals (model voltage residual), V.
+    pub model_residual: N,
+    /// Leaky mean of |a + b + c| (three shunts; 0 with two), A.
+    pub current_sum: N,
+    /// Leaky mean of the commanded |v_d| + |v_q|, V.
+    pub voltage: N,
+    /// Leaky mean of the voltage the measured current can account for,
+    /// (Rs_max + |w_s| Ls)(|i_d| + |i_q|), V.
+    pub explained_voltage: N,
+}
+
+impl<N: Num> Default for ControlMonitor<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<N: Num> ControlMonitor<N> {
+    /// All means at zero.
+    pub fn new() -> Self {
+        Self {
+            current_error: N::ZERO,
+            model_residual: N::ZERO,
+            current_sum: N::ZERO,
+            voltage: N::ZERO,
+            explained_voltage: N::ZERO,
+        }
+    }
+
+    /// One step of the checks, in the order of the evidence's directness: the current
+    /// sum (a sensor fault), the current response to the voltage (dead sensing), the
+    /// current following its reference, then the voltage residual.
+    ///
+    /// `i_ref`, `i`: this step's current reference and measurement (A); `v`: this
+    /// step's voltage command (V); `residual`: the current loops' integrals (V);
+    /// `stator_frequency`: w_s (rad/s electrical, only to bound the impedance);
+    /// `voltage_limited`: a current loop's output is at the voltage limit, so an unmet
+    /// reference is the machine's limit, not a fault, and the regulation error holds.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn check(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        i_ref: Dq<N>,
+        i: Dq<N>,
+        v: Dq<N>,
+        residual: Dq<N>,
+        current_sum: N,
+        stator_frequency: N,
+        voltage_limited: bool,
+    ) -> Option<FaultReason> {
+        let g = limits.monitor_filter;
+        let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
+        if !voltage_limited {
+            let e = (i_ref.d - i.d).abs() + (i_ref.q - i.q).abs();
+            self.current_error = lp(self.current_error, e);
+        }
+        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
+        self.current_sum = lp(self.current_sum, current_sum.abs());
+        let i_mag = i.d.abs() + i.q.abs();
+        self.voltage = lp(self.voltage, v.d.abs() + v.q.abs());
+        let explained = limits.impedance_resistance * i_mag
+            + N::gain_mul(limits.impedance_inductance, stator_frequency.abs(), i_mag);
+        self.explained_voltage = lp(self.explained_voltage, explained);
+        if self.current_sum > limits.current_sum_limit {
+            Some(FaultReason::CurrentSensor)
+        } else if self.voltage > limits.impedance_voltage_floor
+            && self.explained_voltage < self.voltage.half()
+        {
+            Some(FaultReason::NoCurrentResponse)
+        } else if self.current_error > limits.current_error_limit {
+            Some(FaultReason::CurrentRegulation)
+        } else if self.model_residual > limits.model_residual_limit {
+            Some(FaultReason::LossOfControl)
         } else {
             None
         }
@@ -396,6 +549,178 @@ mod tests {
         assert_eq!(
             s.plausibility(&l, &bad, false),
             Some(FaultReason::EstimatorOutOfRange)
+        );
+    }
+
+    /// A stall interrupted by single steps above the threshold still trips (the count
+    /// leaks instead of resetting), only later by the interrupted steps.
+    #[test]
+    fn stall_integrates_with_a_leak() {
+        let l = limits();
+        let mut s = Supervisor::new();
+        let mut tripped_at = None;
+        for k in 0..(4 * l.stall_steps) {
+            // every fourth step the estimate pokes above 10 % of the reference
+            let est = if k % 4 == 3 { 50.0 } else { 1.0 };
+            if s.stall(&l, true, est, 100.0).is_some() {
+                tripped_at = Some(k);
+                break;
+            }
+        }
+        let k = tripped_at.expect("an interrupted stall must still trip");
+        // the overload timer (0.2 s) sees it first; the leak slows it by the interruptions
+        assert!(k > l.overload_steps && k <= 2 * l.overload_steps + 4, "{k}");
+        // a clean run drains the count
+        let mut s = Supervisor::new();
+        for _ in 0..l.overload_steps / 2 {
+            assert_eq!(s.stall(&l, true, 1.0, 100.0), None);
+        }
+        for _ in 0..l.overload_steps {
+            assert_eq!(s.stall(&l, false, 100.0, 100.0), None);
+        }
+        for _ in 0..l.overload_steps {
+            assert_eq!(s.stall(&l, true, 1.0, 100.0), None);
+        }
+        assert_eq!(s.stall(&l, true, 1.0, 100.0), Some(FaultReason::Stall));
+    }
+
+    /// Torque at the limit with the speed estimate well above the reference (an
+    /// overhauling load beyond the capability) is an overload after 5 speed-loop time
+    /// constants; a speed error inside the band is not.
+    #[test]
+    fn overload_needs_a_large_persistent_speed_error() {
+        let l = limits();
+        let mut s = Supervisor::new();
+        for _ in 0..4 * l.overload_steps {
+            assert_eq!(s.stall(&l, true, 140.0, 100.0), None);
+        }
+        let mut s = Supervisor::new();
+        let k = (0..4 * l.overload_steps)
+            .find(|_| s.stall(&l, true, 180.0, 100.0).is_some())
+            .unwrap();
+        assert_eq!(k, l.overload_steps);
+        let mut s = Supervisor::new();
+        for _ in 0..l.overload_steps {
+            let _ = s.stall(&l, true, 180.0, 100.0);
+        }
+        assert_eq!(s.stall(&l, true, 180.0, 100.0), Some(FaultReason::Overload));
+    }
+
+    fn dq(d: f32, q: f32) -> Dq<f32> {
+        Dq { d, q }
+    }
+
+    /// Runs the monitor `n` steps on constant signals; returns the first fault and its step.
+    fn monitor_run(
+        n: u32,
+        i_ref: Dq<f32>,
+        i: Dq<f32>,
+        v: Dq<f32>,
+        residual: Dq<f32>,
+        sum: f32,
+        limited: bool,
+    ) -> Option<(u32, FaultReason)> {
+        let l = limits();
+        let mut m = ControlMonitor::new();
+        (0..n).find_map(|k| {
+            m.check(&l, i_ref, i, v, residual, sum, 60.0, limited)
+                .map(|r| (k, r))
+        })
+    }
+
+    #[test]
+    fn healthy_control_passes_the_monitor() {
+        // running near 500 rpm: currents on reference, model voltage explained
+        let r = monitor_run(
+            10_000,
+            dq(1.5, 2.0),
+            dq(1.49, 2.02),
+            dq(20.0, 90.0),
+            dq(1.0, 3.0),
+            0.01,
+            false,
+        );
+        assert_eq!(r, None);
+    }
+
+    #[test]
+    fn dead_current_sensing_is_no_current_response() {
+        // voltage wound up, nothing measured
+        let r = monitor_run(
+            10_000,
+            dq(1.5, 0.0),
+            dq(0.0, 0.0),
+            dq(150.0, 20.0),
+            dq(100.0, 20.0),
+            0.0,
+            true,
+        );
+        let (k, reason) = r.unwrap();
+        assert_eq!(reason, FaultReason::NoCurrentResponse);
+        assert!(k < 50, "{k} steps"); // within 10 ms at 5 kHz
+    }
+
+    #[test]
+    fn unmet_reference_is_a_regulation_fault_unless_voltage_limited() {
+        let run = |limited| {
+            monitor_run(
+                10_000,
+                dq(1.5, 3.0),
+                dq(0.5, 2.0),
+                dq(20.0, 60.0),
+                dq(2.0, 2.0),
+                0.0,
+                limited,
+            )
+        };
+        let (k, reason) = run(false).unwrap();
+        assert_eq!(reason, FaultReason::CurrentRegulation);
+        assert!(k < 100, "{k} steps");
+        // at the voltage limit the machine, not the drive, limits the current
+        assert_eq!(run(true), None);
+    }
+
+    #[test]
+    fn unexplained_voltage_is_loss_of_control() {
+        let l = limits();
+        let big = l.model_residual_limit;
+        let (_, reason) = monitor_run(
+            10_000,
+            dq(1.5, 3.0),
+            dq(1.5, 3.0),
+            dq(20.0, 150.0),
+            dq(0.0, 1.5 * big),
+            0.0,
+            false,
+        )
+        .unwrap();
+        assert_eq!(reason, FaultReason::LossOfControl);
+    }
+
+    #[test]
+    fn three_shunts_must_sum_to_zero() {
+        let l = limits();
+        let (_, reason) = monitor_run(
+            10_000,
+            dq(1.5, 3.0),
+            dq(1.5, 3.0),
+            dq(20.0, 90.0),
+            dq(1.0, 1.0),
+            2.0 * l.current_sum_limit,
+            false,
+        )
+        .unwrap();
+        assert_eq!(reason, FaultReason::CurrentSensor);
+    }
+
+    #[test]
+    fn magnetizing_times_out() {
+        let l = limits();
+        let s = Supervisor::new();
+        assert_eq!(s.magnetizing(&l, l.magnetizing_timeout_steps), None);
+        assert_eq!(
+            s.magnetizing(&l, l.magnetizing_timeout_steps + 1),
+            Some(FaultReason::MagnetizingTimeout)
         );
     }
 

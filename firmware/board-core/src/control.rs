@@ -66,6 +66,12 @@ impl FaultCode {
             Some(FaultReason::Stall) => 7,
             Some(FaultReason::HardwareBreak) => 8,
             Some(FaultReason::DeadlineMissed) => 9,
+            Some(FaultReason::CurrentRegulation) => 10,
+            Some(FaultReason::LossOfControl) => 11,
+            Some(FaultReason::CurrentSensor) => 12,
+            Some(FaultReason::MagnetizingTimeout) => 13,
+            Some(FaultReason::NoCurrentResponse) => 14,
+            Some(FaultReason::Overload) => 15,
         }
     }
 }

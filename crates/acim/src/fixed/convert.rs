@@ -207,6 +207,10 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
                 d.orientation.gain_per_flux * b.voltage / b.frequency,
                 "orientation_gain",
             )?,
+            load_factor_per_current: gain(
+                d.orientation.load_factor_per_current * b.current,
+                "orientation_gain",
+            )?,
             fade_start: pu(d.orientation.fade_start, b.frequency, "orientation_fade")?,
             inv_fade_width: gain(
                 b.frequency / (cfg.orientation_fade.1 - cfg.orientation_fade.0),
@@ -234,8 +238,30 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             )?,
             implausible_steps: d.limits.implausible_steps,
             stall_steps: d.limits.stall_steps,
+            overload_steps: d.limits.overload_steps,
+            overload_fraction: Q24(to_q24(d.limits.overload_fraction)),
+            overload_speed_floor: pu(d.limits.overload_speed_floor, b.speed, "speed_bandwidth")?,
             stall_fraction: Q24(to_q24(d.limits.stall_fraction)),
             rs_bound_faults: d.limits.rs_bound_faults,
+            monitor_filter: gain(d.limits.monitor_filter, "current_bandwidth")?,
+            current_error_limit: pu(d.limits.current_error_limit, b.current, "flux_current")?,
+            current_sum_limit: pu(d.limits.current_sum_limit, b.current, "overcurrent_trip")?,
+            model_residual_limit: pu(d.limits.model_residual_limit, b.voltage, "dc_bus_max")?,
+            magnetizing_timeout_steps: d.limits.magnetizing_timeout_steps,
+            impedance_resistance: pu(
+                d.limits.impedance_resistance,
+                b.resistance(),
+                "machine.stator_resistance",
+            )?,
+            impedance_inductance: gain(
+                d.limits.impedance_inductance * b.frequency * b.current / b.voltage,
+                "machine.stator_inductance",
+            )?,
+            impedance_voltage_floor: pu(
+                d.limits.impedance_voltage_floor,
+                b.voltage,
+                "current_limit",
+            )?,
         },
         vf: VfDesign {
             volts_per_rad_s: gain(

@@ -156,6 +156,8 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
             angle: Q24::angle_to_rad(t.angle),
             stator_frequency: t.stator_frequency.to_pu() * b.frequency,
             voltage_saturated: t.voltage_saturated,
+            current_error: t.current_error.to_pu() * b.current,
+            model_residual: t.model_residual.to_pu() * b.voltage,
         }
     }
 
