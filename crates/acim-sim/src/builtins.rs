@@ -298,7 +298,11 @@ pub fn all() -> Vec<Scenario> {
     for (rpm, nm) in [(500.0f32, 5.0f32), (500.0, 8.0), (500.0, 12.0)] {
         let mut s = base(
             &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
-            "an overhauling (active) load at 500 rpm: held within the torque capability, a clean fault beyond",
+            if nm <= 10.0 {
+                "overhauling load at 500 rpm within the torque capability: held"
+            } else {
+                "overhauling load at 500 rpm beyond the torque capability: overload"
+            },
             5.0,
         );
         s.speed_profile = vec![sp(0.5, rpm)];

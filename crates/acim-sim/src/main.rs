@@ -20,7 +20,9 @@ const USAGE: &str = "usage:
   acim-sim figures [--out DIR]              regenerate docs/figures/*.png and metrics.md
   acim-sim stability [DIR]                  orientation stability map (docs/stability)
   acim-sim observers [FILE] [--out DIR]     reduced- vs full-order observer, closed loop
-                                            (table to FILE, default docs/observers.md)";
+                                            (table to FILE, default docs/observers.md)
+  acim-sim faults [FILE] [--out DIR]        every fault-* scenario: reason, detection time,
+                                            peaks (table to FILE, default docs/faults.md)";
 
 fn load(spec: &str) -> Result<Scenario, String> {
     if let Some(s) = builtins::get(spec) {
@@ -284,6 +286,24 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let cycles =
                 acim_sim::observers::bench_cycles(Path::new("benches/results/cycles.json"));
             let md = acim_sim::observers::markdown(&rows, cycles);
+            print!("{md}");
+            if let Some(dir) = file.parent() {
+                std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            }
+            std::fs::write(&file, &md).map_err(|e| format!("{}: {e}", file.display()))?;
+            println!(
+                "\nwrote {} (run outputs in {})",
+                file.display(),
+                out.display()
+            );
+        }
+        Some("faults") => {
+            let file = positional
+                .first()
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("docs/faults.md"));
+            let rows = acim_sim::faults::run_all(&out)?;
+            let md = acim_sim::faults::markdown(&rows);
             print!("{md}");
             if let Some(dir) = file.parent() {
                 std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;

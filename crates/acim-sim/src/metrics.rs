@@ -97,6 +97,8 @@ pub struct Metrics {
     pub peak_current_a: f32,
     /// Largest |true speed|, rpm.
     pub peak_speed_rpm: f32,
+    /// Largest |true speed| while switching, rpm.
+    pub peak_speed_switching_rpm: f32,
     /// Time spent switching with the true speed beyond 110 % of `max_speed` or a true
     /// phase current beyond the trip, s.
     pub switching_beyond_limits_s: f32,
@@ -282,6 +284,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     let switching = || rows.iter().filter(|r| r.pwm_enabled);
     let peak_current_a = switching().fold(0.0f32, |m, r| m.max(r.i_phase_peak_a));
     let peak_speed_rpm = rows.iter().fold(0.0f32, |m, r| m.max(r.speed_rpm.abs()));
+    let peak_speed_switching_rpm = switching().fold(0.0f32, |m, r| m.max(r.speed_rpm.abs()));
     let switching_beyond_limits_s = switching()
         .filter(|r| r.speed_rpm.abs() > 1.1 * max_speed_rpm || r.i_phase_peak_a > trip)
         .count() as f32
@@ -298,6 +301,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         speed_err_max_running_rpm: max_running,
         peak_current_a,
         peak_speed_rpm,
+        peak_speed_switching_rpm,
         switching_beyond_limits_s,
         windows,
         load_steps,
