@@ -508,18 +508,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.end(StepRegion::ClarkePark);
         // 3. estimate
         let e = self.estimate(&m, magnetizing, probe);
-        // 4. plausibility
-        let health = EstimatorHealth {
-            speed: e.observer.speed,
-            load_torque: e.observer.load_torque,
-            current: e.observer.current,
-            rs_at_bound: self.est.rs.at_bound,
-        };
-        let saturated = self.refs.speed_ctl.saturated();
-        if let Some(reason) = self
-            .sup
-            .plausibility(&self.coeffs.limits, &health, saturated)
-        {
+        // 4. plausibility of the estimates
+        if let Some(reason) = self.plausibility(&e) {
             return self.enter_fault(reason);
         }
         // 5. references
@@ -539,22 +529,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
-        // 6b. consistency of the control, independent of the estimates
-        let residual = Dq {
-            d: self.cur.d.integral(),
-            q: self.cur.q.integral(),
-        };
-        let voltage_limited = self.cur.d.saturated() || self.cur.q.saturated();
-        if let Some(reason) = self.monitor.check(
-            &self.coeffs.limits,
-            i_ref,
-            m.i_dq,
-            v,
-            residual,
-            m.current_sum,
-            e.stator_frequency,
-            voltage_limited,
-        ) {
+        // 6b. consistency of the control, judged without trusting the estimates
+        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v) {
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -567,6 +543,48 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             duties: modulation.duties,
             enabled: true,
         }
+    }
+
+    /// The supervisor's plausibility check of this step's estimates.
+    #[inline(always)]
+    fn plausibility(&mut self, e: &Estimate<N>) -> Option<FaultReason> {
+        let health = EstimatorHealth {
+            speed: e.observer.speed,
+            load_torque: e.observer.load_torque,
+            current: e.observer.current,
+            rs_at_bound: self.est.rs.at_bound,
+        };
+        let saturated = self.refs.speed_ctl.saturated();
+        self.sup
+            .plausibility(&self.coeffs.limits, &health, saturated)
+    }
+
+    /// The supervisor's control monitor ([`ControlMonitor`]): measured currents against
+    /// their references and the applied voltage, the current loops' integrals as the
+    /// model's voltage residual.
+    #[inline(always)]
+    fn monitor_control(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        i_ref: Dq<N>,
+        v: Dq<N>,
+    ) -> Option<FaultReason> {
+        let residual = Dq {
+            d: self.cur.d.integral(),
+            q: self.cur.q.integral(),
+        };
+        let voltage_limited = self.cur.d.saturated() || self.cur.q.saturated();
+        self.monitor.check(
+            &self.coeffs.limits,
+            i_ref,
+            m.i_dq,
+            v,
+            residual,
+            m.current_sum,
+            e.stator_frequency,
+            voltage_limited,
+        )
     }
 
     /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
