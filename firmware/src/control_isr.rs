@@ -13,7 +13,9 @@
 //! owns the drive.
 
 use crate::board_cfg::Sc;
-use acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
+#[cfg(feature = "selftest")]
+use acim_firmware_core::control::FirmwareFault;
+use acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop};
 use acim_firmware_core::telemetry::TelemetrySample;
 use acim_firmware_core::timing::elapsed;
 use core::mem::MaybeUninit;
@@ -26,6 +28,8 @@ use stm32g4xx_hal::pac::interrupt;
 use crate::hw;
 #[cfg(not(feature = "selftest"))]
 use acim_firmware_core::board::{MAX_DUTY, PWM_ARR};
+#[cfg(not(feature = "selftest"))]
+use acim_firmware_core::stage::{apply_command, control_period};
 
 /// Telemetry queue length (holds N-1 samples: 1.5 s at 10 Hz).
 pub const TEL_Q: usize = 16;
@@ -80,6 +84,7 @@ fn state() -> Option<&'static mut IsrState> {
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
 }
 
+#[cfg(feature = "selftest")]
 #[inline(always)]
 fn commands(st: &mut IsrState) -> Option<ControlCommand> {
     let cmd = st.cmd.dequeue()?;
@@ -104,28 +109,32 @@ fn publish(st: &mut IsrState, cycles: u32, plant_speed_rpm: f32) {
 #[interrupt]
 fn ADC1_2() {
     let t0 = DWT::cycle_count();
-    hw::adc_ack();
-    let Some(st) = state() else { return };
-    if let Some(ControlCommand::ResetFault) = commands(st) {
-        hw::clear_break_flag();
-    }
-    let complete = hw::adc2_done();
-    let raw = hw::adc_read();
-    let out = if hw::break_flag() {
-        st.ctl.trip(FirmwareFault::HardwareBreak)
-    } else if !complete {
-        st.ctl.trip(FirmwareFault::AdcSequence)
-    } else {
-        st.ctl.step(&raw)
+    let mut io = hw::Tim1Adc {
+        arr: PWM_ARR,
+        max_duty: MAX_DUTY,
     };
-    hw::pwm_write(&out, PWM_ARR, MAX_DUTY);
-    // deadline: a newer sequence already completed while this step ran
-    if hw::adc_sequence_pending() {
-        let off = st.ctl.trip(FirmwareFault::DeadlineMissed);
-        hw::pwm_write(&off, PWM_ARR, MAX_DUTY);
+    let Some(st) = state() else {
+        // not installed yet: only acknowledge
+        io_ack(&mut io);
+        return;
+    };
+    // at most one command per period; a start arms MOE, an accepted reset clears breaks
+    if let Some(cmd) = st.cmd.dequeue() {
+        let r = apply_command(&mut st.ctl, &mut io, cmd);
+        let _ = st.reply.enqueue(r);
     }
+    // flags read before acknowledging, break checks, step, PWM write (never sets MOE),
+    // deadline check: acim_firmware_core::stage::control_period
+    control_period(&mut st.ctl, &mut io);
     let t1 = DWT::cycle_count();
     publish(st, elapsed(t0, t1), 0.0);
+}
+
+#[cfg(not(feature = "selftest"))]
+#[inline(always)]
+fn io_ack(io: &mut hw::Tim1Adc) {
+    use acim_firmware_core::stage::PowerStageIo;
+    io.acknowledge();
 }
 
 #[cfg(feature = "selftest")]

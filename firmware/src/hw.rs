@@ -15,8 +15,8 @@
 //! HAL's TIM1/TIM6 objects do not touch these registers after their set-up. Register
 //! pointers come from the PAC and are valid for the whole program.
 
-use acim::PwmOutput;
 use acim_firmware_core::convert::{duty_to_compare, RawSample};
+use acim_firmware_core::stage::PowerStageIo;
 use stm32g4xx_hal::pac;
 
 #[inline(always)]
@@ -104,27 +104,92 @@ pub fn tim1_start(arr: u16, trigger: u16) {
     t.cr1().modify(|_, w| w.cen().set_bit());
 }
 
-/// Writes one step's command. Enabled: compare values (preloaded: act from the next
-/// period) and MOE set. Disabled: MOE cleared at once (switches off within this period,
-/// after the dead time) and compare values back to 50 %.
+/// TIM1_SR: break (BIF), break 2 (B2IF) and system break (SBIF) flags.
+const BREAK_FLAGS: u32 = (1 << 7) | (1 << 8) | (1 << 13);
+
+/// The break input, break 2 or the system break (lockup, ECC, SRAM parity, PVD: see
+/// [`link_system_break`]) fired since the flags were last cleared; the hardware has
+/// already cleared MOE (AOE = 0 keeps it cleared).
 #[inline(always)]
-pub fn pwm_write(out: &PwmOutput, arr: u16, max_duty: f32) {
-    let t = tim1();
-    if out.enabled {
-        let [a, b, c] = out.duties;
+pub fn break_flag() -> bool {
+    tim1().sr().read().bits() & BREAK_FLAGS != 0
+}
+
+/// Clears the break flags (on an accepted fault reset only; if the break line is still
+/// active the flag sets again at once and the drive trips again).
+pub fn clear_break_flags() {
+    // SAFETY: rc_w0 flags: writing 1 leaves a flag unchanged, 0 clears it.
+    tim1().sr().write(|w| unsafe { w.bits(!BREAK_FLAGS) });
+}
+
+/// TIM1 and ADC1/2 as the control interrupt's power stage (the sequence itself, with its
+/// ordering rules, is `acim_firmware_core::stage`, host-tested).
+pub struct Tim1Adc {
+    /// TIM1 auto-reload value.
+    pub arr: u16,
+    /// Largest high-side duty.
+    pub max_duty: f32,
+}
+
+impl PowerStageIo for Tim1Adc {
+    #[inline(always)]
+    fn conversions_done(&self) -> (bool, bool) {
+        (
+            adc1().isr().read().jeos().bit_is_set(),
+            adc2().isr().read().jeos().bit_is_set(),
+        )
+    }
+    #[inline(always)]
+    fn read(&self) -> RawSample {
+        adc_read()
+    }
+    #[inline(always)]
+    fn acknowledge(&mut self) {
+        adc_ack();
+    }
+    #[inline(always)]
+    fn sequence_pending(&self) -> bool {
+        adc_sequence_pending()
+    }
+    #[inline(always)]
+    fn break_flag(&self) -> bool {
+        break_flag()
+    }
+    fn clear_break_flags(&mut self) {
+        clear_break_flags();
+    }
+    #[inline(always)]
+    fn outputs_enabled(&self) -> bool {
+        outputs_enabled()
+    }
+    fn enable_outputs(&mut self) {
+        // re-check the flags right before the write: MOE cannot be set while a level
+        // break is active, and a latched pulse must not be armed over
+        if !break_flag() {
+            tim1().bdtr().modify(|_, w| w.moe().set_bit());
+        }
+    }
+    /// Compare values (preloaded: act from the next period). Never touches MOE.
+    #[inline(always)]
+    fn write_duties(&mut self, duties: [f32; 3]) {
+        let t = tim1();
+        let [a, b, c] = duties;
+        let (arr, m) = (self.arr, self.max_duty);
         // SAFETY: compare values are any 16-bit count (duty_to_compare returns <= arr)
         t.ccr1()
-            .write(|w| unsafe { w.ccr().bits(duty_to_compare(a, arr, max_duty) as u32) });
+            .write(|w| unsafe { w.ccr().bits(duty_to_compare(a, arr, m) as u32) });
         t.ccr2()
-            .write(|w| unsafe { w.ccr().bits(duty_to_compare(b, arr, max_duty) as u32) });
+            .write(|w| unsafe { w.ccr().bits(duty_to_compare(b, arr, m) as u32) });
         t.ccr3()
-            .write(|w| unsafe { w.ccr().bits(duty_to_compare(c, arr, max_duty) as u32) });
-        if t.bdtr().read().moe().bit_is_clear() {
-            t.bdtr().modify(|_, w| w.moe().set_bit());
-        }
-    } else {
+            .write(|w| unsafe { w.ccr().bits(duty_to_compare(c, arr, m) as u32) });
+    }
+    /// MOE cleared at once (switches off within this period, after the dead time) and
+    /// compare values back to 50 %.
+    #[inline(always)]
+    fn switch_off(&mut self) {
+        let t = tim1();
         t.bdtr().modify(|_, w| w.moe().clear_bit());
-        let half = (arr / 2) as u32;
+        let half = (self.arr / 2) as u32;
         // SAFETY: any 16-bit count
         t.ccr1().write(|w| unsafe { w.ccr().bits(half) });
         t.ccr2().write(|w| unsafe { w.ccr().bits(half) });
@@ -132,21 +197,54 @@ pub fn pwm_write(out: &PwmOutput, arr: u16, max_duty: f32) {
     }
 }
 
-/// The break input fired since the flag was last cleared (the hardware has already
-/// cleared MOE; AOE = 0 keeps it cleared).
-#[inline(always)]
-pub fn break_flag() -> bool {
-    let sr = tim1().sr().read();
-    sr.bif().bit_is_set() || sr.b2if().bit_is_set()
+/// The clock registers read back after the HAL's set-up (checked by
+/// `acim_firmware_core::clock::check`).
+pub fn clock_registers() -> acim_firmware_core::clock::ClockRegisters {
+    // SAFETY: read-only accesses of RCC, FLASH and PWR configuration registers, at
+    // start-up (single-threaded); the HAL owns them but no longer writes them.
+    let (rcc, flash, pwr) = unsafe { (&*pac::RCC::ptr(), &*pac::FLASH::ptr(), &*pac::PWR::ptr()) };
+    acim_firmware_core::clock::ClockRegisters {
+        rcc_cfgr: rcc.cfgr().read().bits(),
+        rcc_pllcfgr: rcc.pllcfgr().read().bits(),
+        flash_acr: flash.acr().read().bits(),
+        pwr_cr1: pwr.cr1().read().bits(),
+        pwr_cr5: pwr.cr5().read().bits(),
+    }
 }
 
-/// Clears the break flags (on a fault reset; if the break line is still active the flag
-/// sets again at once and the drive trips again).
-pub fn clear_break_flag() {
-    // SAFETY: rc_w0 flags: writing 1 leaves a flag unchanged, 0 clears it.
-    tim1()
-        .sr()
-        .write(|w| unsafe { w.bits(!((1 << 7) | (1 << 8))) });
+/// Debug halts stop TIM1 (outputs to their off-state) and the watchdog, so a breakpoint
+/// during bring-up leaves the bridge off instead of switching at a frozen duty (review
+/// D6). Written once at start-up.
+pub fn freeze_on_debug_halt() {
+    // SAFETY: DBGMCU is only written here, at start-up (single-threaded).
+    let dbg = unsafe { &*pac::DBGMCU::ptr() };
+    dbg.apb2_fz().modify(|_, w| w.dbg_tim1_stop().set_bit());
+    dbg.apb1l_fz().modify(|_, w| w.dbg_iwdg_stop().set_bit());
+}
+
+/// Routes core lockup (CLL), SRAM parity (SPL), PVD (PVDL) and flash ECC (ECCL) events
+/// to TIM1's system break in hardware, so they switch the bridge off even when no
+/// handler can run (review D7). SYSCFG's clock is enabled first. The lock bits are
+/// write-once until reset.
+pub fn link_system_break() {
+    // SAFETY: init only, single-threaded: RCC read-modify-write of SYSCFGEN only.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.apb2enr().modify(|_, w| w.syscfgen().set_bit());
+    // the enable takes effect before the next access
+    let _ = rcc.apb2enr().read();
+    // SAFETY: SYSCFG is only written here, at start-up; the lock bits only add break
+    // sources.
+    let syscfg = unsafe { &*pac::SYSCFG::ptr() };
+    syscfg.cfgr2().modify(|_, w| {
+        w.cll()
+            .set_bit()
+            .spl()
+            .set_bit()
+            .pvdl()
+            .set_bit()
+            .eccl()
+            .set_bit()
+    });
 }
 
 /// Whether the main output is on.
@@ -260,13 +358,6 @@ pub fn adc_enable_interrupt() {
 pub fn adc_ack() {
     adc1().isr().write(|w| w.jeos().clear().jeoc().clear());
     adc2().isr().write(|w| w.jeos().clear().jeoc().clear());
-}
-
-/// True once ADC2 has finished its sequence too (same trigger, clock and length as ADC1,
-/// so it is normally done when ADC1 is).
-#[inline(always)]
-pub fn adc2_done() -> bool {
-    adc2().isr().read().jeos().bit_is_set()
 }
 
 /// A new injected sequence completed since [`adc_ack`]: the step missed its deadline.

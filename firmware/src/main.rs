@@ -75,8 +75,15 @@ fn main() -> ! {
         panic!("core peripherals taken twice")
     };
 
+    // debug halts stop TIM1 and the watchdog; lockup/ECC/parity/PVD break TIM1 in hardware
+    hw::freeze_on_debug_halt();
+    hw::link_system_break();
+
     // 170 MHz from HSI16: 16 / 4 * 85 / 2; Range 1 boost mode (needed above 150 MHz);
-    // the HAL sets the flash wait states (4 at 170 MHz) during the switch.
+    // the HAL sets the flash wait states (4 at 170 MHz) during the switch. The HAL does not
+    // enable PWR's bus clock, without which its boost-mode write is dropped (review D2).
+    dp.RCC.apb1enr1().modify(|_, w| w.pwren().set_bit());
+    let _ = dp.RCC.apb1enr1().read(); // the enable takes effect before PWR is accessed
     let pwr = dp
         .PWR
         .constrain()
@@ -95,8 +102,10 @@ fn main() -> ! {
             .boost(true),
         pwr,
     );
-    if rcc.clocks.sys_clk.raw() != board::SYSCLK_HZ {
-        panic!("system clock is not 170 MHz");
+    // judged from the registers, not from the HAL's computed value
+    if let Err(e) = acim_firmware_core::clock::check(&hw::clock_registers(), board::SYSCLK_HZ) {
+        defmt::error!("clock set-up wrong: {}", e);
+        panic!("system clock is not 170 MHz boost");
     }
     defmt::info!(
         "acim-firmware {}: {} Hz core, {} Hz PWM, mode: {}",
@@ -442,6 +451,24 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 
 #[exception]
 unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+    hw::emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// NMI (e.g. a flash ECC double error): switch off, then wait for the watchdog.
+#[exception]
+unsafe fn NonMaskableInt() {
+    hw::emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Any exception or interrupt without a handler: switch off, then wait for the watchdog.
+#[exception]
+unsafe fn DefaultHandler(_irqn: i16) {
     hw::emergency_off();
     loop {
         cortex_m::asm::nop();

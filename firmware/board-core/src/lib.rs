@@ -4,6 +4,7 @@
 //! `cargo test` at the repository root runs these tests; the firmware binary itself is
 //! only built for `thumbv7em-none-eabihf`):
 //!
+//! - [`clock`]: the core clock checked from the registers read back after set-up;
 //! - [`board`]: the board description (power stage gains, pin map, PWM and ADC timing) and
 //!   the drive configuration derived from it;
 //! - [`convert`]: ADC counts to amperes and volts, offset calibration, duty to compare
@@ -13,7 +14,9 @@
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
 //! - [`sim`]: the motor model behind this board's ADC, for the self-test;
 //! - [`control`]: the per-period control loop (conversion, faults, drive step, telemetry)
-//!   that the firmware's interrupt calls, generic over the sin/cos provider.
+//!   that the firmware's interrupt calls, generic over the sin/cos provider;
+//! - [`stage`]: the interrupt's period sequence (ADC flags, break, MOE arming, deadline)
+//!   over a register trait, host-tested against a register model.
 //!
 //! Code reachable from [`control::ControlLoop::step`] and
 //! [`control::ControlLoop::finish_period`] runs in the 5 kHz interrupt: it must not panic
@@ -23,9 +26,11 @@
 #![warn(missing_docs)]
 
 pub mod board;
+pub mod clock;
 pub mod command;
 pub mod control;
 pub mod convert;
 pub mod sim;
+pub mod stage;
 pub mod telemetry;
 pub mod timing;
