@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
 """Checks a linked firmware ELF: budgets, placement, and what the control interrupt can reach.
 
-usage: fwcheck.py ELF ISR_SYMBOL BIN_DIR [--warn-only]
+usage: fwcheck.py ELF ISR_SYMBOL BIN_DIR [--warn-only] [--allow-flash=REGEX]
 
 - flash (everything loaded from flash) <= 64 KiB, static RAM (.data + .bss + .uninit +
   .ccmram_uninit) <= 16 KiB;
 - the ISR lies in CCM SRAM (0x1000_0000 .. 0x1000_8000);
 - call graph from the ISR (direct `bl`/`b` targets in the disassembly, through linker
-  thunks): fails if any reachable function is a panic routine or an f64 routine, and lists
-  indirect calls it cannot follow;
+  thunks): fails if any reachable function is a panic routine or an f64 routine, or lies
+  outside CCM SRAM (flash wait states, and a section-name change in ccmram.x would move
+  code silently) unless its name matches --allow-flash; lists indirect calls it cannot
+  follow;
 - worst-case stack of the ISR from the prologues (push / vpush / sub sp) along the deepest
   call path, plus the hardware exception frame.
 """
@@ -138,6 +140,12 @@ def main():
     indirect = [(n, funcs[n]["indirect"]) for n in order if n in funcs and funcs[n]["indirect"]]
     in_flash = [n for n in order if n in funcs and not (CCM_LO <= funcs[n]["addr"] < CCM_HI)]
     print(f"  reachable from {isr}: {len(order)} functions; outside CCM: {', '.join(in_flash) or 'none'}")
+    allow = [a.split("=", 1)[1] for a in sys.argv[1:] if a.startswith("--allow-flash=")]
+    allowed = re.compile(allow[0]) if allow else None
+    stray = [n for n in in_flash if not (allowed and allowed.search(n))]
+    if stray:
+        print("  FAIL: reachable from the interrupt but not in CCM SRAM: " + ", ".join(stray))
+        ok = False
     if indirect:
         print("  indirect branches not followed: " + ", ".join(f"{n} ({k})" for n, k in indirect))
     if bad:

@@ -72,9 +72,22 @@ pub const SAMPLE_LEAD_NS: u32 = 290;
 pub const SAMPLE_LEAD_TICKS: u16 =
     ((SYSCLK_HZ as u64 * SAMPLE_LEAD_NS as u64) / 1_000_000_000) as u16;
 
-/// Largest high-side duty: the low-side switch must stay on long enough around the peak
-/// for the shunt signal to settle and be sampled (3 us here).
-pub const MAX_DUTY: f32 = 1.0 - 3.0e-6 * PWM_FREQUENCY_HZ as f32;
+/// Shunt amplifier settling after the low-side switch turns on, ns (power-stage
+/// dependent: the amplifier's slew and settling to 12 bits; check on a scope).
+pub const AMPLIFIER_SETTLING_NS: u32 = 1_000;
+/// Sampling time of one rank: 24.5 ADC clocks at 42.5 MHz, ns.
+pub const SAMPLING_TIME_NS: u32 = 577;
+/// The low side conducts from a dead time after OCxREF falls, (1 - d) T / 2 - DT before
+/// the counter peak, to (1 - d) T / 2 after it. The sample (centred on the peak) is valid
+/// only if the switch closed and the amplifier settled before the window opens:
+/// (1 - d) T / 2 >= DT + t_settle + t_s / 2. The dead time is taken as programmed (TIM1
+/// rounds [`DEAD_TIME_NS`] up to 256 ticks = 1506 ns).
+pub const LOW_SIDE_HALF_WINDOW_NS: u32 = 1_506 + AMPLIFIER_SETTLING_NS + SAMPLING_TIME_NS / 2;
+/// Largest high-side duty, from [`LOW_SIDE_HALF_WINDOW_NS`]: 1 - 2 (DT + t_settle + t_s/2)
+/// f_pwm = 0.972 at 5 kHz (firmware review D4: the former 0.985 left the window opening
+/// 0.22 us before the switch closed).
+pub const MAX_DUTY: f32 =
+    1.0 - 2.0 * LOW_SIDE_HALF_WINDOW_NS as f32 * 1e-9 * PWM_FREQUENCY_HZ as f32;
 
 /// Electrical description of the power stage's measurement chain.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -158,6 +171,53 @@ pub const TELEMETRY_DECIMATION: u16 = 500;
 /// of its over-speed limit).
 pub const MAX_SPEED_COMMAND_RPM: f32 = 1800.0;
 
+/// DC-bus and protection limits for one way of powering the stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BusProfile {
+    /// Name, printed at boot.
+    pub name: &'static str,
+    /// Lowest DC bus while switching, V.
+    pub dc_bus_min: f32,
+    /// Highest DC bus, V.
+    pub dc_bus_max: f32,
+    /// Phase current limit of the speed loop, A peak.
+    pub current_limit: f32,
+    /// Phase current trip, A peak.
+    pub overcurrent_trip: f32,
+    /// Over-speed trip, rpm.
+    pub max_speed_rpm: f32,
+}
+
+/// Rectified 230 VAC mains (325 V nominal): the project's defaults.
+pub const MAINS: BusProfile = BusProfile {
+    name: "mains 200-400 V",
+    dc_bus_min: 200.0,
+    dc_bus_max: 400.0,
+    current_limit: acim::params::DEFAULT_CURRENT_LIMIT,
+    overcurrent_trip: 8.0,
+    max_speed_rpm: 2000.0,
+};
+
+/// First power-up from a current-limited 24-60 V bench supply: the bus window brackets the
+/// supply, the current limit and trip are low, and the speed limit matches what the
+/// voltage can drive (the paper's motor reaches about 100 rpm at 48 V). Selected with the
+/// firmware's `low-voltage` feature (`firmware/README.md`, bring-up).
+pub const LOW_VOLTAGE: BusProfile = BusProfile {
+    name: "low-voltage bring-up 20-66 V",
+    dc_bus_min: 20.0,
+    dc_bus_max: 66.0,
+    current_limit: 2.5,
+    overcurrent_trip: 4.0,
+    max_speed_rpm: 300.0,
+};
+
+/// The profile this build uses.
+pub const PROFILE: BusProfile = if cfg!(feature = "low-voltage") {
+    LOW_VOLTAGE
+} else {
+    MAINS
+};
+
 /// Independent watchdog timeout, ms (the main loop feeds it only while the control
 /// interrupt is alive).
 pub const WATCHDOG_TIMEOUT_MS: u32 = 100;
@@ -168,7 +228,17 @@ pub const UART_BAUD: u32 = 115_200;
 /// The drive configuration for this board: the project's defaults for the paper's machine
 /// with this board's control period, dead time and current sensing.
 pub fn drive_config() -> DriveConfig {
+    drive_config_for(&PROFILE)
+}
+
+/// The drive configuration for this board with the bus profile `p`.
+pub fn drive_config_for(p: &BusProfile) -> DriveConfig {
     let mut cfg = DriveConfig::paper_defaults();
+    cfg.dc_bus_min = p.dc_bus_min;
+    cfg.dc_bus_max = p.dc_bus_max;
+    cfg.current_limit = p.current_limit;
+    cfg.overcurrent_trip = p.overcurrent_trip;
+    cfg.max_speed = p.max_speed_rpm * acim::math::RPM_TO_RAD_S;
     cfg.control_period = CONTROL_PERIOD_S;
     cfg.dead_time = DEAD_TIME_NS as f32 * 1e-9;
     cfg.current_sensing = if POWER_STAGE.shunts >= 3 {
@@ -194,7 +264,25 @@ mod tests {
         assert_eq!(PWM_ARR, 17_000);
         assert_eq!(SAMPLE_LEAD_TICKS, 49);
         assert!((CONTROL_PERIOD_S - 200e-6).abs() < 1e-9);
-        const { assert!(MAX_DUTY > 0.98 && MAX_DUTY < 1.0) };
+        const { assert!(MAX_DUTY > 0.96 && MAX_DUTY < 0.98) };
+    }
+
+    /// At the largest duty the low side has closed, and the amplifier settled, before the
+    /// sampling window (centred on the counter peak) opens.
+    #[test]
+    fn max_duty_leaves_the_sampling_window_valid() {
+        let period_ns = 1e9 / PWM_FREQUENCY_HZ as f64;
+        let low_on_half = (1.0 - MAX_DUTY as f64) * period_ns / 2.0;
+        // the dead time as TIM1 programs it (DTG = 0xC0: 8 * 32 ticks at 170 MHz)
+        let dead_time = 256.0 / SYSCLK_HZ as f64 * 1e9;
+        assert!(dead_time >= DEAD_TIME_NS as f64);
+        let needed = dead_time + AMPLIFIER_SETTLING_NS as f64 + SAMPLING_TIME_NS as f64 / 2.0;
+        assert!(
+            low_on_half >= needed - 1.0,
+            "{low_on_half} ns < {needed} ns"
+        );
+        // the trigger leads the peak by half the sampling time
+        assert!((SAMPLE_LEAD_NS as f64 - SAMPLING_TIME_NS as f64 / 2.0).abs() < 5.0);
     }
 
     #[test]
@@ -210,6 +298,25 @@ mod tests {
             s.bus_full_scale() > 400.0,
             "bus trip level must be measurable"
         );
+    }
+
+    /// Both profiles give a valid drive; the low-voltage one accepts a 24-60 V supply and
+    /// trips below and above it.
+    #[test]
+    fn bus_profiles_are_valid_drives() {
+        for p in [MAINS, LOW_VOLTAGE] {
+            let cfg = drive_config_for(&p);
+            assert!(Drive::new(cfg).is_ok(), "{}", p.name);
+            assert!(p.dc_bus_max < POWER_STAGE.bus_full_scale(), "{}", p.name);
+            assert!(
+                cfg.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6,
+                "{}",
+                p.name
+            );
+        }
+        const { assert!(LOW_VOLTAGE.dc_bus_min < 24.0 && LOW_VOLTAGE.dc_bus_max > 60.0) };
+        // a bench supply must not run the mains profile
+        const { assert!(MAINS.dc_bus_min > 60.0) };
     }
 
     #[test]

@@ -181,9 +181,17 @@ impl OffsetCalibrator {
 /// (the low side must stay on long enough to sample the shunt), NaN -> 50 %.
 #[inline]
 pub fn duty_to_compare(duty: f32, arr: u16, max_duty: f32) -> u16 {
-    let d = if duty.is_nan() { 0.5 } else { duty };
-    // max/min, not clamp: f32::clamp asserts min <= max (a panic path)
-    let d = d.max(0.0).min(max_duty);
+    // comparisons, not clamp (f32::clamp asserts min <= max: a panic path) nor max/min
+    // (out-of-line fmaxf/fminf calls through flash thunks in the interrupt); NaN -> 0.5
+    let d = if duty > max_duty {
+        max_duty
+    } else if duty >= 0.0 {
+        duty
+    } else if duty < 0.0 {
+        0.0
+    } else {
+        0.5
+    };
     // d * arr <= arr fits u16; `as` saturates anyway
     (d * arr as f32 + 0.5) as u16
 }
@@ -318,6 +326,9 @@ mod tests {
         assert_eq!(duty_to_compare(f32::NAN, PWM_ARR, MAX_DUTY), 8500);
         let max = duty_to_compare(1.0, PWM_ARR, MAX_DUTY);
         assert_eq!(max, duty_to_compare(f32::INFINITY, PWM_ARR, MAX_DUTY));
-        assert!((16_700..PWM_ARR).contains(&max));
+        // MAX_DUTY 0.972 of ARR 17 000 (board::LOW_SIDE_HALF_WINDOW_NS)
+        assert_eq!(max, (MAX_DUTY * PWM_ARR as f32 + 0.5) as u16);
+        assert!((16_400..16_600).contains(&max), "{max}");
+        assert_eq!(duty_to_compare(-f32::INFINITY, PWM_ARR, MAX_DUTY), 0);
     }
 }
