@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Firmware-in-the-loop suite: installs the emulator (Unicorn, pinned), builds both firmware
+# ELFs if they are missing (firmware/check.sh leaves them in target/), runs the tests.
+#
+#   bash firmware/fil/ci.sh          (FIL_UPDATE=1 rewrites golden-boot-writes.txt and isr-budget.json)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+python3 -m pip install --quiet --disable-pip-version-check -r firmware/fil/requirements.txt
+OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/release"
+if [ ! -f "$OUT/acim-firmware-power-stage.elf" ] || [ ! -f "$OUT/acim-firmware-selftest.elf" ]; then
+  bash firmware/check.sh
+fi
+mkdir -p "${CARGO_TARGET_DIR:-$PWD/target}"
+cd firmware/fil
+python3 -m unittest -v test_fil

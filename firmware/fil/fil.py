@@ -1,0 +1,532 @@
+#!/usr/bin/env python3
+"""Firmware in the loop: the unmodified firmware ELF on an emulated Cortex-M4F.
+
+The Unicorn engine executes the firmware's instructions; this module models the
+peripherals the firmware touches, from RM0440 (STM32G4 reference manual), at register
+level:
+
+- RCC (clock enables, HSI/PLL ready bits, SWS follows SW), PWR (reads 0 and drops writes
+  while RCC_APB1ENR1.PWREN is clear, as a gated bus does), FLASH_ACR;
+- GPIO (plain registers), DBGMCU, SYSCFG;
+- TIM1: registers, compare values, MOE/BIF/B2IF/SBIF (a break clears MOE and sets the
+  flag; MOE cannot be set while a break input is active), rc_w0 status flags;
+- ADC1/ADC2: power-up (ADCAL self-clears, ADRDY on ADEN), injected conversions triggered
+  each PWM period once JADSTART is set (JEOS/JEOC, rc_w1), JDRx from a load model through
+  the board's shunt/amplifier/divider description;
+- CORDIC (sine and cosine of the q1.31 argument), IWDG (start/feed counted), USART2 (bytes
+  in and out), SysTick (COUNTFLAG reads set: delays take no emulated time), DWT (CYCCNT =
+  instructions executed), NVIC (enables), TIM6 (the self-test's period interrupt).
+
+Time: the main program runs in chunks of instructions; one PWM period is
+`INSTRUCTIONS_PER_PERIOD` instructions of it (8 000; the real period is 34 000 cycles at
+170 MHz, of which the main loop only polls). At each period boundary the conversions complete and, if enabled and not
+masked by PRIMASK, the control interrupt runs to its return (its own instructions do not
+advance time). Exception entry is done here: the context is saved, 104 bytes of frame are
+reserved on the stack, LR points at a stop address, and the context is restored when the
+handler returns there.
+
+What it does not model: cycle timing (wait states, pipeline, the real ADC conversion time),
+the update-event instant of TIM1, analog behaviour, DMA, and any peripheral the firmware
+does not use.
+"""
+import math
+import struct
+
+from unicorn import Uc, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK, UcError
+from unicorn.arm_const import (
+    UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4,
+    UC_ARM_REG_R5, UC_ARM_REG_R6, UC_ARM_REG_R7, UC_ARM_REG_R8, UC_ARM_REG_R9,
+    UC_ARM_REG_R10, UC_ARM_REG_R11, UC_ARM_REG_R12, UC_ARM_REG_SP, UC_ARM_REG_LR,
+    UC_ARM_REG_PC, UC_ARM_REG_XPSR, UC_ARM_REG_PRIMASK, UC_ARM_REG_FPSCR, UC_ARM_REG_S0,
+    UC_CPU_ARM_CORTEX_M4,
+)
+
+# main-program instructions per PWM period: the real budget is 34 000 cycles, of which
+# the main loop only polls; 8 000 keeps the emulation fast and is ample for its work
+INSTRUCTIONS_PER_PERIOD = 8_000
+STOP = 0x0FFF_0000          # handlers "return" here (mapped, never executed)
+ADC1_2_IRQ = 18
+TIM6_IRQ = 54
+NMI_VECTOR = 2
+HARDFAULT_VECTOR = 3
+
+# board description (firmware/board-core/src/board.rs, POWER_STAGE)
+SHUNT_OHM, AMP_GAIN, AMP_BIAS_V, CURRENT_SIGN = 0.033, 5.0, 1.65, -1.0
+DIV_TOP, DIV_BOTTOM, VREF, COUNTS = 990_000.0, 6_800.0, 3.3, 4096
+
+GPR = [UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4,
+       UC_ARM_REG_R5, UC_ARM_REG_R6, UC_ARM_REG_R7, UC_ARM_REG_R8, UC_ARM_REG_R9,
+       UC_ARM_REG_R10, UC_ARM_REG_R11, UC_ARM_REG_R12, UC_ARM_REG_SP, UC_ARM_REG_LR,
+       UC_ARM_REG_PC, UC_ARM_REG_XPSR, UC_ARM_REG_PRIMASK, UC_ARM_REG_FPSCR]
+FPR = [UC_ARM_REG_S0 + i for i in range(32)]
+
+# peripheral bases and the register names the write log prints
+PERIPHERALS = {
+    0x4000_1000: ("TIM6", {0x0: "CR1", 0xC: "DIER", 0x10: "SR", 0x14: "EGR", 0x28: "PSC", 0x2C: "ARR"}),
+    0x4000_3000: ("IWDG", {0x0: "KR", 0x4: "PR", 0x8: "RLR", 0xC: "SR", 0x10: "WINR"}),
+    0x4000_4400: ("USART2", {0x0: "CR1", 0x4: "CR2", 0x8: "CR3", 0xC: "BRR", 0x18: "RQR",
+                             0x20: "ICR", 0x28: "TDR", 0x2C: "PRESC"}),
+    0x4000_7000: ("PWR", {0x0: "CR1", 0x4: "CR2", 0x8: "CR3", 0xC: "CR4", 0x18: "SCR", 0x80: "CR5"}),
+    0x4001_0000: ("SYSCFG", {0x1C: "CFGR2"}),
+    0x4001_2C00: ("TIM1", {0x0: "CR1", 0x4: "CR2", 0x8: "SMCR", 0xC: "DIER", 0x10: "SR",
+                           0x14: "EGR", 0x18: "CCMR1", 0x1C: "CCMR2", 0x20: "CCER",
+                           0x24: "CNT", 0x28: "PSC", 0x2C: "ARR", 0x30: "RCR", 0x34: "CCR1",
+                           0x38: "CCR2", 0x3C: "CCR3", 0x40: "CCR4", 0x44: "BDTR",
+                           0x48: "CCR5", 0x4C: "CCR6", 0x50: "CCMR3", 0x54: "DTR2",
+                           0x58: "ECR", 0x5C: "TISEL", 0x60: "AF1", 0x64: "AF2", 0x68: "OR"}),
+    0x4002_0C00: ("CORDIC", {0x0: "CSR", 0x4: "WDATA"}),
+    0x4002_1000: ("RCC", {0x0: "CR", 0x4: "ICSCR", 0x8: "CFGR", 0xC: "PLLCFGR", 0x18: "CIER",
+                          0x28: "AHB1RSTR", 0x2C: "AHB2RSTR", 0x30: "AHB3RSTR",
+                          0x38: "APB1RSTR1", 0x3C: "APB1RSTR2", 0x40: "APB2RSTR",
+                          0x20: "CICR", 0x48: "AHB1ENR", 0x4C: "AHB2ENR", 0x50: "AHB3ENR",
+                          0x58: "APB1ENR1", 0x5C: "APB1ENR2", 0x60: "APB2ENR", 0x88: "CCIPR",
+                          0x90: "BDCR", 0x94: "CSR", 0x9C: "CCIPR2"}),
+    0x4002_2000: ("FLASH", {0x0: "ACR"}),
+    0x4800_0000: ("GPIOA", {}), 0x4800_0400: ("GPIOB", {}), 0x4800_0800: ("GPIOC", {}),
+    0x5000_0000: ("ADC1", {}), 0x5000_0100: ("ADC2", {}), 0x5000_0300: ("ADC12", {0x8: "CCR"}),
+    0xE004_2000: ("DBGMCU", {0x4: "CR", 0x8: "APB1FZR1", 0xC: "APB1FZR2", 0x10: "APB2FZR"}),
+}
+GPIO_REGS = {0x0: "MODER", 0x4: "OTYPER", 0x8: "OSPEEDR", 0xC: "PUPDR", 0x14: "ODR",
+             0x18: "BSRR", 0x20: "AFRL", 0x24: "AFRH", 0x28: "BRR"}
+ADC_REGS = {0x0: "ISR", 0x4: "IER", 0x8: "CR", 0xC: "CFGR", 0x10: "CFGR2", 0x14: "SMPR1",
+            0x18: "SMPR2", 0x4C: "JSQR"}
+TIM1_BREAK_FLAGS = (1 << 7) | (1 << 8) | (1 << 13)
+MOE = 1 << 15
+
+
+def load_elf(path):
+    """(PT_LOAD segments as (paddr, bytes), entry) of a little-endian ELF32."""
+    data = open(path, "rb").read()
+    if data[:4] != b"\x7fELF" or data[4] != 1:
+        raise ValueError(f"{path}: not an ELF32 file")
+    e_phoff, = struct.unpack_from("<I", data, 28)
+    e_phentsize, e_phnum = struct.unpack_from("<HH", data, 42)
+    segs = []
+    for i in range(e_phnum):
+        p_type, p_offset, _vaddr, p_paddr, p_filesz, _memsz, _flags, _align = struct.unpack_from(
+            "<8I", data, e_phoff + i * e_phentsize)
+        if p_type == 1 and p_filesz:
+            segs.append((p_paddr, data[p_offset:p_offset + p_filesz]))
+    return segs
+
+
+class RlLoad:
+    """A standstill motor as three star-connected R-L branches (the paper's machine's
+    stator: Rs = 10.5 ohm, L = 0.07 H), driven by the PWM duties' period averages: enough
+    current for the drive to magnetize without a no-current fault."""
+
+    def __init__(self, r=10.5, l=0.07):
+        self.r, self.l = r, l
+        self.i = [0.0, 0.0, 0.0]
+
+    def period(self, duties, enabled, vdc, ts=200e-6):
+        if not enabled:
+            # switches off: the current decays through the diodes into the bus quickly
+            self.i = [0.0, 0.0, 0.0]
+            return
+        m = sum(duties) / 3
+        v = [(d - m) * vdc for d in duties]
+        a = math.exp(-self.r * ts / self.l)
+        self.i = [v[k] / self.r + (self.i[k] - v[k] / self.r) * a for k in range(3)]
+
+
+class Machine:
+    """The emulated MCU with its peripherals, running one ELF."""
+
+    def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0):
+        self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
+        self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
+        for base, size in [(0x0800_0000, 0x8_0000), (0x2000_0000, 0x2_0000),
+                           (0x1000_0000, 0x8000), (STOP, 0x1000), (0x1FFF_0000, 0x1_0000)]:
+            self.uc.mem_map(base, size)
+        for paddr, blob in load_elf(elf):
+            self.uc.mem_write(paddr, blob)
+        for base, size in [(0x4000_0000, 0x3_0000), (0x4800_0000, 0x2000),
+                           (0x5000_0000, 0x1000), (0xE000_0000, 0x10_0000)]:
+            # Unicorn passes the offset into the mapped region, not the address
+            self.uc.mmio_map(base, size,
+                             lambda uc, off, size, d, b=base: self._read(uc, b + off, size, d), None,
+                             lambda uc, off, size, v, d, b=base: self._write(uc, b + off, size, v, d), None)
+        # peripheral bit-band alias: one word per bit of 0x4000_0000.. (the HAL uses it)
+        self.uc.mmio_map(0x4200_0000, 0x200_0000, self._bitband_read, None,
+                         self._bitband_write, None)
+        self.regs = {}           # (base, offset) -> value
+        self.writes = []         # (instret, peripheral, register, value)
+        self.events = []         # ordered named events for rule checks
+        self.instret = 0         # instructions executed by the main program
+        self.periods = 0
+        self.isr_instructions = []
+        self.count_isr = False
+        self.tx = bytearray()
+        self.rx = bytearray()
+        self.rx_history = bytearray()
+        self.break_after = None  # inject a break this many ISR instructions into the handler
+        self.iwdg_feeds = 0
+        self.iwdg_started = False
+        self.nvic_enabled = set()
+        self.break_active = False
+        self.cordic_results = []
+        self.load = load or RlLoad()
+        self.dc_bus = dc_bus
+        self.pwr_gated_writes = pwr_gated_writes
+        self.moe_history = []    # (period, moe)
+        self.selftest = False
+        self._reset_values()
+        sp, reset = struct.unpack("<II", bytes(self.uc.mem_read(0x0800_0000, 8)))
+        self.vectors = [struct.unpack_from("<I", bytes(self.uc.mem_read(0x0800_0000 + 4 * i, 4)))[0]
+                        for i in range(16 + 102)]
+        self.uc.reg_write(UC_ARM_REG_SP, sp)
+        self.pc = reset
+        self.halted = None
+        self._block_counts = {}
+
+    # --- registers ---------------------------------------------------------------------
+    def _reset_values(self):
+        r = self.regs
+        r[(0x4002_1000, 0x0)] = 0x0000_0500     # RCC_CR: HSION, HSIRDY
+        r[(0x4002_1000, 0x8)] = 0x0000_0005     # RCC_CFGR: SW = SWS = HSI16
+        r[(0x4002_1000, 0xC)] = 0x0000_1000     # RCC_PLLCFGR
+        r[(0x4002_1000, 0x58)] = 0x0000_0400    # RCC_APB1ENR1: RTCAPBEN
+        r[(0x4000_7000, 0x0)] = 0x0000_0200     # PWR_CR1: VOS = Range 1
+        r[(0x4000_7000, 0x8)] = 0x0000_8000     # PWR_CR3
+        r[(0x4000_7000, 0x80)] = 0x0000_0100    # PWR_CR5: R1MODE = 1 (boost off)
+        r[(0x4002_2000, 0x0)] = 0x0000_0600     # FLASH_ACR
+        r[(0x4800_0000, 0x0)] = 0xABFF_FFFF     # GPIOA_MODER
+        r[(0x4800_0400, 0x0)] = 0xFFFF_FEBF     # GPIOB_MODER
+        r[(0x4800_0800, 0x0)] = 0xFFFF_FFFF     # GPIOC_MODER
+        for adc in (0x5000_0000, 0x5000_0100):
+            r[(adc, 0x8)] = 0x2000_0000         # ADC_CR: DEEPPWD
+            r[(adc, 0xC)] = 0x8000_0000         # ADC_CFGR: JQDIS
+        r[(0x4001_2C00, 0x2C)] = 0xFFFF         # TIM1_ARR
+        r[(0xE004_2000, 0x0)] = 0x1000_6469     # DBGMCU_IDCODE
+        r[(0xE000_ED00, 0x0)] = 0x410F_C241     # CPUID
+        r[(0xE000_E010, 0x1C)] = 0x4000_0000    # SysTick CALIB
+
+    def _split(self, addr):
+        for base in sorted(PERIPHERALS, reverse=True):
+            if base <= addr < base + 0x400:
+                return base, addr - base
+        if 0xE000_0000 <= addr < 0xE010_0000:
+            return addr & ~0xFF, addr & 0xFF
+        return addr & ~0x3FF, addr & 0x3FF
+
+    def _bitband_read(self, uc, off, size, _d):
+        byte_off, bitn = off // 32, (off % 32) // 4
+        addr = 0x4000_0000 + byte_off
+        v = self._read(uc, addr & ~3, 4, None)
+        return (v >> ((addr & 3) * 8 + bitn)) & 1
+
+    def _bitband_write(self, uc, off, size, value, _d):
+        byte_off, bitn = off // 32, (off % 32) // 4
+        addr = 0x4000_0000 + byte_off
+        a4 = addr & ~3
+        sh = (addr & 3) * 8 + bitn
+        v = self._read(uc, a4, 4, None) if not (0x4000_7000 <= a4 < 0x4000_7400) else \
+            self.reg(0x4000_7000, a4 - 0x4000_7000)
+        v = (v | (1 << sh)) if value & 1 else (v & ~(1 << sh))
+        self._write(uc, a4, 4, v, None)
+
+    def reg(self, base, off):
+        return self.regs.get((base, off), 0)
+
+    def _name(self, base, off):
+        if base in PERIPHERALS:
+            p, names = PERIPHERALS[base]
+            if p.startswith("GPIO"):
+                names = GPIO_REGS
+            elif p in ("ADC1", "ADC2"):
+                names = ADC_REGS
+            return p, names.get(off, f"+0x{off:03X}")
+        return None, None
+
+    def _pwr_clocked(self):
+        return bool(self.reg(0x4002_1000, 0x58) & (1 << 28))
+
+    def _read(self, uc, addr, size, _data):
+        base, off = self._split(addr)
+        v = self.reg(base, off & ~3)
+        if base == 0x4000_7000 and not self._pwr_clocked():
+            v = 0                                       # gated bus reads as 0
+        elif base == 0x4002_1000 and off == 0x0:
+            v |= (v & (1 << 8)) << 2                    # HSIRDY follows HSION
+            v |= (v & (1 << 24)) << 1                   # PLLRDY follows PLLON
+        elif base == 0x4002_1000 and off == 0x8:
+            v = (v & ~0xC) | ((v & 0x3) << 2)           # SWS follows SW
+        elif base == 0x4002_1000 and off == 0x94:
+            v |= 0x2                                    # LSIRDY
+        elif base in (0x5000_0000, 0x5000_0100) and off == 0x8:
+            v &= ~(1 << 31)                             # ADCAL done at once
+        elif base == 0x4000_4400 and off == 0x1C:       # USART2_ISR
+            v = (1 << 7) | (1 << 6) | (1 << 21) | (1 << 22) | ((1 << 5) if self.rx else 0)
+        elif base == 0x4000_4400 and off == 0x24:       # RDR
+            v = self.rx.pop(0) if self.rx else 0
+        elif base == 0x4002_0C00 and off == 0x0:
+            v |= 1 << 31                                # CORDIC RRDY
+        elif base == 0x4002_0C00 and off == 0x8:
+            v = self.cordic_results.pop(0) if self.cordic_results else 0
+        elif base == 0xE000_E000 and off == 0x10:       # SysTick CSR: COUNTFLAG
+            v |= 1 << 16
+        elif base == 0xE000_1000 and off == 0x4:        # DWT CYCCNT
+            v = self.instret & 0xFFFF_FFFF
+        elif base == 0x4000_3000 and off == 0xC:        # IWDG_SR: updates done
+            v = 0
+        shift = (off & 3) * 8
+        return (v >> shift) & ((1 << (8 * size)) - 1)
+
+    def _write(self, uc, addr, size, value, _data):
+        base, off = self._split(addr)
+        off4 = off & ~3
+        if size < 4:
+            old = self.reg(base, off4)
+            shift = (off & 3) * 8
+            mask = ((1 << (8 * size)) - 1) << shift
+            value = (old & ~mask) | ((value << shift) & mask)
+        p, name = self._name(base, off4)
+        if p is not None:
+            self.writes.append((self.instret, p, name, value))
+        if base == 0x4000_7000:
+            self.events.append(("PWR write", self._pwr_clocked()))
+            if not self._pwr_clocked() or self.pwr_gated_writes:
+                return                                  # dropped
+        if base == 0x4002_1000 and off4 == 0x8 and (value & 3) == 3:
+            self.events.append(("SW=PLL", self.reg(0x4002_2000, 0) & 0xF,
+                                (self.reg(0x4000_7000, 0x80) >> 8) & 1))
+        if base in (0x5000_0000, 0x5000_0100):
+            self._adc_write(base, off4, value)
+            return
+        if base == 0x4001_2C00:
+            self._tim1_write(off4, value)
+            return
+        if base == 0x4000_1000 and off4 == 0x10:        # TIM6_SR rc_w0
+            value = self.reg(base, off4) & value
+        if base == 0x4002_0C00 and off4 == 0x4:         # CORDIC WDATA: sine of x pi
+            x = (value - (1 << 32) if value & (1 << 31) else value) / 2**31
+            q = lambda f: int(max(-2**31, min(2**31 - 1, round(f * 2**31)))) & 0xFFFF_FFFF
+            self.cordic_results = [q(math.sin(math.pi * x)), q(math.cos(math.pi * x))]
+        if base == 0x4000_4400 and off4 == 0x28:
+            self.tx.append(value & 0xFF)
+        if base == 0x4000_3000 and off4 == 0x0:
+            if value == 0xCCCC:
+                self.iwdg_started = True
+                self.events.append(("IWDG start",))
+            elif value == 0xAAAA:
+                self.iwdg_feeds += 1
+        if base == 0xE000_E100 and off4 < 0x20:       # NVIC_ISERn
+            for b in range(32):
+                if value & (1 << b):
+                    self.nvic_enabled.add(off4 * 8 + b)
+        self.regs[(base, off4)] = value
+
+    def _adc_write(self, base, off, value):
+        if off == 0x0:                                  # ISR: rc_w1
+            self.regs[(base, 0)] = self.reg(base, 0) & ~value
+            return
+        if off == 0x8:
+            old = self.reg(base, 8)
+            if value & (1 << 31) and not old & (1 << 28):
+                self.events.append(("ADCAL before ADVREGEN", base))
+            if value & (1 << 31):
+                self.events.append(("ADCAL", base))
+            if value & 1 and not old & 1:
+                self.regs[(base, 0)] = self.reg(base, 0) | 1  # ADRDY
+            self.regs[(base, 8)] = value & ~(1 << 31)
+            return
+        self.regs[(base, off)] = value
+
+    def _tim1_write(self, off, value):
+        b = 0x4001_2C00
+        if off == 0x10:                                 # SR: rc_w0
+            self.regs[(b, off)] = self.reg(b, off) & value
+            return
+        if off == 0x44 and value & MOE and not self.reg(b, off) & MOE:
+            if self.break_active:
+                value &= ~MOE                           # cannot set during an active break
+            else:
+                # CCER: whether any output is enabled (MOE with CCxE = 0 drives nothing)
+                self.events.append(("MOE set", self.periods, self._calibrated(),
+                                    bool(self.reg(b, 0x20) & 0x555), self._start_seen()))
+        if off == 0x14 and value & 1:                   # EGR.UG
+            self.regs[(b, 0x10)] = self.reg(b, 0x10) | 1
+        self.regs[(b, off)] = value
+
+    def _calibrated(self):
+        return any(e[0] == "ADCAL" for e in self.events)
+
+    def _start_seen(self):
+        return b"start" in bytes(self.rx_history)
+
+    # --- hardware events ---------------------------------------------------------------
+    def break_pulse(self):
+        """The break input pulses: MOE cleared, BIF set (AOE = 0: stays cleared)."""
+        b = 0x4001_2C00
+        self.regs[(b, 0x44)] = self.reg(b, 0x44) & ~MOE
+        self.regs[(b, 0x10)] = self.reg(b, 0x10) | (1 << 7)
+
+    def moe(self):
+        return bool(self.reg(0x4001_2C00, 0x44) & MOE)
+
+    def duties(self):
+        arr = self.reg(0x4001_2C00, 0x2C) or 1
+        return [self.reg(0x4001_2C00, o) / arr for o in (0x34, 0x38, 0x3C)]
+
+    def _counts(self, amps):
+        v = AMP_BIAS_V + CURRENT_SIGN * amps * SHUNT_OHM * AMP_GAIN
+        return max(0, min(COUNTS - 1, int(round(v / VREF * COUNTS))))
+
+    def _period_hardware(self):
+        """One PWM period: the load integrates the applied duties, the ADCs convert."""
+        self.periods += 1
+        b = 0x4001_2C00
+        running = self.reg(b, 0) & 1
+        self.load.period(self.duties(), self.moe(), self.dc_bus)
+        self.moe_history.append((self.periods, self.moe()))
+        if running:
+            ia, ib, ic = (self._counts(x) for x in self.load.i)
+            bus = int(round(self.dc_bus * DIV_BOTTOM / (DIV_TOP + DIV_BOTTOM) / VREF * COUNTS))
+            for adc, (j1, j2) in ((0x5000_0000, (ia, bus)), (0x5000_0100, (ib, ic))):
+                if self.reg(adc, 8) & (1 << 3):          # JADSTART
+                    self.regs[(adc, 0x80)] = j1
+                    self.regs[(adc, 0x84)] = j2
+                    self.regs[(adc, 0)] = self.reg(adc, 0) | (1 << 6) | (1 << 5)
+        if self.reg(0x4000_1000, 0) & 1:                 # TIM6 running (self-test)
+            self.regs[(0x4000_1000, 0x10)] = self.reg(0x4000_1000, 0x10) | 1
+
+    def _irq_pending(self):
+        if ADC1_2_IRQ in self.nvic_enabled and self.reg(0x5000_0000, 4) & (1 << 6) \
+                and self.reg(0x5000_0000, 0) & (1 << 6):
+            return ADC1_2_IRQ
+        if TIM6_IRQ in self.nvic_enabled and self.reg(0x4000_1000, 0xC) & 1 \
+                and self.reg(0x4000_1000, 0x10) & 1:
+            return TIM6_IRQ
+        return None
+
+    # --- execution ---------------------------------------------------------------------
+    def _save(self):
+        return ([self.uc.reg_read(r) for r in GPR], [self.uc.reg_read(r) for r in FPR])
+
+    def _restore(self, ctx):
+        g, f = ctx
+        for r, v in zip(GPR, g):
+            self.uc.reg_write(r, v)
+        for r, v in zip(FPR, f):
+            self.uc.reg_write(r, v)
+
+    def _count_block(self, uc, address, size, _data):
+        key = (address, size)
+        n = self._block_counts.get(key)
+        if n is None:
+            code = bytes(uc.mem_read(address, size))
+            n, i = 0, 0
+            while i < len(code):
+                hw = code[i] | (code[i + 1] << 8) if i + 1 < len(code) else 0
+                i += 4 if (hw >> 11) in (0b11101, 0b11110, 0b11111) else 2
+                n += 1
+            self._block_counts[key] = n
+        self._isr_count += n
+        if self.break_after is not None and self._isr_count >= self.break_after:
+            self.break_after = None
+            self.break_pulse()
+
+    def _flush(self):
+        # drop translated code (flash and CCM) so that a hook added or removed applies
+        for lo, hi in ((0x0800_0000, 0x0808_0000), (0x1000_0000, 0x1000_8000)):
+            self.uc.ctl_remove_cache(lo, hi)
+
+    def run_exception(self, vector, limit=5_000_000):
+        """Runs the handler of `vector` to its return (or `limit` instructions); returns the
+        instructions it executed when counting is on, else None."""
+        ctx = self._save()
+        sp = ctx[0][13]
+        self.uc.reg_write(UC_ARM_REG_SP, (sp - 104) & ~7)
+        self.uc.reg_write(UC_ARM_REG_LR, STOP | 1)
+        handler = self.vectors[vector]
+        count = None
+        h = None
+        if self.count_isr or self.break_after is not None:
+            self._isr_count = 0
+            h = self.uc.hook_add(UC_HOOK_BLOCK, self._count_block)
+            self._flush()  # blocks translated before the hook would skip it
+        try:
+            self.uc.emu_start(handler, STOP, count=limit)
+        except UcError as e:
+            self.halted = f"exception in vector {vector}: {e} at 0x{self.uc.reg_read(UC_ARM_REG_PC):08x}"
+        finally:
+            if h is not None:
+                self.uc.hook_del(h)
+                self._flush()
+                if self.count_isr:
+                    count = self._isr_count
+        returned = self.uc.reg_read(UC_ARM_REG_PC) == STOP
+        self._restore(ctx)
+        if not returned and self.halted is None:
+            self.halted = f"vector {vector} did not return within {limit} instructions"
+        return count
+
+    def run(self, periods, chunk=2_000, on_period=None):
+        """Runs the main program for `periods` PWM periods, delivering interrupts."""
+        end = self.periods + periods
+        next_period = (self.instret // INSTRUCTIONS_PER_PERIOD + 1) * INSTRUCTIONS_PER_PERIOD
+        while self.periods < end and self.halted is None:
+            n = min(chunk, next_period - self.instret)
+            try:
+                self.uc.emu_start(self.pc | 1, 0xFFFF_FFFF, count=n)
+            except UcError as e:
+                self.halted = f"main: {e} at 0x{self.uc.reg_read(UC_ARM_REG_PC):08x}"
+                break
+            self.pc = self.uc.reg_read(UC_ARM_REG_PC)
+            self.instret += n
+            if self.instret >= next_period:
+                next_period += INSTRUCTIONS_PER_PERIOD
+                self._period_hardware()
+                irq = self._irq_pending()
+                if irq is not None and not (self.uc.reg_read(UC_ARM_REG_PRIMASK) & 1):
+                    self.uc.reg_write(UC_ARM_REG_PC, self.pc | 1)
+                    c = self.run_exception(16 + irq)
+                    self.pc = self.uc.reg_read(UC_ARM_REG_PC)
+                    if c is not None:
+                        self.isr_instructions.append(c)
+                if on_period is not None:
+                    on_period(self)
+        return self
+
+    def run_until(self, cond, max_periods, **kw):
+        for _ in range(max_periods):
+            if cond(self):
+                return True
+            self.run(1, **kw)
+            if self.halted:
+                return False
+        return cond(self)
+
+    def send(self, text):
+        self.rx.extend(text.encode())
+        self.rx_history.extend(text.encode())
+
+    def output(self):
+        return self.tx.decode(errors="replace")
+
+    def write_log(self, until=None):
+        """The peripheral register writes as text lines (up to instruction `until`)."""
+        out = []
+        for t, p, name, v in self.writes:
+            if until is not None and t >= until:
+                break
+            out.append(f"{p}.{name} = 0x{v:08X}")
+        return out
+
+
+def default_elf(mode):
+    import os
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    target = os.environ.get("CARGO_TARGET_DIR", os.path.join(root, "target"))
+    return os.path.join(target, "thumbv7em-none-eabihf", "release", f"acim-firmware-{mode}.elf")
+
+
+if __name__ == "__main__":
+    import sys
+    mode = sys.argv[1] if len(sys.argv) > 1 else "power-stage"
+    m = Machine(default_elf(mode))
+    m.run(20)
+    print(m.output())
+    print("halted:", m.halted, "periods:", m.periods, "instret:", m.instret)
+    print("\n".join(m.write_log()[:40]))

@@ -1,0 +1,223 @@
+#!/usr/bin/env python3
+"""Firmware-in-the-loop tests: the unmodified release ELFs (firmware/check.sh builds them)
+on the emulated MCU of fil.py. Each test names the defect of the firmware review it would
+have caught.
+
+    python3 -m unittest -v firmware/fil/test_fil.py     (FIL_UPDATE=1 rewrites the golden files)
+"""
+import json
+import os
+import sys
+import unittest
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import fil  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CALIBRATION_PERIODS = 1100      # 1024 offset samples plus start-up
+UPDATE = os.environ.get("FIL_UPDATE") == "1"
+
+
+def booted(mode="power-stage", **kw):
+    m = fil.Machine(fil.default_elf(mode), **kw)
+    m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+    return m
+
+
+def command(m, text, periods=10):
+    before = len(m.output())
+    m.send(text + "\r\n")
+    m.run(periods)
+    return m.output()[before:]
+
+
+def state_fault(m):
+    reply = command(m, "status")
+    line = [l for l in reply.split("\r\n") if l.startswith("ok state")][-1]
+    _, _, state, _, fault = line.split()
+    return int(state), int(fault)
+
+
+def started(periods=20):
+    m = booted()
+    command(m, "speed 100")
+    assert "ok" in command(m, "start", periods)
+    return m
+
+
+class Boot(unittest.TestCase):
+    def test_boot_calibration_and_interrupts_without_a_fault(self):
+        """D1: every control interrupt used to trip fault 19 (ADC flags acknowledged
+        before ADC2's was read)."""
+        m = booted()
+        self.assertIsNone(m.halted)
+        self.assertIn("acim-firmware ready", m.output())
+        self.assertIn(fil.ADC1_2_IRQ, m.nvic_enabled)
+        m.run(50)
+        self.assertEqual(state_fault(m), (0, 0))
+        self.assertFalse(m.moe(), "outputs must stay off while idle")
+
+    def test_start_arms_the_outputs_and_magnetizes(self):
+        m = started(periods=40)
+        state, fault = state_fault(m)
+        self.assertEqual(fault, 0)
+        self.assertIn(state, (1, 2))
+        self.assertTrue(m.moe())
+        # the compare values follow the drive, inside the dead-time-derived duty limit
+        self.assertTrue(all(0.0 <= d <= 0.9722 for d in m.duties()), m.duties())
+
+    def test_clock_order_pwr_clock_boost_and_latency(self):
+        """D2: PWR was accessed with its bus clock off; boost and 4 wait states must be in
+        place before the switch to the PLL."""
+        m = fil.Machine(fil.default_elf("power-stage"))
+        m.run(5)
+        pwr = [e for e in m.events if e[0] == "PWR write"]
+        self.assertTrue(pwr, "the firmware writes PWR (boost mode)")
+        self.assertTrue(all(clocked for _, clocked in pwr), "PWR written with its clock off")
+        switch = [e for e in m.events if e[0] == "SW=PLL"]
+        self.assertTrue(switch)
+        _, latency, r1mode = switch[0]
+        self.assertEqual(latency, 4)
+        self.assertEqual(r1mode, 0, "boost (R1MODE = 0) before the 170 MHz switch")
+
+    def test_a_dropped_boost_write_stops_the_firmware_with_outputs_off(self):
+        """D2: the 170 MHz check compared a computed value; now the registers are read
+        back, so silicon that drops the boost write refuses to run."""
+        m = fil.Machine(fil.default_elf("power-stage"), pwr_gated_writes=True)
+        m.run(50)
+        self.assertNotIn("ready", m.output())
+        self.assertFalse(m.moe())
+        self.assertFalse(any(e[0] == "MOE set" and e[3] for e in m.events))
+
+    def test_adc_regulator_before_calibration(self):
+        m = fil.Machine(fil.default_elf("power-stage"))
+        m.run(5)
+        self.assertEqual([e for e in m.events if e[0] == "ADCAL before ADVREGEN"], [])
+        self.assertEqual(len([e for e in m.events if e[0] == "ADCAL"]), 2)
+
+    def test_outputs_enabled_only_after_calibration_and_a_start(self):
+        m = started()
+        driven = [e for e in m.events if e[0] == "MOE set" and e[3]]
+        self.assertEqual(len(driven), 1, m.events)
+        _, _, calibrated, _, start_seen = driven[0]
+        self.assertTrue(calibrated and start_seen)
+
+
+class Protection(unittest.TestCase):
+    def test_a_break_at_any_instant_stays_effective(self):
+        """D3: pwm_write re-set MOE in the same period as a break during the step; a
+        refused reset cleared the break flags."""
+        # instants inside the interrupt (about 870 instructions while magnetizing), from
+        # before its break check to after its PWM write, and between two interrupts
+        for after in (1, 100, 250, 400, 550, 700, 850, None):
+            with self.subTest(break_after_instructions=after):
+                m = started()
+                self.assertTrue(m.moe())
+                if after is None:
+                    m.break_pulse()
+                else:
+                    m.break_after = after
+                m.run(1)
+                self.assertIsNone(m.break_after, "the break was not injected")
+                self.assertFalse(m.moe(), "MOE re-armed after a break")
+                m.break_after = None
+                m.run(20)
+                self.assertFalse(m.moe())
+                state, fault = state_fault(m)
+                self.assertEqual((state, fault), (4, 16))
+                self.assertIn("err", command(m, "start"))
+                self.assertFalse(m.moe())
+                self.assertIn("ok", command(m, "reset"))
+                self.assertFalse(m.moe(), "a reset must not re-arm the outputs")
+                self.assertIn("ok", command(m, "start"))
+                self.assertTrue(m.moe())
+
+    def test_nmi_hardfault_and_unhandled_interrupts_switch_off(self):
+        """D7: NMI and the default handler used to loop with MOE set."""
+        for vector in (fil.NMI_VECTOR, fil.HARDFAULT_VECTOR, 16 + 0, 16 + 40):
+            with self.subTest(vector=vector):
+                m = started()
+                self.assertTrue(m.moe())
+                m.run_exception(vector, limit=20_000)
+                self.assertFalse(m.moe())
+
+    def test_watchdog_is_fed_only_while_the_control_interrupt_runs(self):
+        m = started()
+        f0 = m.iwdg_feeds
+        m.run(100)
+        self.assertGreater(m.iwdg_feeds - f0, 50)
+        # the control interrupt stops (masked): the main loop must stop feeding
+        m.nvic_enabled.discard(fil.ADC1_2_IRQ)
+        m.run(3)
+        f1 = m.iwdg_feeds
+        m.run(200)
+        self.assertEqual(m.iwdg_feeds, f1)
+
+    def test_debug_halt_freezes_tim1_and_system_faults_break_it(self):
+        """D6, D7: DBGMCU_APB2FZR.DBG_TIM1_STOP and SYSCFG_CFGR2 lock bits."""
+        m = fil.Machine(fil.default_elf("power-stage"))
+        m.run(5)
+        self.assertTrue(m.reg(0xE004_2000, 0x10) & (1 << 11))
+        self.assertEqual(m.reg(0x4001_0000, 0x1C) & 0xF, 0xF)
+
+
+class Logs(unittest.TestCase):
+    def _golden(self, name, lines):
+        path = os.path.join(HERE, name)
+        text = "\n".join(lines) + "\n"
+        if UPDATE or not os.path.exists(path):
+            open(path, "w").write(text)
+        self.assertEqual(open(path).read(), text,
+                         f"{name} differs: a HAL, PAC or firmware change altered the register "
+                         "writes; review and rerun with FIL_UPDATE=1")
+
+    def test_boot_register_writes_match_the_golden_log(self):
+        """Every peripheral write of the boot (up to the first control interrupt) in
+        order; the ADC end-of-sequence acknowledgements of the calibration loop omitted."""
+        m = fil.Machine(fil.default_elf("power-stage"))
+        m.run_until(lambda m: fil.ADC1_2_IRQ in m.nvic_enabled, CALIBRATION_PERIODS + 200)
+        lines = [l for l in m.write_log() if not l.startswith(("ADC1.ISR", "ADC2.ISR"))]
+        self._golden("golden-boot-writes.txt", lines)
+
+    def test_control_interrupt_instruction_budget(self):
+        """Executed instructions of the real control interrupt, entry to return, while
+        magnetizing (CORDIC sin/cos): published and held to a budget (+5 %)."""
+        m = started()
+        m.count_isr = True
+        m.run(200)
+        n = m.isr_instructions
+        self.assertTrue(n)
+        stats = {"min": min(n), "mean": round(sum(n) / len(n), 1), "max": max(n),
+                 "periods": len(n)}
+        print(f"\ncontrol interrupt (power-stage build, magnetizing): {stats}", file=sys.stderr)
+        path = os.path.join(HERE, "isr-budget.json")
+        if UPDATE or not os.path.exists(path):
+            json.dump({"max_instructions": stats["max"]}, open(path, "w"), indent=1)
+        budget = json.load(open(path))["max_instructions"]
+        self.assertLessEqual(stats["max"], budget * 1.05, f"{stats} vs budget {budget}")
+        json.dump(stats, open(os.path.join(HERE, "..", "..", "target", "fil-isr.json"), "w"))
+
+
+class SelfTest(unittest.TestCase):
+    def test_selftest_build_reaches_500_rpm(self):
+        """The self-test build (motor model in the interrupt) closed loop in emulation:
+        speed 500, start, and the model reaches 500 rpm with the estimate tracking it."""
+        m = fil.Machine(fil.default_elf("selftest"))
+        m.run(20)
+        self.assertIn("ready", m.output())
+        command(m, "speed 500", 5)
+        command(m, "start", 5)
+        command(m, "stream on", 5)
+        m.run(9000)
+        frames = [l for l in m.output().split("\r\n") if l.startswith("$T,")]
+        self.assertGreater(len(frames), 10)
+        f = frames[-1].split("*")[0].split(",")
+        state, fault = int(f[2]), int(f[3])
+        est, plant = int(f[5]) / 10, int(f[16]) / 10
+        self.assertEqual((state, fault), (2, 0), frames[-1])
+        self.assertLess(abs(plant - 500), 25, frames[-1])
+        self.assertLess(abs(est - plant), 25, frames[-1])
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
