@@ -72,7 +72,8 @@ fn round_to_i32(y: f32) -> i32 {
     let t = y + 0.5;
     let k = t as i32; // saturating, NaN -> 0
     if (k as f32) > t {
-        k - 1
+        // saturating: far below i32::MIN the cast gives MIN, and MIN - 1 would overflow
+        k.saturating_sub(1)
     } else {
         k
     }
@@ -345,5 +346,25 @@ impl BusVoltageSensor {
             + finite_or(self.cfg.offset, 0.0)
             + noise;
         self.cfg.adc.quantize(y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Far beyond the range (and beyond i32 in LSBs) the quantiser saturates to its end
+    /// codes instead of overflowing (issue 12: it overflowed beyond about 1e7 A).
+    #[test]
+    fn quantiser_saturates_at_any_input() {
+        let adc = CurrentSensorConfig::default().adc;
+        let top = adc.quantize(1e3);
+        let bottom = adc.quantize(-1e3);
+        for x in [1e7f32, 1e12, f32::MAX, f32::INFINITY] {
+            assert_eq!(adc.quantize(x), top);
+            assert_eq!(adc.quantize(-x), bottom);
+        }
+        assert!(adc.quantize(f32::NAN).is_finite());
+        assert!(bottom < 0.0 && top > 0.0);
     }
 }

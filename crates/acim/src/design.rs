@@ -211,7 +211,21 @@ fn positive(v: f32, field: &'static str) -> Result<f32, ConfigError> {
 }
 
 /// Longest control period accepted, s (100 Hz: slower is not a current loop).
-pub const MAX_CONTROL_PERIOD: f32 = 0.01;
+pub const MAX_CONTROL_PERIOD: f32 = 10e-3;
+/// Shortest control period, s (50 kHz: below it no step fits a Cortex-M4 and the dead
+/// time would eat the period).
+pub const MIN_CONTROL_PERIOD: f32 = 20e-6;
+/// The over-current trip may be at most this multiple of `current_limit`: a trip far
+/// above the regulated current protects nothing (it is a protection switched off by
+/// configuration).
+pub const MAX_TRIP_OVER_LIMIT: f32 = 3.0;
+/// `max_speed` may be at most this multiple of the base speed the bus can drive,
+/// linear limit at `dc_bus_max` / (p lambda_ref): beyond it the over-speed trip could
+/// never fire.
+pub const MAX_SPEED_OVER_BASE: f32 = 3.0;
+/// The rotor time constant must span at least this many control periods: the discrete
+/// flux model (eq. 13) diverges when tau_r approaches the period.
+pub const MIN_ROTOR_TIME_CONSTANT_PERIODS: f32 = 5.0;
 /// Largest current-loop bandwidth x period: beyond 0.5 the discrete PI with a one-period
 /// delay loses its phase margin.
 pub const MAX_CURRENT_BANDWIDTH_PERIODS: f32 = 0.5;
@@ -490,6 +504,17 @@ impl DriveDesign {
             "control_period",
             "at most 10 ms (MAX_CONTROL_PERIOD)",
         )?;
+        check(
+            ts >= MIN_CONTROL_PERIOD,
+            "control_period",
+            "at least 20 us (MIN_CONTROL_PERIOD)",
+        )?;
+        check(
+            cfg.machine.rotor_time_constant() >= MIN_ROTOR_TIME_CONSTANT_PERIODS * ts,
+            "machine",
+            "rotor time constant Lr/Rr must span at least 5 control periods \
+             (MIN_ROTOR_TIME_CONSTANT_PERIODS)",
+        )?;
         let i_max = positive(cfg.current_limit, "current_limit")?;
         let i_d = positive(cfg.flux_current, "flux_current")?;
         check(i_d < i_max, "flux_current", "must be below current_limit")?;
@@ -498,6 +523,11 @@ impl DriveDesign {
             cfg.overcurrent_trip >= i_max,
             "overcurrent_trip",
             "must be at least current_limit",
+        )?;
+        check(
+            cfg.overcurrent_trip <= MAX_TRIP_OVER_LIMIT * i_max,
+            "overcurrent_trip",
+            "must be at most 3 x current_limit (MAX_TRIP_OVER_LIMIT)",
         )?;
         positive(cfg.dc_bus_min, "dc_bus_min")?;
         positive(cfg.dc_bus_max, "dc_bus_max")?;
@@ -571,6 +601,13 @@ impl DriveDesign {
 
         let m = cfg.machine;
         let flux_reference = m.rotor_flux_for(i_d);
+        let base_speed = linear_limit(cfg.dc_bus_max) / (m.pole_pairs_f32() * flux_reference);
+        check(
+            cfg.max_speed <= MAX_SPEED_OVER_BASE * base_speed,
+            "max_speed",
+            "must be at most 3 x the base speed the bus drives, linear limit at dc_bus_max \
+             / (p lambda_ref) (MAX_SPEED_OVER_BASE)",
+        )?;
         let i_sq_limit = sqrt(i_max * i_max - i_d * i_d);
         let observer =
             ObserverConfig::new(&m, cfg.observer_poles, ts).map_err(ConfigError::Observer)?;
@@ -710,5 +747,37 @@ impl DriveCoeffs<f32> {
                 boost: cfg.vf.boost,
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::MachineParams;
+
+    fn field(cfg: DriveConfig) -> Option<&'static str> {
+        DriveDesign::new(cfg).err().map(|e| e.field())
+    }
+
+    /// Protections cannot be switched off by configuration, and errors name the field
+    /// that is wrong (issue 12): a trip far above the current limit, a speed limit the bus
+    /// could never reach, a rotor time constant near the period, a tiny period.
+    #[test]
+    fn physics_bounds_name_the_field() {
+        assert_eq!(field(DriveConfig::paper_defaults()), None);
+        let mut c = DriveConfig::paper_defaults();
+        c.overcurrent_trip = 1e30;
+        assert_eq!(field(c), Some("overcurrent_trip"));
+        let mut c = DriveConfig::paper_defaults();
+        c.max_speed = 1e30;
+        assert_eq!(field(c), Some("max_speed"));
+        let mut c = DriveConfig::paper_defaults();
+        let mut data = c.machine.data();
+        data.rotor_resistance = data.rotor_inductance / (2.0 * c.control_period);
+        c.machine = MachineParams::new(data).unwrap();
+        assert_eq!(field(c), Some("machine"));
+        let mut c = DriveConfig::paper_defaults();
+        c.control_period = 5e-6;
+        assert_eq!(field(c), Some("control_period"), "not dead_time");
     }
 }

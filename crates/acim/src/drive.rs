@@ -1119,7 +1119,7 @@ mod tests {
             let mut c = DriveConfig::paper_defaults();
             c.flux_current = flux_current;
             c.current_limit = flux_current + extra;
-            c.overcurrent_trip = 2.0 * c.current_limit + 12.0;
+            c.overcurrent_trip = crate::design::MAX_TRIP_OVER_LIMIT * c.current_limit;
             c.speed_ramp = 1e6; // a step: a large target saturates the speed PI at once
             let mut d = Drive::new(c).unwrap();
             d.set_speed_target(target).unwrap();
@@ -1134,7 +1134,11 @@ mod tests {
             prop_assert_eq!(d.state(), DriveState::Running);
             let lim = c.current_limit * (1.0 + 1e-5);
             let mut at_limit = false;
+            // samples scaled to +/-1.4 I_max (the third phase within 2.8 I_max, below the
+            // trip at 3 I_max)
+            let k = 1.4 * c.current_limit / 6.0;
             for (a, b) in samples {
+                let (a, b) = (k * a, k * b);
                 d.step(&DriveInputs { phase_currents: [a, b, -a - b], dc_bus: 325.0 });
                 let r = d.telemetry().current_reference;
                 let mag = (r.d * r.d + r.q * r.q).sqrt();

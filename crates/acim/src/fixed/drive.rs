@@ -13,7 +13,7 @@
 use super::q::{clamp, to_q24, ONE, Q24};
 use super::trig::TableSinCos;
 use super::PerUnitBases;
-use crate::design::{ConfigError, DriveCoeffs, DriveConfig, DriveDesign};
+use crate::design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign};
 use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
 use crate::frames::SinCos;
 use crate::frames::{AlphaBeta, Dq};
@@ -108,6 +108,12 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
     /// (only possible at this boundary) faults the drive with `NonFiniteInput`.
     pub fn step_si(&mut self, inp: &DriveInputs) -> PwmOutput {
         let [a, b, c] = inp.phase_currents;
+        // with two shunts the third sample is not a measurement: ignored, as the f32
+        // drive ignores it (it derives c = -a - b)
+        let c = match self.config().current_sensing {
+            CurrentSensing::TwoPhase => 0.0,
+            CurrentSensing::ThreePhase => c,
+        };
         let finite = is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus);
         if !finite {
             if self.state() != DriveState::Fault {
@@ -171,6 +177,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
 mod tests {
     use super::*;
     use crate::design::STALL_SPEED_FRACTION;
+
     use crate::svpwm::{INV_SQRT3, VOLTAGE_MARGIN};
     use proptest::prelude::*;
 
@@ -210,6 +217,33 @@ mod tests {
 
     fn drive() -> FixedDrive {
         FixedDrive::with_bases(DriveConfig::paper_defaults(), PerUnitBases::PAPER).unwrap()
+    }
+
+    /// Both arithmetics treat a non-finite sample alike: with two shunts the third sample
+    /// is ignored (it faulted the fixed drive but not the f32 drive); with three it faults
+    /// both.
+    #[test]
+    fn non_finite_samples_are_judged_alike_in_both_arithmetics() {
+        for sensing in [CurrentSensing::TwoPhase, CurrentSensing::ThreePhase] {
+            let mut cfg = DriveConfig::paper_defaults();
+            cfg.current_sensing = sensing;
+            let mut f = crate::Drive::new(cfg).unwrap();
+            let mut q = FixedDrive::with_bases(cfg, PerUnitBases::PAPER).unwrap();
+            f.start().unwrap();
+            q.start().unwrap();
+            let inp = DriveInputs {
+                phase_currents: [0.1, -0.05, f32::NAN],
+                dc_bus: 325.0,
+            };
+            let (of, oq) = (f.step(&inp), q.step_si(&inp));
+            assert_eq!(of.enabled, oq.enabled, "{sensing:?}");
+            assert_eq!(f.state(), q.state(), "{sensing:?}");
+            assert_eq!(f.fault(), q.fault(), "{sensing:?}");
+            assert_eq!(
+                f.state() == DriveState::Fault,
+                sensing == CurrentSensing::ThreePhase
+            );
+        }
     }
 
     /// Any Q7.24 current code, with the extremes (a saturated ADC maps to them) often.
