@@ -152,6 +152,7 @@ class Machine:
                          self._bitband_write, None)
         self.regs = {}           # (base, offset) -> value
         self.writes = []         # (instret, peripheral, register, value)
+        self.boot_writes = None  # number of writes before the first NVIC unmask
         self.events = []         # ordered named events for rule checks
         self.instret = 0         # instructions executed by the main program
         self.periods = 0
@@ -312,6 +313,8 @@ class Machine:
             elif value == 0xAAAA:
                 self.iwdg_feeds += 1
         if base == 0xE000_E100 and off4 < 0x20:       # NVIC_ISERn
+            if self.boot_writes is None:
+                self.boot_writes = len(self.writes)   # the boot ends at the first unmask
             for b in range(32):
                 if value & (1 << b):
                     self.nvic_enabled.add(off4 * 8 + b)

@@ -428,6 +428,10 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub ramp_step: N,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
+    /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
+    /// equals a voltage; with the voltage limit, the fastest reachable speed (without
+    /// field weakening).
+    pub speed_per_volt: N::Gain,
     /// The voltage lead of the inverse Park (delay compensation).
     pub lead: N::Lead,
     /// 1/V_dc -> 1/v_max: 1/(0.98/sqrt 3) (the current loops' voltage limit).
@@ -737,6 +741,7 @@ impl DriveCoeffs<f32> {
             torque_factor: d.torque_factor,
             ramp_step: d.ramp_step,
             speed_target_limit: d.speed_target_limit,
+            speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),
             voltage_limit_per_inv_bus: 1.0 / (VOLTAGE_MARGIN * INV_SQRT3),
             orientation: d.orientation,

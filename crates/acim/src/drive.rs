@@ -117,6 +117,9 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub stator_frequency: N,
     /// Whether the modulator limited the voltage.
     pub voltage_saturated: bool,
+    /// Whether the speed target is beyond the speed the voltage can reach (it is limited
+    /// to that speed).
+    pub speed_target_limited: bool,
     /// The control monitor's mean |i* - i|, A ([`ControlMonitor`]).
     pub current_error: N,
     /// The control monitor's mean current-loop integral (model voltage residual), V.
@@ -225,6 +228,8 @@ struct References<N> {
     speed_ctl: PiController<N>,
     magnetizing_steps: u32,
     rs_settled_steps: u32,
+    /// The target is beyond the reachable speed (reported in the telemetry).
+    target_limited: bool,
 }
 
 /// Current-control stage state: the d and q PIs.
@@ -307,6 +312,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 speed_ctl: PiController::new(),
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
+                target_limited: false,
             },
             cur: CurrentControl {
                 d: PiController::new(),
@@ -512,21 +518,21 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         if let Some(reason) = self.plausibility(&e) {
             return self.enter_fault(reason);
         }
-        // 5. references
-        probe.begin(StepRegion::SpeedPi);
-        let i_ref = match self.references(&m, &e, magnetizing) {
-            Ok(i_ref) => i_ref,
-            Err(reason) => return self.enter_fault(reason),
-        };
-        probe.end(StepRegion::SpeedPi);
-        // 6. current control, within the modulator's voltage limit
-        probe.begin(StepRegion::CurrentPi);
-        // the bus was checked against dc_bus_min > 0 by the gate: one reciprocal per step,
-        // shared by the voltage limit and the modulator
+        // the modulator's voltage limit at this bus (the bus was checked against
+        // dc_bus_min > 0 by the gate: one reciprocal per step, shared with the modulator)
         let inv_dc_bus = m.dc_bus.recip();
         let limit = self
             .modulator
             .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
+        // 5. references, within the speed that voltage can reach
+        probe.begin(StepRegion::SpeedPi);
+        let i_ref = match self.references(&m, &e, magnetizing, limit.max) {
+            Ok(i_ref) => i_ref,
+            Err(reason) => return self.enter_fault(reason),
+        };
+        probe.end(StepRegion::SpeedPi);
+        // 6. current control, within the voltage limit
+        probe.begin(StepRegion::CurrentPi);
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
@@ -695,6 +701,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         m: &Measured<N>,
         e: &Estimate<N>,
         magnetizing: bool,
+        voltage_limit: N,
     ) -> Result<Dq<N>, FaultReason> {
         let c = &self.coeffs;
         let r = &mut self.refs;
@@ -723,7 +730,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 q: N::ZERO,
             });
         }
-        let dv = (r.speed_target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
+        // a target beyond the no-load speed the voltage limit reaches (back-EMF
+        // p Omega lambda_ref = v_max) is limited to it and reported in the telemetry
+        let reach = N::gain(c.speed_per_volt, voltage_limit);
+        let target = r.speed_target.clamp(-reach, reach);
+        r.target_limited = target != r.speed_target;
+        let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
         let i_sq_ref = r
@@ -832,6 +844,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             angle: m.angle,
             stator_frequency: e.stator_frequency,
             voltage_saturated: saturated,
+            speed_target_limited: self.refs.target_limited,
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
         };
@@ -1049,6 +1062,40 @@ mod tests {
         assert!(d.refs.speed_target <= 0.9 * d.config().max_speed);
     }
 
+    /// A target above the speed the bus voltage can reach (back-EMF p Omega lambda_ref =
+    /// v_max: about 1130 rpm at 325 V for the paper's machine) is limited to it and
+    /// reported; a reachable target is not.
+    #[test]
+    fn unreachable_speed_targets_are_limited_and_reported() {
+        let mut d = drive();
+        let i = 1.5;
+        let magnetizing = DriveInputs {
+            phase_currents: [i, -0.5 * i, -0.5 * i],
+            dc_bus: 325.0,
+        };
+        d.set_speed_target(1800.0 * crate::math::RPM_TO_RAD_S)
+            .unwrap();
+        d.start().unwrap();
+        let mut n = 0;
+        while d.state() == DriveState::Magnetizing && n < 20_000 {
+            d.step(&magnetizing);
+            n += 1;
+        }
+        assert_eq!(d.state(), DriveState::Running);
+        d.step(&magnetizing);
+        let reach = linear_limit(325.0) / (2.0 * d.design().flux_reference);
+        assert!(d.telemetry().speed_target_limited);
+        // the ramp heads for the reachable speed, not for 1800 rpm
+        d.refs.speed_reference = 0.99 * reach;
+        d.step(&magnetizing);
+        d.step(&magnetizing);
+        assert!(d.refs.speed_reference <= reach * (1.0 + 1e-5), "{reach}");
+        d.set_speed_target(500.0 * crate::math::RPM_TO_RAD_S)
+            .unwrap();
+        d.step(&magnetizing);
+        assert!(!d.telemetry().speed_target_limited);
+    }
+
     #[test]
     fn current_limit_circle_with_d_priority() {
         let d = drive();
@@ -1146,7 +1193,9 @@ mod tests {
                 at_limit |= mag > 0.999 * c.current_limit;
             }
             // the property is exercised: large targets drive the reference to the circle
-            if target.abs() > 250.0 {
+            // (the drive limits a target to the speed the bus voltage can reach)
+            let reach = linear_limit(325.0) / (2.0 * d.design().flux_reference);
+            if target.abs().min(reach) > 250.0 {
                 prop_assert!(at_limit);
             }
         }

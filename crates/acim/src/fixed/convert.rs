@@ -197,6 +197,10 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "machine")?,
         ramp_step: Q24(to_q24(d.ramp_step / b.speed)),
         speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
+        speed_per_volt: gain(
+            b.voltage / (pp * d.flux_reference * b.speed),
+            "flux_current",
+        )?,
         lead: angle_gain(b.frequency * ts * cfg.delay_periods).ok_or(missing("delay_periods"))?,
         voltage_limit_per_inv_bus: gain(
             1.0 / (crate::svpwm::VOLTAGE_MARGIN * crate::svpwm::INV_SQRT3),

@@ -162,6 +162,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
             angle: Q24::angle_to_rad(t.angle),
             stator_frequency: t.stator_frequency.to_pu() * b.frequency,
             voltage_saturated: t.voltage_saturated,
+            speed_target_limited: t.speed_target_limited,
             current_error: t.current_error.to_pu() * b.current,
             model_residual: t.model_residual.to_pu() * b.voltage,
         }
