@@ -5,7 +5,9 @@
 #   bash firmware/fil/ci.sh          (FIL_UPDATE=1 rewrites golden-boot-writes.txt and isr-budget.json)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-python3 -m pip install --quiet --disable-pip-version-check -r firmware/fil/requirements.txt
+python3 -m pip install --quiet --disable-pip-version-check -r firmware/fil/requirements.txt \
+  || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages \
+       -r firmware/fil/requirements.txt
 OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/release"
 if [ ! -f "$OUT/acim-firmware-power-stage.elf" ] || [ ! -f "$OUT/acim-firmware-selftest.elf" ]; then
   bash firmware/check.sh
