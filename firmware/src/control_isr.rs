@@ -88,6 +88,9 @@ fn state() -> Option<&'static mut IsrState> {
 #[inline(always)]
 fn commands(st: &mut IsrState) -> Option<ControlCommand> {
     let cmd = st.cmd.dequeue()?;
+    if let ControlCommand::PlantLoad(nm) = cmd {
+        st.sim.set_brake_nm(nm);
+    }
     let r = st.ctl.apply(cmd);
     let _ = st.reply.enqueue(r);
     Some(cmd)

@@ -345,6 +345,17 @@ fn handle(
         Command::Stop => Some(ControlCommand::Stop),
         Command::Speed(rpm) => Some(ControlCommand::SpeedRpm(rpm)),
         Command::ResetFault => Some(ControlCommand::ResetFault),
+        Command::Load(nm) => {
+            if cfg!(feature = "selftest") {
+                Some(ControlCommand::PlantLoad(nm))
+            } else {
+                say(
+                    out,
+                    b"err load applies to the self-test's motor model only\r\n",
+                );
+                None
+            }
+        }
         Command::Stream(on) => {
             *stream = on;
             say(out, b"ok\r\n");
@@ -400,7 +411,7 @@ fn handle(
         Command::Help => {
             say(
                 out,
-                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off\r\n",
+                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test)\r\n",
             );
             None
         }

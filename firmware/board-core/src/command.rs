@@ -9,6 +9,7 @@
 //! params           print the drive configuration and board values
 //! status           print the state, fault and timing
 //! stream on|off    text telemetry frames on the UART as well as RTT
+//! load <N m>       self-test only: the motor model's load torque (a brake), |N m| <= 20
 //! help             list the commands
 //! ```
 //!
@@ -17,6 +18,9 @@
 //! [`MAX_LINE`]) yields a [`ParseError`] and no command: nothing changes.
 
 use crate::board::MAX_SPEED_COMMAND_RPM;
+
+/// Largest load torque the self-test's `load` command accepts, N m.
+pub const MAX_LOAD_COMMAND_NM: f32 = 20.0;
 use heapless::Vec;
 
 /// Longest accepted line, bytes (without the terminator).
@@ -42,6 +46,8 @@ pub enum Command {
     Status,
     /// Text telemetry on the UART on/off.
     Stream(bool),
+    /// Self-test: the motor model's (passive) load torque, N m.
+    Load(f32),
     /// List the commands.
     Help,
 }
@@ -125,6 +131,14 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
                 return Err(ParseError::OutOfRange);
             }
             Ok(Command::Speed(rpm))
+        }
+        b"load" => {
+            let a = arg.ok_or(ParseError::MissingArgument)?;
+            let nm = parse_decimal(a).ok_or(ParseError::BadNumber)?;
+            if nm.abs() > MAX_LOAD_COMMAND_NM {
+                return Err(ParseError::OutOfRange);
+            }
+            Ok(Command::Load(nm))
         }
         b"stream" => match arg.ok_or(ParseError::MissingArgument)? {
             b"on" => Ok(Command::Stream(true)),
@@ -236,6 +250,15 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn load_command_is_bounded() {
+        assert_eq!(parse(b"load 1.5"), Ok(Command::Load(1.5)));
+        assert_eq!(parse(b"load -2"), Ok(Command::Load(-2.0)));
+        assert_eq!(parse(b"load 20.001"), Err(ParseError::OutOfRange));
+        assert_eq!(parse(b"load"), Err(ParseError::MissingArgument));
+        assert_eq!(parse(b"load x"), Err(ParseError::BadNumber));
     }
 
     #[test]

@@ -91,6 +91,8 @@ pub enum ControlCommand {
     SpeedRpm(f32),
     /// Fault -> idle (also clears a firmware fault).
     ResetFault,
+    /// Self-test: the motor model's load torque, N m (the drive itself is unaffected).
+    PlantLoad(f32),
 }
 
 /// The interrupt's reply to a [`ControlCommand`].
@@ -161,6 +163,8 @@ impl<S: SinCos> ControlLoop<S> {
                 Ok(())
             }
             ControlCommand::SpeedRpm(rpm) => self.drive.set_speed_target(rpm * RPM_TO_RAD_S),
+            // applied by the self-test's interrupt to its motor model
+            ControlCommand::PlantLoad(_) => Ok(()),
             ControlCommand::ResetFault => {
                 let r = self.drive.reset_fault();
                 if r.is_ok() {

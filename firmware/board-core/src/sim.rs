@@ -45,6 +45,16 @@ impl SimulatedStage {
         self.load = load;
     }
 
+    /// A brake (passive load, opposing the motion) of `nm` N m from the next period on, as
+    /// the paper's powder brake (the `load` command); 0 removes it.
+    pub fn set_brake_nm(&mut self, nm: f32) {
+        self.load = if nm == 0.0 {
+            LoadTorque::None
+        } else {
+            LoadTorque::Passive { torque: nm.abs() }
+        };
+    }
+
     /// What the ADC would convert at this sampling instant (true phase currents and bus
     /// through the board's gains, rounded and clamped to 12 bits).
     pub fn sample(&self) -> RawSample {

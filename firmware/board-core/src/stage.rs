@@ -61,7 +61,7 @@ pub fn apply_command<S: SinCos, P: PowerStageIo>(
                     io.enable_outputs();
                 }
             }
-            ControlCommand::Stop | ControlCommand::SpeedRpm(_) => {}
+            ControlCommand::Stop | ControlCommand::SpeedRpm(_) | ControlCommand::PlantLoad(_) => {}
         }
     }
     reply
