@@ -286,6 +286,13 @@ pub const RESIDUAL_RS_TOLERANCE: f32 = 0.5;
 /// ... plus this fraction of the linear voltage limit at the highest bus (inverter
 /// non-linearity, flux and inductance errors).
 pub const RESIDUAL_VOLTAGE_FRACTION: f32 = 0.05;
+/// The idle offset means are leaky means over this time, s.
+pub const OFFSET_FILTER_TIME: f32 = 0.02;
+/// They count as settled after this many filter times of idle samples.
+pub const OFFSET_SETTLE_FILTER_TIMES: f32 = 5.0;
+/// A channel whose idle offset exceeds this fraction of the over-current trip is a
+/// sensor fault (2 % of an 8 A trip: 0.16 A, some 30 LSB of a 12-bit +/-10 A channel).
+pub const OFFSET_FRACTION: f32 = 0.02;
 /// Magnetizing gives up after this many rotor time constants beyond the standstill Rs
 /// identification's own timeout (the flux settles in about 3).
 pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
@@ -335,6 +342,12 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
     /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r.
     pub magnetizing_timeout_steps: u32,
+    /// Idle offset means: leaky-mean gain Ts / [`OFFSET_FILTER_TIME`].
+    pub offset_filter: N::Gain,
+    /// Idle samples before the offset means are trusted.
+    pub offset_settle_steps: u32,
+    /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`] of the trip.
+    pub offset_limit: N,
     /// Largest stator resistance the current-response check allows, ohm:
     /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs.
     pub impedance_resistance: N,
@@ -689,6 +702,9 @@ impl DriveDesign {
                 current_sum_limit: CURRENT_SUM_FRACTION * cfg.overcurrent_trip,
                 model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
                     + RESIDUAL_VOLTAGE_FRACTION * v_static,
+                offset_filter: (ts / OFFSET_FILTER_TIME).min(1.0),
+                offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts) as u32,
+                offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,

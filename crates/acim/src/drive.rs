@@ -56,7 +56,8 @@ use crate::orientation;
 use crate::pi::PiController;
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
 pub use crate::supervisor::{
-    CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, Supervisor,
+    CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
+    Supervisor,
 };
 use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
 
@@ -263,6 +264,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     sincos: S,
     applied: Applied<N>,
     monitor: ControlMonitor<N>,
+    offsets: OffsetMonitor<N>,
+    /// The offsets subtracted from the samples since the last start.
+    offset_compensation: [N; 3],
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
 }
@@ -322,6 +326,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             sincos,
             applied: Applied::default(),
             monitor: ControlMonitor::new(),
+            offsets: OffsetMonitor::new(),
+            offset_compensation: [N::ZERO; 3],
             open_loop: OpenLoop::default(),
             telemetry: DriveTelemetry {
                 stator_resistance_estimate: rs_initial,
@@ -391,13 +397,31 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
 
     /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
     pub fn start(&mut self) -> Result<(), CommandError> {
+        self.check_sensors_before_start()?;
         self.sup.start(DriveState::Magnetizing)?;
         self.reset_dynamic_state();
         Ok(())
     }
 
+    /// Idle only: a current channel whose offset, measured with the switches off, is
+    /// beyond its limit refuses the start and faults the drive (`CurrentSensor`);
+    /// otherwise the settled offsets are subtracted from the samples until the next stop.
+    fn check_sensors_before_start(&mut self) -> Result<(), CommandError> {
+        if self.sup.state() != DriveState::Idle {
+            return Ok(()); // the state machine refuses the start
+        }
+        let limits = &self.coeffs.limits;
+        if let Some(reason) = self.sup.check_offsets(limits, &self.offsets) {
+            self.sup.trip(reason);
+            return Err(CommandError::SensorOffset);
+        }
+        self.offset_compensation = self.offsets.compensation(limits);
+        Ok(())
+    }
+
     /// Idle -> OpenLoop: V/f at the electrical frequency p * speed target.
     pub fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        self.check_sensors_before_start()?;
         self.sup.start(DriveState::OpenLoop)?;
         self.reset_dynamic_state();
         Ok(())
@@ -501,7 +525,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.end(StepRegion::FaultChecks);
         let mode = match gate {
             Gate::Run(mode) => mode,
-            Gate::Off(None) => return PwmOutput::OFF,
+            Gate::Off(None) => {
+                if self.sup.state() == DriveState::Idle {
+                    // switches off: measure the current channels' zero offsets
+                    self.offsets
+                        .idle_sample(&self.coeffs.limits, inp.phase_currents);
+                }
+                return PwmOutput::OFF;
+            }
             Gate::Off(Some(reason)) => return self.enter_fault(reason),
         };
         if mode == DriveState::OpenLoop {
@@ -596,7 +627,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
     #[inline(always)]
     fn sense(&mut self, inp: &DriveInputs<N>) -> Measured<N> {
+        let [oa, ob, oc] = self.offset_compensation;
         let [a, b, c] = inp.phase_currents;
+        let (a, b, c) = (a - oa, b - ob, c - oc);
         let (i_ab, current_sum) = match self.coeffs.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), N::ZERO),
             CurrentSensing::ThreePhase => (clarke_three(a, b, c), a + b + c),
@@ -1094,6 +1127,44 @@ mod tests {
             .unwrap();
         d.step(&magnetizing);
         assert!(!d.telemetry().speed_target_limited);
+    }
+
+    /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
+    /// the start and faults the drive; a small offset is measured and subtracted.
+    #[test]
+    fn idle_offsets_are_checked_at_start_and_compensated() {
+        let idle = |d: &mut Drive, a: f32, n: usize| {
+            for _ in 0..n {
+                d.step(&DriveInputs {
+                    phase_currents: [a, 0.0, 0.0],
+                    dc_bus: 325.0,
+                });
+            }
+        };
+        // too few idle samples: nothing judged, nothing compensated
+        let mut d = drive();
+        idle(&mut d, 0.5, 10);
+        assert_eq!(d.start(), Ok(()));
+        assert_eq!(d.offset_compensation, [0.0; 3]);
+        // 0.2 s idle with 0.5 A on channel a: refused, CurrentSensor fault
+        let mut d = drive();
+        idle(&mut d, 0.5, 1000);
+        assert_eq!(d.start(), Err(CommandError::SensorOffset));
+        assert_eq!(d.state(), DriveState::Fault);
+        assert_eq!(d.fault(), Some(FaultReason::CurrentSensor));
+        // 0.05 A: accepted, and subtracted from the samples
+        let mut d = drive();
+        idle(&mut d, 0.05, 1000);
+        assert_eq!(d.start(), Ok(()));
+        assert!((d.offset_compensation[0] - 0.05).abs() < 1e-3);
+        let m = d.sense(&DriveInputs {
+            phase_currents: [0.05, 0.0, 0.0],
+            dc_bus: 325.0,
+        });
+        assert!(
+            m.i_ab.alpha.abs() < 1e-3 && m.i_ab.beta.abs() < 1e-3,
+            "{m:?}"
+        );
     }
 
     #[test]

@@ -95,6 +95,9 @@ pub enum CommandError {
     NotFinite,
     /// The value is outside its documented range.
     OutOfRange,
+    /// A current channel's zero offset, measured with the switches off while idle, is
+    /// beyond its limit: the start is refused and the drive faults (`CurrentSensor`).
+    SensorOffset,
 }
 
 /// What the estimation stage hands the supervisor's plausibility check.
@@ -415,6 +418,84 @@ impl<N: Num> ControlMonitor<N> {
             Some(FaultReason::CurrentRegulation)
         } else if self.model_residual > limits.model_residual_limit {
             Some(FaultReason::LossOfControl)
+        } else {
+            None
+        }
+    }
+}
+
+/// The current channels' zero offsets, measured while the drive is idle with the switches
+/// off (every true phase current is then zero): a leaky mean per channel over
+/// `offset_filter`. Checked at every start against `offset_limit` (a drifting or broken
+/// amplifier) and, when settled, subtracted from the samples while the drive runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OffsetMonitor<N: Num = f32> {
+    /// Mean of each channel while idle, A.
+    pub offsets: [N; 3],
+    /// Idle samples seen (saturating).
+    pub idle_steps: u32,
+}
+
+impl<N: Num> Default for OffsetMonitor<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<N: Num> OffsetMonitor<N> {
+    /// Nothing measured yet.
+    pub fn new() -> Self {
+        Self {
+            offsets: [N::ZERO; 3],
+            idle_steps: 0,
+        }
+    }
+
+    /// One sample taken with the switches off (non-finite samples are skipped: the gate
+    /// faults on them).
+    #[inline(always)]
+    pub fn idle_sample(&mut self, limits: &SupervisionLimits<N>, currents: [N; 3]) {
+        if !(currents[0].is_finite() && currents[1].is_finite() && currents[2].is_finite()) {
+            return;
+        }
+        for (o, x) in self.offsets.iter_mut().zip(currents) {
+            *o = *o + N::gain(limits.offset_filter, x - *o);
+        }
+        self.idle_steps = self.idle_steps.saturating_add(1);
+    }
+
+    /// Whether enough idle samples were seen for the means to be trusted.
+    pub fn settled(&self, limits: &SupervisionLimits<N>) -> bool {
+        self.idle_steps >= limits.offset_settle_steps
+    }
+
+    /// The offsets to subtract: the settled means, or zero.
+    pub fn compensation(&self, limits: &SupervisionLimits<N>) -> [N; 3] {
+        if self.settled(limits) {
+            self.offsets
+        } else {
+            [N::ZERO; 3]
+        }
+    }
+}
+
+impl Supervisor {
+    /// Start check of the current sensors: a settled idle offset beyond `offset_limit`
+    /// on a measured channel is a sensor fault.
+    pub fn check_offsets<N: Num>(
+        &self,
+        limits: &SupervisionLimits<N>,
+        m: &OffsetMonitor<N>,
+    ) -> Option<FaultReason> {
+        let measured = match limits.current_sensing {
+            CurrentSensing::TwoPhase => 2,
+            CurrentSensing::ThreePhase => 3,
+        };
+        let bad = m.offsets[..measured]
+            .iter()
+            .any(|o| o.abs() > limits.offset_limit);
+        if m.settled(limits) && bad {
+            Some(FaultReason::CurrentSensor)
         } else {
             None
         }
