@@ -286,16 +286,7 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let cycles =
                 acim_sim::observers::bench_cycles(Path::new("benches/results/cycles.json"));
             let md = acim_sim::observers::markdown(&rows, cycles);
-            print!("{md}");
-            if let Some(dir) = file.parent() {
-                std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-            }
-            std::fs::write(&file, &md).map_err(|e| format!("{}: {e}", file.display()))?;
-            println!(
-                "\nwrote {} (run outputs in {})",
-                file.display(),
-                out.display()
-            );
+            write_table(&file, &md, &out)?;
         }
         Some("faults") => {
             let file = positional
@@ -304,16 +295,7 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 .unwrap_or_else(|| PathBuf::from("docs/faults.md"));
             let rows = acim_sim::faults::run_all(&out)?;
             let md = acim_sim::faults::markdown(&rows);
-            print!("{md}");
-            if let Some(dir) = file.parent() {
-                std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-            }
-            std::fs::write(&file, &md).map_err(|e| format!("{}: {e}", file.display()))?;
-            println!(
-                "\nwrote {} (run outputs in {})",
-                file.display(),
-                out.display()
-            );
+            write_table(&file, &md, &out)?;
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),
@@ -329,4 +311,19 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Prints a generated Markdown table and writes it to `file` (creating its directory).
+fn write_table(file: &Path, md: &str, out: &Path) -> Result<(), String> {
+    print!("{md}");
+    if let Some(dir) = file.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::write(file, md).map_err(|e| format!("{}: {e}", file.display()))?;
+    println!(
+        "\nwrote {} (run outputs in {})",
+        file.display(),
+        out.display()
+    );
+    Ok(())
 }
