@@ -1,5 +1,5 @@
 //! Built-in scenarios: the paper's Figs. 6-12, open-loop V/f, regeneration (the subject of
-//! a later issue: run and reported here) and fault cases.
+//! a later issue: run and reported here), fault cases and flying starts.
 //!
 //! Common settings of the paper cases (design notes section 4 and the issue's defaults):
 //! Table 1 machine, J = 0.01 kg m^2, viscous friction 2e-3 N m s/rad, 325 V stiff bus,
@@ -7,7 +7,7 @@
 //! 12-bit current sensors with 10 mA rms noise, the paper's load as a passive brake.
 //! Figs. 10-12 (the paper's experiments) add sensor gain and offset errors.
 
-use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, Window};
+use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, StartSpec, Window};
 
 fn sp(t_s: f32, rpm: f32) -> SpeedPoint {
     SpeedPoint { t_s, rpm }
@@ -310,6 +310,37 @@ pub fn all() -> Vec<Scenario> {
         s.windows = vec![win("before-load", 2.0, 2.5)];
         v.push(s);
     }
+
+    // flying starts: the start command comes while the rotor coasts (realistic sensors)
+    let mut s = base(
+        "flying-start-800",
+        "start while the rotor coasts at 800 rpm: the speed search catches it (J = 0.01)",
+        3.0,
+    );
+    realistic_sensors(&mut s);
+    s.start = StartSpec {
+        at_s: 0.5,
+        initial_speed_rpm: 800.0,
+    };
+    s.speed_profile = vec![sp(0.0, 800.0)];
+    s.windows = vec![win("caught", 2.0, 3.0)];
+    v.push(s);
+
+    let mut s = base(
+        "flying-start-reverse",
+        "start while a 10x inertia coasts at -1000 rpm, then reverse to +500 rpm",
+        5.0,
+    );
+    realistic_sensors(&mut s);
+    s.plant.inertia_kgm2 = 0.1;
+    s.controller.inertia_kgm2 = 0.1;
+    s.start = StartSpec {
+        at_s: 0.5,
+        initial_speed_rpm: -1000.0,
+    };
+    s.speed_profile = vec![sp(0.0, 500.0)];
+    s.windows = vec![win("reversed", 4.5, 5.0)];
+    v.push(s);
 
     v
 }
