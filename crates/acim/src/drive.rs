@@ -223,8 +223,6 @@ struct Estimator<N: Num, O> {
     rs: RsEstimator<N>,
     flux: FluxModel<N>,
     filtered_residual: N,
-    /// The flying start's speed search ([`crate::speed_search`]).
-    search: SpeedSearch<N>,
 }
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
@@ -278,6 +276,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     offset_compensation: [N; 3],
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
+    /// The flying start's speed search ([`crate::speed_search`]), used only while
+    /// magnetizing (last: it keeps the running step's state within short load offsets).
+    search: SpeedSearch<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -318,7 +319,6 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rs: RsEstimator::new(rs_initial),
                 flux: FluxModel::new(),
                 filtered_residual: N::ZERO,
-                search: SpeedSearch::new(),
             },
             refs: References {
                 speed_target: N::ZERO,
@@ -347,6 +347,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             design,
             coeffs,
             bases,
+            search: SpeedSearch::new(),
         })
     }
 
@@ -498,7 +499,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.filtered_residual = N::ZERO;
-        self.est.search = SpeedSearch::new();
+        self.search = SpeedSearch::new();
         self.refs.flying = false;
         self.applied = Applied::default();
         self.monitor = ControlMonitor::new();
@@ -557,7 +558,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let m = self.sense(inp);
         probe.end(StepRegion::ClarkePark);
         // 3. estimate
-        let e = self.estimate(&m, magnetizing, probe);
+        // the frame is held while magnetizing at rest and turns with the rotor on a
+        // flying start
+        let frame_held = magnetizing && !self.refs.flying;
+        let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
         if let Some(reason) = self.plausibility(&e) {
             return self.enter_fault(reason);
@@ -666,6 +670,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         &mut self,
         m: &Measured<N>,
         magnetizing: bool,
+        frame_held: bool,
         probe: &mut P,
     ) -> Estimate<N> {
         let c = &self.coeffs;
@@ -717,7 +722,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.begin(StepRegion::FluxSlip);
         // (also while a flying start magnetizes in the turning frame: the residual of a
         // speed error locks the frame onto the rotor as the flux builds)
-        let correction = if (!magnetizing && flux_settled) || self.refs.flying {
+        let correction = if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
         } else {
             N::ZERO
@@ -729,7 +734,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             i.d,
             i.q,
             N::gain(c.pole_pairs, observer.speed) + correction,
-            magnetizing && !self.refs.flying,
+            frame_held,
         );
         probe.end(StepRegion::FluxSlip);
         Estimate {
@@ -762,7 +767,6 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             }
             // flying start: the speed search on the voltage of the held frame
             match self
-                .est
                 .search
                 .update(&mag.search, self.applied.v_dq, m.i_dq, e.rs)
             {
@@ -788,12 +792,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 || r.flying
                 || r.rs_settled_steps > mag.rs_settle_steps
                 || r.magnetizing_steps > mag.rs_timeout_steps;
-            if e.flux_settled && rs_done && self.est.search.done(&mag.search) {
+            if e.flux_settled && rs_done && self.search.done(&mag.search) {
                 self.sup.magnetized();
                 self.est.observer.start_running(m.i_dq.q);
                 r.speed_ctl.reset();
                 // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
                 r.speed_reference = e.observer.speed;
+                r.flying = false;
             }
             return Ok(Dq {
                 d: c.i_sd_ref,
@@ -917,7 +922,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             speed_target_limited: self.refs.target_limited,
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
-            search_speed: self.est.search.measured_speed,
+            search_speed: self.search.measured_speed,
         };
     }
 
