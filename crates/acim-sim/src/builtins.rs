@@ -295,10 +295,17 @@ pub fn all() -> Vec<Scenario> {
     s.faults.current_sensor_offset_drift_a_per_s = 0.5;
     v.push(s);
 
-    for (rpm, nm) in [(500.0f32, 5.0f32), (500.0, 8.0), (500.0, 12.0)] {
+    for (rpm, nm) in [
+        (500.0f32, 5.0f32),
+        (500.0, 8.0),
+        (500.0, 12.0),
+        (120.0, 8.0),
+    ] {
         let mut s = base(
             &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
-            if nm <= 10.0 {
+            if rpm < 200.0 {
+                "overhauling load at 120 rpm that pins the stator frequency near zero: overload"
+            } else if nm <= 10.0 {
                 "overhauling load at 500 rpm within the torque capability: held"
             } else {
                 "overhauling load at 500 rpm beyond the torque capability: overload"

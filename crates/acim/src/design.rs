@@ -331,6 +331,11 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// ... and beyond this floor, rad/s ([`OVERLOAD_FRACTION`] of 100 rpm, so that a
     /// reversal through zero does not count).
     pub overload_speed_floor: N,
+    /// Torque at its limit with |w_s| below this, rad/s electrical (the orientation
+    /// correction's fade-in start: no information below it) ...
+    pub blind_frequency: N,
+    /// ... for longer than this, steps (one rotor time constant): `Overload`.
+    pub blind_steps: u32,
     /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`]).
     pub stall_fraction: N,
     /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
@@ -729,6 +734,8 @@ impl DriveDesign {
                 overload_steps: (OVERLOAD_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32,
                 overload_fraction: OVERLOAD_FRACTION,
                 overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
+                blind_frequency: fa,
+                blind_steps: (m.rotor_time_constant() / ts) as u32,
                 stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.rs_estimation,
                 monitor_filter: (ts * cfg.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)

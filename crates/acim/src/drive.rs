@@ -816,9 +816,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let i_sq_ref = r
             .speed_ctl
             .update(&c.pi_speed, r.speed_reference - speed, N::ZERO);
+        let saturated = r.speed_ctl.saturated();
         let stall = self
             .sup
-            .stall(&c.limits, r.speed_ctl.saturated(), speed, r.speed_reference);
+            .stall(&c.limits, saturated, speed, r.speed_reference);
+        let stall = match stall {
+            None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
+            some => some,
+        };
         match stall {
             Some(reason) => Err(reason),
             None => Ok(Dq {

@@ -268,6 +268,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             overload_steps: d.limits.overload_steps,
             overload_fraction: Q24(to_q24(d.limits.overload_fraction)),
             overload_speed_floor: pu(d.limits.overload_speed_floor, b.speed, "speed_bandwidth")?,
+            blind_frequency: pu(d.limits.blind_frequency, b.frequency, "orientation_fade")?,
+            blind_steps: d.limits.blind_steps,
             stall_fraction: Q24(to_q24(d.limits.stall_fraction)),
             rs_bound_faults: d.limits.rs_bound_faults,
             monitor_filter: gain(d.limits.monitor_filter, "current_bandwidth")?,
