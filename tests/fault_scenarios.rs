@@ -98,10 +98,10 @@ fn dead_current_sensing_at_power_up_does_not_hang_in_magnetizing() {
 
 #[test]
 fn drifting_offset_ends_in_a_fault_not_a_runaway() {
-    let sc = builtins::get("fault-offset-drift").unwrap();
-    let (_, m) = acim_sim::run_with_metrics(&sc).unwrap();
-    assert!(m.fault.is_some(), "{m:#?}");
-    assert!(m.switches_off_at_end);
+    // the drift starts with the run (no idle offset to check at the start): the running
+    // check finds the DC component once the stator frequency makes the current AC
+    // (about 1.05 s into the ramp) and within its 1 s mean's rise to the limit
+    check("fault-offset-drift", "CurrentSensor", 1.0, 0.8);
     check_safe("fault-offset-drift");
 }
 

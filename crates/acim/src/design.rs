@@ -294,6 +294,9 @@ pub const RESIDUAL_RS_TOLERANCE: f32 = 0.5;
 pub const RESIDUAL_VOLTAGE_FRACTION: f32 = 0.05;
 /// The idle offset means are leaky means over this time, s.
 pub const OFFSET_FILTER_TIME: f32 = 0.02;
+/// Time constant of the running offset check's leaky mean of the alpha-beta current, s:
+/// long against the electrical period, so that the AC current averages out.
+pub const RUNNING_OFFSET_FILTER_TIME: f32 = 1.0;
 /// They count as settled after this many filter times of idle samples.
 pub const OFFSET_SETTLE_FILTER_TIMES: f32 = 5.0;
 /// A channel whose idle offset exceeds this fraction of the over-current trip is a
@@ -358,8 +361,15 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub offset_filter: N::Gain,
     /// Idle samples before the offset means are trusted.
     pub offset_settle_steps: u32,
-    /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`] of the trip.
+    /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`] of the trip (also the
+    /// largest DC component of the running alpha-beta current).
     pub offset_limit: N,
+    /// The running offset check's leaky-mean gain Ts / [`RUNNING_OFFSET_FILTER_TIME`].
+    pub running_offset_filter: N::Gain,
+    /// The running offset check counts only above this |w_s|, rad/s electrical:
+    /// 2 I_max / (offset_limit T), where the AC current's ripple through the mean, at
+    /// most I_max / (|w_s| T), is below half the limit.
+    pub running_offset_min_frequency: N,
     /// Largest stator resistance the current-response check allows, ohm:
     /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs.
     pub impedance_resistance: N,
@@ -747,6 +757,9 @@ impl DriveDesign {
                 offset_filter: (ts / OFFSET_FILTER_TIME).min(1.0),
                 offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts) as u32,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
+                running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
+                running_offset_min_frequency: 2.0 * i_max
+                    / (OFFSET_FRACTION * cfg.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
                 impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,

@@ -629,7 +629,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             q: self.cur.q.integral(),
         };
         let voltage_limited = self.cur.d.saturated() || self.cur.q.saturated();
-        self.monitor.check(
+        let found = self.monitor.check(
             &self.coeffs.limits,
             i_ref,
             m.i_dq,
@@ -638,7 +638,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             m.current_sum,
             e.stator_frequency,
             voltage_limited,
-        )
+        );
+        match found {
+            None => {
+                self.monitor
+                    .check_offset_drift(&self.coeffs.limits, m.i_ab, e.stator_frequency)
+            }
+            some => some,
+        }
     }
 
     /// Sense stage: Clarke (two or three phases) and Park at the frame angle.

@@ -9,7 +9,7 @@
 //! resets them all.
 
 use crate::design::{CurrentSensing, SupervisionLimits};
-use crate::frames::Dq;
+use crate::frames::{AlphaBeta, Dq};
 use crate::num::Num;
 
 /// Operating state of the drive.
@@ -385,6 +385,9 @@ pub struct ControlMonitor<N: Num = f32> {
     /// Leaky mean of the voltage the measured current can account for,
     /// (Rs_max + |w_s| Ls)(|i_d| + |i_q|), V.
     pub explained_voltage: N,
+    /// Leaky mean of the measured alpha-beta current over about a second, counted only
+    /// where the stator frequency makes the true current AC (running offset check), A.
+    pub dc_current: AlphaBeta<N>,
 }
 
 impl<N: Num> Default for ControlMonitor<N> {
@@ -402,6 +405,37 @@ impl<N: Num> ControlMonitor<N> {
             current_sum: N::ZERO,
             voltage: N::ZERO,
             explained_voltage: N::ZERO,
+            dc_current: AlphaBeta {
+                alpha: N::ZERO,
+                beta: N::ZERO,
+            },
+        }
+    }
+
+    /// Running offset check: above `running_offset_min_frequency` every true phase
+    /// current is AC, so the mean of the measured alpha-beta current over about a second
+    /// is the channels' offset (an offset o on channel a shows as (o, o/sqrt 3), on
+    /// channel b as (0, 2 o/sqrt 3)); beyond `offset_limit` on either axis it is a
+    /// sensor fault (an amplifier drifting while the drive runs, which the start check
+    /// cannot see). `i_ab`: the measured current after the idle-offset compensation, A.
+    #[inline(always)]
+    pub fn check_offset_drift(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        i_ab: AlphaBeta<N>,
+        stator_frequency: N,
+    ) -> Option<FaultReason> {
+        if stator_frequency.abs() >= limits.running_offset_min_frequency {
+            let g = limits.running_offset_filter;
+            let dc = &mut self.dc_current;
+            dc.alpha = dc.alpha + N::gain(g, i_ab.alpha - dc.alpha);
+            dc.beta = dc.beta + N::gain(g, i_ab.beta - dc.beta);
+        }
+        let dc = self.dc_current;
+        if dc.alpha.abs() > limits.offset_limit || dc.beta.abs() > limits.offset_limit {
+            Some(FaultReason::CurrentSensor)
+        } else {
+            None
         }
     }
 
@@ -700,6 +734,33 @@ mod tests {
     /// Torque at the limit with the speed estimate well above the reference (an
     /// overhauling load beyond the capability) is an overload after 5 speed-loop time
     /// constants; a speed error inside the band is not.
+    #[test]
+    fn a_dc_component_of_the_running_current_is_an_offset_fault() {
+        let l = limits();
+        let ts = 200e-6f32;
+        let run = |offset: f32, w: f32, seconds: f32| {
+            let mut m = ControlMonitor::new();
+            let steps = (seconds / ts) as usize;
+            (0..steps).position(|k| {
+                let th = w * k as f32 * ts;
+                // the current limit's amplitude, the worst case for the ripple
+                let i = AlphaBeta {
+                    alpha: 4.67 * th.cos() + offset,
+                    beta: 4.67 * th.sin() + offset / 3f32.sqrt(),
+                };
+                m.check_offset_drift(&l, i, w).is_some()
+            })
+        };
+        let w_min = l.running_offset_min_frequency;
+        // AC current at the lowest counted frequency: no fault in 10 s
+        assert_eq!(run(0.0, w_min, 10.0), None);
+        // an offset at the limit's double: found within a filter time constant
+        let k = run(2.0 * l.offset_limit, 2.0 * w_min, 5.0).expect("found");
+        assert!((k as f32) * ts < 1.0, "{k}");
+        // below the counted frequency the mean holds: nothing is judged there
+        assert_eq!(run(2.0 * l.offset_limit, 0.5 * w_min, 5.0), None);
+    }
+
     #[test]
     fn torque_limit_at_a_blind_stator_frequency_is_an_overload() {
         let l = limits();

@@ -280,6 +280,12 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             offset_filter: gain(d.limits.offset_filter, "control_period")?,
             offset_settle_steps: d.limits.offset_settle_steps,
             offset_limit: pu(d.limits.offset_limit, b.current, "overcurrent_trip")?,
+            running_offset_filter: gain(d.limits.running_offset_filter, "control_period")?,
+            running_offset_min_frequency: pu(
+                d.limits.running_offset_min_frequency,
+                b.frequency,
+                "overcurrent_trip",
+            )?,
             impedance_resistance: pu(
                 d.limits.impedance_resistance,
                 b.resistance(),
