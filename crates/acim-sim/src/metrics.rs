@@ -287,10 +287,9 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             running_steps = 0;
         }
     }
-    // the scenario keeps the library's max_speed
-    let max_speed_rpm = acim::DriveConfig::paper_defaults().max_speed * acim::math::RAD_S_TO_RPM;
-    let trip = sc.drive.overcurrent_trip_a;
-    let ts = sc.drive.control_period_s;
+    let max_speed_rpm = r.config.max_speed * acim::math::RAD_S_TO_RPM;
+    let trip = r.config.overcurrent_trip;
+    let ts = r.config.control_period;
     let switching = || rows.iter().filter(|r| r.pwm_enabled);
     let peak_current_a = switching().fold(0.0f32, |m, r| m.max(r.i_phase_peak_a));
     let peak_speed_rpm = rows.iter().fold(0.0f32, |m, r| m.max(r.speed_rpm.abs()));

@@ -401,6 +401,63 @@ pub struct StartSpec {
     pub initial_speed_rpm: f32,
 }
 
+/// The motor's nameplate (rms line values, as printed): with it the drive's ratings come
+/// from `acim::nameplate` instead of `[drive]` (see [`Scenario::nameplate`]).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NameplateSpec {
+    /// Rated output power, W.
+    pub power_w: f32,
+    /// Rated line-to-line voltage, V rms.
+    pub voltage_v: f32,
+    /// Rated current, A rms.
+    pub current_a: f32,
+    /// Rated frequency, Hz.
+    pub frequency_hz: f32,
+    /// Rated speed, rpm (optional).
+    #[serde(default)]
+    pub speed_rpm: Option<f32>,
+    /// Rated power factor (optional).
+    #[serde(default)]
+    pub power_factor: Option<f32>,
+    /// Pole pairs (optional when the speed is given).
+    #[serde(default)]
+    pub pole_pairs: Option<u8>,
+    /// Rated torque, N m (informative: the drive derives it from power and speed).
+    #[serde(default)]
+    pub torque_nm: Option<f32>,
+}
+
+/// The power board (with `[nameplate]`): bus, sensing full scales, PWM.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BoardSpec {
+    /// Nominal DC bus, V.
+    pub dc_bus_v: f32,
+    /// Current-sense full scale, +/- A (the plant's current sensors use it too).
+    pub current_full_scale_a: f32,
+    /// Bus-sense full scale, V (default 1.5 x the bus; the plant's bus sensor uses it).
+    #[serde(default)]
+    pub bus_full_scale_v: Option<f32>,
+    /// PWM and control frequency, Hz (default 5 000).
+    #[serde(default)]
+    pub pwm_frequency_hz: Option<f32>,
+}
+
+impl BoardSpec {
+    /// The library's board description (dead time and device drop: the inverter's).
+    pub fn board(&self, inverter: &InverterSpec) -> acim::nameplate::Board {
+        acim::nameplate::Board {
+            dc_bus_v: self.dc_bus_v,
+            current_full_scale_a: self.current_full_scale_a,
+            bus_full_scale_v: self.bus_full_scale_v.unwrap_or(1.5 * self.dc_bus_v),
+            pwm_frequency_hz: self.pwm_frequency_hz.unwrap_or(5000.0),
+            dead_time_s: inverter.dead_time_s,
+            device_drop_v: inverter.device_drop_v,
+        }
+    }
+}
+
 /// A time window over which steady-state metrics are computed.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -447,6 +504,14 @@ pub struct Scenario {
     pub faults: FaultSpec,
     /// Start command time and initial rotor speed.
     pub start: StartSpec,
+    /// The motor's nameplate: when present (with `[board]`), the drive's ratings, limits,
+    /// bandwidths, observer poles, period and per-unit bases follow from it and the
+    /// controller's machine (`acim::nameplate::drive_config`), and `[drive]` only chooses
+    /// `mode`, `arithmetic`, `observer`, `rs_estimation`, `rs_initial_ohm` and
+    /// `orientation_gain`; the plant's sensors take the board's full scales.
+    pub nameplate: Option<NameplateSpec>,
+    /// The power board (with `[nameplate]`).
+    pub board: Option<BoardSpec>,
     /// Steady-state metric windows.
     pub windows: Vec<Window>,
 }
@@ -469,6 +534,8 @@ impl Default for Scenario {
             load_profile: vec![],
             faults: FaultSpec::default(),
             start: StartSpec::default(),
+            nameplate: None,
+            board: None,
             windows: vec![],
         }
     }
@@ -483,6 +550,10 @@ pub struct Validated {
     pub drive: acim::DriveConfig,
     /// Current channels.
     pub channels: CurrentChannels,
+    /// The fixed-point drive's per-unit bases.
+    pub bases: acim::fixed::PerUnitBases,
+    /// The board, with `[nameplate]`.
+    pub board: Option<acim::nameplate::Board>,
 }
 
 impl Scenario {
@@ -771,6 +842,41 @@ impl Scenario {
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
         };
         // the drive's own checks name its fields; map them to scenario fields
+        let mut bases = acim::fixed::PerUnitBases::PAPER;
+        let mut board = None;
+        if let Some(np) = self.nameplate {
+            let Some(b) = self.board else {
+                return err("board", "is needed with [nameplate] (dc_bus_v, current_full_scale_a)");
+            };
+            let b = b.board(&self.inverter);
+            let nameplate = acim::nameplate::Nameplate {
+                power_w: np.power_w,
+                voltage_v: np.voltage_v,
+                current_a: np.current_a,
+                frequency_hz: np.frequency_hz,
+                speed_rpm: np.speed_rpm,
+                power_factor: np.power_factor,
+                pole_pairs: np.pole_pairs,
+            };
+            let mut cfg = acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| {
+                ScenarioError {
+                    field: match e {
+                        acim::nameplate::NameplateError::Invalid { field, .. } => field.into(),
+                        acim::nameplate::NameplateError::Config(_) => "nameplate".into(),
+                    },
+                    allowed: format!("{e}"),
+                }
+            })?;
+            cfg.rs_estimation = drive.rs_estimation;
+            if d.rs_initial_ohm.is_some() {
+                cfg.rs_initial = drive.rs_initial;
+            }
+            cfg.orientation_gain = drive.orientation_gain;
+            cfg.current_sensing = drive.current_sensing;
+            bases = acim::nameplate::per_unit_bases(&cfg, &b);
+            board = Some(b);
+            drive = cfg;
+        }
         acim::Drive::new(drive).map_err(|e| ScenarioError {
             field: "drive".into(),
             allowed: format!("{e}"),
@@ -790,7 +896,7 @@ impl Scenario {
             )?;
         }
         if d.arithmetic == Arithmetic::Fixed {
-            acim::fixed::FixedDrive::with_bases(drive, acim::fixed::PerUnitBases::PAPER).map_err(
+            acim::fixed::FixedDrive::with_bases(drive, bases).map_err(
                 |e| ScenarioError {
                     field: "drive.arithmetic".into(),
                     allowed: format!("{e}"),
@@ -801,6 +907,8 @@ impl Scenario {
             plant,
             drive,
             channels,
+            bases,
+            board,
         })
     }
 }

@@ -8,7 +8,7 @@
 //! model (a switch-off acts at once).
 
 use crate::scenario::{Arithmetic, ControlMode, ObserverKind, Scenario, ScenarioError, Validated};
-use acim::fixed::{FixedDrive, PerUnitBases};
+use acim::fixed::FixedDrive;
 use acim::frames::FastSinCos;
 use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
@@ -126,6 +126,8 @@ pub struct RunResult {
     pub switches_off_at_end: bool,
     /// The flying start's speed search at its decision (absent when it did not run).
     pub search: Option<SearchRecord>,
+    /// The drive configuration as run.
+    pub config: acim::DriveConfig,
 }
 
 /// The flying start's speed search at its decision.
@@ -143,7 +145,7 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     let inv = Inverter::new(
         InverterConfig {
             dead_time: sc.inverter.dead_time_s,
-            pwm_period: sc.drive.control_period_s,
+            pwm_period: v.drive.control_period,
             device_drop: sc.inverter.device_drop_v,
             ..InverterConfig::default()
         },
@@ -151,13 +153,18 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     );
     let mut cs = CurrentSensorConfig::default();
     cs.adc.bits = sc.sensors.adc_bits;
-    cs.adc.full_scale = sc.sensors.full_scale_a;
+    cs.adc.full_scale = v
+        .board
+        .map_or(sc.sensors.full_scale_a, |b| b.current_full_scale_a);
     cs.channels = v.channels;
     cs.gain_error = sc.sensors.gain_error;
     cs.offset = sc.sensors.offset_a;
     cs.noise_std = sc.sensors.noise_a;
     let mut bs = BusSensorConfig::default();
     bs.adc.bits = sc.sensors.bus_adc_bits;
+    if let Some(b) = v.board {
+        bs.adc.full_scale = b.bus_full_scale_v;
+    }
     let mut plant = Plant::new(
         InductionMachine::new(v.plant),
         inv,
@@ -239,7 +246,7 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
             Box::new(d)
         }
         (Arithmetic::Fixed, ObserverKind::Reduced) => Box::new(
-            FixedDrive::with_bases(v.drive, PerUnitBases::PAPER)
+            FixedDrive::with_bases(v.drive, v.bases)
                 .map_err(bad("drive.arithmetic"))?,
         ),
         (Arithmetic::Fixed, ObserverKind::FullOrder) => {
@@ -257,7 +264,7 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
     let v = sc.validate()?;
     let mut plant = build_plant(sc, &v);
     let mut drive = build_drive(sc, &v)?;
-    let ts = sc.drive.control_period_s;
+    let ts = v.drive.control_period;
     let n = (sc.duration_s / ts).round() as usize;
     let mut rows = Vec::with_capacity(n);
 
@@ -379,5 +386,6 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         final_state: drive.state(),
         switches_off_at_end: !pwm.preloaded().enabled,
         search,
+        config: v.drive,
     })
 }

@@ -31,6 +31,7 @@ pub mod svpwm;
 pub mod controller;
 pub mod design;
 pub mod drive;
+pub mod nameplate;
 pub mod supervisor;
 
 // the fixed-point arithmetic, and the paper's baseline observer
@@ -45,6 +46,6 @@ pub use drive::{
 };
 pub use num::Num;
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
-pub use params::{MachineData, MachineParams, ParamError};
+pub use params::{InverseGamma, MachineData, MachineParams, ParamError};
 pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};
 pub use svpwm::{Modulator, Svpwm};

@@ -75,6 +75,25 @@ pub struct MachineData {
     pub viscous_friction: f32,
 }
 
+/// A machine in inverse-Gamma form: the argument of [`MachineParams::from_inverse_gamma`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InverseGamma {
+    /// Stator resistance Rs, ohm.
+    pub stator_resistance: f32,
+    /// Rotor resistance R_R = Rr (Lm/Lr)^2, ohm.
+    pub rotor_resistance: f32,
+    /// Leakage inductance L_sigma = sigma Ls, H.
+    pub leakage_inductance: f32,
+    /// Magnetizing inductance L_M = Lm^2 / Lr, H.
+    pub magnetizing_inductance: f32,
+    /// Pole pairs p.
+    pub pole_pairs: u8,
+    /// Inertia J, kg m^2.
+    pub inertia: f32,
+    /// Viscous friction B, N m s/rad.
+    pub viscous_friction: f32,
+}
+
 fn positive(v: f32, name: &'static str) -> Result<f32, ParamError> {
     if is_finite(v) && v > 0.0 {
         Ok(v)
@@ -129,6 +148,28 @@ impl MachineParams {
             inertia: DEFAULT_INERTIA,
             viscous_friction: DEFAULT_VISCOUS_FRICTION,
         }
+    }
+
+    /// A machine given in the inverse-Gamma form the drive uses (Rs, R_R, L_sigma, L_M;
+    /// what terminal measurements identify), as the exact T-model equivalent
+    /// Ls = Lr = L_M + L_sigma, Lm = sqrt(L_M Lr), Rr = R_R Lr / L_M (terminal
+    /// measurements cannot separate Ls from Lr; any split gives the same terminal
+    /// behaviour).
+    pub fn from_inverse_gamma(g: InverseGamma) -> Result<Self, ParamError> {
+        let l_m = positive(g.magnetizing_inductance, "magnetizing_inductance")?;
+        let l_s = positive(g.leakage_inductance, "leakage_inductance")?;
+        let r_r = positive(g.rotor_resistance, "rotor_resistance")?;
+        let l = l_m + l_s;
+        Self::new(MachineData {
+            stator_resistance: g.stator_resistance,
+            rotor_resistance: r_r * l / l_m,
+            stator_inductance: l,
+            rotor_inductance: l,
+            mutual_inductance: crate::math::sqrt(l_m * l),
+            pole_pairs: g.pole_pairs,
+            inertia: g.inertia,
+            viscous_friction: g.viscous_friction,
+        })
     }
 
     /// The raw data of these parameters, e.g. to change one field and re-validate.
