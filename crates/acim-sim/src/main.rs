@@ -122,19 +122,21 @@ struct Progress {
 }
 
 impl Progress {
-    fn new(quiet: bool, name: &str, duration_s: f32) -> Progress {
+    fn new(quiet: bool, sc: &Scenario) -> Progress {
         if quiet || !std::io::stderr().is_terminal() {
             return Progress { bar: None };
         }
-        let bar = indicatif::ProgressBar::new(0);
+        let steps = (sc.duration_s / sc.drive.control_period_s).round().max(1.0) as u64;
+        let bar = indicatif::ProgressBar::new(steps);
+        // short enough for an 80-column terminal (a wrapped bar redraws badly)
         let style = indicatif::ProgressStyle::with_template(
-            "{prefix:>26} [{bar:30}] {percent:>3}% {msg} (eta {eta})",
+            "{prefix} [{bar:24}] {percent:>3}% of {msg}, eta {eta}",
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
         .progress_chars("=> ");
         bar.set_style(style);
-        bar.set_prefix(name.to_string());
-        bar.set_message(format!("of {duration_s:.1} s simulated"));
+        bar.set_prefix(sc.name.clone());
+        bar.set_message(format!("{:.0} s simulated", sc.duration_s));
         Progress { bar: Some(bar) }
     }
 
@@ -176,7 +178,7 @@ fn load_with(spec: &str, sets: &[String]) -> Result<Scenario, String> {
 
 /// Runs one scenario with a progress bar and writes its files.
 fn run_one(sc: &Scenario, out: &Path, o: &Opts) -> Result<Metrics, String> {
-    let p = Progress::new(o.quiet, &sc.name, sc.duration_s);
+    let p = Progress::new(o.quiet, sc);
     let r = acim_sim::run_and_write_with(sc, out, o.write(), &mut |d, n| p.update(d, n));
     p.finish();
     r.map_err(|e| format!("{}: {e}", sc.name))

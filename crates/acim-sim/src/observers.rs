@@ -83,11 +83,11 @@ pub fn compare_with(
     Ok(rows)
 }
 
+/// The run's verdict ([`crate::metrics::Verdict`]), with the fault's reason.
 fn outcome(m: &Metrics) -> String {
     match &m.fault {
         Some(f) => format!("fault {f}"),
-        None if m.control_kept => "kept".into(),
-        None => "lost".into(),
+        None => m.verdict.as_str().into(),
     }
 }
 
@@ -130,7 +130,8 @@ pub fn markdown(rows: &[Row], cycles: Option<(f64, f64)>) -> String {
     s.push_str(
         "\nEstimation errors are the worst steady-state window of each scenario (maxima of 10 ms \
          averages of estimated minus true speed); raw maxima are unfiltered. The full-order \
-         observer has no load model (no load-torque estimate).\n",
+         observer has no load model (no load-torque estimate). Outcomes are the simulator's \
+         verdicts: drifting = the rotor crept above 5 rpm with the reference held at 0.\n",
     );
     if let Some((red, full)) = cycles {
         let _ = write!(
