@@ -3,7 +3,7 @@
 //! `main` sets the clocks (170 MHz, boost mode), the watchdog, the UART command channel
 //! and either the power-stage path (TIM1 PWM, ADC injected conversions, offset
 //! calibration) or, with the `selftest` feature, the motor model on a 5 kHz TIM6
-//! interrupt; then it hands the drive to the control interrupt ([`control_isr`]) and loops:
+//! interrupt; then it hands the drive to the control interrupt (module `control_isr`) and loops:
 //! watchdog, commands, replies, telemetry. See firmware/README.md.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
