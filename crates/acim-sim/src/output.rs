@@ -401,3 +401,71 @@ pub fn write_stability(
     )?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("acim-sim-output-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn entries(d: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_failed_write_leaves_no_file_and_names_the_path() {
+        let d = scratch("fail");
+        let path = d.join("run.csv");
+        // an earlier, complete file stays as it was
+        write_file(&path, b"old\n").unwrap();
+        let e = write_atomic(&path, |w| {
+            w.write_all(b"half a row")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(e.path, path);
+        assert!(e.to_string().contains("run.csv: disk full"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"old\n");
+        assert_eq!(entries(&d), ["run.csv"]);
+        // a new file that fails is not created at all
+        let fresh = d.join("fresh.json");
+        assert!(write_atomic(&fresh, |_| Err(std::io::Error::other("no"))).is_err());
+        assert_eq!(entries(&d), ["run.csv"]);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn io_errors_name_the_path() {
+        let d = scratch("missing");
+        let e = write_file(&d.join("no-such-dir/x.json"), b"{}").unwrap_err();
+        assert!(e.to_string().contains("no-such-dir/x.json"), "{e}");
+        let e = create_dir(Path::new("/proc/acim-sim-cannot")).unwrap_err();
+        assert!(e.to_string().starts_with("/proc/acim-sim-cannot: "), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn default_decimation_follows_the_duration() {
+        let mut sc = crate::scenario::Scenario {
+            duration_s: 10.0, // 50 000 steps
+            ..Default::default()
+        };
+        assert_eq!(csv_decimation(&sc), (1, true));
+        sc.duration_s = 20.0; // 100 000 steps
+        assert_eq!(csv_decimation(&sc), (1, true));
+        sc.duration_s = 600.0; // 3 000 000 steps
+        assert_eq!(csv_decimation(&sc), (30, true));
+        sc.csv_decimation = Some(7);
+        assert_eq!(csv_decimation(&sc), (7, false));
+    }
+}
