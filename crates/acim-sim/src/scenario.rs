@@ -564,10 +564,13 @@ impl Scenario {
         for s in sets {
             apply_override(&mut v, s)?;
             // check each override on its own, so an error names the `--set` that caused it
-            Self::from_value(
-                v.clone(),
-                s.split_once('=').map_or(s.as_str(), |(k, _)| k.trim()),
-            )?;
+            Self::from_value(v.clone(), "--set").map_err(|e| ScenarioError {
+                field: s
+                    .split_once('=')
+                    .map_or(s.as_str(), |(k, _)| k.trim())
+                    .to_string(),
+                allowed: format!("--set {s}: {}", e.allowed),
+            })?;
         }
         Self::from_value(v, "--set")
     }
