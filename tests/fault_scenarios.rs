@@ -130,6 +130,17 @@ fn overhauling_load_beyond_capability_faults_as_overload() {
     check_safe("fault-overhauling-500-12nm");
 }
 
+/// At 120 rpm an 8 N m overhauling load holds the regenerating stator frequency near zero,
+/// where no fundamental-model estimator sees the rotor: the estimate settles at the slip
+/// (DC stator currents fit any rotor speed) while the rotor runs away. Torque at its
+/// limit with |w_s| in that band for one rotor time constant is an Overload, before the
+/// machine leaves the speed range (it used to run 21 ms above 110 % of the speed limit).
+#[test]
+fn overhauling_load_that_blinds_the_estimator_faults_as_overload() {
+    check("fault-overhauling-120-8nm", "Overload", 2.5, 1.0);
+    check_safe("fault-overhauling-120-8nm");
+}
+
 /// After a fault the speed target is cleared: reset and start do not ramp back to the old
 /// target without a new command.
 #[test]

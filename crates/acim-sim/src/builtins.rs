@@ -1,5 +1,5 @@
 //! Built-in scenarios: the paper's Figs. 6-12, open-loop V/f, regeneration (the subject of
-//! a later issue: run and reported here) and fault cases.
+//! a later issue: run and reported here), fault cases and flying starts.
 //!
 //! Common settings of the paper cases (design notes section 4 and the issue's defaults):
 //! Table 1 machine, J = 0.01 kg m^2, viscous friction 2e-3 N m s/rad, 325 V stiff bus,
@@ -7,7 +7,7 @@
 //! 12-bit current sensors with 10 mA rms noise, the paper's load as a passive brake.
 //! Figs. 10-12 (the paper's experiments) add sensor gain and offset errors.
 
-use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, Window};
+use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, StartSpec, Window};
 
 fn sp(t_s: f32, rpm: f32) -> SpeedPoint {
     SpeedPoint { t_s, rpm }
@@ -295,10 +295,17 @@ pub fn all() -> Vec<Scenario> {
     s.faults.current_sensor_offset_drift_a_per_s = 0.5;
     v.push(s);
 
-    for (rpm, nm) in [(500.0f32, 5.0f32), (500.0, 8.0), (500.0, 12.0)] {
+    for (rpm, nm) in [
+        (500.0f32, 5.0f32),
+        (500.0, 8.0),
+        (500.0, 12.0),
+        (120.0, 8.0),
+    ] {
         let mut s = base(
             &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
-            if nm <= 10.0 {
+            if rpm < 200.0 {
+                "overhauling load at 120 rpm that pins the stator frequency near zero: overload"
+            } else if nm <= 10.0 {
                 "overhauling load at 500 rpm within the torque capability: held"
             } else {
                 "overhauling load at 500 rpm beyond the torque capability: overload"
@@ -310,6 +317,37 @@ pub fn all() -> Vec<Scenario> {
         s.windows = vec![win("before-load", 2.0, 2.5)];
         v.push(s);
     }
+
+    // flying starts: the start command comes while the rotor coasts (realistic sensors)
+    let mut s = base(
+        "flying-start-800",
+        "start while the rotor coasts at 800 rpm: the speed search catches it (J = 0.01)",
+        3.0,
+    );
+    realistic_sensors(&mut s);
+    s.start = StartSpec {
+        at_s: 0.5,
+        initial_speed_rpm: 800.0,
+    };
+    s.speed_profile = vec![sp(0.0, 800.0)];
+    s.windows = vec![win("caught", 2.0, 3.0)];
+    v.push(s);
+
+    let mut s = base(
+        "flying-start-reverse",
+        "start while a 10x inertia coasts at -1000 rpm, then reverse to +500 rpm",
+        5.0,
+    );
+    realistic_sensors(&mut s);
+    s.plant.inertia_kgm2 = 0.1;
+    s.controller.inertia_kgm2 = 0.1;
+    s.start = StartSpec {
+        at_s: 0.5,
+        initial_speed_rpm: -1000.0,
+    };
+    s.speed_profile = vec![sp(0.0, 500.0)];
+    s.windows = vec![win("reversed", 4.5, 5.0)];
+    v.push(s);
 
     v
 }

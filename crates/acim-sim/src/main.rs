@@ -266,6 +266,12 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
             if i == 0 { note.as_str() } else { "" },
         ));
     }
+    if let Some(s) = m.speed_search.filter(|s| s.true_rpm.abs() > 1.0) {
+        out.push(format!(
+            "{:<26} flying start: speed search at {:.3} s measured {:.0} rpm (rotor {:.0} rpm)",
+            "", s.t_s, s.measured_rpm, s.true_rpm
+        ));
+    }
     for s in &m.load_steps {
         out.push(format!(
             "{:<26} load {:+.2} N m at {:.1} s: estimate within 0.05 N m after {}, speed within 5 rpm after {} (dip {:.1} rpm)",

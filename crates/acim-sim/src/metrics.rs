@@ -267,6 +267,8 @@ pub struct Metrics {
     pub switching_beyond_limits_s: f32,
     /// Largest |speed - ref| while running (10 ms average), rpm.
     pub speed_err_max_running_rpm: f32,
+    /// The flying start's speed search at its decision.
+    pub speed_search: Option<crate::sim::SearchRecord>,
     /// Per-window steady-state metrics, in time order.
     pub windows: Windows,
     /// Load changes.
@@ -435,10 +437,18 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         },
     };
 
+    // judged on averages over running steps only (before running the reference is 0
+    // while the rotor may turn: a flying start)
     let mut max_running = 0.0f32;
+    let mut running_steps = 0usize;
     for (k, r) in rows.iter().enumerate() {
         if r.state == 2 || r.state == 3 {
-            max_running = max_running.max(spd_avg[k].abs());
+            running_steps += 1;
+            if running_steps >= SMOOTHING_STEPS {
+                max_running = max_running.max(spd_avg[k].abs());
+            }
+        } else {
+            running_steps = 0;
         }
     }
     // creep at a held zero reference: the last stretch (while running) over which the
@@ -531,6 +541,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         voltage_saturated_s,
         modulation_index_max,
         speed_err_max_running_rpm: max_running,
+        speed_search: r.search,
         peak_current_a,
         peak_speed_rpm,
         peak_speed_switching_rpm,

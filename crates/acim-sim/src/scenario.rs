@@ -446,6 +446,18 @@ pub struct FaultSpec {
     pub current_sensor_offset_drift_a_per_s: f32,
 }
 
+/// When the drive is started, and how the machine turns before it (a flying start when
+/// the rotor turns at the start command).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct StartSpec {
+    /// The start command, s: until then the switches are off and the machine coasts
+    /// (the drive measures its current-sensor offsets meanwhile).
+    pub at_s: f32,
+    /// Rotor speed at t = 0, rpm (the machine unexcited: no rotor flux).
+    pub initial_speed_rpm: f32,
+}
+
 /// A time window over which steady-state metrics are computed.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -492,6 +504,8 @@ pub struct Scenario {
     pub load_profile: Vec<LoadPoint>,
     /// Injected faults.
     pub faults: FaultSpec,
+    /// Start command time and initial rotor speed.
+    pub start: StartSpec,
     /// Steady-state metric windows.
     pub windows: Vec<Window>,
 }
@@ -513,6 +527,7 @@ impl Default for Scenario {
             speed_profile: vec![],
             load_profile: vec![],
             faults: FaultSpec::default(),
+            start: StartSpec::default(),
             windows: vec![],
         }
     }
@@ -723,6 +738,15 @@ impl Scenario {
                 1000.0,
             )?;
         }
+        if self.start.at_s != 0.0 {
+            check_range("start.at_s", self.start.at_s, 0.0, self.duration_s)?;
+        }
+        check_range(
+            "start.initial_speed_rpm",
+            self.start.initial_speed_rpm,
+            -10_000.0,
+            10_000.0,
+        )?;
         let f = &self.faults;
         for (name, t) in [
             ("faults.phase_short_at_s", f.phase_short_at_s),

@@ -163,6 +163,19 @@ pub struct RunResult {
     pub final_state: DriveState,
     /// Whether the PWM outputs were off at the end.
     pub switches_off_at_end: bool,
+    /// The flying start's speed search at its decision (absent when it did not run).
+    pub search: Option<SearchRecord>,
+}
+
+/// The flying start's speed search at its decision.
+#[derive(Serialize, Clone, Copy, Debug, PartialEq)]
+pub struct SearchRecord {
+    /// Time of the decision, s.
+    pub t_s: f32,
+    /// The speed the search measured, rpm.
+    pub measured_rpm: f32,
+    /// The true rotor speed at the decision, rpm.
+    pub true_rpm: f32,
 }
 
 pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
@@ -303,25 +316,38 @@ pub fn run_with_progress(
     let (mut si, mut li) = (0usize, 0usize);
     let mut load = LoadTorque::None;
 
-    match sc.drive.mode {
-        ControlMode::Sensorless => drive.start(),
-        ControlMode::Vf => drive.start_open_loop(),
+    plant
+        .machine_mut()
+        .set_speed(sc.start.initial_speed_rpm * acim::math::RPM_TO_RAD_S);
+    let start_step = (sc.start.at_s / ts).round() as usize;
+    let start = |drive: &mut Box<dyn Controller>| {
+        match sc.drive.mode {
+            ControlMode::Sensorless => drive.start(),
+            ControlMode::Vf => drive.start_open_loop(),
+        }
+        .map_err(|e| ScenarioError {
+            field: "drive.mode".into(),
+            allowed: format!("{e:?}"),
+        })
+    };
+    if start_step == 0 {
+        start(&mut drive)?;
     }
-    .map_err(|e| ScenarioError {
-        field: "drive.mode".into(),
-        allowed: format!("{e:?}"),
-    })?;
 
     let mut pwm = PwmPreload::new();
     let mut dc_link = build_dc_link(sc);
     let mut faults = FaultInjector::new(fault_plan(sc));
     let mut fault_time = None;
+    let mut search = None;
 
     for k in 0..n {
         if k % PROGRESS_EVERY == 0 {
             progress(k, n);
         }
         let t = k as f32 * ts;
+        if k == start_step && k > 0 {
+            start(&mut drive)?;
+        }
         while si < speed_points.len() && speed_points[si].t_s <= t + 0.5 * ts {
             let _ = drive.set_speed_target(speed_points[si].rpm * acim::math::RPM_TO_RAD_S);
             si += 1;
@@ -340,6 +366,13 @@ pub fn run_with_progress(
             phase_currents: meas.phase_currents,
             dc_bus: meas.dc_bus,
         });
+        if search.is_none() && drive.telemetry().search_speed != 0.0 {
+            search = Some(SearchRecord {
+                t_s: t,
+                measured_rpm: drive.telemetry().search_speed * RAD_S_TO_RPM,
+                true_rpm: plant.machine().speed() * RAD_S_TO_RPM,
+            });
+        }
         if drive.state() == DriveState::Fault && fault_time.is_none() {
             fault_time = Some(t);
         }
@@ -410,5 +443,6 @@ pub fn run_with_progress(
         fault_time_s: fault_time,
         final_state: drive.state(),
         switches_off_at_end: !pwm.preloaded().enabled,
+        search,
     })
 }

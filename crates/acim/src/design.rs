@@ -14,6 +14,7 @@ use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, Obser
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
 use crate::rs_estimator::RsEstimatorConfig;
+use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
 
 /// How many phase currents are measured.
@@ -109,6 +110,10 @@ pub struct DriveConfig {
     pub stall_time: f32,
     /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
     pub max_load_torque_estimate: f32,
+    /// Flying start: magnetizing first measures the rotor speed from the voltage the
+    /// current loops apply ([`crate::speed_search`]) and catches a turning rotor instead
+    /// of braking it with DC. Needs p `max_speed` `control_period` <= pi/4.
+    pub flying_start: bool,
     /// V/f mode settings.
     pub vf: VfConfig,
 }
@@ -149,6 +154,7 @@ impl DriveConfig {
             delay_periods: 1.5,
             stall_time: 1.0,
             max_load_torque_estimate: 15.0,
+            flying_start: true,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
@@ -325,6 +331,11 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// ... and beyond this floor, rad/s ([`OVERLOAD_FRACTION`] of 100 rpm, so that a
     /// reversal through zero does not count).
     pub overload_speed_floor: N,
+    /// Torque at its limit with |w_s| below this, rad/s electrical (the orientation
+    /// correction's fade-in start: no information below it) ...
+    pub blind_frequency: N,
+    /// ... for longer than this, steps (one rotor time constant): `Overload`.
+    pub blind_steps: u32,
     /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`]).
     pub stall_fraction: N,
     /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
@@ -340,7 +351,8 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// current_limit + [`RESIDUAL_VOLTAGE_FRACTION`] of the linear limit at `dc_bus_max`.
     pub model_residual_limit: N,
     /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
-    /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r.
+    /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r, plus the flying start's speed search (when
+    /// it runs).
     pub magnetizing_timeout_steps: u32,
     /// Idle offset means: leaky-mean gain Ts / [`OFFSET_FILTER_TIME`].
     pub offset_filter: N::Gain,
@@ -388,6 +400,8 @@ pub struct MagnetizingDesign<N: Num = f32> {
     pub rs_settled_error: N,
     /// Low-pass coefficient of the residual filter (Ts / 20 ms).
     pub residual_filter: N::Gain,
+    /// The flying start's speed search.
+    pub search: SpeedSearchDesign<N>,
 }
 
 /// Open-loop V/f constants.
@@ -636,6 +650,31 @@ impl DriveDesign {
         rs.max_stator_frequency = cfg.rs_max_frequency;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
+        // below the Rs gate's frequency the rotor counts as at rest: there the standstill
+        // sequence (frame held, Rs identification) applies
+        let search = SpeedSearchDesign::new(
+            cfg.flying_start,
+            ts,
+            m.rotor_time_constant(),
+            m.referred_rotor_resistance(),
+            i_d,
+            cfg.current_bandwidth,
+            pp,
+            cfg.max_speed,
+            cfg.rs_max_frequency,
+        );
+        let Some(search) = search else {
+            return Err(ConfigError::Invalid {
+                field: "flying_start",
+                rule: "needs p max_speed control_period <= pi/4 (the speed search resolves \
+                       at most a quarter turn per period); switch it off or shorten the period",
+            });
+        };
+        let search_steps = if cfg.flying_start {
+            search.decision_step() as f32
+        } else {
+            0.0
+        };
         Ok(Self {
             config: cfg,
             ts,
@@ -681,6 +720,7 @@ impl DriveDesign {
                 rs_settle_steps: (RS_SETTLE_TIME / ts) as u32,
                 rs_settled_error: RS_SETTLED_FRACTION * i_d,
                 residual_filter: (ts / RESIDUAL_FILTER_TIME).min(1.0),
+                search,
             },
             limits: SupervisionLimits {
                 current_sensing: cfg.current_sensing,
@@ -694,6 +734,8 @@ impl DriveDesign {
                 overload_steps: (OVERLOAD_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32,
                 overload_fraction: OVERLOAD_FRACTION,
                 overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
+                blind_frequency: fa,
+                blind_steps: (m.rotor_time_constant() / ts) as u32,
                 stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.rs_estimation,
                 monitor_filter: (ts * cfg.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
@@ -714,7 +756,8 @@ impl DriveDesign {
                     0.0
                 } + MAGNETIZING_TIMEOUT_TAU_R
                     * m.rotor_time_constant())
-                    / ts) as u32,
+                    / ts
+                    + search_steps) as u32,
             },
         })
     }

@@ -55,6 +55,7 @@ use crate::observer::{
 use crate::orientation;
 use crate::pi::PiController;
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
+use crate::speed_search::{SearchOutcome, SpeedSearch};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
     Supervisor,
@@ -125,6 +126,9 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub current_error: N,
     /// The control monitor's mean current-loop integral (model voltage residual), V.
     pub model_residual: N,
+    /// The flying start's measured rotor speed, rad/s mechanical (0 until the speed
+    /// search decides, [`crate::speed_search`]).
+    pub search_speed: N,
 }
 
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
@@ -231,6 +235,9 @@ struct References<N> {
     rs_settled_steps: u32,
     /// The target is beyond the reachable speed (reported in the telemetry).
     target_limited: bool,
+    /// A flying start: magnetizing in a frame turning with the rotor at the speed the
+    /// search measured.
+    flying: bool,
 }
 
 /// Current-control stage state: the d and q PIs.
@@ -269,6 +276,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     offset_compensation: [N; 3],
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
+    /// The flying start's speed search ([`crate::speed_search`]), used only while
+    /// magnetizing (last: it keeps the running step's state within short load offsets).
+    search: SpeedSearch<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -317,6 +327,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
                 target_limited: false,
+                flying: false,
             },
             cur: CurrentControl {
                 d: PiController::new(),
@@ -336,6 +347,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             design,
             coeffs,
             bases,
+            search: SpeedSearch::new(),
         })
     }
 
@@ -487,6 +499,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.filtered_residual = N::ZERO;
+        self.search = SpeedSearch::new();
+        self.refs.flying = false;
         self.applied = Applied::default();
         self.monitor = ControlMonitor::new();
         self.open_loop = OpenLoop::default();
@@ -544,7 +558,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let m = self.sense(inp);
         probe.end(StepRegion::ClarkePark);
         // 3. estimate
-        let e = self.estimate(&m, magnetizing, probe);
+        // the frame is held while magnetizing at rest and turns with the rotor on a
+        // flying start
+        let frame_held = magnetizing && !self.refs.flying;
+        let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
         if let Some(reason) = self.plausibility(&e) {
             return self.enter_fault(reason);
@@ -653,6 +670,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         &mut self,
         m: &Measured<N>,
         magnetizing: bool,
+        frame_held: bool,
         probe: &mut P,
     ) -> Estimate<N> {
         let c = &self.coeffs;
@@ -702,18 +720,21 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.end(StepRegion::RsEstimator);
 
         probe.begin(StepRegion::FluxSlip);
-        let correction = if !magnetizing && flux_settled {
+        // (also while a flying start magnetizes in the turning frame: the residual of a
+        // speed error locks the frame onto the rotor as the flux builds)
+        let correction = if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
         } else {
             N::ZERO
         };
-        // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat
+        // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat; the frame is
+        // held while magnetizing at rest and turns with the rotor on a flying start
         est.flux.update(
             &c.flux,
             i.d,
             i.q,
             N::gain(c.pole_pairs, observer.speed) + correction,
-            magnetizing,
+            frame_held,
         );
         probe.end(StepRegion::FluxSlip);
         Estimate {
@@ -744,19 +765,40 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             if let Some(reason) = self.sup.magnetizing(&c.limits, r.magnetizing_steps) {
                 return Err(reason);
             }
+            // flying start: the speed search on the voltage of the held frame
+            match self
+                .search
+                .update(&mag.search, self.applied.v_dq, m.i_dq, e.rs)
+            {
+                Some(SearchOutcome::Turning(speed)) => {
+                    // catch the rotor: the frame turns with it from the next step (zero
+                    // slip at zero torque current) and the flux builds again from zero
+                    // in that frame (the search's flux decays with tau_r meanwhile)
+                    r.flying = true;
+                    self.est.observer.preset_speed(speed);
+                    self.est.flux.rotor_flux = N::ZERO;
+                }
+                Some(SearchOutcome::OverSpeed) => return Err(FaultReason::OverSpeed),
+                _ => {}
+            }
             r.rs_settled_steps = if self.est.filtered_residual.abs() < mag.rs_settled_error {
                 r.rs_settled_steps.saturating_add(1)
             } else {
                 0
             };
-            // standstill Rs identification: wait for 50 ms of settled residual
+            // standstill Rs identification: wait for 50 ms of settled residual (not on
+            // a flying start: the rotor does not stand still)
             let rs_done = !mag.identify_rs
+                || r.flying
                 || r.rs_settled_steps > mag.rs_settle_steps
                 || r.magnetizing_steps > mag.rs_timeout_steps;
-            if e.flux_settled && rs_done {
+            if e.flux_settled && rs_done && self.search.done(&mag.search) {
                 self.sup.magnetized();
                 self.est.observer.start_running(m.i_dq.q);
                 r.speed_ctl.reset();
+                // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
+                r.speed_reference = e.observer.speed;
+                r.flying = false;
             }
             return Ok(Dq {
                 d: c.i_sd_ref,
@@ -774,9 +816,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let i_sq_ref = r
             .speed_ctl
             .update(&c.pi_speed, r.speed_reference - speed, N::ZERO);
+        let saturated = r.speed_ctl.saturated();
         let stall = self
             .sup
-            .stall(&c.limits, r.speed_ctl.saturated(), speed, r.speed_reference);
+            .stall(&c.limits, saturated, speed, r.speed_reference);
+        let stall = match stall {
+            None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
+            some => some,
+        };
         match stall {
             Some(reason) => Err(reason),
             None => Ok(Dq {
@@ -880,6 +927,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             speed_target_limited: self.refs.target_limited,
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
+            search_speed: self.search.measured_speed,
         };
     }
 

@@ -430,14 +430,16 @@ impl FullOrderObserver {
 /// `Drive<_, f32, FullOrder>` runs the paper's baseline in the closed loop. It runs from
 /// the first magnetizing step (it estimates the flux itself) on the measured alpha-beta
 /// current and the alpha-beta voltage commanded for the past period, with its speed held
-/// at zero until magnetizing ends (the rotor is at rest, as the reduced-order observer
-/// assumes); it has no load model (the load estimate is 0). Its design uses the
+/// until magnetizing ends at the speed the rotor turns at (zero at rest, the speed
+/// search's measurement on a flying start); it has no load model (the load estimate is 0). Its design uses the
 /// controller's machine model as built: unlike the reduced-order observer it does not
 /// follow the Rs estimate.
 #[derive(Clone, Debug)]
 pub struct FullOrder {
     cfg: FullOrderConfig,
     state: FullOrderObserver,
+    /// The speed held while magnetizing, rad/s electrical.
+    preset_elec: f32,
 }
 
 impl FullOrder {
@@ -455,6 +457,7 @@ impl FullOrder {
         Ok(Self {
             cfg: FullOrderConfig::new(m, design, ts)?,
             state: FullOrderObserver::new(),
+            preset_elec: 0.0,
         })
     }
     /// The design in use.
@@ -482,10 +485,11 @@ impl crate::observer::SpeedObserver for FullOrder {
             x.i_ab.beta,
         );
         if x.magnetizing {
-            // at rest while the flux builds: the adaptation starts with speed control
-            self.state.speed_integral = 0.0;
-            self.state.speed_elec = 0.0;
-            speed = 0.0;
+            // the rotor speed is known while the flux builds (0 at rest, the speed
+            // search's on a flying start): the adaptation starts with speed control
+            self.state.speed_integral = self.preset_elec;
+            self.state.speed_elec = self.preset_elec;
+            speed = self.state.speed(&self.cfg);
         }
         crate::observer::SpeedEstimate {
             speed,
@@ -495,8 +499,12 @@ impl crate::observer::SpeedObserver for FullOrder {
     }
     fn reset(&mut self) {
         self.state = FullOrderObserver::new();
+        self.preset_elec = 0.0;
     }
     fn start_running(&mut self, _i_sq: f32) {}
+    fn preset_speed(&mut self, speed: f32) {
+        self.preset_elec = speed * self.cfg.pole_pairs;
+    }
     #[inline(always)]
     fn estimate(&self) -> crate::observer::SpeedEstimate {
         crate::observer::SpeedEstimate {

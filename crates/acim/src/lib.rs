@@ -53,6 +53,7 @@ pub mod orientation;
 pub mod params;
 pub mod pi;
 pub mod rs_estimator;
+pub mod speed_search;
 pub mod svpwm;
 
 // the cascade: configuration and design, supervision, the staged drive

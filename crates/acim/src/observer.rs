@@ -377,8 +377,13 @@ pub trait SpeedObserver<N: Num = f32> {
     fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
     /// Back to the initial state (a start command).
     fn reset(&mut self);
-    /// Called when magnetizing ends, with the measured i_sq: the rotor is at rest.
+    /// Called when magnetizing ends, with the measured i_sq: speed control starts from
+    /// the speed the rotor turns at (0 at rest, the preset speed on a flying start).
     fn start_running(&mut self, i_sq: N);
+    /// While magnetizing: the rotor turns at `speed` (rad/s), measured by the flying
+    /// start's speed search ([`crate::speed_search`]); the estimate holds it until speed
+    /// control starts.
+    fn preset_speed(&mut self, speed: N);
     /// The last estimate.
     fn estimate(&self) -> SpeedEstimate<N>;
 }
@@ -410,7 +415,11 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
     }
     #[inline(always)]
     fn start_running(&mut self, i_sq: N) {
-        ReducedOrderObserver::reset(self, i_sq, N::ZERO, N::ZERO);
+        ReducedOrderObserver::reset(self, i_sq, self.speed_estimate, N::ZERO);
+    }
+    #[inline(always)]
+    fn preset_speed(&mut self, speed: N) {
+        self.speed_estimate = speed;
     }
     #[inline(always)]
     fn estimate(&self) -> SpeedEstimate<N> {

@@ -134,6 +134,7 @@ pub struct Supervisor {
     implausible_steps: u32,
     stall_steps: u32,
     overload_steps: u32,
+    blind_steps: u32,
 }
 
 impl Default for Supervisor {
@@ -151,6 +152,7 @@ impl Supervisor {
             implausible_steps: 0,
             stall_steps: 0,
             overload_steps: 0,
+            blind_steps: 0,
         }
     }
     /// Present state.
@@ -172,6 +174,7 @@ impl Supervisor {
         self.implausible_steps = 0;
         self.stall_steps = 0;
         self.overload_steps = 0;
+        self.blind_steps = 0;
         Ok(())
     }
     /// Any active state -> Idle; a faulted drive stays faulted.
@@ -277,6 +280,35 @@ impl Supervisor {
     ) -> Option<FaultReason> {
         if magnetizing_steps > limits.magnetizing_timeout_steps {
             Some(FaultReason::MagnetizingTimeout)
+        } else {
+            None
+        }
+    }
+
+    /// Torque at its limit (speed PI saturated) while the frame's stator frequency sits
+    /// below `blind_frequency`, where no fundamental-model estimator sees the rotor (the
+    /// orientation correction has no information there either), integrated with a leak
+    /// beyond `blind_steps` (one rotor time constant: the time on which the flux model's
+    /// error grows when the frame stands still): `Overload`. This is the signature of an
+    /// overhauling load beyond what the drive holds at low speed: the estimate settles
+    /// where the regenerating slip cancels it (w_s = 0, DC stator currents, which fit any
+    /// rotor speed) while the rotor runs away. A reversal at the torque limit crosses the
+    /// band in a few milliseconds.
+    #[inline(always)]
+    pub fn blind<N: Num>(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        speed_pi_saturated: bool,
+        stator_frequency: N,
+    ) -> Option<FaultReason> {
+        let blind = speed_pi_saturated && stator_frequency.abs() < limits.blind_frequency;
+        self.blind_steps = if blind {
+            self.blind_steps.saturating_add(1)
+        } else {
+            self.blind_steps.saturating_sub(1)
+        };
+        if self.blind_steps > limits.blind_steps {
+            Some(FaultReason::Overload)
         } else {
             None
         }
@@ -668,6 +700,29 @@ mod tests {
     /// Torque at the limit with the speed estimate well above the reference (an
     /// overhauling load beyond the capability) is an overload after 5 speed-loop time
     /// constants; a speed error inside the band is not.
+    #[test]
+    fn torque_limit_at_a_blind_stator_frequency_is_an_overload() {
+        let l = limits();
+        let mut s = Supervisor::new();
+        let w = 0.5 * l.blind_frequency;
+        // a reversal crossing the band at the torque limit does not count
+        for _ in 0..l.blind_steps / 2 {
+            assert_eq!(s.blind(&l, true, w), None);
+        }
+        for _ in 0..l.blind_steps / 2 {
+            assert_eq!(s.blind(&l, true, 3.0 * l.blind_frequency), None);
+        }
+        // neither does a blind frequency below the torque limit
+        for _ in 0..4 * l.blind_steps {
+            assert_eq!(s.blind(&l, false, 0.0), None);
+        }
+        // persisting one rotor time constant does
+        let n = (0..4 * l.blind_steps)
+            .position(|_| s.blind(&l, true, -w).is_some())
+            .unwrap() as u32;
+        assert!(n >= l.blind_steps && n <= l.blind_steps + 1, "{n}");
+    }
+
     #[test]
     fn overload_needs_a_large_persistent_speed_error() {
         let l = limits();

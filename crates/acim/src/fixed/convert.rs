@@ -100,6 +100,28 @@ pub fn observer(cfg: &ObserverConfig, b: &PerUnitBases) -> Option<ObserverCoeffs
     })
 }
 
+/// The flying start's speed search: voltages of V_base in, speeds of Omega_base out; the
+/// normalised covariance and the arc tangent's argument are dimensionless.
+fn search(
+    d: &crate::speed_search::SpeedSearchDesign,
+    b: &PerUnitBases,
+) -> Result<crate::speed_search::SpeedSearchDesign<Q24>, ConfigError> {
+    let c = |x: f32| Q24(to_q24(x));
+    Ok(crate::speed_search::SpeedSearchDesign {
+        enabled: d.enabled,
+        begin_step: d.begin_step,
+        block_len: d.block_len,
+        pairs: d.pairs,
+        sample_gain: gain(d.sample_gain * b.voltage, "flux_current")?,
+        pair_weight: gain(d.pair_weight, "machine")?,
+        signal_floor: c(d.signal_floor),
+        speed_per_rad: gain(d.speed_per_rad / b.speed, "control_period")?,
+        standstill_speed: pu(d.standstill_speed, b.speed, "rs_max_frequency")?,
+        max_speed: pu(d.max_speed, b.speed, "max_speed")?,
+        atan: d.atan.map(c),
+    })
+}
+
 /// A resistance in the Rs integrator's Q1.30 (below 2 pu).
 fn to_q30(x: f32) -> Option<i32> {
     if is_finite(x) && x.abs() < 1.99 {
@@ -228,6 +250,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             rs_settle_steps: d.magnetizing.rs_settle_steps,
             rs_settled_error: pu(d.magnetizing.rs_settled_error, b.current, "flux_current")?,
             residual_filter: gain(d.magnetizing.residual_filter, "control_period")?,
+            search: search(&d.magnetizing.search, b)?,
         },
         limits: SupervisionLimits {
             current_sensing: d.limits.current_sensing,
@@ -245,6 +268,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             overload_steps: d.limits.overload_steps,
             overload_fraction: Q24(to_q24(d.limits.overload_fraction)),
             overload_speed_floor: pu(d.limits.overload_speed_floor, b.speed, "speed_bandwidth")?,
+            blind_frequency: pu(d.limits.blind_frequency, b.frequency, "orientation_fade")?,
+            blind_steps: d.limits.blind_steps,
             stall_fraction: Q24(to_q24(d.limits.stall_fraction)),
             rs_bound_faults: d.limits.rs_bound_faults,
             monitor_filter: gain(d.limits.monitor_filter, "current_bandwidth")?,

@@ -165,6 +165,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
             speed_target_limited: t.speed_target_limited,
             current_error: t.current_error.to_pu() * b.current,
             model_residual: t.model_residual.to_pu() * b.voltage,
+            search_speed: t.search_speed.to_pu() * b.speed,
         }
     }
 
