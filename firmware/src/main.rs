@@ -3,39 +3,60 @@
 //! `main` sets the clocks (170 MHz, boost mode), the watchdog, the UART command channel
 //! and either the power-stage path (TIM1 PWM, ADC injected conversions, offset
 //! calibration) or, with the `selftest` feature, the motor model on a 5 kHz TIM6
-//! interrupt; then it hands the drive to the control interrupt ([`control_isr`]) and loops:
+//! interrupt; then it hands the drive to the control interrupt (module `control_isr`) and loops:
 //! watchdog, commands, replies, telemetry. See firmware/README.md.
-#![no_std]
-#![no_main]
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
 
+// Built for the host (`cargo build --workspace`), the firmware is a stub that says how to
+// build it: everything below is for the MCU only (`target_os = "none"`), and so are its
+// dependencies (Cargo.toml).
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!(
+        "acim-firmware is STM32G474 (Cortex-M4F) firmware; this host build is a stub.\n  \
+         build it: cargo build --release -p acim-firmware --target thumbv7em-none-eabihf\n  \
+         host tests of its hardware-independent logic: cargo test -p acim-firmware-core"
+    );
+    std::process::exit(2);
+}
+
+#[cfg(target_os = "none")]
 mod ccm;
+#[cfg(target_os = "none")]
 mod control_isr;
+#[cfg(target_os = "none")]
 #[cfg(not(feature = "soft-sincos"))]
 mod cordic;
+#[cfg(target_os = "none")]
 #[cfg_attr(feature = "selftest", allow(dead_code))]
 mod hw;
 
-use acim::math::RAD_S_TO_RPM;
-use acim::Drive;
-use acim_firmware_core::board::{self, POWER_STAGE};
-use acim_firmware_core::command::{Command, LineAssembler, ParseError};
-use acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop};
-use acim_firmware_core::convert::Converter;
-use acim_firmware_core::telemetry::{self, TelemetrySample};
-use control_isr::{IsrState, CMD_Q, TEL_Q};
-use core::sync::atomic::Ordering;
-use cortex_m_rt::{entry, exception, ExceptionFrame};
-use defmt_rtt as _;
-use heapless::spsc::Queue;
-use heapless::Deque;
-use stm32g4xx_hal::hal_02::serial::{Read as _, Write as _};
-use stm32g4xx_hal::independent_watchdog::IndependentWatchdog;
-use stm32g4xx_hal::prelude::*;
-use stm32g4xx_hal::pwr::{PwrExt, VoltageScale};
-use stm32g4xx_hal::rcc::{Config, PllConfig, PllMDiv, PllNMul, PllRDiv, PllSrc, RccExt};
-use stm32g4xx_hal::serial::FullConfig;
-use stm32g4xx_hal::{pac, time::ExtU32};
+#[cfg(target_os = "none")]
+use {
+    acim::math::RAD_S_TO_RPM,
+    acim::Drive,
+    acim_firmware_core::board::{self, POWER_STAGE},
+    acim_firmware_core::command::{Command, LineAssembler, ParseError},
+    acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop},
+    acim_firmware_core::convert::Converter,
+    acim_firmware_core::telemetry::{self, TelemetrySample},
+    control_isr::{IsrState, CMD_Q, TEL_Q},
+    core::sync::atomic::Ordering,
+    cortex_m_rt::{entry, exception, ExceptionFrame},
+    defmt_rtt as _,
+    heapless::spsc::Queue,
+    heapless::Deque,
+    stm32g4xx_hal::hal_02::serial::{Read as _, Write as _},
+    stm32g4xx_hal::independent_watchdog::IndependentWatchdog,
+    stm32g4xx_hal::prelude::*,
+    stm32g4xx_hal::pwr::{PwrExt, VoltageScale},
+    stm32g4xx_hal::rcc::{Config, PllConfig, PllMDiv, PllNMul, PllRDiv, PllSrc, RccExt},
+    stm32g4xx_hal::serial::FullConfig,
+    stm32g4xx_hal::{pac, time::ExtU32},
+};
 
+#[cfg(target_os = "none")]
 /// Which sin/cos the drive uses, and how it is made.
 mod board_cfg {
     #[cfg(not(feature = "soft-sincos"))]
@@ -53,16 +74,21 @@ mod board_cfg {
     }
 }
 
+#[cfg(target_os = "none")]
 static mut TEL_QUEUE: Queue<TelemetrySample, TEL_Q> = Queue::new();
+#[cfg(target_os = "none")]
 static mut CMD_QUEUE: Queue<ControlCommand, CMD_Q> = Queue::new();
+#[cfg(target_os = "none")]
 static mut REPLY_QUEUE: Queue<CommandReply, CMD_Q> = Queue::new();
 
+#[cfg(target_os = "none")]
 const MODE: &str = if cfg!(feature = "selftest") {
     "self-test (motor model, outputs disabled)"
 } else {
     "power stage"
 };
 
+#[cfg(target_os = "none")]
 #[entry]
 fn main() -> ! {
     // first: the control step's code must be in CCM before anything calls it
@@ -314,6 +340,7 @@ fn main() -> ! {
     }
 }
 
+#[cfg(target_os = "none")]
 fn say(out: &mut Deque<u8, 512>, text: &[u8]) {
     for &b in text {
         if out.push_back(b).is_err() {
@@ -322,6 +349,7 @@ fn say(out: &mut Deque<u8, 512>, text: &[u8]) {
     }
 }
 
+#[cfg(target_os = "none")]
 fn handle(
     parsed: Result<Command, ParseError>,
     cmd_p: &mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
@@ -424,6 +452,7 @@ fn handle(
     }
 }
 
+#[cfg(target_os = "none")]
 fn hw_outputs_enabled() -> bool {
     if cfg!(feature = "selftest") {
         false
@@ -432,6 +461,7 @@ fn hw_outputs_enabled() -> bool {
     }
 }
 
+#[cfg(target_os = "none")]
 /// Switches off and waits for a power cycle (called before the watchdog is started, so
 /// the board stays halted with its outputs off instead of resetting in a loop).
 #[cfg(not(feature = "selftest"))]
@@ -442,6 +472,7 @@ fn halt_safe() -> ! {
     }
 }
 
+#[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     // switches off first, before anything that could fail
@@ -460,6 +491,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     }
 }
 
+#[cfg(target_os = "none")]
 #[exception]
 unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
     hw::emergency_off();
@@ -468,6 +500,7 @@ unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
     }
 }
 
+#[cfg(target_os = "none")]
 /// NMI (e.g. a flash ECC double error): switch off, then wait for the watchdog.
 #[exception]
 unsafe fn NonMaskableInt() {
@@ -477,6 +510,7 @@ unsafe fn NonMaskableInt() {
     }
 }
 
+#[cfg(target_os = "none")]
 /// Any exception or interrupt without a handler: switch off, then wait for the watchdog.
 #[exception]
 unsafe fn DefaultHandler(_irqn: i16) {

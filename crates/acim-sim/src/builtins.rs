@@ -200,7 +200,7 @@ pub fn all() -> Vec<Scenario> {
         );
         s.plant.friction_nms = 0.0;
         s.controller.friction_nms = 0.0;
-        s.csv_decimation = 10;
+        s.csv_decimation = Some(10);
         s.speed_profile = vec![sp(0.5, rpm)];
         s.windows = vec![win("steady", 2.0, 62.0)];
         v.push(s);

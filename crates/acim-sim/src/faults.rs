@@ -37,12 +37,26 @@ fn injected_at(sc: &crate::scenario::Scenario) -> Option<f32> {
 pub fn run_all(
     out: &Path,
 ) -> Result<Vec<(crate::scenario::Scenario, Option<f32>, Metrics)>, String> {
+    run_all_with(&[], &mut |sc| {
+        crate::run_and_write(sc, out).map_err(|e| format!("{}: {e}", sc.name))
+    })
+}
+
+/// [`run_all`] with `--set` overrides applied to every scenario, each run through `run`
+/// (which writes its outputs).
+pub fn run_all_with(
+    sets: &[String],
+    run: &mut dyn FnMut(&crate::scenario::Scenario) -> Result<Metrics, String>,
+) -> Result<Vec<(crate::scenario::Scenario, Option<f32>, Metrics)>, String> {
     let mut rows = Vec::new();
     for sc in builtins::all()
         .into_iter()
         .filter(|s| s.name.starts_with("fault-"))
     {
-        let m = crate::run_and_write(&sc, out).map_err(|e| format!("{}: {e}", sc.name))?;
+        let sc = sc
+            .with_overrides(sets)
+            .map_err(|e| format!("{}: {e}", sc.name))?;
+        let m = run(&sc)?;
         let at = injected_at(&sc);
         rows.push((sc, at, m));
     }

@@ -1,28 +1,158 @@
 //! `acim-sim`: run the sensorless drive closed loop against the motor model.
 //!
 //! ```text
-//! acim-sim                          run every paper scenario into out/ and print metrics
-//! acim-sim list                     list the built-in scenarios
-//! acim-sim run <name|file.toml> [--out DIR] [--set key=value]...
-//! acim-sim figures [--out DIR]      regenerate docs/figures (PNGs + metrics.md)
+//! acim-sim [OPTIONS]                       run every paper scenario into out/ and print metrics
+//! acim-sim list                            list the built-in scenarios
+//! acim-sim run <name|file.toml> [OPTIONS]  one scenario
+//! acim-sim figures [DIR] [OPTIONS]         regenerate docs/figures (PNGs + metrics.md)
+//! acim-sim stability [DIR]                 orientation stability map (docs/stability)
+//! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
+//! acim-sim faults [FILE] [OPTIONS]         fault table
 //! ```
 
 use acim_sim::builtins;
-use acim_sim::metrics::Metrics;
+use acim_sim::metrics::{Metrics, Verdict};
+use acim_sim::output::{self, FileError};
 use acim_sim::scenario::Scenario;
+use acim_sim::WriteOptions;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 const USAGE: &str = "usage:
-  acim-sim                                  run all paper scenarios into out/, print metrics
-  acim-sim list                             list built-in scenarios
-  acim-sim run <name|file.toml> [--out DIR] [--set key=value]...
-  acim-sim figures [--out DIR]              regenerate docs/figures/*.png and metrics.md
-  acim-sim stability [DIR]                  orientation stability map (docs/stability)
-  acim-sim observers [FILE] [--out DIR]     reduced- vs full-order observer, closed loop
-                                            (table to FILE, default docs/observers.md)
-  acim-sim faults [FILE] [--out DIR]        every fault-* scenario: reason, detection time,
-                                            peaks (table to FILE, default docs/faults.md)";
+  acim-sim [OPTIONS]                        run all paper scenarios into out/, print metrics
+  acim-sim list                             list built-in scenarios (takes no options)
+  acim-sim run <name|file.toml> [OPTIONS]   run one scenario: <out>/<name>.{csv,json,png}
+  acim-sim figures [DIR] [OPTIONS]          every built-in scenario; PNGs and metrics.md to DIR
+                                            (default docs/figures; with --set: <out>/figures)
+  acim-sim stability [DIR]                  orientation stability map (default docs/stability;
+                                            --out DIR is the same; --set is not supported)
+  acim-sim observers [FILE] [OPTIONS]       reduced- vs full-order observer, closed loop (table
+                                            to FILE, default docs/observers.md; with --set:
+                                            <out>/observers.md)
+  acim-sim faults [FILE] [OPTIONS]          every fault-* scenario: reason, detection time,
+                                            peaks (table to FILE, default docs/faults.md; with
+                                            --set: <out>/faults.md)
+options:
+  --out DIR        directory for the run outputs (CSV, JSON, PNG), default out
+  --set key=value  override a scenario field (dotted TOML key), repeatable; applies to every
+                   scenario the command runs
+  --gzip           write the CSV gzip-compressed, <name>.csv.gz (about 4x smaller; for long runs)
+  --quiet, -q      no progress bar (it is shown only when stderr is a terminal anyway)";
+
+/// Command-line options shared by the subcommands.
+#[derive(Debug, Default)]
+struct Opts {
+    out: Option<PathBuf>,
+    sets: Vec<String>,
+    gzip: bool,
+    quiet: bool,
+    positional: Vec<String>,
+}
+
+impl Opts {
+    fn parse(rest: &[String]) -> Result<Opts, String> {
+        let mut o = Opts::default();
+        let mut i = 0;
+        while i < rest.len() {
+            match rest[i].as_str() {
+                "--out" => {
+                    let dir = rest.get(i + 1).ok_or("--out needs a directory")?;
+                    if dir.is_empty() {
+                        return Err("--out needs a directory, got an empty string".into());
+                    }
+                    o.out = Some(PathBuf::from(dir));
+                    i += 1;
+                }
+                a if a.starts_with("--out=") => o.out = Some(PathBuf::from(&a["--out=".len()..])),
+                "--set" => {
+                    o.sets
+                        .push(rest.get(i + 1).ok_or("--set needs key=value")?.clone());
+                    i += 1;
+                }
+                a if a.starts_with("--set=") => o.sets.push(a["--set=".len()..].to_string()),
+                "--gzip" => o.gzip = true,
+                "--quiet" | "-q" => o.quiet = true,
+                a if a.starts_with('-') && a.len() > 1 => {
+                    return Err(format!("unknown option {a}\n{USAGE}"))
+                }
+                a => o.positional.push(a.to_string()),
+            }
+            i += 1;
+        }
+        Ok(o)
+    }
+
+    fn out(&self) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| PathBuf::from("out"))
+    }
+
+    fn write(&self) -> WriteOptions {
+        WriteOptions {
+            gzip_csv: self.gzip,
+        }
+    }
+
+    /// Rejects what a subcommand does not take, with the reason.
+    fn reject(&self, cmd: &str, set: Option<&str>, gzip: Option<&str>) -> Result<(), String> {
+        if let (Some(why), false) = (set, self.sets.is_empty()) {
+            return Err(format!("`{cmd}` does not take --set: {why}"));
+        }
+        if let (Some(why), true) = (gzip, self.gzip) {
+            return Err(format!("`{cmd}` does not take --gzip: {why}"));
+        }
+        Ok(())
+    }
+
+    fn at_most_positional(&self, cmd: &str, n: usize, what: &str) -> Result<(), String> {
+        if self.positional.len() > n {
+            return Err(format!(
+                "`{cmd}` takes {what}, got {:?}\n{USAGE}",
+                self.positional
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A progress reporter for one run: an indicatif bar on stderr when it is a terminal and
+/// not `--quiet`, nothing otherwise.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    fn new(quiet: bool, sc: &Scenario) -> Progress {
+        if quiet || !std::io::stderr().is_terminal() {
+            return Progress { bar: None };
+        }
+        let steps = (sc.duration_s / sc.drive.control_period_s).round().max(1.0) as u64;
+        let bar = indicatif::ProgressBar::new(steps);
+        // short enough for an 80-column terminal (a wrapped bar redraws badly)
+        let style = indicatif::ProgressStyle::with_template(
+            "{prefix} [{bar:24}] {percent:>3}% of {msg}, eta {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> ");
+        bar.set_style(style);
+        bar.set_prefix(sc.name.clone());
+        bar.set_message(format!("{:.0} s simulated", sc.duration_s));
+        Progress { bar: Some(bar) }
+    }
+
+    fn update(&self, done: usize, total: usize) {
+        if let Some(b) = &self.bar {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
 
 fn load(spec: &str) -> Result<Scenario, String> {
     if let Some(s) = builtins::get(spec) {
@@ -37,6 +167,23 @@ fn load(spec: &str) -> Result<Scenario, String> {
     ))
 }
 
+/// Loads `spec` and applies the `--set` overrides, then validates.
+fn load_with(spec: &str, sets: &[String]) -> Result<Scenario, String> {
+    let sc = load(spec)?
+        .with_overrides(sets)
+        .map_err(|e| format!("{spec}: {e}"))?;
+    sc.validate().map_err(|e| format!("{spec}: {e}"))?;
+    Ok(sc)
+}
+
+/// Runs one scenario with a progress bar and writes its files.
+fn run_one(sc: &Scenario, out: &Path, o: &Opts) -> Result<Metrics, String> {
+    let p = Progress::new(o.quiet, sc);
+    let r = acim_sim::run_and_write_with(sc, out, o.write(), &mut |d, n| p.update(d, n));
+    p.finish();
+    r.map_err(|e| format!("{}: {e}", sc.name))
+}
+
 fn summary_header() -> String {
     format!(
         "{:<26} {:>9} {:>8} {:>8} {:>9} {:>9} {:>9}  {}",
@@ -44,19 +191,59 @@ fn summary_header() -> String {
     )
 }
 
-/// How a run ended, in one phrase (console table and metrics.md).
+/// How a run ended, in one phrase (console table and metrics.md); the criteria are
+/// [`acim_sim::metrics::Verdict`]'s.
 fn outcome(m: &Metrics) -> String {
-    match &m.fault {
-        Some(f) => format!(
+    match (m.verdict, &m.fault) {
+        (Verdict::Faulted, Some(f)) => format!(
             "{f} at {:.3} s, switches {}",
             m.fault_time_s.unwrap_or(0.0),
             if m.switches_off_at_end { "off" } else { "ON" }
         ),
-        None if m.control_kept => "control kept".to_string(),
-        None => format!(
+        (Verdict::Lost, _) => format!(
             "control lost (max err {:.0} rpm)",
             m.speed_err_max_running_rpm
         ),
+        (Verdict::Drifting, _) => format!(
+            "drifting: rotor at up to {:.1} rpm with the reference held at 0 from {:.2} s",
+            m.zero_hold.as_ref().map_or(0.0, |z| z.speed_max_rpm),
+            m.zero_hold.as_ref().map_or(0.0, |z| z.from_s),
+        ),
+        _ => "control kept".to_string(),
+    }
+}
+
+/// A note on the CSV's decimation when it was chosen automatically and thins the file.
+fn decimation_note(sc: &Scenario, opts: WriteOptions, always: bool) -> Option<String> {
+    let (n, auto) = output::csv_decimation(sc);
+    let file = opts.csv_name(&sc.name);
+    let gz_hint = if sc.duration_s > 60.0 && !opts.gzip_csv {
+        "; --gzip compresses it"
+    } else {
+        ""
+    };
+    match (n, auto) {
+        (1, _) if !always => None,
+        (1, _) => Some(format!("{file}: every control step{gz_hint}")),
+        (n, true) => Some(format!(
+            "{file}: one row per {n} control steps, chosen for a {:.0} s run (at most {} rows; set csv_decimation to change){gz_hint}",
+            sc.duration_s,
+            output::CSV_ROWS_DEFAULT_MAX
+        )),
+        (n, false) if always => Some(format!(
+            "{file}: one row per {n} control steps (csv_decimation){gz_hint}"
+        )),
+        _ => None,
+    }
+}
+
+/// A table cell: `x` with `decimals`, or `n/a` where there is no value (open loop has no
+/// estimate).
+fn cell(x: f32, decimals: usize) -> String {
+    if x.is_nan() {
+        "n/a".into()
+    } else {
+        format!("{x:.decimals$}")
     }
 }
 
@@ -68,14 +255,14 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
     }
     for (i, (name, w)) in m.windows.iter().enumerate() {
         out.push(format!(
-            "{:<26} {:>9} {:>8.2} {:>8.2} {:>9.3} {:>8.2}° {:>9.3}  {}",
+            "{:<26} {:>9} {:>8} {:>8} {:>9} {:>8}° {:>9}  {}",
             if i == 0 { m.name.as_str() } else { "" },
             name,
-            w.speed_est_err_max_rpm,
-            w.speed_err_max_rpm,
-            w.load_est_err_mean_nm,
-            w.orientation_err_max_deg,
-            w.rs_est_mean_ohm,
+            cell(w.speed_est_err_max_rpm, 2),
+            cell(w.speed_err_max_rpm, 2),
+            cell(w.load_est_err_mean_nm, 3),
+            cell(w.orientation_err_max_deg, 2),
+            cell(w.rs_est_mean_ohm, 3),
             if i == 0 { note.as_str() } else { "" },
         ));
     }
@@ -96,7 +283,7 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
             s.speed_dip_rpm
         ));
     }
-    if m.rs.initial_ohm != m.rs.true_ohm || m.rs.final_ohm != m.rs.initial_ohm {
+    if m.rs.estimator_on {
         out.push(format!(
             "{:<26} Rs {:.2} -> {:.3} ohm (true {:.2}); within 2 % from {} ({} after speed control started)",
             "",
@@ -110,27 +297,46 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
     out
 }
 
-fn run_many(names: &[String], out: &Path) -> Result<Vec<Metrics>, String> {
+fn run_many(scenarios: &[Scenario], o: &Opts) -> Result<Vec<Metrics>, String> {
+    let out = o.out();
     let mut all = Vec::new();
     println!("{}", summary_header());
-    for name in names {
-        let sc = load(name)?;
-        let m = acim_sim::run_and_write(&sc, out).map_err(|e| format!("{name}: {e}"))?;
+    for sc in scenarios {
+        let m = run_one(sc, &out, o)?;
         for l in summary_lines(&m) {
             println!("{l}");
+        }
+        if let Some(n) = decimation_note(sc, o.write(), false) {
+            println!("{:<26} {n}", "");
         }
         all.push(m);
     }
     println!(
-        "\nerrors in rpm are maxima of 10 ms averages over each steady window; TL err is the mean |estimate - real|; outputs in {}",
+        "\nerrors in rpm are maxima of 10 ms averages over each steady window (in time order); TL err is the mean |estimate - real|; outputs in {}",
         out.display()
     );
+    println!("{}", acim_sim::metrics::verdict_criteria());
+    if !o.sets.is_empty() {
+        println!(
+            "overrides applied to every scenario: --set {}",
+            o.sets.join(" --set ")
+        );
+    }
     Ok(all)
 }
 
-fn write_metrics_md(path: &Path, all: &[Metrics]) -> std::io::Result<()> {
-    let mut s = String::from(
-        "<!-- generated by `cargo run --release -p acim-sim -- figures`; do not edit -->\n\n| scenario | window | speed est. error max (rpm) | speed error max (rpm) | load est. error mean (N m) | orientation error max (deg) | Rs mean (ohm) | outcome |\n|---|---|---|---|---|---|---|---|\n",
+/// The named scenarios with the `--set` overrides applied.
+fn scenarios(names: &[String], sets: &[String]) -> Result<Vec<Scenario>, String> {
+    names.iter().map(|n| load_with(n, sets)).collect()
+}
+
+fn write_metrics_md(path: &Path, all: &[Metrics], sets: &[String]) -> Result<(), FileError> {
+    let cmd = std::iter::once("figures".to_string())
+        .chain(sets.iter().map(|s| format!("--set {s}")))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let mut s = format!(
+        "<!-- generated by `cargo run --release -p acim-sim -- {cmd}`; do not edit -->\n\n| scenario | window | speed est. error max (rpm) | speed error max (rpm) | load est. error mean (N m) | orientation error max (deg) | Rs mean (ohm) | outcome |\n|---|---|---|---|---|---|---|---|\n",
     );
     for m in all {
         let outcome = outcome(m);
@@ -168,7 +374,7 @@ fn write_metrics_md(path: &Path, all: &[Metrics]) -> std::io::Result<()> {
                 st.speed_dip_rpm
             );
         }
-        if m.rs.final_ohm != m.rs.initial_ohm {
+        if m.rs.estimator_on {
             s += &format!(
                 "- {}: Rs estimate {:.2} -> {:.3} ohm (true {:.2}), within 2 % from t = {} ({} after speed control started)\n",
                 m.name,
@@ -180,85 +386,95 @@ fn write_metrics_md(path: &Path, all: &[Metrics]) -> std::io::Result<()> {
             );
         }
     }
-    std::fs::write(path, s)
+    s += &format!("\n{}.\n", acim_sim::metrics::verdict_criteria());
+    output::write_file(path, s.as_bytes())
 }
 
 fn real_main(args: Vec<String>) -> Result<(), String> {
-    let mut it = args.into_iter();
-    let cmd = it.next();
-    let rest: Vec<String> = it.collect();
-    let mut out = PathBuf::from("out");
-    let mut sets = Vec::new();
-    let mut positional = Vec::new();
-    let mut i = 0;
-    while i < rest.len() {
-        match rest[i].as_str() {
-            "--out" => {
-                out = PathBuf::from(rest.get(i + 1).ok_or("--out needs a directory")?);
-                i += 1;
-            }
-            "--set" => {
-                sets.push(rest.get(i + 1).ok_or("--set needs key=value")?.clone());
-                i += 1;
-            }
-            a if a.starts_with("--set=") => sets.push(a["--set=".len()..].to_string()),
-            a if a.starts_with("--") => return Err(format!("unknown option {a}\n{USAGE}")),
-            a => positional.push(a.to_string()),
-        }
-        i += 1;
-    }
-    match cmd.as_deref() {
+    // `acim-sim [OPTIONS]` is the main job; otherwise the first word is the command
+    let (cmd, rest) = match args.split_first() {
+        Some((c, r)) if !c.starts_with('-') || c == "-h" || c == "--help" => (Some(c.as_str()), r),
+        _ => (None, &args[..]),
+    };
+    let o = Opts::parse(rest)?;
+    match cmd {
         None => {
-            run_many(&builtins::paper_names(), &out)?;
+            o.at_most_positional("acim-sim", 0, "no arguments besides options")?;
+            run_many(&scenarios(&builtins::paper_names(), &o.sets)?, &o)?;
         }
         Some("list") => {
+            if !rest.is_empty() {
+                return Err(format!(
+                    "`list` takes no options or arguments, got {rest:?}"
+                ));
+            }
             for s in builtins::all() {
                 println!("{:<28} {}", s.name, s.description);
             }
         }
         Some("run") => {
-            let [spec] = positional.as_slice() else {
+            let [spec] = o.positional.as_slice() else {
                 return Err(format!("run takes one scenario name or file\n{USAGE}"));
             };
-            let sc = load(spec)?
-                .with_overrides(&sets)
-                .map_err(|e| e.to_string())?;
-            sc.validate().map_err(|e| e.to_string())?;
-            let m = acim_sim::run_and_write(&sc, &out).map_err(|e| e.to_string())?;
+            let sc = load_with(spec, &o.sets)?;
+            let out = o.out();
+            let m = run_one(&sc, &out, &o)?;
             println!("{}", summary_header());
             for l in summary_lines(&m) {
                 println!("{l}");
             }
+            println!("{}", acim_sim::metrics::verdict_criteria());
+            if let Some(n) = decimation_note(&sc, o.write(), true) {
+                println!("{n}");
+            }
             println!(
-                "simulated {:.1} s in {:.3} s ({:.0}x real time); wrote {}/{}.{{csv,json,png}}",
+                "simulated {:.1} s in {:.3} s ({:.0}x real time); wrote {} and {}.{{json,png}} in {}",
                 m.duration_s,
                 m.wall_time_s,
                 m.real_time_factor,
+                o.write().csv_name(&sc.name),
+                sc.name,
                 out.display(),
-                sc.name
             );
         }
         Some("figures") => {
-            let fig = if positional.is_empty() {
-                PathBuf::from("docs/figures")
-            } else {
-                PathBuf::from(&positional[0])
+            o.at_most_positional("figures", 1, "at most one figure directory")?;
+            let fig = match (o.positional.first(), o.sets.is_empty()) {
+                (Some(d), _) => PathBuf::from(d),
+                (None, true) => PathBuf::from("docs/figures"),
+                // overridden runs must not overwrite the committed figures
+                (None, false) => o.out().join("figures"),
             };
             let names: Vec<String> = builtins::all().into_iter().map(|s| s.name).collect();
-            let all = run_many(&names, &out)?;
-            std::fs::create_dir_all(&fig).map_err(|e| e.to_string())?;
+            let all = run_many(&scenarios(&names, &o.sets)?, &o)?;
+            let out = o.out();
+            output::create_dir(&fig).map_err(|e| e.to_string())?;
             for n in &names {
-                std::fs::copy(out.join(format!("{n}.png")), fig.join(format!("{n}.png")))
+                let from = out.join(format!("{n}.png"));
+                let png = std::fs::read(&from).map_err(|e| FileError::new(&from, e).to_string())?;
+                output::write_file(&fig.join(format!("{n}.png")), &png)
                     .map_err(|e| e.to_string())?;
             }
-            write_metrics_md(&fig.join("metrics.md"), &all).map_err(|e| e.to_string())?;
+            write_metrics_md(&fig.join("metrics.md"), &all, &o.sets).map_err(|e| e.to_string())?;
             println!("figures and metrics.md written to {}", fig.display());
         }
         Some("stability") => {
-            let dir = if positional.is_empty() {
-                PathBuf::from("docs/stability")
-            } else {
-                PathBuf::from(&positional[0])
+            o.at_most_positional("stability", 1, "at most one output directory")?;
+            o.reject(
+                "stability",
+                Some("it measures fixed operating points of the paper's machine with ideal sensors and inverter (crates/acim-sim/src/stability.rs)"),
+                Some("it writes no CSV"),
+            )?;
+            let dir = match (o.positional.first(), &o.out) {
+                (Some(p), Some(d)) if Path::new(p) != d => {
+                    return Err(format!(
+                        "`stability` got two output directories, {p} and --out {}",
+                        d.display()
+                    ))
+                }
+                (Some(p), _) => PathBuf::from(p),
+                (None, Some(d)) => d.clone(),
+                (None, None) => PathBuf::from("docs/stability"),
             };
             let gains = [0.0, acim::DriveConfig::paper_defaults().orientation_gain];
             let t0 = std::time::Instant::now();
@@ -284,29 +500,47 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             );
         }
         Some("observers") => {
-            let file = positional
-                .first()
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from("docs/observers.md"));
-            let rows = acim_sim::observers::compare(&out)?;
+            o.at_most_positional("observers", 1, "at most one table file")?;
+            let file = table_file(&o, "observers.md");
+            let out = o.out();
+            let rows = acim_sim::observers::compare_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
             let cycles =
                 acim_sim::observers::bench_cycles(Path::new("benches/results/cycles.json"));
             let md = acim_sim::observers::markdown(&rows, cycles);
-            write_table(&file, &md, &out)?;
+            write_table(&file, &with_overrides_note(md, &o.sets), &out)?;
         }
         Some("faults") => {
-            let file = positional
-                .first()
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from("docs/faults.md"));
-            let rows = acim_sim::faults::run_all(&out)?;
+            o.at_most_positional("faults", 1, "at most one table file")?;
+            let file = table_file(&o, "faults.md");
+            let out = o.out();
+            let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
             let md = acim_sim::faults::markdown(&rows);
-            write_table(&file, &md, &out)?;
+            write_table(&file, &with_overrides_note(md, &o.sets), &out)?;
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),
     }
     Ok(())
+}
+
+/// The table file of `observers`/`faults`: the positional FILE, else `docs/<name>`, or
+/// `<out>/<name>` when `--set` changed the scenarios (the committed table stays as is).
+fn table_file(o: &Opts, name: &str) -> PathBuf {
+    match (o.positional.first(), o.sets.is_empty()) {
+        (Some(f), _) => PathBuf::from(f),
+        (None, true) => Path::new("docs").join(name),
+        (None, false) => o.out().join(name),
+    }
+}
+
+fn with_overrides_note(mut md: String, sets: &[String]) -> String {
+    if !sets.is_empty() {
+        md += &format!(
+            "\nOverrides applied to every run: `--set {}`.\n",
+            sets.join(" --set ")
+        );
+    }
+    md
 }
 
 fn main() -> ExitCode {
@@ -322,10 +556,10 @@ fn main() -> ExitCode {
 /// Prints a generated Markdown table and writes it to `file` (creating its directory).
 fn write_table(file: &Path, md: &str, out: &Path) -> Result<(), String> {
     print!("{md}");
-    if let Some(dir) = file.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
+        output::create_dir(dir).map_err(|e| e.to_string())?;
     }
-    std::fs::write(file, md).map_err(|e| format!("{}: {e}", file.display()))?;
+    output::write_file(file, md.as_bytes()).map_err(|e| e.to_string())?;
     println!(
         "\nwrote {} (run outputs in {})",
         file.display(),

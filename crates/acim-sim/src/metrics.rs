@@ -7,11 +7,147 @@
 //! error slower than 100 Hz. The raw (unfiltered) maxima are reported too.
 
 use crate::sim::{Row, RunResult};
-use serde::Serialize;
-use std::collections::BTreeMap;
+use serde::ser::SerializeMap;
+use serde::{Serialize, Serializer};
 
 /// Moving-average length for steady-state speed errors, control steps (10 ms at 5 kHz).
 pub const SMOOTHING_STEPS: usize = 50;
+
+/// Version of the metrics JSON (`<name>.json`): raised whenever a field is renamed,
+/// removed or changes meaning (adding a field does not raise it).
+///
+/// 1: the first versioned layout (verdict, time-ordered windows, saturation and
+/// modulation index, `rs.estimator_on`).
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// A speed-loop error (10 ms average of |speed - reference|) above this while running
+/// means control was lost, rpm.
+pub const LOST_ERROR_RPM: f32 = 100.0;
+
+/// With the reference held at zero, a true speed (10 ms average) above this means the
+/// rotor is drifting, rpm.
+pub const DRIFT_SPEED_RPM: f32 = 5.0;
+
+/// The reference counts as held at zero this long after it reached zero (the speed loop
+/// has settled), s.
+pub const DRIFT_SETTLE_S: f32 = 0.5;
+
+/// How a run ended, judged by stated criteria (most severe first):
+///
+/// - `faulted`: the drive tripped (a fault reason is reported);
+/// - `lost`: while running, the 10 ms average of |speed - reference| exceeded
+///   [`LOST_ERROR_RPM`];
+/// - `drifting`: control was not lost, but with the ramped reference held at zero for
+///   [`DRIFT_SETTLE_S`] or longer the rotor's true speed (10 ms average) exceeded
+///   [`DRIFT_SPEED_RPM`]: at zero stator frequency the estimator does not see the rotor;
+/// - `kept`: none of the above.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    /// No fault, speed error bounded, no creep at a held zero reference.
+    #[default]
+    Kept,
+    /// The rotor creeps with the reference held at zero.
+    Drifting,
+    /// The speed error left the bound while running.
+    Lost,
+    /// The drive tripped.
+    Faulted,
+}
+
+impl Verdict {
+    /// The verdict as one lowercase word.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::Kept => "kept",
+            Verdict::Drifting => "drifting",
+            Verdict::Lost => "lost",
+            Verdict::Faulted => "faulted",
+        }
+    }
+}
+
+/// One-paragraph statement of the verdict criteria (printed under the console table).
+pub fn verdict_criteria() -> String {
+    format!(
+        "verdicts: faulted = the drive tripped; lost = |speed - ref| (10 ms average) above {LOST_ERROR_RPM:.0} rpm while running; \
+         drifting = not lost, but with the reference held at 0 for {DRIFT_SETTLE_S} s or more the true speed (10 ms average) exceeded {DRIFT_SPEED_RPM:.0} rpm; \
+         kept = none of these"
+    )
+}
+
+/// Per-window metrics in the scenario's time order (start, then end), looked up by name.
+/// Serialised as a JSON object whose keys keep that order.
+#[derive(Clone, Debug, Default)]
+pub struct Windows(Vec<(String, WindowMetrics)>);
+
+impl Windows {
+    /// Windows in time order.
+    pub fn iter(&self) -> impl Iterator<Item = (&String, &WindowMetrics)> {
+        self.0.iter().map(|(k, v)| (k, v))
+    }
+    /// The metrics of each window, in time order.
+    pub fn values(&self) -> impl Iterator<Item = &WindowMetrics> {
+        self.0.iter().map(|(_, v)| v)
+    }
+    /// Window names, in time order.
+    pub fn keys(&self) -> impl Iterator<Item = &String> {
+        self.0.iter().map(|(k, _)| k)
+    }
+    /// The window called `name`.
+    pub fn get(&self, name: &str) -> Option<&WindowMetrics> {
+        self.0.iter().find(|(k, _)| k == name).map(|(_, v)| v)
+    }
+    /// Number of windows.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+    /// Adds a window (a repeated name replaces the earlier one) and keeps time order.
+    fn insert(&mut self, name: String, m: WindowMetrics) {
+        self.0.retain(|(k, _)| *k != name);
+        self.0.push((name, m));
+        self.0.sort_by(|a, b| {
+            a.1.from_s
+                .total_cmp(&b.1.from_s)
+                .then(a.1.to_s.total_cmp(&b.1.to_s))
+        });
+    }
+}
+
+impl<Q: AsRef<str> + ?Sized> std::ops::Index<&Q> for Windows {
+    type Output = WindowMetrics;
+    /// The window called `name`; panics if there is none (like a map's index).
+    fn index(&self, name: &Q) -> &WindowMetrics {
+        let name = name.as_ref();
+        self.get(name)
+            .unwrap_or_else(|| panic!("no metric window named `{name}`"))
+    }
+}
+
+impl<'a> IntoIterator for &'a Windows {
+    type Item = (&'a String, &'a WindowMetrics);
+    type IntoIter = std::iter::Map<
+        std::slice::Iter<'a, (String, WindowMetrics)>,
+        fn(&'a (String, WindowMetrics)) -> (&'a String, &'a WindowMetrics),
+    >;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.iter().map(|(k, v)| (k, v))
+    }
+}
+
+impl Serialize for Windows {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            m.serialize_entry(k, v)?;
+        }
+        m.end()
+    }
+}
 
 /// Steady-state metrics over one window.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -61,6 +197,9 @@ pub struct LoadStepMetrics {
 /// Rs estimator convergence.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct RsMetrics {
+    /// Whether the Rs estimator ran (`drive.rs_estimation`); the other fields only mean
+    /// something when it did.
+    pub estimator_on: bool,
     /// True stator resistance, ohm.
     pub true_ohm: f32,
     /// Initial estimate, ohm.
@@ -73,9 +212,22 @@ pub struct RsMetrics {
     pub within_2pct_after_running_s: Option<f32>,
 }
 
+/// Rotor creep with the reference held at zero (see [`Verdict::Drifting`]).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ZeroHoldMetrics {
+    /// When the ramped reference first reached zero (and stayed there while running), s.
+    pub from_s: f32,
+    /// How long it was held at zero while running, s.
+    pub held_s: f32,
+    /// Largest |true speed| (10 ms average) from [`DRIFT_SETTLE_S`] after `from_s`, rpm.
+    pub speed_max_rpm: f32,
+}
+
 /// All metrics of a run.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Metrics {
+    /// Layout version of this JSON ([`SCHEMA_VERSION`]).
+    pub schema_version: u32,
     /// Scenario name.
     pub name: String,
     /// Scenario description.
@@ -91,8 +243,19 @@ pub struct Metrics {
     /// Final drive state.
     pub final_state: String,
     /// Whether the drive stayed in control: no fault, and |speed - ref| (10 ms average)
-    /// stayed below 100 rpm whenever running.
+    /// stayed below [`LOST_ERROR_RPM`] whenever running (a drifting run counts as kept
+    /// here; [`Metrics::verdict`] tells them apart).
     pub control_kept: bool,
+    /// The verdict: kept, drifting, lost or faulted ([`Verdict`] states the criteria).
+    pub verdict: Verdict,
+    /// Rotor creep at a held zero reference, when the reference was held at zero long
+    /// enough to judge it.
+    pub zero_hold: Option<ZeroHoldMetrics>,
+    /// Time running (closed or open loop) with the modulator limiting the voltage, s.
+    pub voltage_saturated_s: f32,
+    /// Largest modulation index |v_dq| / (V_dc / sqrt 3) while switching (1 = the linear
+    /// limit of space-vector modulation).
+    pub modulation_index_max: f32,
     /// Largest |true phase current| while switching, A.
     pub peak_current_a: f32,
     /// Largest |true speed|, rpm.
@@ -106,8 +269,8 @@ pub struct Metrics {
     pub speed_err_max_running_rpm: f32,
     /// The flying start's speed search at its decision.
     pub speed_search: Option<crate::sim::SearchRecord>,
-    /// Per-window steady-state metrics.
-    pub windows: BTreeMap<String, WindowMetrics>,
+    /// Per-window steady-state metrics, in time order.
+    pub windows: Windows,
     /// Load changes.
     pub load_steps: Vec<LoadStepMetrics>,
     /// Rs estimator convergence.
@@ -150,7 +313,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     let load_avg = moving_average(&load_err, SMOOTHING_STEPS);
     let spd_avg = moving_average(&spd_err, SMOOTHING_STEPS);
 
-    let mut windows = BTreeMap::new();
+    let mut windows = Windows::default();
     for w in &sc.windows {
         let (a, b) = (idx(rows, w.from_s), idx(rows, w.to_s));
         if b <= a {
@@ -257,6 +420,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     };
     let running_from = rows.iter().find(|r| r.state == 2).map(|r| r.t_s);
     let rs = RsMetrics {
+        estimator_on: sc.drive.rs_estimation,
         true_ohm: true_rs,
         initial_ohm: rows
             .first()
@@ -287,6 +451,69 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             running_steps = 0;
         }
     }
+    // creep at a held zero reference: the last stretch (while running) over which the
+    // ramped reference is zero, judged from DRIFT_SETTLE_S after it reached zero
+    let mut zero_hold = None;
+    let mut k = 0;
+    while k < rows.len() {
+        let held = |r: &Row| r.state == 2 && r.speed_ref_rpm.abs() < 1e-3;
+        if !held(&rows[k]) {
+            k += 1;
+            continue;
+        }
+        let start = k;
+        while k < rows.len() && held(&rows[k]) {
+            k += 1;
+        }
+        let from = rows[start].t_s;
+        let held_s = rows[k - 1].t_s - from + r.config.control_period;
+        if held_s > DRIFT_SETTLE_S {
+            let a = idx(rows, from + DRIFT_SETTLE_S);
+            let speed_avg = moving_average(
+                &rows[start..k]
+                    .iter()
+                    .map(|r| r.speed_rpm)
+                    .collect::<Vec<_>>(),
+                SMOOTHING_STEPS,
+            );
+            let worst = speed_avg[a - start..]
+                .iter()
+                .fold(0.0f32, |m, x| m.max(x.abs()));
+            let z = zero_hold.get_or_insert(ZeroHoldMetrics {
+                from_s: from,
+                held_s,
+                speed_max_rpm: worst,
+            });
+            if worst > z.speed_max_rpm {
+                *z = ZeroHoldMetrics {
+                    from_s: from,
+                    held_s,
+                    speed_max_rpm: worst,
+                };
+            }
+        }
+    }
+    let control_kept = r.fault.is_none() && max_running < LOST_ERROR_RPM;
+    let verdict = if r.fault.is_some() {
+        Verdict::Faulted
+    } else if !control_kept {
+        Verdict::Lost
+    } else if zero_hold
+        .as_ref()
+        .is_some_and(|z| z.speed_max_rpm > DRIFT_SPEED_RPM)
+    {
+        Verdict::Drifting
+    } else {
+        Verdict::Kept
+    };
+    let active = || rows.iter().filter(|r| r.state == 2 || r.state == 3);
+    let voltage_saturated_s =
+        active().filter(|r| r.voltage_saturated).count() as f32 * r.config.control_period;
+    let modulation_index_max = rows
+        .iter()
+        .filter(|r| r.pwm_enabled)
+        .fold(0.0f32, |m, r| m.max(r.modulation_index));
+
     let max_speed_rpm = r.config.max_speed * acim::math::RAD_S_TO_RPM;
     let trip = r.config.overcurrent_trip;
     let ts = r.config.control_period;
@@ -299,6 +526,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         .count() as f32
         * ts;
     Metrics {
+        schema_version: SCHEMA_VERSION,
         name: sc.name.clone(),
         description: sc.description.clone(),
         duration_s: sc.duration_s,
@@ -306,7 +534,11 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         fault_time_s: r.fault_time_s,
         switches_off_at_end: r.switches_off_at_end,
         final_state: format!("{:?}", r.final_state),
-        control_kept: r.fault.is_none() && max_running < 100.0,
+        control_kept,
+        verdict,
+        zero_hold,
+        voltage_saturated_s,
+        modulation_index_max,
         speed_err_max_running_rpm: max_running,
         speed_search: r.search,
         peak_current_a,

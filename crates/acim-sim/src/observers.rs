@@ -6,7 +6,7 @@
 
 use crate::builtins;
 use crate::metrics::Metrics;
-use crate::scenario::ObserverKind;
+use crate::scenario::{ObserverKind, Scenario};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -52,15 +52,28 @@ pub fn worst_raw_error(m: &Metrics) -> f32 {
 /// Runs every scenario with both observers; run outputs (CSV, JSON, PNG) go to `out`, the
 /// full-order runs named `<scenario>-full-order`.
 pub fn compare(out: &Path) -> Result<Vec<Row>, String> {
+    compare_with(&[], &mut |sc| {
+        crate::run_and_write(sc, out).map_err(|e| format!("{}: {e}", sc.name))
+    })
+}
+
+/// [`compare`] with `--set` overrides applied to every scenario (before the observer is
+/// chosen), each run through `run` (which writes its outputs).
+pub fn compare_with(
+    sets: &[String],
+    run: &mut dyn FnMut(&Scenario) -> Result<Metrics, String>,
+) -> Result<Vec<Row>, String> {
     let mut rows = Vec::new();
     for name in SCENARIOS {
-        let base = builtins::get(name).ok_or_else(|| format!("no built-in scenario {name}"))?;
+        let base = builtins::get(name)
+            .ok_or_else(|| format!("no built-in scenario {name}"))?
+            .with_overrides(sets)
+            .map_err(|e| format!("{name}: {e}"))?;
         let mut full = base.clone();
         full.drive.observer = ObserverKind::FullOrder;
         full.name = format!("{name}-full-order");
-        let reduced = crate::run_and_write(&base, out).map_err(|e| format!("{name}: {e}"))?;
-        let full_order =
-            crate::run_and_write(&full, out).map_err(|e| format!("{}: {e}", full.name))?;
+        let reduced = run(&base)?;
+        let full_order = run(&full)?;
         rows.push(Row {
             scenario: name.to_string(),
             reduced,
@@ -70,11 +83,11 @@ pub fn compare(out: &Path) -> Result<Vec<Row>, String> {
     Ok(rows)
 }
 
+/// The run's verdict ([`crate::metrics::Verdict`]), with the fault's reason.
 fn outcome(m: &Metrics) -> String {
     match &m.fault {
         Some(f) => format!("fault {f}"),
-        None if m.control_kept => "kept".into(),
-        None => "lost".into(),
+        None => m.verdict.as_str().into(),
     }
 }
 
@@ -117,7 +130,8 @@ pub fn markdown(rows: &[Row], cycles: Option<(f64, f64)>) -> String {
     s.push_str(
         "\nEstimation errors are the worst steady-state window of each scenario (maxima of 10 ms \
          averages of estimated minus true speed); raw maxima are unfiltered. The full-order \
-         observer has no load model (no load-torque estimate).\n",
+         observer has no load model (no load-torque estimate). Outcomes are the simulator's \
+         verdicts: drifting = the rotor crept above 5 rpm with the reference held at 0.\n",
     );
     if let Some((red, full)) = cycles {
         let _ = write!(

@@ -30,6 +30,63 @@ fn err<T>(field: &str, allowed: &str) -> Result<T, ScenarioError> {
     })
 }
 
+/// Scenario names become output file names: 1-100 characters from `A-Z a-z 0-9 - _ .`,
+/// not starting with `.` (so no path separators, no `..`, no hidden files).
+pub fn check_name(name: &str) -> Result<(), ScenarioError> {
+    let ok = !name.is_empty()
+        && name.len() <= 100
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+    if ok {
+        Ok(())
+    } else {
+        err(
+            "name",
+            &format!(
+                "must be 1-100 characters of letters, digits, '-', '_' and '.', not starting with '.' (it names the output files), got {name:?}"
+            ),
+        )
+    }
+}
+
+/// Applies one `key=value` override to the scenario's TOML value.
+fn apply_override(v: &mut toml::Value, s: &str) -> Result<(), ScenarioError> {
+    let Some((key, val)) = s.split_once('=') else {
+        return err(
+            s,
+            "override must be key=value, e.g. drive.rs_estimation=true",
+        );
+    };
+    let key = key.trim();
+    if key.is_empty() || key.split('.').any(|p| p.trim().is_empty()) {
+        return err(
+            s,
+            "override needs a dotted field name before '=', e.g. sensors.adc_bits=8",
+        );
+    }
+    let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("x = {}", val.trim()))
+        .ok()
+        .and_then(|t| t.get("x").cloned())
+        .unwrap_or_else(|| toml::Value::String(val.trim().to_string()));
+    let mut cur = v;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, part) in parts.iter().enumerate() {
+        let Some(table) = cur.as_table_mut() else {
+            return err(key, "is not a field of the scenario");
+        };
+        if i + 1 == parts.len() {
+            table.insert(part.to_string(), parsed.clone());
+            break;
+        }
+        cur = table
+            .entry(part.to_string())
+            .or_insert_with(|| toml::Value::Table(Default::default()));
+    }
+    Ok(())
+}
+
 fn check_range(field: &str, v: f32, lo: f32, hi: f32) -> Result<(), ScenarioError> {
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
@@ -482,8 +539,10 @@ pub struct Scenario {
     pub duration_s: f32,
     /// Noise seed.
     pub seed: u64,
-    /// Write every n-th control step to the CSV (1 = all).
-    pub csv_decimation: u32,
+    /// Write every n-th control step to the CSV (1 = all). Unset: every step up to
+    /// 100 000 steps, beyond that the smallest step that keeps the CSV within 100 000 rows
+    /// (`acim_sim::output::csv_decimation`).
+    pub csv_decimation: Option<u32>,
     /// The real machine.
     pub plant: MachineSpec,
     /// The controller's model of the machine (may differ).
@@ -523,7 +582,7 @@ impl Default for Scenario {
             description: String::new(),
             duration_s: 5.0,
             seed: 1,
-            csv_decimation: 1,
+            csv_decimation: None,
             plant: MachineSpec::default(),
             controller: MachineSpec::default(),
             drive: DriveSpec::default(),
@@ -557,9 +616,29 @@ pub struct Validated {
 }
 
 impl Scenario {
-    /// Parses TOML text.
+    /// Parses TOML text. A file that sets nothing (empty, or only comments) is an error:
+    /// it would otherwise run the defaults silently.
     pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        let table: toml::Table =
+            toml::from_str(text).or_else(|e| err("(file)", &format!("{e}")))?;
+        if table.is_empty() {
+            return err(
+                "(file)",
+                "the scenario file sets no fields (it is empty or only comments); \
+                 crates/acim-sim/scenarios/example.toml documents every field",
+            );
+        }
+        // parse the text itself: its errors quote the user's own file, with line numbers
         toml::from_str(text).or_else(|e| err("(file)", &format!("{e}")))
+    }
+
+    /// Deserialises a TOML value; errors carry no line numbers (the value may come from
+    /// `--set` overrides, not from a file the user wrote).
+    fn from_value(v: toml::Value, field: &str) -> Result<Self, ScenarioError> {
+        v.try_into::<Self>().or_else(|e| {
+            let msg = e.message().trim().to_string();
+            err(field, &msg)
+        })
     }
 
     /// Applies `key=value` overrides (dotted keys, TOML values; a bare word is a string).
@@ -569,40 +648,24 @@ impl Scenario {
         }
         let mut v = toml::Value::try_from(self).or_else(|e| err("(scenario)", &format!("{e}")))?;
         for s in sets {
-            let Some((key, val)) = s.split_once('=') else {
-                return err(
-                    s,
-                    "override must be key=value, e.g. drive.rs_estimation=true",
-                );
-            };
-            let key = key.trim();
-            let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("x = {}", val.trim()))
-                .ok()
-                .and_then(|t| t.get("x").cloned())
-                .unwrap_or_else(|| toml::Value::String(val.trim().to_string()));
-            let mut cur = &mut v;
-            let parts: Vec<&str> = key.split('.').collect();
-            for (i, part) in parts.iter().enumerate() {
-                let Some(table) = cur.as_table_mut() else {
-                    return err(key, "is not a field of the scenario");
-                };
-                if i + 1 == parts.len() {
-                    table.insert(part.to_string(), parsed.clone());
-                    break;
-                }
-                cur = table
-                    .entry(part.to_string())
-                    .or_insert_with(|| toml::Value::Table(Default::default()));
-            }
+            apply_override(&mut v, s)?;
+            // check each override on its own, so an error names the `--set` that caused it
+            Self::from_value(v.clone(), "--set").map_err(|e| ScenarioError {
+                field: s
+                    .split_once('=')
+                    .map_or(s.as_str(), |(k, _)| k.trim())
+                    .to_string(),
+                allowed: format!("--set {s}: {}", e.allowed),
+            })?;
         }
-        let text = toml::to_string(&v).or_else(|e| err("(scenario)", &format!("{e}")))?;
-        Self::from_toml(&text)
+        Self::from_value(v, "--set")
     }
 
     /// Checks every field and builds the library configuration.
     pub fn validate(&self) -> Result<Validated, ScenarioError> {
         check_range("duration_s", self.duration_s, 0.001, 600.0)?;
-        if self.csv_decimation == 0 {
+        check_name(&self.name)?;
+        if self.csv_decimation == Some(0) {
             return err("csv_decimation", "must be an integer >= 1");
         }
         let plant = self.plant.params("plant")?;

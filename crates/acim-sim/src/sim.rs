@@ -20,8 +20,14 @@ use acim_plant::{
 };
 use serde::Serialize;
 
+const SQRT_3: f32 = 1.732_050_8;
+
+/// A modulation index at (or, by rounding, just under) the current loops' voltage limit,
+/// [`acim::svpwm::VOLTAGE_MARGIN`] of the linear limit, counts as saturated.
+const SATURATED_MODULATION: f32 = acim::svpwm::VOLTAGE_MARGIN * 0.999;
+
 /// The CSV header: the required columns first, then extra ones.
-pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz";
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason";
 
 /// One recorded control step.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -74,13 +80,39 @@ pub struct Row {
     pub model_residual_v: f32,
     /// The drive's stator frequency w_s / 2 pi, Hz (electrical).
     pub stator_frequency_hz: f32,
+    /// Whether the voltage command is limited this step: at the current loops' limit
+    /// (98 % of V_dc / sqrt 3, `acim::svpwm::VOLTAGE_MARGIN`) or cut by the modulator.
+    pub voltage_saturated: bool,
+    /// Modulation index |v_dq| / (V_dc / sqrt 3) of the command, with the measured bus
+    /// (1 = the linear limit of space-vector modulation).
+    pub modulation_index: f32,
+    /// The fault that stopped the drive, while it is in the fault state.
+    #[serde(skip)]
+    pub fault: Option<FaultReason>,
+}
+
+/// The drive state's name for a state code of [`Row::state`].
+pub fn state_name(code: u8) -> &'static str {
+    match code {
+        0 => "idle",
+        1 => "magnetizing",
+        2 => "running",
+        3 => "open-loop",
+        4 => "fault",
+        _ => "unknown",
+    }
+}
+
+/// A fault reason's name as the CSV and JSON write it (its Rust variant name).
+pub fn fault_name(f: FaultReason) -> String {
+    format!("{f:?}")
 }
 
 impl Row {
     /// CSV line for this row (same column order as [`CSV_HEADER`]).
     pub fn csv(&self) -> String {
         format!(
-            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4}",
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{}",
             self.t_s,
             self.speed_ref_rpm,
             self.speed_rpm,
@@ -105,9 +137,16 @@ impl Row {
             self.current_error_a,
             self.model_residual_v,
             self.stator_frequency_hz,
+            self.voltage_saturated as u8,
+            self.modulation_index,
+            state_name(self.state),
+            self.fault.map(fault_name).unwrap_or_default(),
         )
     }
 }
+
+/// How often [`run_with_progress`] reports, control steps (0.5 s at 5 kHz).
+pub const PROGRESS_EVERY: usize = 2500;
 
 /// Result of a run: every control step and how it ended.
 #[derive(Clone, Debug)]
@@ -261,6 +300,15 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
 /// Runs a scenario to its end (or, after a fault, on with the switches off so the
 /// result shows the machine coasting).
 pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
+    run_with_progress(sc, &mut |_, _| {})
+}
+
+/// [`run`], calling `progress(done, total)` (control steps) every
+/// [`PROGRESS_EVERY`] steps and once at the end.
+pub fn run_with_progress(
+    sc: &Scenario,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<RunResult, ScenarioError> {
     let v = sc.validate()?;
     let mut plant = build_plant(sc, &v);
     let mut drive = build_drive(sc, &v)?;
@@ -300,6 +348,9 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
     let mut search = None;
 
     for k in 0..n {
+        if k % PROGRESS_EVERY == 0 {
+            progress(k, n);
+        }
         let t = k as f32 * ts;
         if k == start_step && k > 0 {
             start(&mut drive)?;
@@ -335,6 +386,12 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
 
         // record the state at the sampling instant
         let tel = drive.telemetry();
+        let modulation = if meas.dc_bus > 0.0 {
+            (tel.voltage.d * tel.voltage.d + tel.voltage.q * tel.voltage.q).sqrt() * SQRT_3
+                / meas.dc_bus
+        } else {
+            0.0
+        };
         let m = plant.machine();
         let lam = m.lambda_r();
         let flux_angle = lam.beta.atan2(lam.alpha);
@@ -370,6 +427,13 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
             current_error_a: tel.current_error,
             model_residual_v: tel.model_residual,
             stator_frequency_hz: tel.stator_frequency * (1.0 / acim::math::TAU),
+            voltage_saturated: tel.voltage_saturated || modulation >= SATURATED_MODULATION,
+            modulation_index: modulation,
+            fault: if drive.state() == DriveState::Fault {
+                drive.fault()
+            } else {
+                None
+            },
         });
 
         // apply: a switch-off acts at once, new duties from the next period
@@ -378,6 +442,7 @@ pub fn run(sc: &Scenario) -> Result<RunResult, ScenarioError> {
         plant.run_pwm_period(applied, load);
         dc_link.step(plant.last_period().dc_current, ts);
     }
+    progress(n, n);
     Ok(RunResult {
         scenario: sc.clone(),
         rows,

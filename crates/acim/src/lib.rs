@@ -1,5 +1,34 @@
 //! # acim: sensorless field-oriented control of induction machines
 //!
+//! Closed loop against the motor model of the `acim-plant` crate (the paper's machine),
+//! seeing only sampled phase currents and bus voltage; duties computed from the samples
+//! of period k act over period k + 1 (`PwmPreload`, preloaded timer compare registers):
+//!
+//! ```
+//! use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
+//! use acim::{Drive, DriveConfig, DriveInputs, DriveState};
+//! use acim_plant::{LoadTorque, Plant, PwmPreload};
+//!
+//! // a bad configuration is a `ConfigError` naming the field and the rule
+//! let mut drive = Drive::new(DriveConfig::paper_defaults()).expect("valid configuration");
+//! let (mut plant, mut pwm) = (Plant::paper_default(1), PwmPreload::new());
+//! drive.start().expect("an idle drive starts"); // magnetize, then run
+//! drive.set_speed_target(300.0 * RPM_TO_RAD_S).expect("a finite target");
+//! for _ in 0..10_000 {
+//!     // 2 s at 5 kHz
+//!     let m = plant.sample(); // at the period boundary
+//!     let out = drive.step(&DriveInputs { phase_currents: m.phase_currents, dc_bus: m.dc_bus });
+//!     plant.run_pwm_period(pwm.advance(out), LoadTorque::None); // over the next period
+//! }
+//! assert_eq!(drive.state(), DriveState::Running);
+//! assert!((plant.speed() * RAD_S_TO_RPM - 300.0).abs() < 5.0);
+//! ```
+//!
+//! More in `crates/acim/examples/`: `closed_loop` (the timing model explained, with a load
+//! step), `own_motor` (a drive for your motor's parameters) and `fixed_point` (the Q7.24
+//! drive for cores without an FPU), each run by CI with
+//! `cargo run --release -p acim --example <name>`.
+//!
 //! A `no_std`, allocation-free, HAL-free implementation of Kianinezhad, Nahid-Mobarakeh,
 //! Betin and Capolino (2009), "Robust sensorless vector control of induction machines":
 //! indirect field-oriented control (eq. 8, 13) whose speed comes from a reduced-order
