@@ -909,7 +909,10 @@ impl Scenario {
         let mut board = None;
         if let Some(np) = self.nameplate {
             let Some(b) = self.board else {
-                return err("board", "is needed with [nameplate] (dc_bus_v, current_full_scale_a)");
+                return err(
+                    "board",
+                    "is needed with [nameplate] (dc_bus_v, current_full_scale_a)",
+                );
             };
             let b = b.board(&self.inverter);
             let nameplate = acim::nameplate::Nameplate {
@@ -921,15 +924,14 @@ impl Scenario {
                 power_factor: np.power_factor,
                 pole_pairs: np.pole_pairs,
             };
-            let mut cfg = acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| {
-                ScenarioError {
+            let mut cfg =
+                acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| ScenarioError {
                     field: match e {
                         acim::nameplate::NameplateError::Invalid { field, .. } => field.into(),
                         acim::nameplate::NameplateError::Config(_) => "nameplate".into(),
                     },
                     allowed: format!("{e}"),
-                }
-            })?;
+                })?;
             cfg.rs_estimation = drive.rs_estimation;
             if d.rs_initial_ohm.is_some() {
                 cfg.rs_initial = drive.rs_initial;
@@ -959,12 +961,10 @@ impl Scenario {
             )?;
         }
         if d.arithmetic == Arithmetic::Fixed {
-            acim::fixed::FixedDrive::with_bases(drive, bases).map_err(
-                |e| ScenarioError {
-                    field: "drive.arithmetic".into(),
-                    allowed: format!("{e}"),
-                },
-            )?;
+            acim::fixed::FixedDrive::with_bases(drive, bases).map_err(|e| ScenarioError {
+                field: "drive.arithmetic".into(),
+                allowed: format!("{e}"),
+            })?;
         }
         Ok(Validated {
             plant,

@@ -284,10 +284,9 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
                 Drive::with_parts(design, (), FastSinCos, observer, Svpwm).map_err(bad("drive"))?;
             Box::new(d)
         }
-        (Arithmetic::Fixed, ObserverKind::Reduced) => Box::new(
-            FixedDrive::with_bases(v.drive, v.bases)
-                .map_err(bad("drive.arithmetic"))?,
-        ),
+        (Arithmetic::Fixed, ObserverKind::Reduced) => {
+            Box::new(FixedDrive::with_bases(v.drive, v.bases).map_err(bad("drive.arithmetic"))?)
+        }
         (Arithmetic::Fixed, ObserverKind::FullOrder) => {
             return Err(ScenarioError {
                 field: "drive.observer".into(),

@@ -296,7 +296,7 @@ pub const RESIDUAL_VOLTAGE_FRACTION: f32 = 0.05;
 pub const OFFSET_FILTER_TIME: f32 = 0.02;
 /// Time constant of the running offset check's leaky mean of the alpha-beta current, s:
 /// long against the electrical period, so that the AC current averages out.
-pub const RUNNING_OFFSET_FILTER_TIME: f32 = 1.0;
+pub const RUNNING_OFFSET_FILTER_TIME: f32 = 2.0;
 /// They count as settled after this many filter times of idle samples.
 pub const OFFSET_SETTLE_FILTER_TIMES: f32 = 5.0;
 /// A channel whose idle offset exceeds this fraction of the over-current trip is a
@@ -367,11 +367,13 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// The running offset check's leaky-mean gain Ts / [`RUNNING_OFFSET_FILTER_TIME`].
     pub running_offset_filter: N::Gain,
     /// The running offset check counts only above this |w_s|, rad/s electrical:
-    /// 2 I_max / (offset_limit T), where the AC current's ripple through the mean, at
-    /// most I_max / (|w_s| T), is below half the limit.
+    /// 4 I_max / (offset_limit T), where the AC current's ripple through the mean plus the
+    /// transient of a current that starts at that frequency, at most 2 I_max / (|w_s| T),
+    /// stays below half the limit.
     pub running_offset_min_frequency: N,
-    /// Largest stator resistance the current-response check allows, ohm:
-    /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs.
+    /// Largest resistance the current-response check allows, ohm:
+    /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs + R_R (while the flux builds with the frame
+    /// held, d lambda_r/dt = R_R i_sd - lambda_r/tau_r adds up to R_R |i|).
     pub impedance_resistance: N,
     /// Largest inductance the current-response check allows, H: Ls (the machine's
     /// impedance is below Rs_max + |w_s| Ls at any slip).
@@ -758,9 +760,10 @@ impl DriveDesign {
                 offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts) as u32,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
-                running_offset_min_frequency: 2.0 * i_max
+                running_offset_min_frequency: 4.0 * i_max
                     / (OFFSET_FRACTION * cfg.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
-                impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance(),
+                impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance()
+                    + m.referred_rotor_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,
                 magnetizing_timeout_steps: ((if cfg.rs_estimation {

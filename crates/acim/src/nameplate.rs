@@ -299,6 +299,17 @@ pub fn drive_config(
              draws at rated voltage: check the nameplate against the machine data",
         ));
     }
+    // the rated torque must be reachable at the rated current with the machine's own
+    // rated flux: 1.5 p L_M i_sd sqrt(I^2 - i_sd^2) >= P / Omega_rated
+    let flux = machine.rotor_flux_for(i_d);
+    let i_q = sqrt(i_max * i_max - i_d * i_d);
+    if machine.torque_constant(flux) * i_q < rated.torque {
+        return Err(invalid(
+            "nameplate.power_w",
+            "the rated torque P / Omega_rated needs more than the rated current at the \
+             machine's rated flux: the nameplate does not match the machine data",
+        ));
+    }
     let trip = TRIP_OVER_LIMIT * i_max;
     if trip > FULL_SCALE_MARGIN * i_fs {
         return Err(invalid(
@@ -435,8 +446,10 @@ mod tests {
             (
                 "ti-aci-benchmark",
                 ti,
+                // TI publishes no rating; the shared file's assumed 750 W at 3 A is more
+                // torque than the machine makes at 3 A (4.0 against 4.1 N m): 600 W
                 Nameplate {
-                    power_w: 750.0,
+                    power_w: 600.0,
                     voltage_v: 220.0,
                     current_a: 3.0,
                     frequency_hz: 60.0,
@@ -508,6 +521,20 @@ mod tests {
         // the bases follow the same rules as the hand-picked ones
         let bases = per_unit_bases(&cfg, &b);
         assert_eq!(bases.current, PerUnitBases::PAPER.current);
+    }
+
+    #[test]
+    fn a_rating_the_machine_cannot_make_is_refused() {
+        // TI's benchmark motor with the shared file's assumed 750 W at 3 A, 1 750 rpm
+        let (_, ti, mut n, b) = machines()[1];
+        n.power_w = 750.0;
+        assert!(matches!(
+            drive_config(ti, &n, &b),
+            Err(NameplateError::Invalid {
+                field: "nameplate.power_w",
+                ..
+            })
+        ));
     }
 
     #[test]

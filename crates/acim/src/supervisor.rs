@@ -754,9 +754,11 @@ mod tests {
         let w_min = l.running_offset_min_frequency;
         // AC current at the lowest counted frequency: no fault in 10 s
         assert_eq!(run(0.0, w_min, 10.0), None);
-        // an offset at the limit's double: found within a filter time constant
+        // an offset at the limit's double: found within a filter time constant (the mean
+        // reaches half the offset after T ln 2)
         let k = run(2.0 * l.offset_limit, 2.0 * w_min, 5.0).expect("found");
-        assert!((k as f32) * ts < 1.0, "{k}");
+        let t = crate::design::RUNNING_OFFSET_FILTER_TIME;
+        assert!((k as f32) * ts < t, "{k}");
         // below the counted frequency the mean holds: nothing is judged there
         assert_eq!(run(2.0 * l.offset_limit, 0.5 * w_min, 5.0), None);
     }
