@@ -139,7 +139,7 @@ fn run(
     let t_build = t0.elapsed();
     let tools = llvm_tools()?;
     let dis = Disassembly::load(&tools, &elf)?;
-    let markers = dis.markers()?;
+    let markers = dis.markers("", &scenario::REGIONS)?;
 
     // static call graphs: the whole measured code (for -dfilter), and the drive step alone
     // (for the panic/f64 scan)
@@ -160,7 +160,8 @@ fn run(
 
     let qemu = Qemu::detect()?;
     let t1 = Instant::now();
-    let (stats, profile, summary) = run_qemu(&qemu, &elf, &filter, &dis, &markers, keep_trace)?;
+    let (stats, profile, summary) =
+        run_qemu(&qemu, &M4F_RUN, &elf, &filter, &dis, &markers, keep_trace)?;
     let t_qemu = t1.elapsed();
 
     // ---- results
@@ -199,13 +200,38 @@ fn run(
             .unwrap_or(f64::NAN)
     };
     let ratio = mean_c("observer_full_order") / mean_c("observer_reduced");
+
+    // ---- the fixed-point path on the Cortex-M4F and the Cortex-M3
+    let results = bench_dir().join("results");
+    std::fs::create_dir_all(&results).map_err(|e| e.to_string())?;
+    let t2 = Instant::now();
+    let mut fixed_json = serde_json::Map::new();
+    let mut fixed_rows: Vec<(&'static str, Vec<Row>, String)> = Vec::new();
+    for fc in &FIXED_CORES {
+        let (frows, prof, fsummary) = run_fixed(&qemu, &tools, fc)?;
+        let mut m = serde_json::Map::new();
+        for r in &frows {
+            m.insert(r.name.clone(), region_json(r));
+        }
+        fixed_json.insert(
+            fc.key.to_string(),
+            serde_json::json!({
+                "target": format!("{} (QEMU {} {}, cycles estimated from the {:?} timing table)", fc.target, qemu.version_string, fc.spec.machine, fc.spec.core),
+                "regions": m,
+            }),
+        );
+        let prof_path = results.join(format!("profile_fixed_{}_drive_step.txt", fc.key));
+        std::fs::write(&prof_path, &prof).map_err(|e| e.to_string())?;
+        fixed_rows.push((fc.key, frows, fsummary));
+    }
+    let t_fixed = t2.elapsed();
+
     let json = serde_json::json!({
         "target": format!("{TARGET} (Cortex-M4F; instructions counted in QEMU {} netduinoplus2, cycles estimated from the Cortex-M4 TRM timings)", qemu.version_string),
         "regions": regions,
         "full_to_reduced_observer_ratio": round2(ratio),
+        "fixed_point": fixed_json,
     });
-    let results = bench_dir().join("results");
-    std::fs::create_dir_all(&results).map_err(|e| e.to_string())?;
     let out = results.join("cycles.json");
     std::fs::write(
         &out,
@@ -240,15 +266,53 @@ fn run(
             mean_c("observer_reduced") <= 60.0,
         ),
         (
-            "drive_step mean <= 400 est. cycles",
-            mean_c("drive_step") <= 400.0,
+            "drive_step mean <= 750 est. cycles",
+            mean_c("drive_step") <= 750.0,
         ),
-        ("full/reduced ratio >= 3.75", ratio >= 3.75),
     ];
     for (t, ok) in targets {
         println!("target {t}: {}", if ok { "met" } else { "NOT met" });
     }
     println!("firmware: {summary}");
+
+    for (key, frows, fsummary) in &fixed_rows {
+        println!();
+        println!(
+            "fixed point (Q7.24) on {key}: {:<9} {:>5} {:>7} {:>9} {:>7} | {:>7} {:>9} {:>7}",
+            "region", "n", "ins min", "ins mean", "ins max", "cyc min", "cyc mean", "cyc max"
+        );
+        for r in frows {
+            println!(
+                "{:<37} {:>5} {:>7} {:>9.1} {:>7} | {:>7} {:>9.1} {:>7}",
+                r.name, r.n, r.imin, r.imean, r.imax, r.cmin, r.cmean, r.cmax
+            );
+        }
+        println!("firmware: {fsummary}");
+    }
+    let fixed_mean_i = |key: &str, n: &str| {
+        fixed_rows
+            .iter()
+            .find(|f| f.0 == key)
+            .and_then(|f| f.1.iter().find(|r| r.name == n))
+            .map(|r| r.imean)
+            .unwrap_or(f64::NAN)
+    };
+    for (t, ok) in [
+        (
+            "fixed drive_step on m4f mean <= 1100 instructions",
+            fixed_mean_i("m4f", "drive_step") <= 1100.0,
+        ),
+        (
+            "fixed drive_step on m3 mean <= 1400 instructions",
+            fixed_mean_i("m3", "drive_step") <= 1400.0,
+        ),
+        (
+            "fixed observer_alone on m4f mean <= 100 instructions",
+            fixed_mean_i("m4f", "observer_alone") <= 100.0,
+        ),
+    ] {
+        println!("target {t}: {}", if ok { "met" } else { "NOT met" });
+    }
 
     // ---- profile of the drive step
     let prof_path = results.join("profile_drive_step.txt");
@@ -306,10 +370,20 @@ fn run(
 
     // ---- budget
     let budget_path = bench_dir().join("budget.json");
+    // every gated region: the f32 regions by name, the fixed-point ones as
+    // `fixed_<core>.<region>`
+    let mut gated: Vec<(String, u64)> = rows.iter().map(|r| (r.0.to_string(), r.4)).collect();
+    for (key, frows, _) in &fixed_rows {
+        gated.extend(
+            frows
+                .iter()
+                .map(|r| (format!("fixed_{key}.{}", r.name), r.imax)),
+        );
+    }
     if update_budget {
         let mut b = serde_json::Map::new();
-        for r in &rows {
-            b.insert(r.0.to_string(), serde_json::json!(r.4));
+        for (name, max) in &gated {
+            b.insert(name.clone(), serde_json::json!(max));
         }
         let doc = serde_json::json!({
             "comment": "max executed instructions per region (acim-bench, QEMU); --check fails above +5 %. Regenerate with: cargo run -p acim-bench --release -- --update-budget",
@@ -332,22 +406,22 @@ fn run(
             budget_path.display(),
             BUDGET_TOLERANCE * 100.0
         );
-        for r in &rows {
-            match doc["max_instructions"][r.0].as_u64() {
+        for (name, max) in &gated {
+            match doc["max_instructions"][name.as_str()].as_u64() {
                 Some(b) => {
                     let limit = b as f64 * (1.0 + BUDGET_TOLERANCE);
-                    let pass = (r.4 as f64) <= limit;
+                    let pass = (*max as f64) <= limit;
                     println!(
-                        "  {:<20} max {:>6} budget {:>6} {}",
-                        r.0,
-                        r.4,
+                        "  {:<28} max {:>6} budget {:>6} {}",
+                        name,
+                        max,
                         b,
                         if pass { "ok" } else { "OVER BUDGET" }
                     );
                     ok &= pass;
                 }
                 None => {
-                    println!("  {:<20} no budget entry", r.0);
+                    println!("  {:<28} no budget entry", name);
                     ok = false;
                 }
             }
@@ -355,12 +429,150 @@ fn run(
     }
     println!();
     println!(
-        "time: build {:.1} s, QEMU run + parse {:.1} s; results: {}",
+        "time: build {:.1} s, QEMU run + parse {:.1} s (fixed point: {:.1} s); results: {}",
         t_build.as_secs_f64(),
         t_qemu.as_secs_f64(),
+        t_fixed.as_secs_f64(),
         out.display()
     );
     Ok(ok)
+}
+
+/// The fixed-point path (`acim-bench-fixed`, the synthetic ideal current loop of
+/// `src/bin/fixed_vs_f32.rs`) on one core: its regions, traced like the f32 bench.
+struct FixedCore {
+    /// Key of the results and budget entries (`fixed_<key>.<region>`).
+    key: &'static str,
+    target: &'static str,
+    spec: RunSpec,
+}
+
+const FIXED_CORES: [FixedCore; 2] = [
+    FixedCore {
+        key: "m4f",
+        target: "thumbv7em-none-eabihf",
+        spec: RunSpec {
+            machine: "netduinoplus2",
+            cpu: "cortex-m4",
+            core: Core::M4,
+            summary_prefix: "ACIM-FIXED summary ",
+            profile_region: "drive_step",
+        },
+    },
+    FixedCore {
+        key: "m3",
+        target: "thumbv7m-none-eabi",
+        spec: RunSpec {
+            machine: "netduino2",
+            cpu: "cortex-m3",
+            core: Core::M3,
+            summary_prefix: "ACIM-FIXED summary ",
+            profile_region: "drive_step",
+        },
+    },
+];
+
+/// Marker regions of the fixed-point firmware (`bench_begin_fx_<region>`), `empty` first.
+const FIXED_REGIONS: [&str; 11] = [
+    "empty",
+    "fault_checks",
+    "clarke_park",
+    "observer_reduced",
+    "rs_estimator",
+    "flux_slip",
+    "speed_pi",
+    "current_pi",
+    "svpwm",
+    "drive_step",
+    "observer_alone",
+];
+
+/// One measured region: name, samples, instructions min/mean/max, est. cycles min/mean/max
+/// (marker overhead subtracted).
+#[derive(Clone, Debug)]
+struct Row {
+    name: String,
+    n: u64,
+    imin: u64,
+    imean: f64,
+    imax: u64,
+    cmin: u64,
+    cmean: f64,
+    cmax: u64,
+}
+
+fn rows_of(stats: &HashMap<&'static str, Stat>, names: &[&'static str]) -> Res<Vec<Row>> {
+    let base = stats.get("empty").cloned().unwrap_or_default();
+    let (b_i, b_c) = (base.min_i, base.min_c);
+    names
+        .iter()
+        .filter(|n| **n != "empty")
+        .map(|&name| {
+            let s = stats.get(name).cloned().unwrap_or_default();
+            if s.n == 0 {
+                return Err(format!("region {name} was never measured"));
+            }
+            Ok(Row {
+                name: name.to_string(),
+                n: s.n,
+                imin: s.min_i - b_i,
+                imean: s.sum_i as f64 / s.n as f64 - b_i as f64,
+                imax: s.max_i - b_i,
+                cmin: s.min_c - b_c,
+                cmean: s.sum_c as f64 / s.n as f64 - b_c as f64,
+                cmax: s.max_c - b_c,
+            })
+        })
+        .collect()
+}
+
+/// Builds, traces and weights the fixed-point firmware on `fc`'s core; the rows, the
+/// drive-step profile (rendered) and the firmware summary.
+fn run_fixed(qemu: &Qemu, tools: &Tools, fc: &FixedCore) -> Res<(Vec<Row>, String, String)> {
+    let elf = build_bin(fc.target, "acim-bench-fixed")?;
+    let dis = Disassembly::load(tools, &elf)?;
+    let markers = dis.markers("fx_", &FIXED_REGIONS)?;
+    // the measured work is out of line in fixed_step, fixed_step_probed, fixed_observer
+    // (and the marker calibration): the trace filter covers them and their callees
+    let mut roots: Vec<usize> = (0..dis.funcs.len())
+        .filter(|&k| {
+            let n = &dis.funcs[k].name;
+            n.contains("::fw::fixed_step")
+                || n.contains("::fw::fixed_observer")
+                || n.contains("::fw::calibrate")
+        })
+        .collect();
+    if roots.len() < 4 {
+        return Err(format!(
+            "{}: fixed_step, fixed_step_probed, fixed_observer, calibrate not all found",
+            fc.key
+        ));
+    }
+    roots.extend(markers.values().map(|m| m.func));
+    let graph = dis.reachable(&roots);
+    let filter = dis.dfilter(&graph.functions);
+    eprintln!("fixed point on {} ({}):", fc.key, fc.spec.machine);
+    let (stats, profile, summary) = run_qemu(qemu, &fc.spec, &elf, &filter, &dis, &markers, None)?;
+    if !summary.contains("measured=500") || !summary.contains("faults=0") {
+        return Err(format!(
+            "{}: the fixed-point run did not complete cleanly: {summary}",
+            fc.key
+        ));
+    }
+    let rows = rows_of(&stats, &FIXED_REGIONS)?;
+    let steps = rows
+        .iter()
+        .find(|r| r.name == "drive_step")
+        .map(|r| r.n)
+        .unwrap_or(1);
+    Ok((rows, profile.render(&dis, steps), summary))
+}
+
+fn region_json(r: &Row) -> serde_json::Value {
+    serde_json::json!({
+        "instructions": {"min": r.imin, "mean": round2(r.imean), "max": r.imax},
+        "cycles_est": {"min": r.cmin, "mean": round2(r.cmean), "max": r.cmax},
+    })
 }
 
 fn round2(x: f64) -> f64 {
@@ -376,32 +588,36 @@ fn cargo() -> String {
 }
 
 fn build_firmware() -> Res<PathBuf> {
+    build_bin(TARGET, FW_BIN)
+}
+
+fn build_bin(target: &str, bin: &str) -> Res<PathBuf> {
     let mut cmd = Command::new(cargo());
     cmd.args([
         "build",
         "--release",
         "--target",
-        TARGET,
+        target,
         "-p",
         "acim-bench",
         "--bin",
-        FW_BIN,
+        bin,
         "--message-format=json-render-diagnostics",
     ])
     .current_dir(bench_dir())
     .stdout(Stdio::piped())
     .stderr(Stdio::inherit());
-    eprintln!("building {FW_BIN} for {TARGET} (release) ...");
+    eprintln!("building {bin} for {target} (release) ...");
     let out = cmd.output().map_err(|e| format!("cargo: {e}"))?;
     if !out.status.success() {
         return Err(format!(
-            "building the firmware failed (is the target installed? rustup target add {TARGET})"
+            "building the firmware failed (is the target installed? rustup target add {target})"
         ));
     }
     let mut exe = None;
     for line in String::from_utf8_lossy(&out.stdout).lines() {
         if let Ok(v) = serde_json::from_str::<serde_json::Value>(line) {
-            if v["reason"] == "compiler-artifact" && v["target"]["name"] == FW_BIN {
+            if v["reason"] == "compiler-artifact" && v["target"]["name"] == bin {
                 if let Some(p) = v["executable"].as_str() {
                     exe = Some(PathBuf::from(p));
                 }
@@ -582,11 +798,12 @@ impl Disassembly {
             .position(|f| f.start <= addr && addr < f.end.max(f.start + 1))
     }
 
-    fn markers(&self) -> Res<HashMap<u32, Marker>> {
+    /// The marker functions `bench_begin_<prefix><region>` / `bench_end_<prefix><region>`.
+    fn markers(&self, prefix: &str, regions: &[&'static str]) -> Res<HashMap<u32, Marker>> {
         let mut m = HashMap::new();
-        for r in scenario::REGIONS {
+        for &r in regions {
             for begin in [true, false] {
-                let name = format!("bench_{}_{}", if begin { "begin" } else { "end" }, r);
+                let name = format!("bench_{}_{prefix}{r}", if begin { "begin" } else { "end" });
                 let func = self
                     .function_named(|n| n == name)
                     .ok_or_else(|| format!("marker {name} not found in the ELF"))?;
@@ -833,6 +1050,33 @@ fn cycles(i: &Insn, taken: bool, after_ls: bool) -> (u32, Class) {
     }
 }
 
+/// The core whose timing table weights the executed instructions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Core {
+    /// Cortex-M4F (Arm Cortex-M4 TRM r0p1, tables 3-1 and 7-1).
+    M4,
+    /// Cortex-M3 (Arm Cortex-M3 TRM r2p1, table 3-1): as the M4 except the long
+    /// multiplies, which terminate early by operand size: UMULL 3-4, SMULL 4-5, UMLAL
+    /// 4-6, SMLAL 5-7 (the signed forms one cycle longer); the worst case is taken.
+    M3,
+}
+
+/// Estimated cycles of one executed instruction on `core` (see [`cycles`]).
+fn cycles_on(core: Core, i: &Insn, taken: bool, after_ls: bool) -> (u32, Class) {
+    let (c, class) = cycles(i, taken, after_ls);
+    if core == Core::M3 {
+        let extra = match base_mnemonic(&i.mnemonic).as_str() {
+            "umull" => 3,
+            "smull" => 4,
+            "umlal" => 5,
+            "smlal" => 6,
+            _ => 0,
+        };
+        return (c + extra, class);
+    }
+    (c, class)
+}
+
 fn is_single_ls(class: Class) -> bool {
     class == Class::LoadStore
 }
@@ -991,8 +1235,27 @@ impl Profile {
     }
 }
 
+/// What one QEMU run measures: the machine, the core's timing table, the firmware's
+/// summary line and the region whose per-instruction profile is kept.
+struct RunSpec {
+    machine: &'static str,
+    cpu: &'static str,
+    core: Core,
+    summary_prefix: &'static str,
+    profile_region: &'static str,
+}
+
+const M4F_RUN: RunSpec = RunSpec {
+    machine: "netduinoplus2",
+    cpu: "cortex-m4",
+    core: Core::M4,
+    summary_prefix: "ACIM-BENCH summary ",
+    profile_region: "drive_step",
+};
+
 fn run_qemu(
     qemu: &Qemu,
+    spec: &RunSpec,
     elf: &Path,
     filter: &str,
     dis: &Disassembly,
@@ -1002,9 +1265,9 @@ fn run_qemu(
     let mut cmd = Command::new("qemu-system-arm");
     cmd.args([
         "-machine",
-        "netduinoplus2",
+        spec.machine,
         "-cpu",
-        "cortex-m4",
+        spec.cpu,
         "-nographic",
         "-monitor",
         "none",
@@ -1072,7 +1335,7 @@ fn run_qemu(
         }
         if !line.starts_with(b"Trace ") {
             let l = String::from_utf8_lossy(&line);
-            if let Some(sm) = l.trim().strip_prefix("ACIM-BENCH summary ") {
+            if let Some(sm) = l.trim().strip_prefix(spec.summary_prefix) {
                 stderr_summary = sm.to_string();
             } else if other_lines.len() < 20 {
                 other_lines.push(String::from_utf8_lossy(&line).trim().to_string());
@@ -1103,11 +1366,11 @@ fn run_qemu(
         if let Some((ppc, counted)) = pending.take() {
             if let Some(i) = dis.at(ppc) {
                 let taken = pc != ppc + i.size;
-                let (c, class) = cycles(i, taken, after_ls);
+                let (c, class) = cycles_on(spec.core, i, taken, after_ls);
                 after_ls = is_single_ls(class);
                 if counted {
                     count_c += c as u64;
-                    if active == Some("drive_step") {
+                    if active == Some(spec.profile_region) {
                         let e = profile.by_pc.entry(ppc).or_default();
                         e.0 += 1;
                         e.1 += c as u64;
@@ -1143,7 +1406,7 @@ fn run_qemu(
     let out = out_thread.join().unwrap_or_default();
     let summary = out
         .lines()
-        .find_map(|l| l.strip_prefix("ACIM-BENCH summary "))
+        .find_map(|l| l.strip_prefix(spec.summary_prefix))
         .map(str::to_string)
         .unwrap_or(stderr_summary);
     if !status.success() || summary.is_empty() {
