@@ -222,12 +222,16 @@ impl Gain {
             .wrapping_mul(self.frac as i64)
             .wrapping_add(round);
         let t = (f >> 32) as i32;
+        if self.int == 0 {
+            // gains below 1/2: no integer part, no saturation (post is 0 at shift 32)
+            return t >> self.post;
+        }
         let p = (x as i64)
             .wrapping_mul(self.int as i64)
             .wrapping_add(t as i64);
-        // only shift <= 32 can saturate, where |t| <= 2^30: the sum leaves i32 only when
+        // here shift <= 31, post = 0 and |t| <= 2^30: the sum leaves i32 only when
         // |x int| > 2^30, so x int is nonzero and has the sign of x ^ int
-        saturate_words((p >> 32) as i32, p as i32, x ^ self.int) >> self.post
+        saturate_words((p >> 32) as i32, p as i32, x ^ self.int)
     }
 }
 
