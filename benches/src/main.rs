@@ -184,11 +184,14 @@ fn run(
             s.sum_c as f64 / s.n as f64 - b_c as f64,
             s.max_c - b_c,
         );
+        let base_t = base.sum_t as f64 / base.n.max(1) as f64;
+        let tmean = s.sum_t as f64 / s.n as f64 - base_t;
         regions.insert(
             name.to_string(),
             serde_json::json!({
                 "instructions": {"min": imin, "mean": round2(imean), "max": imax},
                 "cycles_est": {"min": cmin, "mean": round2(cmean), "max": cmax},
+                "cycles_table_only_mean": round2(tmean),
             }),
         );
         rows.push((name, s.n, imin, imean, imax, cmin, cmean, cmax));
@@ -259,6 +262,12 @@ fn run(
         );
     }
     println!("(marker overhead subtracted: {b_i} instructions, {b_c} cycles)");
+    if let Some(v) = regions.get("drive_step") {
+        println!(
+            "drive_step mean est. cycles from the timing table alone (no pipeline effects): {}",
+            v["cycles_table_only_mean"]
+        );
+    }
     println!("full-order / reduced-order observer cost ratio (mean est. cycles): {ratio:.2}");
     let targets = [
         (
@@ -499,6 +508,8 @@ struct Row {
     cmin: u64,
     cmean: f64,
     cmax: u64,
+    /// Mean estimate from the timing table alone (no pipeline effects).
+    tmean: f64,
 }
 
 fn rows_of(stats: &HashMap<&'static str, Stat>, names: &[&'static str]) -> Res<Vec<Row>> {
@@ -521,6 +532,7 @@ fn rows_of(stats: &HashMap<&'static str, Stat>, names: &[&'static str]) -> Res<V
                 cmin: s.min_c - b_c,
                 cmean: s.sum_c as f64 / s.n as f64 - b_c as f64,
                 cmax: s.max_c - b_c,
+                tmean: s.sum_t as f64 / s.n as f64 - base.sum_t as f64 / base.n.max(1) as f64,
             })
         })
         .collect()
@@ -572,6 +584,7 @@ fn region_json(r: &Row) -> serde_json::Value {
     serde_json::json!({
         "instructions": {"min": r.imin, "mean": round2(r.imean), "max": r.imax},
         "cycles_est": {"min": r.cmin, "mean": round2(r.cmean), "max": r.cmax},
+        "cycles_table_only_mean": round2(r.tmean),
     })
 }
 
@@ -1061,7 +1074,190 @@ enum Core {
     M3,
 }
 
-/// Estimated cycles of one executed instruction on `core` (see [`cycles`]).
+/// What an instruction's timing depends on from the instruction executed before it
+/// (the pipeline model of [`timed`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Prev {
+    /// The previous instruction was a single load (LDR/LDRB/LDRH/LDRSB/LDRSH, not a
+    /// store, LDRD or LDM) into this core register (`u8::MAX`: the register is unknown).
+    ldr_dest: Option<u8>,
+    /// Single-precision registers (bit n = s<n>) written by the previous instruction
+    /// whose result arrives one cycle after it issues (VADD/VSUB/VMUL/VNMUL/VCVT: result
+    /// latency 2; VMLA/VMLS/VNMLA/VNMLS and the fused forms: 4 after 3 issue cycles;
+    /// VDIV/VSQRT: 15 after 14).
+    fp_late: u32,
+    /// The late result comes from VADD/VSUB/VMUL/VNMUL/VCVT, which forward to the addend
+    /// of a following multiply-accumulate without a stall.
+    fp_bypass: bool,
+}
+
+/// Single-precision register mask of one operand token (`s5`, `d3` = s6+s7).
+fn fp_reg_mask(tok: &str) -> u32 {
+    let t = tok
+        .trim()
+        .trim_matches(|c| c == '{' || c == '}' || c == '[' || c == ']');
+    let num = |x: &str| x.parse::<u32>().ok();
+    if let Some(n) = t.strip_prefix('s').and_then(num) {
+        if n < 32 {
+            return 1 << n;
+        }
+    }
+    if let Some(n) = t.strip_prefix('d').and_then(num) {
+        if n < 16 {
+            return 3 << (2 * n);
+        }
+    }
+    0
+}
+
+/// Mask of every single-precision register named in `ops` (ranges `s16-s19` included).
+fn fp_mask_all(ops: &str) -> u32 {
+    let mut m = 0;
+    for tok in ops.split([',', ' ', '{', '}']) {
+        if let Some((a, b)) = tok.split_once('-') {
+            let (ma, mb) = (fp_reg_mask(a), fp_reg_mask(b));
+            if ma != 0 && mb != 0 {
+                let (lo, hi) = (ma.trailing_zeros(), 31 - mb.leading_zeros());
+                for k in lo..=hi {
+                    m |= 1 << k;
+                }
+                continue;
+            }
+        }
+        m |= fp_reg_mask(tok);
+    }
+    m
+}
+
+/// Core register number of a token (`r0`-`r12`, `sp`, `lr`, `pc`).
+fn core_reg(tok: &str) -> Option<u8> {
+    let t = tok
+        .trim()
+        .trim_matches(|c| c == '{' || c == '}' || c == '[' || c == ']' || c == '!');
+    match t {
+        "sp" => Some(13),
+        "lr" => Some(14),
+        "pc" => Some(15),
+        _ => t.strip_prefix('r')?.parse::<u8>().ok().filter(|&n| n < 16),
+    }
+}
+
+/// Core registers inside the address brackets of a load/store (`[r1, r2, lsl #2]`).
+fn address_regs(ops: &str) -> Vec<u8> {
+    let Some(a) = ops.find('[') else {
+        return vec![];
+    };
+    let b = ops[a..].find(']').map(|e| a + e).unwrap_or(ops.len());
+    ops[a + 1..b].split(',').filter_map(core_reg).collect()
+}
+
+/// Estimated cycles on `core` of one executed instruction with its predecessor's state
+/// `prev`; the class and the state for the next instruction.
+///
+/// The pipeline model on top of the table of [`cycles`] (Arm Cortex-M4 TRM r0p1 section
+/// 3.3.2 and table 7-1; GCC's Cortex-M4 FPU pipeline description for the FP result
+/// latencies, which the TRM does not tabulate):
+/// - a single LDR directly after another single LDR costs 1 (address and data phases
+///   pipelined) unless the first one's destination forms the second one's address; a
+///   store is never followed by a pipelined access; a store with an immediate offset
+///   costs 1 (its data phase overlaps the next instruction), with a register offset 2, or
+///   1 directly after an LDR;
+/// - an FP result used by the next instruction stalls it one cycle (VADD, VSUB, VMUL,
+///   VNMUL, VCVT: result latency 2; multiply-accumulates 4 after 3 issue cycles; VDIV and
+///   VSQRT 15 after 14), except a VADD/VSUB/VMUL/VNMUL/VCVT result forwarded to the
+///   addend of a following multiply-accumulate; VABS/VNEG/VMOV between S registers,
+///   VLDR and VMOV from a core register have no extra latency;
+/// - VMOV of one float to or from a core register costs 2 (TRM table 7-1, "two
+///   floats/one double to/from two core registers or one float to/from one core
+///   register"), between S registers or an immediate 1.
+fn timed(core: Core, i: &Insn, taken: bool, prev: &Prev) -> (u32, Class, Prev) {
+    let (table, class) = cycles_on(core, i, taken, false);
+    let b = base_mnemonic(&i.mnemonic);
+    let ops = i.operands.as_str();
+    let toks: Vec<&str> = ops.split(',').map(str::trim).collect();
+    let mut next = Prev::default();
+    let mut c = table;
+    match b.as_str() {
+        "ldr" | "ldrb" | "ldrh" | "ldrsb" | "ldrsh" => {
+            let writes_pc = ops.starts_with("pc");
+            if let Some(d) = prev.ldr_dest {
+                if !address_regs(ops).contains(&d) && d != u8::MAX {
+                    c -= 1;
+                }
+            }
+            if !writes_pc {
+                next.ldr_dest = Some(toks.first().and_then(|t| core_reg(t)).unwrap_or(u8::MAX));
+            }
+        }
+        "str" | "strb" | "strh" => {
+            let reg_offset = address_regs(ops).len() > 1;
+            c = if !reg_offset || prev.ldr_dest.is_some() {
+                1
+            } else {
+                2
+            };
+        }
+        "vmov" => {
+            // one float to/from one core register: 2 (two core registers: 2 already)
+            let core_side = toks.iter().any(|t| core_reg(t).is_some());
+            if core_side {
+                c = 2;
+            }
+        }
+        _ => {}
+    }
+    // FP result-use stall
+    if prev.fp_late != 0 && b.starts_with('v') {
+        let srcs = fp_sources(&b, &toks);
+        let mut hit = prev.fp_late & srcs;
+        if prev.fp_bypass && is_fp_mac(&b) {
+            // the addend (the destination register) is forwarded
+            hit &= !toks.first().map(|t| fp_reg_mask(t)).unwrap_or(0);
+        }
+        if hit != 0 {
+            c += 1;
+        }
+    }
+    let late = matches!(
+        b.as_str(),
+        "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr" | "vdiv" | "vsqrt"
+    ) || is_fp_mac(&b);
+    if late {
+        next.fp_late = toks.first().map(|t| fp_reg_mask(t)).unwrap_or(0);
+        next.fp_bypass = matches!(
+            b.as_str(),
+            "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr"
+        );
+    }
+    (c, class, next)
+}
+
+fn is_fp_mac(b: &str) -> bool {
+    matches!(
+        b,
+        "vmla" | "vmls" | "vnmla" | "vnmls" | "vfma" | "vfms" | "vfnma" | "vfnms"
+    )
+}
+
+/// Single-precision registers an FP instruction reads.
+fn fp_sources(b: &str, toks: &[&str]) -> u32 {
+    let all = |ts: &[&str]| ts.iter().fold(0, |m, t| m | fp_mask_all(t));
+    match b {
+        // destination first, then sources
+        "vadd" | "vsub" | "vmul" | "vnmul" | "vdiv" | "vsqrt" | "vabs" | "vneg" | "vcvt"
+        | "vcvtr" => all(toks.get(1..).unwrap_or(&[])),
+        // the destination is the addend
+        _ if is_fp_mac(b) => all(toks),
+        // stores, compares, pushes: every named register is read
+        "vstr" | "vstm" | "vstmia" | "vstmdb" | "vpush" | "vcmp" | "vcmpe" => all(toks),
+        // vmov: the source is the last operand(s) after the destination
+        "vmov" => all(toks.get(1..).unwrap_or(&[])),
+        _ => 0,
+    }
+}
+
+/// Estimated cycles of one executed instruction on `core` from the timing table alone
+/// (see [`cycles`]; the pipeline effects are in [`timed`]).
 fn cycles_on(core: Core, i: &Insn, taken: bool, after_ls: bool) -> (u32, Class) {
     let (c, class) = cycles(i, taken, after_ls);
     if core == Core::M3 {
@@ -1130,10 +1326,14 @@ struct Stat {
     min_c: u64,
     max_c: u64,
     sum_c: u64,
+    /// Sum of the estimate from the timing table alone (the model before the pipeline
+    /// effects of [`timed`]), for comparison.
+    sum_t: u64,
 }
 
 impl Stat {
-    fn add(&mut self, i: u64, c: u64) {
+    fn add(&mut self, i: u64, c: u64, t: u64) {
+        self.sum_t += t;
         if self.n == 0 {
             self.min_i = i;
             self.max_i = i;
@@ -1310,6 +1510,8 @@ fn run_qemu(
     // the previous executed instruction, finalised when the next PC is known
     let mut pending: Option<(u32, bool)> = None; // (pc, counted in region)
     let mut after_ls = false;
+    let mut prev = Prev::default();
+    let mut count_t = 0u64;
     let mut unknown_pcs = 0u64;
     let mut other_lines = Vec::new();
     let mut stderr_summary = String::new();
@@ -1366,10 +1568,13 @@ fn run_qemu(
         if let Some((ppc, counted)) = pending.take() {
             if let Some(i) = dis.at(ppc) {
                 let taken = pc != ppc + i.size;
-                let (c, class) = cycles_on(spec.core, i, taken, after_ls);
+                let (t, class) = cycles_on(spec.core, i, taken, after_ls);
                 after_ls = is_single_ls(class);
+                let (c, _, next) = timed(spec.core, i, taken, &prev);
+                prev = next;
                 if counted {
                     count_c += c as u64;
+                    count_t += t as u64;
                     if active == Some(spec.profile_region) {
                         let e = profile.by_pc.entry(ppc).or_default();
                         e.0 += 1;
@@ -1384,8 +1589,12 @@ fn run_qemu(
                 active = Some(m.region);
                 count_i = 0;
                 count_c = 0;
+                count_t = 0;
             } else if active == Some(m.region) {
-                stats.entry(m.region).or_default().add(count_i, count_c);
+                stats
+                    .entry(m.region)
+                    .or_default()
+                    .add(count_i, count_c, count_t);
                 active = None;
             } else {
                 active = None;
@@ -1541,5 +1750,160 @@ mod tests {
         assert!(is_f64("__aeabi_dadd") && is_f64("__adddf3") && is_f64("__extendsfdf2"));
         assert!(!is_f64("__aeabi_uidiv") && !is_f64("__aeabi_memcpy"));
         assert!(is_panic("core::panicking::panic_bounds_check::h1"));
+    }
+
+    /// Cycles of a straight-line sequence (no branches) under the pipeline model.
+    fn seq(core: Core, code: &[(&str, &str)]) -> u32 {
+        let mut prev = Prev::default();
+        let mut total = 0;
+        for (m, o) in code {
+            let i = Insn {
+                addr: 0,
+                size: 4,
+                mnemonic: m.to_string(),
+                operands: o.to_string(),
+                func: 0,
+            };
+            let (c, _, next) = timed(core, &i, false, &prev);
+            prev = next;
+            total += c;
+        }
+        total
+    }
+
+    /// The load/store examples of the Cortex-M4 TRM (r0p1, 3.3.2 "Load/store timings"),
+    /// with the totals the TRM states, and the rules they illustrate.
+    #[test]
+    fn load_store_pipelining_matches_the_trm_examples() {
+        // "LDR R0,[R1]; LDR R1,[R2] - normally three cycles total"
+        assert_eq!(
+            seq(Core::M4, &[("ldr", "r0, [r1]"), ("ldr", "r1, [r2]")]),
+            3
+        );
+        // "LDR R0,[R1,R2]; STR R1,[R3,R4] - normally three cycles total"
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("ldr", "r0, [r1, r2]"), ("str", "r1, [r3, r4]")]
+            ),
+            3
+        );
+        // "LDR R0,[R1,R2]!; LDR R1,[R3,#4]; LDR R4,[R5],#4; STR R6,[R7,#8] - normally
+        // five cycles total"
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[
+                    ("ldr", "r0, [r1, r2]!"),
+                    ("ldr", "r1, [r3, #4]"),
+                    ("ldr", "r4, [r5], #4"),
+                    ("str", "r6, [r7, #8]"),
+                ]
+            ),
+            5
+        );
+        // the first load's destination forms the second one's address: not pipelined
+        assert_eq!(
+            seq(Core::M4, &[("ldr", "r0, [r1]"), ("ldr", "r2, [r0, #4]")]),
+            4
+        );
+        // "STR Rx,[Ry,#imm] is always one cycle"; nothing pipelines after a store
+        assert_eq!(seq(Core::M4, &[("str", "r0, [r1, #4]")]), 1);
+        assert_eq!(
+            seq(Core::M4, &[("str", "r0, [r1]"), ("ldr", "r2, [r3]")]),
+            3
+        );
+        assert_eq!(seq(Core::M4, &[("str", "r0, [r1, r2]")]), 2);
+        // LDRD is not pipelined with its neighbours: 3
+        assert_eq!(
+            seq(Core::M4, &[("ldr", "r0, [r1]"), ("ldrd", "r2, r3, [r4]")]),
+            5
+        );
+    }
+
+    /// FP timings: TRM table 7-1 for issue costs, GCC's Cortex-M4 FPU pipeline
+    /// description for the result latencies (VADD/VMUL/VCVT 2, multiply-accumulate 4,
+    /// forwarded to a following accumulate's addend).
+    #[test]
+    fn fpu_result_use_stalls_and_core_moves() {
+        // independent: 1 + 1
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vmul.f32", "s0, s1, s2"), ("vadd.f32", "s3, s5, s4")]
+            ),
+            2
+        );
+        // dependent: the VADD waits one cycle for s0
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vmul.f32", "s0, s1, s2"), ("vadd.f32", "s3, s0, s4")]
+            ),
+            3
+        );
+        // a VMUL result as the addend of the next VMLA is forwarded: 1 + 3
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vmul.f32", "s0, s1, s2"), ("vmla.f32", "s0, s3, s4")]
+            ),
+            4
+        );
+        // as a multiplicand it is not: 1 + 1 + 3
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vmul.f32", "s0, s1, s2"), ("vmla.f32", "s3, s0, s4")]
+            ),
+            5
+        );
+        // a VMLA result used next: 3 + 1 + 1; a VABS result: no extra latency
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vmla.f32", "s0, s1, s2"), ("vstr", "s0, [r0]")]
+            ),
+            3 + 1 + 2
+        );
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vabs.f32", "s0, s1"), ("vadd.f32", "s2, s0, s0")]
+            ),
+            2
+        );
+        // VLDR then use: 2 + 1 (no extra latency); compare then flags: 1 + 1
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vldr", "s0, [r0]"), ("vadd.f32", "s1, s0, s0")]
+            ),
+            3
+        );
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vcmp.f32", "s0, s1"), ("vmrs", "APSR_nzcv, fpscr")]
+            ),
+            2
+        );
+        // one float to/from a core register: 2 each; between S registers: 1
+        assert_eq!(seq(Core::M4, &[("vmov", "s0, r0")]), 2);
+        assert_eq!(seq(Core::M4, &[("vmov", "r0, s0")]), 2);
+        assert_eq!(seq(Core::M4, &[("vmov.f32", "s0, s1")]), 1);
+        assert_eq!(seq(Core::M4, &[("vmov", "r0, r1, d0")]), 2);
+        // a D register names two singles
+        assert_eq!(
+            seq(
+                Core::M4,
+                &[("vadd.f32", "s1, s2, s3"), ("vstr", "d0, [r0]")]
+            ),
+            1 + 2 + 1
+        );
+        // the M3 long multiplies: worst case of the TRM's early-terminating ranges
+        assert_eq!(seq(Core::M3, &[("smull", "r0, r1, r2, r3")]), 5);
+        assert_eq!(seq(Core::M3, &[("smlal", "r0, r1, r2, r3")]), 7);
+        assert_eq!(seq(Core::M4, &[("smlal", "r0, r1, r2, r3")]), 1);
     }
 }
