@@ -86,6 +86,7 @@ fn main() {
     let mut update_budget = false;
     let mut keep_trace: Option<PathBuf> = None;
     let mut allow_panic_paths = false;
+    let mut weigh_isr: Option<(PathBuf, PathBuf)> = None;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -94,13 +95,21 @@ fn main() {
             "--allow-panic-paths" => allow_panic_paths = true,
             "--help" | "-h" => {
                 println!(
-                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the probed step diverged from the real one\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE"
+                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the probed step diverged from the real one\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE\n  --weigh-isr ELF DIR  weigh the firmware-in-the-loop traces DIR/fil-isr-trace-<phase>.txt\n                   (executed addresses of the control interrupt of ELF) with the\n                   Cortex-M4 model; with --check hold them to firmware/fil/isr-budget.json,\n                   with --update-budget write the measured maxima there"
                 );
                 return;
             }
             "--keep-trace" => {
                 i += 1;
                 keep_trace = args.get(i).map(PathBuf::from);
+            }
+            "--weigh-isr" => {
+                let (Some(elf), Some(dir)) = (args.get(i + 1), args.get(i + 2)) else {
+                    eprintln!("--weigh-isr needs ELF and DIR (see --help)");
+                    std::process::exit(2);
+                };
+                weigh_isr = Some((PathBuf::from(elf), PathBuf::from(dir)));
+                i += 2;
             }
             other => {
                 eprintln!("unknown argument {other} (see --help)");
@@ -109,7 +118,11 @@ fn main() {
         }
         i += 1;
     }
-    match run(check, update_budget, allow_panic_paths, keep_trace) {
+    let result = match weigh_isr {
+        Some((elf, dir)) => weigh_isr_traces(&elf, &dir, check, update_budget),
+        None => run(check, update_budget, allow_panic_paths, keep_trace),
+    };
+    match result {
         Ok(true) => {}
         Ok(false) => {
             eprintln!("acim-bench: CHECK FAILED");
@@ -586,6 +599,138 @@ fn region_json(r: &Row) -> serde_json::Value {
         "cycles_est": {"min": r.cmin, "mean": round2(r.cmean), "max": r.cmax},
         "cycles_table_only_mean": round2(r.tmean),
     })
+}
+
+/// The cycle target of the control interrupt, entry to return (issue 16).
+const ISR_CYCLE_TARGET: f64 = 1000.0;
+
+/// Weighs the control interrupt's executed addresses recorded by the firmware-in-the-loop
+/// suite (`firmware/fil`, one interrupt per line) with the Cortex-M4 model of [`timed`]:
+/// instructions and estimated cycles per phase, held to `firmware/fil/isr-budget.json`.
+fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bool> {
+    let tools = llvm_tools()?;
+    let dis = Disassembly::load(&tools, elf)?;
+    let budget_path = bench_dir().join("../firmware/fil/isr-budget.json");
+    let mut doc: serde_json::Value = std::fs::read_to_string(&budget_path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_else(|| serde_json::json!({}));
+    let mut ok = true;
+    println!(
+        "control interrupt ({}), Cortex-M4 model, zero wait states (CCM SRAM):",
+        elf.display()
+    );
+    for phase in ["magnetizing", "running"] {
+        let path = dir.join(format!("fil-isr-trace-{phase}.txt"));
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut st = Stat::default();
+        let mut unknown = 0u64;
+        let mut outside_ccm = BTreeSet::new();
+        let mut by_func: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let pcs: Vec<u32> = line
+                .split_whitespace()
+                .filter_map(|h| u32::from_str_radix(h, 16).ok())
+                .collect();
+            let (mut n, mut c, mut t) = (0u64, 0u64, 0u64);
+            let mut prev = Prev::default();
+            let mut after_ls = false;
+            for (k, &pc) in pcs.iter().enumerate() {
+                if !(0x1000_0000..0x1000_8000).contains(&pc) {
+                    outside_ccm.insert(dis.function_at(pc).map(|f| dis.funcs[f].name.clone()));
+                }
+                let Some(i) = dis.at(pc) else {
+                    unknown += 1;
+                    continue;
+                };
+                // the last one is the return (a write of the PC)
+                let taken = pcs.get(k + 1).is_none_or(|&next| next != pc + i.size);
+                let (ct, class) = cycles_on(Core::M4, i, taken, after_ls);
+                after_ls = is_single_ls(class);
+                let (cc, _, next) = timed(Core::M4, i, taken, &prev);
+                prev = next;
+                let f = by_func.entry(dis.funcs[i.func].name.clone()).or_default();
+                f.0 += 1;
+                f.1 += cc as u64;
+                n += 1;
+                c += cc as u64;
+                t += ct as u64;
+            }
+            st.add(n, c, t);
+        }
+        if st.n == 0 {
+            return Err(format!("{}: no interrupt recorded", path.display()));
+        }
+        let mean_c = st.sum_c as f64 / st.n as f64;
+        println!(
+            "  {phase:<12} n {:>4}  instructions min {} mean {:.1} max {}  est. cycles min {} mean {:.1} max {} (table only: mean {:.1}) = {:.2} us at 170 MHz, {:.1} % of 200 us",
+            st.n,
+            st.min_i,
+            st.sum_i as f64 / st.n as f64,
+            st.max_i,
+            st.min_c,
+            mean_c,
+            st.max_c,
+            st.sum_t as f64 / st.n as f64,
+            st.max_c as f64 / CLOCK_MHZ,
+            st.max_c as f64 / CLOCK_MHZ / 2.0
+        );
+        let mut funcs: Vec<_> = by_func.into_iter().collect();
+        funcs.sort_by_key(|f| std::cmp::Reverse(f.1 .1));
+        for (name, (fi, fc)) in funcs {
+            println!(
+                "      {:>7.1} ins {:>7.1} cyc  {name}",
+                fi as f64 / st.n as f64,
+                fc as f64 / st.n as f64
+            );
+        }
+        if unknown > 0 {
+            println!("  {phase}: {unknown} executed addresses not in the disassembly");
+            ok = false;
+        }
+        if !outside_ccm.is_empty() {
+            println!("  {phase}: executed outside CCM SRAM: {outside_ccm:?}");
+            ok = false;
+        }
+        println!(
+            "  target: {phase} max <= {ISR_CYCLE_TARGET} est. cycles: {}",
+            if st.max_c as f64 <= ISR_CYCLE_TARGET {
+                "met"
+            } else {
+                "NOT met"
+            }
+        );
+        let key = format!("{phase}_max_cycles_est");
+        if update {
+            doc[key.as_str()] = serde_json::json!(st.max_c);
+        } else if check {
+            match doc[key.as_str()].as_u64() {
+                Some(b) => {
+                    let pass = st.max_c as f64 <= b as f64 * (1.0 + BUDGET_TOLERANCE);
+                    println!(
+                        "  budget {key}: {} vs {b} {}",
+                        st.max_c,
+                        if pass { "ok" } else { "OVER BUDGET" }
+                    );
+                    ok &= pass;
+                }
+                None => {
+                    println!("  no budget entry {key}");
+                    ok = false;
+                }
+            }
+        }
+    }
+    if update {
+        std::fs::write(
+            &budget_path,
+            serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())? + "\n",
+        )
+        .map_err(|e| format!("{}: {e}", budget_path.display()))?;
+        println!("budget written: {}", budget_path.display());
+    }
+    Ok(ok)
 }
 
 fn round2(x: f64) -> f64 {
