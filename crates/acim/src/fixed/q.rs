@@ -414,6 +414,10 @@ impl crate::num::Num for Q24 {
         true
     }
     #[inline(always)]
+    fn is_nan(self) -> bool {
+        false
+    }
+    #[inline(always)]
     fn recip(self) -> Q24 {
         Q24(reciprocal(self.0))
     }
