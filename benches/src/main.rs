@@ -1226,7 +1226,7 @@ struct Prev {
     /// The previous instruction was a single load (LDR/LDRB/LDRH/LDRSB/LDRSH, not a
     /// store, LDRD or LDM) into this core register (`u8::MAX`: the register is unknown).
     ldr_dest: Option<u8>,
-    /// Single-precision registers (bit n = s<n>) written by the previous instruction
+    /// Single-precision registers (bit n = register `sn`) written by the previous instruction
     /// whose result arrives one cycle after it issues (VADD/VSUB/VMUL/VNMUL/VCVT: result
     /// latency 2; VMLA/VMLS/VNMLA/VNMLS and the fused forms: 4 after 3 issue cycles;
     /// VDIV/VSQRT: 15 after 14).
