@@ -217,6 +217,7 @@ class Logs(unittest.TestCase):
                   file=sys.stderr)
             phases[phase] = stats
             target = os.path.join(HERE, "..", "..", "target")
+            os.makedirs(target, exist_ok=True)
             with open(os.path.join(target, f"fil-isr-trace-{phase}.txt"), "w") as f:
                 for t in m.isr_traces:
                     f.write(" ".join(f"{a:x}" for a in t) + "\n")
