@@ -199,12 +199,17 @@ fn run(
         );
         let base_t = base.sum_t as f64 / base.n.max(1) as f64;
         let tmean = s.sum_t as f64 / s.n as f64 - base_t;
+        let (down, up) = (
+            s.sum_down as f64 / s.n as f64 - base.sum_down as f64 / base.n.max(1) as f64,
+            s.sum_up as f64 / s.n as f64 - base.sum_up as f64 / base.n.max(1) as f64,
+        );
         regions.insert(
             name.to_string(),
             serde_json::json!({
                 "instructions": {"min": imin, "mean": round2(imean), "max": imax},
                 "cycles_est": {"min": cmin, "mean": round2(cmean), "max": cmax},
                 "cycles_table_only_mean": round2(tmean),
+                "cycles_est_mean_range": [round2(cmean - down), round2(cmean + up)],
             }),
         );
         rows.push((name, s.n, imin, imean, imax, cmin, cmean, cmax));
@@ -277,8 +282,8 @@ fn run(
     println!("(marker overhead subtracted: {b_i} instructions, {b_c} cycles)");
     if let Some(v) = regions.get("drive_step") {
         println!(
-            "drive_step mean est. cycles from the timing table alone (no pipeline effects): {}",
-            v["cycles_table_only_mean"]
+            "drive_step mean est. cycles from the timing table alone (no pipeline effects): {}; range left open by the model (branch refill 1-3, division overlap): {}",
+            v["cycles_table_only_mean"], v["cycles_est_mean_range"]
         );
     }
     println!("full-order / reduced-order observer cost ratio (mean est. cycles): {ratio:.2}");
@@ -523,6 +528,8 @@ struct Row {
     cmax: u64,
     /// Mean estimate from the timing table alone (no pipeline effects).
     tmean: f64,
+    /// Mean of the range the model leaves open ([`slack`]).
+    range: (f64, f64),
 }
 
 fn rows_of(stats: &HashMap<&'static str, Stat>, names: &[&'static str]) -> Res<Vec<Row>> {
@@ -546,6 +553,14 @@ fn rows_of(stats: &HashMap<&'static str, Stat>, names: &[&'static str]) -> Res<V
                 cmean: s.sum_c as f64 / s.n as f64 - b_c as f64,
                 cmax: s.max_c - b_c,
                 tmean: s.sum_t as f64 / s.n as f64 - base.sum_t as f64 / base.n.max(1) as f64,
+                range: {
+                    let per = |v: u64, n: u64| v as f64 / n.max(1) as f64;
+                    let c = per(s.sum_c, s.n) - b_c as f64;
+                    (
+                        c - (per(s.sum_down, s.n) - per(base.sum_down, base.n)),
+                        c + (per(s.sum_up, s.n) - per(base.sum_up, base.n)),
+                    )
+                },
             })
         })
         .collect()
@@ -598,6 +613,7 @@ fn region_json(r: &Row) -> serde_json::Value {
         "instructions": {"min": r.imin, "mean": round2(r.imean), "max": r.imax},
         "cycles_est": {"min": r.cmin, "mean": round2(r.cmean), "max": r.cmax},
         "cycles_table_only_mean": round2(r.tmean),
+        "cycles_est_mean_range": [round2(r.range.0), round2(r.range.1)],
     })
 }
 
@@ -634,6 +650,7 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
                 .filter_map(|h| u32::from_str_radix(h, 16).ok())
                 .collect();
             let (mut n, mut c, mut t) = (0u64, 0u64, 0u64);
+            let (mut down, mut up) = (0u64, 0u64);
             let mut prev = Prev::default();
             let mut after_ls = false;
             for (k, &pc) in pcs.iter().enumerate() {
@@ -650,6 +667,8 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
                 after_ls = is_single_ls(class);
                 let (cc, _, next) = timed(Core::M4, i, taken, &prev);
                 prev = next;
+                let (d, u) = slack(Core::M4, i, taken);
+                (down, up) = (down + d as u64, up + u as u64);
                 let f = by_func.entry(dis.funcs[i.func].name.clone()).or_default();
                 f.0 += 1;
                 f.1 += cc as u64;
@@ -658,6 +677,7 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
                 t += ct as u64;
             }
             st.add(n, c, t);
+            st.add_slack(down, up);
         }
         if st.n == 0 {
             return Err(format!("{}: no interrupt recorded", path.display()));
@@ -685,6 +705,11 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
                 fc as f64 / st.n as f64
             );
         }
+        println!(
+            "  {phase}: mean range left open by the model (branch refill 1-3, division overlap): {:.1} .. {:.1}",
+            mean_c - st.sum_down as f64 / st.n as f64,
+            mean_c + st.sum_up as f64 / st.n as f64
+        );
         if unknown > 0 {
             println!("  {phase}: {unknown} executed addresses not in the disassembly");
             ok = false;
@@ -1418,6 +1443,32 @@ fn cycles_on(core: Core, i: &Insn, taken: bool, after_ls: bool) -> (u32, Class) 
     (c, class)
 }
 
+/// What the estimate of one executed instruction leaves open (cycles it may be too high,
+/// too low): a pipeline refill is 1 to 3 cycles (TRM: "P ranges from 1 to 3 depending on
+/// the alignment and width of the target instruction, and whether the processor manages to
+/// speculate the address early"; 2 is taken); VDIV/VSQRT let the integer instructions
+/// behind them complete (up to 13 of their 14 cycles overlapped); the M3's long multiplies
+/// terminate early on small operands (the worst case is taken).
+fn slack(core: Core, i: &Insn, taken: bool) -> (u32, u32) {
+    let b = base_mnemonic(&i.mnemonic);
+    let ops = i.operands.as_str();
+    let writes_pc =
+        ops.starts_with("pc") || (ops.contains("pc}") && (b == "pop" || b.starts_with("ldm")));
+    let refill = match b.as_str() {
+        "b" | "cbz" | "cbnz" => taken,
+        "bl" | "blx" | "bx" | "tbb" | "tbh" => true,
+        _ => writes_pc,
+    };
+    let mut s = if refill { (1, 1) } else { (0, 0) };
+    match b.as_str() {
+        "vdiv" | "vsqrt" => s.0 += 13,
+        "umull" | "smull" if core == Core::M3 => s.0 += 1,
+        "umlal" | "smlal" if core == Core::M3 => s.0 += 2,
+        _ => {}
+    }
+    s
+}
+
 fn is_single_ls(class: Class) -> bool {
     class == Class::LoadStore
 }
@@ -1474,9 +1525,18 @@ struct Stat {
     /// Sum of the estimate from the timing table alone (the model before the pipeline
     /// effects of [`timed`]), for comparison.
     sum_t: u64,
+    /// Sums of the model's unmodelled slack (cycles the estimate may be too high, too
+    /// low): see [`slack`].
+    sum_down: u64,
+    sum_up: u64,
 }
 
 impl Stat {
+    fn add_slack(&mut self, down: u64, up: u64) {
+        self.sum_down += down;
+        self.sum_up += up;
+    }
+
     fn add(&mut self, i: u64, c: u64, t: u64) {
         self.sum_t += t;
         if self.n == 0 {
@@ -1657,6 +1717,7 @@ fn run_qemu(
     let mut after_ls = false;
     let mut prev = Prev::default();
     let mut count_t = 0u64;
+    let (mut count_down, mut count_up) = (0u64, 0u64);
     let mut unknown_pcs = 0u64;
     let mut other_lines = Vec::new();
     let mut stderr_summary = String::new();
@@ -1720,6 +1781,9 @@ fn run_qemu(
                 if counted {
                     count_c += c as u64;
                     count_t += t as u64;
+                    let (d, u) = slack(spec.core, i, taken);
+                    count_down += d as u64;
+                    count_up += u as u64;
                     if active == Some(spec.profile_region) {
                         let e = profile.by_pc.entry(ppc).or_default();
                         e.0 += 1;
@@ -1735,11 +1799,17 @@ fn run_qemu(
                 count_i = 0;
                 count_c = 0;
                 count_t = 0;
+                count_down = 0;
+                count_up = 0;
             } else if active == Some(m.region) {
                 stats
                     .entry(m.region)
                     .or_default()
                     .add(count_i, count_c, count_t);
+                stats
+                    .entry(m.region)
+                    .or_default()
+                    .add_slack(count_down, count_up);
                 active = None;
             } else {
                 active = None;
@@ -2050,5 +2120,29 @@ mod tests {
         assert_eq!(seq(Core::M3, &[("smull", "r0, r1, r2, r3")]), 5);
         assert_eq!(seq(Core::M3, &[("smlal", "r0, r1, r2, r3")]), 7);
         assert_eq!(seq(Core::M4, &[("smlal", "r0, r1, r2, r3")]), 1);
+        // what the model leaves open: refills 1-3 (2 taken), division overlap, M3 early
+        // termination
+        let mk = |m: &str, o: &str| Insn {
+            addr: 0,
+            size: 2,
+            mnemonic: m.into(),
+            operands: o.into(),
+            func: 0,
+        };
+        assert_eq!(slack(Core::M4, &mk("bne", "0x8000"), true), (1, 1));
+        assert_eq!(slack(Core::M4, &mk("bne", "0x8000"), false), (0, 0));
+        assert_eq!(slack(Core::M4, &mk("pop", "{r4, pc}"), true), (1, 1));
+        assert_eq!(
+            slack(Core::M4, &mk("vdiv.f32", "s0, s1, s2"), false),
+            (13, 0)
+        );
+        assert_eq!(
+            slack(Core::M3, &mk("smlal", "r0, r1, r2, r3"), false),
+            (2, 0)
+        );
+        assert_eq!(
+            slack(Core::M4, &mk("smlal", "r0, r1, r2, r3"), false),
+            (0, 0)
+        );
     }
 }
