@@ -4,6 +4,7 @@
 //! cargo run -p acim-bench --release                  # measure, print, write results/
 //! cargo run -p acim-bench --release -- --check       # also fail on budget/panic/f64
 //! cargo run -p acim-bench --release -- --update-budget
+//! cargo run -p acim-bench --release -- --weigh-isr ELF DIR [--check|--update-budget]
 //! ```
 //!
 //! Steps: builds the firmware bin `acim-bench-fw` for `thumbv7em-none-eabihf` (release),
@@ -13,7 +14,10 @@
 //! `-dfilter` to the measured code, and stream-parses the log (never held in memory):
 //! every executed instruction is one `Trace` line with its PC, so the count between the
 //! `bench_begin_R` and `bench_end_R` marker calls is exact. Each executed instruction is
-//! weighted with the Cortex-M4 timing table below to estimate cycles.
+//! weighted with the Cortex-M4 timing table below and the pipeline model of [`timed`] to
+//! estimate cycles. The same run traces the fixed-point firmware `acim-bench-fixed` on the
+//! Cortex-M4F and the Cortex-M3 (`netduino2`; [`Core::M3`] for its multiplies), and
+//! `--weigh-isr` weighs the firmware-in-the-loop traces of the control interrupt.
 //!
 //! ## Cortex-M4 timing table (Arm Cortex-M4 TRM r0p1, tables 3-1 and 7-1) and assumptions
 //!
@@ -22,26 +26,30 @@
 //! | ALU, MOV/MOVW/MOVT, CMP/TST, shifts, extend, bitfield, IT, NOP, MUL, SMULL/UMULL/SMLAL/UMLAL | 1 |
 //! | MLA, MLS | 2 |
 //! | SDIV, UDIV | 12 (the TRM's 2-12 is data dependent; worst case taken) |
-//! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2, or 1 when directly after another single load/store (pipelined) |
+//! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2 (pipelining in [`timed`]) |
 //! | LDRD, STRD | 3 |
 //! | LDM/STM/PUSH/POP (N registers) | 1 + N; POP/LDM with PC: 1 + N + 2 |
 //! | B, B`<cond>`, CBZ/CBNZ | taken 3 (1 + 2 refill), not taken 1 |
 //! | BL, BX, BLX | 3 |
 //! | TBB, TBH | 4 |
 //! | other writes of PC (MOV/ADD/LDR pc) | + 2 |
-//! | VADD/VSUB/VMUL/VNMUL/VABS/VNEG/VCMP/VCVT/VMOV/VMRS/VMSR (F32) | 1 |
-//! | VMOV two core registers <-> two S / one D register | 2 |
+//! | VADD/VSUB/VMUL/VNMUL/VABS/VNEG/VCMP/VCVT/VMRS/VMSR (F32), VMOV between S registers | 1 |
+//! | VMOV one or two core registers <-> S / D registers | 2 (one float: in [`timed`]) |
 //! | VLDR, VSTR | 2 |
 //! | VLDM/VSTM/VPUSH/VPOP (N single registers, a D counts 2) | 1 + N |
 //! | VMLA/VMLS/VNMLA/VNMLS, VFMA/VFMS/VFNMA/VFNMS | 3 |
 //! | VDIV, VSQRT | 14 |
 //!
+//! On top of the table, [`timed`] models the TRM's load/store pipelining rules, the FP
+//! result-use stall and the core-FP moves (issue 16; validated in the tests on the TRM's
+//! own sequences), and [`slack`] reports what stays open (refill 1-3 cycles, division
+//! overlap, M3 early termination) as a range.
+//!
 //! Assumptions: zero-wait-state memory (code in CCM SRAM or flash hidden by the ART
-//! accelerator), no bus contention, no interrupts; no modelling of operand dependencies
-//! (a VMUL result feeding the next VADD, a load feeding an address), of the FPU's
-//! load/store pipelining beyond the table, or of IT folding (IT counted as 1). An
-//! instruction skipped inside an IT block is counted as executed (1 cycle), as the core
-//! does. QEMU itself is not cycle-accurate: only the instruction counts are exact.
+//! accelerator), no bus contention, no interrupts; no modelling of the FPU's load/store
+//! pipelining with core loads or of IT folding (IT counted as 1). An instruction skipped
+//! inside an IT block is counted as executed (1 cycle), as the core does. QEMU itself is
+//! not cycle-accurate: only the instruction counts are exact.
 //!
 //! Region overhead: the `bl bench_end_R` call is inside the region; the minimum of the
 //! `empty` calibration region (begin immediately followed by end) is subtracted from every
