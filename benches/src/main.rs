@@ -26,7 +26,7 @@
 //! | ALU, MOV/MOVW/MOVT, CMP/TST, shifts, extend, bitfield, IT, NOP, MUL, SMULL/UMULL/SMLAL/UMLAL | 1 |
 //! | MLA, MLS | 2 |
 //! | SDIV, UDIV | 12 (the TRM's 2-12 is data dependent; worst case taken) |
-//! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2 (pipelining in [`timed`]) |
+//! | LDR/LDRB/LDRH/LDRSB/LDRSH, STR/STRB/STRH | 2, 1 directly after a single load/store in the table-only figure (the TRM's exact pipelining rules: [`timed`]) |
 //! | LDRD, STRD | 3 |
 //! | LDM/STM/PUSH/POP (N registers) | 1 + N; POP/LDM with PC: 1 + N + 2 |
 //! | B, B`<cond>`, CBZ/CBNZ | taken 3 (1 + 2 refill), not taken 1 |
