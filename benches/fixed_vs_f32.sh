@@ -4,6 +4,7 @@
 # (thumbv7em-none-eabihf, hardware f32) on netduinoplus2. See src/bin/fixed_vs_f32.rs.
 #   bash benches/fixed_vs_f32.sh          (from anywhere; needs qemu-system-arm)
 set -euo pipefail
+shopt -s inherit_errexit # a failed build inside $(run ...) stops the script
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
 run() { # target machine cpu

@@ -32,7 +32,8 @@ does not use.
 import math
 import struct
 
-from unicorn import Uc, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK, UcError
+from unicorn import (Uc, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK,
+                     UC_HOOK_CODE, UcError)
 from unicorn.arm_const import (
     UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4,
     UC_ARM_REG_R5, UC_ARM_REG_R6, UC_ARM_REG_R7, UC_ARM_REG_R8, UC_ARM_REG_R9,
@@ -158,6 +159,8 @@ class Machine:
         self.periods = 0
         self.isr_instructions = []
         self.count_isr = False
+        self.trace_isr = False   # record each interrupt's executed PCs (isr_traces)
+        self.isr_traces = []     # one list of executed instruction addresses per interrupt
         self.tx = bytearray()
         self.rx = bytearray()
         self.rx_history = bytearray()
@@ -449,11 +452,20 @@ class Machine:
             self._isr_count = 0
             h = self.uc.hook_add(UC_HOOK_BLOCK, self._count_block)
             self._flush()  # blocks translated before the hook would skip it
+        trace, ht = None, None
+        if self.trace_isr:
+            trace = []
+            ht = self.uc.hook_add(UC_HOOK_CODE, lambda _uc, a, _s, _d: trace.append(a))
+            self._flush()
         try:
             self.uc.emu_start(handler, STOP, count=limit)
         except UcError as e:
             self.halted = f"exception in vector {vector}: {e} at 0x{self.uc.reg_read(UC_ARM_REG_PC):08x}"
         finally:
+            if ht is not None:
+                self.uc.hook_del(ht)
+                self.isr_traces.append(trace)
+                self._flush()
             if h is not None:
                 self.uc.hook_del(h)
                 self._flush()

@@ -182,22 +182,58 @@ class Logs(unittest.TestCase):
         self._golden("golden-boot-writes.txt", lines)
 
     def test_control_interrupt_instruction_budget(self):
-        """Executed instructions of the real control interrupt, entry to return, while
-        magnetizing (CORDIC sin/cos): published and held to a budget (+5 %)."""
+        """Executed instructions of the real control interrupt, entry to return (CORDIC
+        sin/cos), while magnetizing and while running (into the R-L load model, after
+        magnetizing ends): published and held to a budget (+5 %). Every executed
+        instruction is in CCM SRAM (no call leaves it). The executed addresses of each
+        interrupt go to target/fil-isr-trace-<phase>.txt, where the cycle bench weighs
+        them with its Cortex-M4 model (`acim-bench --weigh-isr`, gated at 1000 cycles)."""
         m = started()
-        m.count_isr = True
-        m.run(200)
-        n = m.isr_instructions
-        self.assertTrue(n)
-        stats = {"min": min(n), "mean": round(sum(n) / len(n), 1), "max": max(n),
-                 "periods": len(n)}
-        print(f"\ncontrol interrupt (power-stage build, magnetizing): {stats}", file=sys.stderr)
+        phases = {}
+        for phase in ("magnetizing", "running"):
+            if phase == "running":
+                for _ in range(40):
+                    if state_fault(m)[0] == 2:
+                        break
+                    m.run(100)
+                self.assertEqual(state_fault(m), (2, 0), "not Running in the R-L load")
+                m.isr_instructions = []
+            m.count_isr = True
+            m.trace_isr = True
+            m.isr_traces = []
+            m.run(200)
+            m.count_isr = False
+            m.trace_isr = False
+            self.assertIsNone(m.halted)
+            n = m.isr_instructions
+            self.assertTrue(n)
+            outside = sorted({a for t in m.isr_traces for a in t
+                              if not 0x1000_0000 <= a < 0x1000_8000})
+            self.assertFalse(outside, f"{phase}: executed outside CCM SRAM: "
+                             + ", ".join(f"0x{a:08x}" for a in outside[:10]))
+            stats = {"min": min(n), "mean": round(sum(n) / len(n), 1), "max": max(n),
+                     "periods": len(n)}
+            print(f"\ncontrol interrupt (power-stage build, {phase}): {stats}",
+                  file=sys.stderr)
+            phases[phase] = stats
+            target = os.path.join(HERE, "..", "..", "target")
+            os.makedirs(target, exist_ok=True)
+            with open(os.path.join(target, f"fil-isr-trace-{phase}.txt"), "w") as f:
+                for t in m.isr_traces:
+                    f.write(" ".join(f"{a:x}" for a in t) + "\n")
         path = os.path.join(HERE, "isr-budget.json")
+        measured = {"max_instructions": phases["magnetizing"]["max"],
+                    "running_max_instructions": phases["running"]["max"]}
         if UPDATE or not os.path.exists(path):
-            json.dump({"max_instructions": stats["max"]}, open(path, "w"), indent=1)
-        budget = json.load(open(path))["max_instructions"]
-        self.assertLessEqual(stats["max"], budget * 1.05, f"{stats} vs budget {budget}")
-        json.dump(stats, open(os.path.join(HERE, "..", "..", "target", "fil-isr.json"), "w"))
+            old = json.load(open(path)) if os.path.exists(path) else {}
+            old.update(measured)
+            with open(path, "w") as f:  # the layout acim-bench --weigh-isr writes too
+                json.dump(old, f, indent=2, sort_keys=True)
+                f.write("\n")
+        budget = json.load(open(path))
+        for key, value in measured.items():
+            self.assertLessEqual(value, budget[key] * 1.05, f"{key}: {phases} vs {budget}")
+        json.dump(phases, open(os.path.join(HERE, "..", "..", "target", "fil-isr.json"), "w"))
 
 
 class SelfTest(unittest.TestCase):

@@ -16,6 +16,13 @@
 //! even steps the whole `step`, on odd steps the regions of `step_probed`; the observer
 //! alone is measured on each arithmetic's own inputs every step.
 //!
+//! Markers: the fixed-point regions are also bracketed by calls to `#[inline(never)]
+//! #[no_mangle]` functions `bench_begin_fx_R` / `bench_end_fx_R` (distinct bodies), so
+//! the host runner (`cargo run -p acim-bench --release`) counts the executed
+//! instructions between them exactly in QEMU's execution log and weights them with the
+//! Cortex-M4 or Cortex-M3 timing table (the gate of the fixed path). The marker calls sit
+//! inside the SysTick window too; the `empty` region calibrates both away.
+//!
 //! Run (from the workspace root):
 //!
 //! ```sh
@@ -33,6 +40,7 @@ mod fw {
     };
     use acim::fixed::{FixedDrive, FixedInputs, PerUnitBases, Q24};
     use acim::frames::{inverse_clarke, inverse_park, Dq, FastSinCos};
+    use acim::observer::ObserverCoeffs;
     use acim::observer::{ObserverInputs, ReducedOrderObserver};
     use core::hint::black_box;
     use cortex_m::peripheral::{syst::SystClkSource, SYST};
@@ -54,6 +62,58 @@ mod fw {
     ];
     const MEASURED: u32 = 500;
 
+    macro_rules! markers {
+        ($($id:literal $begin:ident $end:ident),* $(,)?) => {
+            $(
+                // no_mangle: the host runner finds the marker by its symbol
+                #[allow(unsafe_code)]
+                #[inline(never)]
+                #[no_mangle]
+                pub extern "C" fn $begin() {
+                    black_box($id as u32);
+                }
+                #[allow(unsafe_code)]
+                #[inline(never)]
+                #[no_mangle]
+                pub extern "C" fn $end() {
+                    black_box($id as u32 + 100);
+                }
+            )*
+            /// The begin marker of region `id` (constant at every call site once inlined).
+            #[inline(always)]
+            fn marker_begin(id: usize) {
+                match id {
+                    $($id => $begin(),)*
+                    _ => {}
+                }
+            }
+            /// The end marker of region `id`.
+            #[inline(always)]
+            fn marker_end(id: usize) {
+                match id {
+                    $($id => $end(),)*
+                    _ => {}
+                }
+            }
+        };
+    }
+
+    // ids are the indices in REGIONS
+    markers!(
+        // the bodies pass distinct ids through black_box: never merged, never removed
+        0 bench_begin_fx_empty bench_end_fx_empty,
+        1 bench_begin_fx_fault_checks bench_end_fx_fault_checks,
+        2 bench_begin_fx_clarke_park bench_end_fx_clarke_park,
+        3 bench_begin_fx_observer_reduced bench_end_fx_observer_reduced,
+        4 bench_begin_fx_rs_estimator bench_end_fx_rs_estimator,
+        5 bench_begin_fx_flux_slip bench_end_fx_flux_slip,
+        6 bench_begin_fx_speed_pi bench_end_fx_speed_pi,
+        7 bench_begin_fx_current_pi bench_end_fx_current_pi,
+        8 bench_begin_fx_svpwm bench_end_fx_svpwm,
+        9 bench_begin_fx_drive_step bench_end_fx_drive_step,
+        10 bench_begin_fx_observer_alone bench_end_fx_observer_alone,
+    );
+
     #[derive(Clone, Copy)]
     struct Stat {
         min: u32,
@@ -71,16 +131,24 @@ mod fw {
     struct Stats {
         s: [Stat; REGIONS.len()],
         t0: u32,
+        /// Whether this arithmetic's regions call the trace markers (the fixed point).
+        traced: bool,
     }
 
     impl Stats {
         #[inline(always)]
-        fn begin(&mut self) {
+        fn begin(&mut self, id: usize) {
+            if self.traced {
+                marker_begin(id);
+            }
             self.t0 = SYST::get_current();
         }
         #[inline(always)]
         fn end(&mut self, id: usize) {
             let t1 = SYST::get_current();
+            if self.traced {
+                marker_end(id);
+            }
             let d = self.t0.wrapping_sub(t1) & 0x00FF_FFFF; // counts down
             if let Some(st) = self.s.get_mut(id) {
                 st.min = st.min.min(d);
@@ -106,8 +174,8 @@ mod fw {
 
     impl StepProbe for Stats {
         #[inline(always)]
-        fn begin(&mut self, _: StepRegion) {
-            Stats::begin(self);
+        fn begin(&mut self, r: StepRegion) {
+            Stats::begin(self, id(r));
         }
         #[inline(always)]
         fn end(&mut self, r: StepRegion) {
@@ -132,14 +200,19 @@ mod fw {
         let mut empty = u32::MAX;
         let mut nops = u32::MAX;
         for _ in 0..8 {
-            stats.begin();
+            stats.begin(0);
             let t1 = SYST::get_current();
+            if stats.traced {
+                marker_end(0);
+            }
             empty = empty.min(stats.t0.wrapping_sub(t1) & 0x00FF_FFFF);
-            stats.begin();
-            // SAFETY: 1000 `nop`s: no memory, register or flag effects.
+            stats.begin(11);
+            // SAFETY: 1000 `nop`s: no memory, register or flag effects. Not declared
+            // `nomem`: the asm then orders with the volatile SysTick reads around it (with
+            // `nomem` the compiler may hoist the closing read above the nops).
             #[allow(unsafe_code)]
             unsafe {
-                core::arch::asm!(".rept 1000", "nop", ".endr", options(nomem, nostack))
+                core::arch::asm!(".rept 1000", "nop", ".endr", options(nostack))
             };
             let t1 = SYST::get_current();
             nops = nops.min(stats.t0.wrapping_sub(t1) & 0x00FF_FFFF);
@@ -180,6 +253,33 @@ mod fw {
         c
     }
 
+    // The measured fixed-point work, out of line: the host runner's trace filter covers
+    // these functions (and what they call) only.
+    #[inline(never)]
+    fn fixed_step(d: &mut FixedDrive, inp: &FixedInputs, st: &mut Stats) {
+        st.begin(9);
+        black_box(d.step(black_box(inp)));
+        st.end(9);
+    }
+
+    #[inline(never)]
+    fn fixed_step_probed(d: &mut FixedDrive, inp: &FixedInputs, st: &mut Stats) {
+        black_box(d.step_probed(black_box(inp), st));
+    }
+
+    #[inline(never)]
+    fn fixed_observer(
+        o: &mut ReducedOrderObserver<Q24>,
+        c: &ObserverCoeffs<Q24>,
+        u: &ObserverInputs<Q24>,
+        st: &mut Stats,
+    ) {
+        st.begin(10);
+        o.update(black_box(c), black_box(u));
+        st.end(10);
+        black_box(&*o);
+    }
+
     #[entry]
     fn main() -> ! {
         let Some(mut p) = cortex_m::Peripherals::take() else {
@@ -205,12 +305,16 @@ mod fw {
         let mut st32 = Stats {
             s: [NEW; REGIONS.len()],
             t0: 0,
+            traced: false,
         };
         let mut stq = Stats {
             s: [NEW; REGIONS.len()],
             t0: 0,
+            traced: true,
         };
         let (empty, nops) = calibrate(&mut st32);
+        // the trace markers' calibration (the SysTick figures use the untraced one)
+        let _ = calibrate(&mut stq);
         let _ = f32_drive.set_speed_target(500.0 * acim::math::RPM_TO_RAD_S);
         let _ = fixed_drive.set_speed_target_si(500.0 * acim::math::RPM_TO_RAD_S);
         let _ = f32_drive.start();
@@ -238,15 +342,13 @@ mod fw {
                 dc_bus: Q24::from_pu(325.0 / bases.voltage),
             };
             if running && steps % 2 == 0 {
-                st32.begin();
+                st32.begin(9);
                 black_box(f32_drive.step(black_box(&inp32)));
                 st32.end(9);
-                stq.begin();
-                black_box(fixed_drive.step(black_box(&inpq)));
-                stq.end(9);
+                fixed_step(&mut fixed_drive, &inpq, &mut stq);
             } else if running {
                 black_box(f32_drive.step_probed(black_box(&inp32), &mut st32));
-                black_box(fixed_drive.step_probed(black_box(&inpq), &mut stq));
+                fixed_step_probed(&mut fixed_drive, &inpq, &mut stq);
             } else {
                 f32_drive.step(&inp32);
                 fixed_drive.step(&inpq);
@@ -264,7 +366,7 @@ mod fw {
                     inv_rotor_flux: 1.0 / t.rotor_flux.max(0.05),
                     equivalent_resistance: t.stator_resistance_estimate + 7.81,
                 };
-                st32.begin();
+                st32.begin(10);
                 obs32.update(black_box(&obs_cfg.coeffs), black_box(&u));
                 st32.end(10);
                 black_box(&obs32);
@@ -279,10 +381,7 @@ mod fw {
                         inv_rotor_flux: Q24(acim::fixed::q::reciprocal(q.rotor_flux.0)),
                         equivalent_resistance: q.stator_resistance_estimate + Q24(3_276_000),
                     };
-                    stq.begin();
-                    obsq.update(black_box(c), black_box(&uq));
-                    stq.end(10);
-                    black_box(&obsq);
+                    fixed_observer(&mut obsq, c, &uq, &mut stq);
                 }
             }
             // ideal current loop: next samples = this step's references at the next angle

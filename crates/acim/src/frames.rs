@@ -84,16 +84,15 @@ impl FastSinCos {
                 + r2 * (-1.0 / 6.0
                     + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 * (1.0 / 362_880.0)))));
         let c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40320.0))));
-        let v = match k & 3 {
+        // always finite: x is finite with |x| < 1000 or wrapped into [-pi, pi) (a NaN or
+        // an infinity wraps to 0), so |r| <= pi/4 and the polynomials are bounded. The
+        // finiteness check the result used to get could never fail (test
+        // `non_finite_and_extreme_inputs_give_finite_values`).
+        match k & 3 {
             0 => SinCosValue { sin: s, cos: c },
             1 => SinCosValue { sin: c, cos: -s },
             2 => SinCosValue { sin: -s, cos: -c },
             _ => SinCosValue { sin: -c, cos: s },
-        };
-        if crate::math::is_finite(v.sin) {
-            v
-        } else {
-            SinCosValue { sin: 0.0, cos: 1.0 }
         }
     }
 }
@@ -170,7 +169,7 @@ pub fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::f32::consts::{FRAC_PI_2, PI};
+    use core::f32::consts::{FRAC_PI_2, PI, TAU as TAU_F};
     use proptest::prelude::*;
 
     #[test]
@@ -196,6 +195,51 @@ mod tests {
         assert_eq!((v.sin, v.cos), (0.0, 1.0));
         let v = FastSinCos::eval(f32::INFINITY);
         assert_eq!((v.sin, v.cos), (0.0, 1.0));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(100_000))]
+        /// Every f32 bit pattern (NaN payloads, infinities, subnormals, the extremes)
+        /// gives a finite sin/cos: the reason `eval` needs no finiteness check of its own.
+        #[test]
+        fn non_finite_and_extreme_inputs_give_finite_values(bits in any::<u32>()) {
+            let v = FastSinCos::eval(f32::from_bits(bits));
+            prop_assert!(v.sin.is_finite() && v.cos.is_finite(), "{:e}", f32::from_bits(bits));
+            prop_assert!(v.sin.abs() <= 1.0 + 1e-6 && v.cos.abs() <= 1.0 + 1e-6);
+        }
+    }
+
+    #[test]
+    fn non_finite_and_extreme_inputs_exhaustive_edges() {
+        for x in [
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1e-45,
+            -0.0,
+            999.999_94,
+            -999.999_94,
+            1000.0,
+            -1000.0,
+            8_388_608.0 * TAU_F,
+            -8_388_608.0 * TAU_F,
+        ] {
+            let v = FastSinCos::eval(x);
+            assert!(v.sin.is_finite() && v.cos.is_finite(), "{x:e}");
+        }
+        // every float in [-1000, 1000] reachable by a coarse walk over the bit patterns
+        let mut b = 0u32;
+        while b < u32::MAX - 4093 {
+            let x = f32::from_bits(b);
+            let v = FastSinCos::eval(x);
+            assert!(v.sin.is_finite() && v.cos.is_finite(), "{x:e}");
+            b += 4093;
+        }
     }
 
     #[test]

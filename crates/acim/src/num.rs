@@ -85,6 +85,8 @@ pub trait Num:
     fn into_range(self, lo: Self, hi: Self) -> Self;
     /// Whether finite (always in fixed point).
     fn is_finite(self) -> bool;
+    /// Whether NaN (never in fixed point): one self-comparison in f32.
+    fn is_nan(self) -> bool;
     /// `self` if finite, else `fallback` (the identity in fixed point).
     #[inline(always)]
     fn finite_or(self, fallback: Self) -> Self {
@@ -190,6 +192,10 @@ impl Num for f32 {
     #[inline(always)]
     fn is_finite(self) -> bool {
         crate::math::is_finite(self)
+    }
+    #[inline(always)]
+    fn is_nan(self) -> bool {
+        f32::is_nan(self)
     }
     #[inline(always)]
     fn recip(self) -> f32 {

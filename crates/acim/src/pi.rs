@@ -144,14 +144,20 @@ impl<N: Num> PiController<N> {
             };
             self.saturated = true;
         } else {
-            // also catches NaN (all comparisons false): clamp below maps it into range
+            // also catches NaN (all comparisons false): the integral clamp below maps it
+            // into range
             self.integral = candidate;
-            out = unsat;
             self.saturated = false;
+            // in range unless NaN (an infinity took a branch above): one self-comparison
+            // instead of the two of a clamp; a NaN in f32 is mapped into range here
+            out = if unsat.is_nan() {
+                unsat.into_range(lo, hi)
+            } else {
+                unsat
+            };
         }
         self.integral = self.integral.clamp(lo, hi);
-        // a NaN in f32 (all comparisons false above) is mapped into range here
-        out.into_range(lo, hi)
+        out
     }
 
     /// Bumpless reset: sets the integral so that, with zero error and feed-forward

@@ -27,18 +27,38 @@ pub fn saturate(v: i64) -> i32 {
     }
 }
 
-/// Product of two Q7.24 values in Q7.24, rounded to nearest (ties up) and saturated.
-/// The `i64` product of two `i32` cannot overflow (|a b| <= 2^62).
+/// The `i32` saturation of the 64-bit value `hi:lo` (`hi` its upper word, `lo` its lower
+/// word as a signed bit pattern): `lo` when `hi` is its sign extension, else the bound of
+/// the value's sign, which the caller passes as `sign` (negative or not; the caller knows
+/// it from its operands' signs without looking at the 64-bit value, which keeps the
+/// compiler from rebuilding the two 64-bit comparisons of [`saturate`]). The same function
+/// of the 64-bit value as [`saturate`].
+#[inline(always)]
+fn saturate_words(hi: i32, lo: i32, sign: i32) -> i32 {
+    if hi != lo >> 31 {
+        (sign >> 31) ^ i32::MAX
+    } else {
+        lo
+    }
+}
+
+/// Product of two Q7.24 values in Q7.24, rounded to nearest (ties up) and saturated:
+/// `saturate((a b + 2^23) >> 24)`. The `i64` product of two `i32` cannot overflow
+/// (|a b| <= 2^62), nor the rounded sum. Computed on the two words of the product: the
+/// result is bits 24..56 of the rounded product, saturated from its two words (bit-identical to the 64-bit form, `tests::mul_matches_the_64_bit_form`).
 #[inline(always)]
 pub fn mul(a: i32, b: i32) -> i32 {
     // wrapping_* on operations that cannot overflow: no overflow-check panic path in any
     // build profile (the i64 product is below 2^62, the rounded sum below 2^63)
-    saturate(
-        (a as i64)
-            .wrapping_mul(b as i64)
-            .wrapping_add(1i64 << (FRAC_BITS - 1))
-            >> FRAC_BITS,
-    )
+    let p = (a as i64)
+        .wrapping_mul(b as i64)
+        .wrapping_add(1i64 << (FRAC_BITS - 1));
+    let hi = (p >> 32) as i32;
+    let lo = p as u32;
+    let r = ((lo >> FRAC_BITS) | ((hi as u32) << (32 - FRAC_BITS))) as i32;
+    // when it does not fit, |a b| >= 2^54: the product is nonzero and its sign is that of
+    // a ^ b
+    saturate_words(hi >> FRAC_BITS, r, a ^ b)
 }
 
 /// `x` limited to [lo, hi] by comparisons (requires lo <= hi; `Ord::clamp` asserts that and
@@ -70,8 +90,12 @@ pub fn from_q24(x: i32) -> f32 {
 /// A constant factor with its own binary point: `value = mantissa / 2^shift`, the
 /// mantissa normalised to 29-30 significant bits at construction, so a gain of 4e-5 keeps
 /// the same relative precision (about 2e-9, better than the f32 it comes from) as a gain
-/// of 200. [`Gain::apply`] multiplies a Q7.24 signal by it: one 32x32->64 multiply, a
-/// rounding add and a shift by `shift` (0..=62), saturated.
+/// of 200. [`Gain::apply`] multiplies a Q7.24 signal by it: `saturate((x mantissa +
+/// 2^(shift-1)) >> shift)`, the exact product rounded to nearest and saturated.
+///
+/// The step never shifts a 64-bit value by a variable amount: construction splits the
+/// gain into the words [`Gain::apply`] needs (see there), so one apply is two multiplies
+/// into 64 bits and a few single-word operations on every core (Cortex-M3 included).
 ///
 /// Gains are built from the f32 designs at construction time (the designs stay
 /// single-sourced in `observer`, `pi`, `flux`, `rs_estimator`, `svpwm`); the step never
@@ -81,6 +105,19 @@ pub fn from_q24(x: i32) -> f32 {
 pub struct Gain {
     mantissa: i32,
     shift: u32,
+    /// Multiplier of the 64-bit word sum (the fraction part): `(mantissa mod 2^shift)
+    /// 2^(32-shift)` for shift <= 32, `mantissa` above.
+    frac: i32,
+    /// Multiplier of the integer part: `round(mantissa / 2^shift)` for shift <= 32, 0
+    /// above (the result then cannot saturate).
+    int: i32,
+    /// Rounding constant added below the fraction product, low and high words: 2^31 for
+    /// shift <= 32, `2^(shift-1)` above.
+    round_lo: u32,
+    /// High word of the rounding constant.
+    round_hi: i32,
+    /// Final right shift: 0 for shift <= 32, `shift - 32` above.
+    post: u32,
 }
 
 impl Gain {
@@ -88,7 +125,47 @@ impl Gain {
     pub const ZERO: Self = Self {
         mantissa: 0,
         shift: 0,
+        frac: 0,
+        int: 0,
+        round_lo: 0,
+        round_hi: 0,
+        post: 0,
     };
+
+    /// The gain `mantissa / 2^shift` (shift <= 62) with its apply words.
+    const fn from_parts(mantissa: i32, shift: u32) -> Self {
+        if shift <= 32 {
+            // int = floor((m + 2^(shift-1)) / 2^shift), frac = m - int 2^shift in
+            // [-2^(shift-1), 2^(shift-1)): frac 2^(32-shift) in [-2^31, 2^31)
+            let m = mantissa as i64;
+            let (int, rem) = if shift == 0 {
+                (m, 0)
+            } else {
+                let i = (m + (1i64 << (shift - 1))) >> shift;
+                (i, m - (i << shift))
+            };
+            Self {
+                mantissa,
+                shift,
+                frac: (rem << (32 - shift)) as i32,
+                int: int as i32,
+                round_lo: 1 << 31,
+                round_hi: 0,
+                post: 0,
+            }
+        } else {
+            let round = 1i64 << (shift - 1);
+            Self {
+                mantissa,
+                shift,
+                frac: mantissa,
+                int: 0,
+                round_lo: round as u32,
+                round_hi: (round >> 32) as i32,
+                post: shift - 32,
+            }
+        }
+    }
 
     /// The gain nearest to `x`, or `None` when `x` is not finite or |x| >= 2^30
     /// (configuration time only).
@@ -107,7 +184,7 @@ impl Gain {
             shift += 1;
         }
         let mantissa = (scaled + if scaled >= 0.0 { 0.5 } else { -0.5 }) as i32;
-        Some(Self { mantissa, shift })
+        Some(Self::from_parts(mantissa, shift))
     }
 
     /// The value as f32 (tests and diagnostics).
@@ -121,14 +198,40 @@ impl Gain {
         v
     }
 
-    /// `x * value`, rounded to nearest and saturated. `shift <= 62` by construction, so the
-    /// rounding term and the product (|x m| < 2^61) stay inside `i64`; the wrapping shift
-    /// functions only avoid a (never taken) overflow-check panic path.
+    /// `x * value`, rounded to nearest and saturated: `saturate((x mantissa +
+    /// 2^(shift-1)) >> shift)` (0 for the rounding term at shift 0), bit for bit
+    /// (`tests::apply_matches_the_64_bit_form` over every shift and random inputs).
+    ///
+    /// How, with `m = int 2^shift + frac'` split at construction:
+    /// - shift <= 32: `x m / 2^shift = x int + x frac' / 2^shift`, and the rounded
+    ///   second term is the upper word of `x frac + 2^31` (`frac = frac' 2^(32-shift)`,
+    ///   a 32-bit factor); the sum `x int + that` is exact in 64 bits and saturated to
+    ///   `i32` from its two words;
+    /// - shift > 32 (gains below 1/4): `int = 0`, the upper word of `x m + 2^(shift-1)`
+    ///   shifted right by `shift - 32` is the result, which cannot saturate (|x m| <
+    ///   2^61).
+    ///
+    /// Two multiply-accumulates (`SMLAL`), no variable 64-bit shift, no 64-bit compare.
     #[inline(always)]
     pub fn apply(self, x: i32) -> i32 {
-        let p = (x as i64).wrapping_mul(self.mantissa as i64);
-        let round = 1i64.wrapping_shl(self.shift) >> 1;
-        saturate(p.wrapping_add(round).wrapping_shr(self.shift))
+        // the i64 arithmetic below cannot overflow (|x frac| < 2^62 plus a constant
+        // below 2^61; |x int| <= 2^61 plus a word); the wrapping forms only keep
+        // overflow-check panic paths out of every build profile
+        let round = ((self.round_hi as i64) << 32) | self.round_lo as i64;
+        let f = (x as i64)
+            .wrapping_mul(self.frac as i64)
+            .wrapping_add(round);
+        let t = (f >> 32) as i32;
+        if self.int == 0 {
+            // gains below 1/2: no integer part, no saturation (post is 0 at shift 32)
+            return t >> self.post;
+        }
+        let p = (x as i64)
+            .wrapping_mul(self.int as i64)
+            .wrapping_add(t as i64);
+        // here shift <= 31, post = 0 and |t| <= 2^30: the sum leaves i32 only when
+        // |x int| > 2^30, so x int is nonzero and has the sign of x ^ int
+        saturate_words((p >> 32) as i32, p as i32, x ^ self.int)
     }
 }
 
@@ -311,6 +414,10 @@ impl crate::num::Num for Q24 {
         true
     }
     #[inline(always)]
+    fn is_nan(self) -> bool {
+        false
+    }
+    #[inline(always)]
     fn recip(self) -> Q24 {
         Q24(reciprocal(self.0))
     }
@@ -377,7 +484,165 @@ impl crate::num::Num for Q24 {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
+    use proptest::prelude::*;
+
+    /// The 64-bit form [`mul`] had before the word-wise rewrite (issue 16), verbatim: the
+    /// reference the rewrite must reproduce bit for bit.
+    fn mul_64(a: i32, b: i32) -> i32 {
+        saturate(
+            (a as i64)
+                .wrapping_mul(b as i64)
+                .wrapping_add(1i64 << (FRAC_BITS - 1))
+                >> FRAC_BITS,
+        )
+    }
+
+    /// The 64-bit form [`Gain::apply`] had before the rewrite (variable 64-bit shift,
+    /// 64-bit saturation), verbatim.
+    fn apply_64(g: Gain, x: i32) -> i32 {
+        let p = (x as i64).wrapping_mul(g.mantissa as i64);
+        let round = 1i64.wrapping_shl(g.shift) >> 1;
+        saturate(p.wrapping_add(round).wrapping_shr(g.shift))
+    }
+
+    /// Inputs where rounding and saturation change: the extremes, zero, +-1, the
+    /// powers of two and their neighbours.
+    fn edge_inputs() -> std::vec::Vec<i32> {
+        let mut v = std::vec![0, 1, -1, i32::MAX, i32::MIN, i32::MAX - 1, i32::MIN + 1];
+        for k in 0..31 {
+            let p = 1i32 << k;
+            v.extend_from_slice(&[p, p - 1, p + 1, -p, -p + 1, -p - 1]);
+        }
+        v
+    }
+
+    /// Every mantissa/shift pair the constructor can produce is covered: shift 0..=62,
+    /// mantissas at the normalisation bounds (2^29, 2^30 - 1 and negative) and random
+    /// ones (including the small mantissas at the shift-62 cap).
+    fn any_gain() -> impl Strategy<Value = Gain> {
+        (
+            prop_oneof![
+                3 => (1i32 << 29)..(1i32 << 30),
+                3 => -(1i32 << 30) + 1..=-(1i32 << 29),
+                1 => Just((1i32 << 30) - 1),
+                1 => Just(-(1i32 << 30) + 1),
+                1 => Just(1i32 << 29),
+                1 => -(1i32 << 29)..(1i32 << 29),
+            ],
+            0u32..=62,
+        )
+            .prop_map(|(m, s)| Gain::from_parts(m, s))
+    }
+
+    fn any_signal() -> impl Strategy<Value = i32> {
+        prop_oneof![
+            4 => any::<i32>(),
+            4 => -(1i32 << 26)..(1i32 << 26),
+            1 => -1024i32..1024,
+            1 => prop_oneof![Just(i32::MAX), Just(i32::MIN), Just(0)],
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200_000))]
+        /// The word-wise [`Gain::apply`] is the 64-bit form, bit for bit.
+        #[test]
+        fn apply_matches_the_64_bit_form(g in any_gain(), x in any_signal()) {
+            prop_assert_eq!(g.apply(x), apply_64(g, x), "{:?} x = {}", g, x);
+        }
+
+        /// The word-wise [`mul`] is the 64-bit form, bit for bit.
+        #[test]
+        fn mul_matches_the_64_bit_form(a in any_signal(), b in any_signal()) {
+            prop_assert_eq!(mul(a, b), mul_64(a, b), "{} {}", a, b);
+        }
+    }
+
+    /// Exhaustive over the edges: every shift, mantissas at the bounds, every edge input
+    /// (where saturation and the rounding tie change), for both forms.
+    #[test]
+    fn apply_and_mul_match_on_the_edges() {
+        let xs = edge_inputs();
+        for s in 0..=62u32 {
+            for m in [
+                1 << 29,
+                (1 << 30) - 1,
+                -(1 << 29),
+                -(1 << 30) + 1,
+                1,
+                -1,
+                0x2AAA_AAAB,
+                -0x3555_5555,
+            ] {
+                let g = Gain::from_parts(m, s);
+                for &x in &xs {
+                    assert_eq!(g.apply(x), apply_64(g, x), "m {m} s {s} x {x}");
+                }
+            }
+        }
+        for &a in &xs {
+            for &b in &xs {
+                assert_eq!(mul(a, b), mul_64(a, b), "{a} {b}");
+            }
+        }
+    }
+
+    /// The gains of the paper design (every shift class it uses) over a dense sweep of
+    /// the signal range.
+    #[test]
+    fn apply_matches_for_the_design_gains() {
+        let d =
+            crate::design::DriveDesign::new(crate::design::DriveConfig::paper_defaults()).unwrap();
+        let c = super::super::convert::coeffs(&d, &PerUnitBases::PAPER).unwrap();
+        let gains = [
+            c.pi_d.kp,
+            c.pi_d.ki_ts,
+            c.pi_speed.kp,
+            c.pi_speed.ki_ts,
+            c.flux.blend,
+            c.flux.magnetizing_inductance,
+            c.flux.slip_gain,
+            c.flux.ts,
+            c.observer.ts_a,
+            c.observer.ts_inv_l,
+            c.observer.ts_p_inv_l,
+            c.observer.ts,
+            c.observer.ts_torque_per_inertia,
+            c.observer.ts_inv_inertia,
+            c.observer.ts_friction_rate,
+            c.observer.ts_g2,
+            c.observer.ts_g3,
+            c.rs.ts,
+            c.rs.ts_over_transient_inductance,
+            c.rs.alpha_ts,
+            c.pwm.inv_current_band,
+            c.transient_inductance,
+            c.inv_rotor_time_constant,
+            c.pole_pairs,
+            c.back_emf,
+            c.torque_factor,
+            c.speed_per_volt,
+            c.lead,
+            c.voltage_limit_per_inv_bus,
+        ];
+        let mut shifts = [false; 63];
+        for g in gains {
+            shifts[g.shift as usize] = true;
+            let mut x = i32::MIN;
+            loop {
+                assert_eq!(g.apply(x), apply_64(g, x), "{g:?} x {x}");
+                assert_eq!(g.apply(x ^ 0x5A5A), apply_64(g, x ^ 0x5A5A), "{g:?} x {x}");
+                match x.checked_add(65_537) {
+                    Some(n) => x = n,
+                    None => break,
+                }
+            }
+        }
+        // both construction classes are exercised by the design
+        assert!(shifts[..=32].iter().any(|&b| b) && shifts[33..].iter().any(|&b| b));
+    }
 
     #[test]
     fn reciprocal_is_accurate_over_its_range() {
