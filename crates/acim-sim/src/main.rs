@@ -33,12 +33,17 @@ const USAGE: &str = "usage:
   acim-sim faults [FILE] [OPTIONS]          every fault-* scenario: reason, detection time,
                                             peaks (table to FILE, default docs/faults.md; with
                                             --set: <out>/faults.md)
+  acim-sim commission <scenario|machine.toml> [--nameplate FILE] [OPTIONS]
+                                            self-commissioning against the plant: the
+                                            inverse-Gamma model, J, B and the dead time to
+                                            <out>/identified.toml, with the true values
 options:
   --out DIR        directory for the run outputs (CSV, JSON, PNG), default out
   --set key=value  override a scenario field (dotted TOML key), repeatable; applies to every
                    scenario the command runs
   --gzip           write the CSV gzip-compressed, <name>.csv.gz (about 4x smaller; for long runs)
-  --quiet, -q      no progress bar (it is shown only when stderr is a terminal anyway)";
+  --quiet, -q      no progress bar (it is shown only when stderr is a terminal anyway)
+  --nameplate FILE (commission) the [nameplate] and [board] tables of FILE";
 
 /// Command-line options shared by the subcommands.
 #[derive(Debug, Default)]
@@ -47,6 +52,7 @@ struct Opts {
     sets: Vec<String>,
     gzip: bool,
     quiet: bool,
+    nameplate: Option<PathBuf>,
     positional: Vec<String>,
 }
 
@@ -72,6 +78,11 @@ impl Opts {
                 }
                 a if a.starts_with("--set=") => o.sets.push(a["--set=".len()..].to_string()),
                 "--gzip" => o.gzip = true,
+                "--nameplate" => {
+                    let f = rest.get(i + 1).ok_or("--nameplate needs a TOML file")?;
+                    o.nameplate = Some(PathBuf::from(f));
+                    i += 1;
+                }
                 "--quiet" | "-q" => o.quiet = true,
                 a if a.starts_with('-') && a.len() > 1 => {
                     return Err(format!("unknown option {a}\n{USAGE}"))
@@ -160,7 +171,8 @@ fn load(spec: &str) -> Result<Scenario, String> {
     }
     if spec.ends_with(".toml") || Path::new(spec).exists() {
         let text = std::fs::read_to_string(spec).map_err(|e| format!("{spec}: {e}"))?;
-        return Scenario::from_toml(&text).map_err(|e| format!("{spec}: {e}"));
+        return Scenario::from_toml(&acim_sim::scenario::machine_file_as_scenario(&text))
+            .map_err(|e| format!("{spec}: {e}"));
     }
     Err(format!(
         "no built-in scenario or file named `{spec}` (see `acim-sim list`)"
@@ -516,6 +528,47 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
             let md = acim_sim::faults::markdown(&rows);
             write_table(&file, &with_overrides_note(md, &o.sets), &out)?;
+        }
+        Some("commission") => {
+            let [spec] = o.positional.as_slice() else {
+                return Err(format!(
+                    "commission takes one scenario or machine file\n{USAGE}"
+                ));
+            };
+            let mut sc = load(spec)?;
+            if let Some(f) = &o.nameplate {
+                let text =
+                    std::fs::read_to_string(f).map_err(|e| format!("{}: {e}", f.display()))?;
+                let t: toml::Table = acim_sim::scenario::machine_file_as_scenario(&text)
+                    .parse()
+                    .map_err(|e| format!("{}: {e}", f.display()))?;
+                let part = |k: &str| {
+                    t.get(k)
+                        .cloned()
+                        .ok_or(format!("{}: no [{k}]", f.display()))
+                };
+                sc.nameplate = Some(
+                    part("nameplate")?
+                        .try_into()
+                        .map_err(|e| format!("{}: [nameplate]: {e}", f.display()))?,
+                );
+                sc.board = Some(
+                    part("board")?
+                        .try_into()
+                        .map_err(|e| format!("{}: [board]: {e}", f.display()))?,
+                );
+            }
+            let sc = sc
+                .with_overrides(&o.sets)
+                .map_err(|e| format!("{spec}: {e}"))?;
+            let r = acim_sim::commission::commission(&sc)?;
+            let out = o.out();
+            std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+            let file = out.join("identified.toml");
+            let text = r.toml();
+            print!("{text}");
+            std::fs::write(&file, &text).map_err(|e| format!("{}: {e}", file.display()))?;
+            println!("wrote {}", file.display());
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),

@@ -975,3 +975,43 @@ impl Scenario {
         })
     }
 }
+
+/// A machine file (`[nameplate]`, `[plant]`, `[inverse_gamma]`, `[board]`, as in the
+/// project's acceptance set) reads as a scenario: its `[inverse_gamma]` table (the same
+/// machine in another form) is dropped, the controller gets the plant's data, the DC link
+/// the board's bus, and a board without a current-sense range gets 2.2 x the rated peak
+/// current (the trip, 1.75 x, with margin). Any other text passes unchanged.
+pub fn machine_file_as_scenario(text: &str) -> String {
+    let Ok(mut t) = text.parse::<toml::Table>() else {
+        return text.to_string();
+    };
+    if t.remove("inverse_gamma").is_none() {
+        return text.to_string();
+    }
+    if let Some(plant) = t.get("plant").cloned() {
+        t.entry("controller").or_insert(plant);
+    }
+    let rated_peak = t
+        .get("nameplate")
+        .and_then(|n| n.get("current_a"))
+        .and_then(|v| v.as_float())
+        .map(|i| i * std::f64::consts::SQRT_2);
+    if let Some(b) = t.get_mut("board").and_then(|b| b.as_table_mut()) {
+        if let (false, Some(i)) = (b.contains_key("current_full_scale_a"), rated_peak) {
+            b.insert("current_full_scale_a".into(), toml::Value::Float(2.2 * i));
+        }
+    }
+    if let Some(bus) = t
+        .get("board")
+        .and_then(|b| b.get("dc_bus_v"))
+        .and_then(|v| v.as_float())
+    {
+        let mut link = toml::Table::new();
+        link.insert("source_v".into(), toml::Value::Float(bus));
+        t.entry("dc_link").or_insert(toml::Value::Table(link));
+    }
+    if let Some(n) = t.get_mut("nameplate").and_then(|n| n.as_table_mut()) {
+        n.remove("torque_nm");
+    }
+    toml::to_string(&t).unwrap_or_else(|_| text.to_string())
+}

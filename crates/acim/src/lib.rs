@@ -57,6 +57,7 @@ pub mod speed_search;
 pub mod svpwm;
 
 // the cascade: configuration and design, supervision, the staged drive
+pub mod commissioning;
 pub mod controller;
 pub mod design;
 pub mod drive;
