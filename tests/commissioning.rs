@@ -79,3 +79,25 @@ fn two_slopes_give_inertia_and_friction() {
     );
     assert!(acim::commissioning::mechanics_from_slopes(2.0, -1.0, 1.0, 1.0).is_none());
 }
+
+/// `identified.toml` round trip: a scenario's `controller_file` takes the identified
+/// model (the T-model equivalent of its inverse-Gamma data) and dead time.
+#[test]
+fn identified_file_sets_the_controller() {
+    let sc = machine(include_str!(
+        "../crates/acim-sim/machines/motulator-2k2.toml"
+    ));
+    let r = commission(&sc).unwrap();
+    let mut run = sc.clone();
+    run.apply_identified(&r.toml()).unwrap();
+    let m = run.validate().unwrap().drive.machine;
+    let rel = |a: f32, b: f32| ((a - b) / b).abs();
+    assert!(rel(m.stator_resistance(), r.rs_ohm.identified) < 1e-5);
+    assert!(rel(m.referred_rotor_resistance(), r.rr_ohm.identified) < 1e-4);
+    assert!(rel(m.transient_inductance(), r.l_sigma_h.identified) < 1e-3);
+    assert!(rel(m.magnetizing_inductance(), r.l_m_h.identified) < 1e-4);
+    assert_eq!(run.drive.dead_time_comp_s, r.dead_time_s.identified);
+    assert!(run
+        .apply_identified("[inverse_gamma]\nrs_ohm = 1.0\n")
+        .is_err());
+}

@@ -166,6 +166,16 @@ impl Progress {
 }
 
 fn load(spec: &str) -> Result<Scenario, String> {
+    let mut sc = load_plain(spec)?;
+    if let Some(f) = sc.controller_file.clone() {
+        let text = std::fs::read_to_string(&f).map_err(|e| format!("{f}: {e}"))?;
+        sc.apply_identified(&text)
+            .map_err(|e| format!("{spec}: {e}"))?;
+    }
+    Ok(sc)
+}
+
+fn load_plain(spec: &str) -> Result<Scenario, String> {
     if let Some(s) = builtins::get(spec) {
         return Ok(s);
     }

@@ -571,6 +571,12 @@ pub struct Scenario {
     pub nameplate: Option<NameplateSpec>,
     /// The power board (with `[nameplate]`).
     pub board: Option<BoardSpec>,
+    /// The controller's machine from an `identified.toml` that `acim-sim commission`
+    /// wrote (its `[inverse_gamma]`, `[mechanics]` and `[inverter]` replace
+    /// `[controller]` and the dead time the drive compensates); a path relative to the
+    /// working directory. Resolved when the scenario is loaded from a file or by name.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub controller_file: Option<String>,
     /// Steady-state metric windows.
     pub windows: Vec<Window>,
 }
@@ -595,6 +601,7 @@ impl Default for Scenario {
             start: StartSpec::default(),
             nameplate: None,
             board: None,
+            controller_file: None,
             windows: vec![],
         }
     }
@@ -1014,4 +1021,58 @@ pub fn machine_file_as_scenario(text: &str) -> String {
         n.remove("torque_nm");
     }
     toml::to_string(&t).unwrap_or_else(|_| text.to_string())
+}
+
+impl Scenario {
+    /// Applies an `identified.toml` (from `acim-sim commission`) as the controller's
+    /// machine: the exact T-model of its inverse-Gamma data (Ls = Lr), its inertia and
+    /// friction, and its dead time as the drive's compensation. Errors name the key.
+    pub fn apply_identified(&mut self, text: &str) -> Result<(), ScenarioError> {
+        let t: toml::Table = text
+            .parse()
+            .or_else(|e| err("controller_file", &format!("not TOML: {e}")))?;
+        let get = |table: &str, key: &str| -> Result<f32, ScenarioError> {
+            t.get(table)
+                .and_then(|x| x.get(key))
+                .and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)))
+                .map(|v| v as f32)
+                .ok_or_else(|| ScenarioError {
+                    field: format!("controller_file: [{table}] {key}"),
+                    allowed: "a number".into(),
+                })
+        };
+        let (rs, r_r) = (
+            get("inverse_gamma", "rs_ohm")?,
+            get("inverse_gamma", "rr_ohm")?,
+        );
+        let (l_s, l_m) = (
+            get("inverse_gamma", "l_sigma_h")?,
+            get("inverse_gamma", "l_m_h")?,
+        );
+        check_range("controller_file: [inverse_gamma] l_m_h", l_m, 1e-6, 100.0)?;
+        check_range(
+            "controller_file: [inverse_gamma] l_sigma_h",
+            l_s,
+            1e-7,
+            100.0,
+        )?;
+        let l = l_m + l_s;
+        self.controller.rs_ohm = rs;
+        self.controller.rr_ohm = r_r * l / l_m;
+        self.controller.ls_h = l;
+        self.controller.lr_h = l;
+        self.controller.lm_h = (l_m * l).sqrt();
+        if let Ok(j) = get("mechanics", "inertia_kgm2") {
+            if j.is_finite() {
+                self.controller.inertia_kgm2 = j;
+            }
+        }
+        if let Ok(b) = get("mechanics", "friction_nms") {
+            self.controller.friction_nms = b;
+        }
+        if let Ok(td) = get("inverter", "dead_time_s") {
+            self.drive.dead_time_comp_s = td;
+        }
+        Ok(())
+    }
 }
