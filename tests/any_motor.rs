@@ -4,7 +4,8 @@
 //! (`acim::nameplate`), and it runs the scenarios closed loop.
 
 use acim_sim::scenario::{
-    BoardSpec, LoadKind, LoadPoint, MachineSpec, NameplateSpec, Scenario, SpeedPoint, Window,
+    BoardSpec, LoadKind, LoadPoint, MachineSpec, NameplateSpec, SaturationSpec, Scenario,
+    SpeedPoint, Window,
 };
 
 struct Machine {
@@ -14,6 +15,7 @@ struct Machine {
     board: BoardSpec,
     rated_rpm: f32,
     rated_torque_nm: f32,
+    saturation: Option<SaturationSpec>,
 }
 
 fn t_model(rs: f32, rr: f32, ls: f32, lr: f32, lm: f32, j: f32, b: f32) -> MachineSpec {
@@ -67,6 +69,7 @@ fn machines() -> Vec<Machine> {
             board: board(325.0, 10.0),
             rated_rpm: 1500.0,
             rated_torque_nm: 750.0 / (1500.0 * std::f32::consts::PI / 30.0),
+            saturation: None,
         },
         Machine {
             // TI publishes no rating: 600 W at 3 A (the shared file's assumed 750 W is
@@ -77,6 +80,7 @@ fn machines() -> Vec<Machine> {
             board: board(311.0, 10.0),
             rated_rpm: 1750.0,
             rated_torque_nm: 600.0 / (1750.0 * std::f32::consts::PI / 30.0),
+            saturation: None,
         },
         Machine {
             name: "motulator-2k2",
@@ -85,6 +89,20 @@ fn machines() -> Vec<Machine> {
             board: board(540.0, 20.0),
             rated_rpm: 1500.0,
             rated_torque_nm: 2200.0 / (1500.0 * std::f32::consts::PI / 30.0),
+            saturation: None,
+        },
+        Machine {
+            // the acceptance set's saturating machine: L_m about 10 % down at rated flux
+            name: "motulator-2k2-saturated",
+            plant: t_model(3.7, r_r * l / l_m, l, l, (l_m * l).sqrt(), 0.015, 0.002),
+            nameplate: nameplate(2200.0, 400.0, 5.0, 50.0, None),
+            board: board(540.0, 20.0),
+            rated_rpm: 1500.0,
+            rated_torque_nm: 2200.0 / (1500.0 * std::f32::consts::PI / 30.0),
+            saturation: Some(SaturationSpec {
+                beta_per_wb: 0.75,
+                exponent: 7,
+            }),
         },
         Machine {
             name: "krause-50hp",
@@ -93,6 +111,7 @@ fn machines() -> Vec<Machine> {
             board: board(650.0, 160.0),
             rated_rpm: 1705.0,
             rated_torque_nm: 37_300.0 / (1705.0 * std::f32::consts::PI / 30.0),
+            saturation: None,
         },
     ]
 }
@@ -105,6 +124,7 @@ fn plant_scenario(m: &Machine, name: &str, duration_s: f32) -> Scenario {
         controller: m.plant,
         nameplate: Some(m.nameplate),
         board: Some(m.board),
+        saturation: m.saturation,
         ..Scenario::default()
     };
     s.dc_link.source_v = m.board.dc_bus_v;

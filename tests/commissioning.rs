@@ -49,6 +49,17 @@ fn motulator_2k2() {
     check("motulator-2k2", &sc, true);
 }
 
+/// Main-flux saturation: L_M at rated flux (from the no-load test) is below the
+/// unsaturated one (about 10 %); identified against the plant's at the same flux.
+#[test]
+fn motulator_2k2_saturated() {
+    let sc = machine(include_str!(
+        "../crates/acim-sim/machines/motulator-2k2-saturated.toml"
+    ));
+    assert!(sc.saturation.is_some());
+    check("motulator-2k2-saturated", &sc, true);
+}
+
 #[test]
 fn krause_50hp() {
     let sc = machine(include_str!("../crates/acim-sim/machines/krause-50hp.toml"));

@@ -56,7 +56,7 @@ pub use inverter::{
     DEFAULT_PWM_PERIOD,
 };
 pub use load::{LoadTorque, PASSIVE_SPEED_BAND};
-pub use machine::{EnergyAccount, InductionMachine, MachineState, DEFAULT_SUBSTEPS};
+pub use machine::{EnergyAccount, InductionMachine, MachineState, Saturation, DEFAULT_SUBSTEPS};
 pub use sensors::{
     Adc, BusSensorConfig, BusVoltageSensor, CurrentChannels, CurrentSensorConfig, CurrentSensors,
     Measurements, Rng, DEFAULT_BUS_FULL_SCALE, DEFAULT_CURRENT_FULL_SCALE,

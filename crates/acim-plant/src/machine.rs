@@ -188,6 +188,33 @@ impl Coeffs {
     }
 }
 
+/// Main-flux saturation of the plant (off by default): the magnetizing inductance falls
+/// with the rotor flux linkage as `L_m(|psi_r|) = L_m0 / (1 + (beta |psi_r|)^S)` (the
+/// power law of motulator's saturation model, here on the T-model's L_m with the
+/// leakages constant). The model is quasi-static: every RK4 stage uses the coefficients of
+/// eq. (1)-(3) at its own flux, which gives the right saturation curve in steady state
+/// (psi_r = L_m(psi_r) i_sd) and neglects the d L_m/dt terms in transients; the energy
+/// account (built for constant inductances) does not balance with it on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Saturation {
+    /// beta, 1/Wb: the flux where the inductance has halved is 1/beta.
+    pub beta: f32,
+    /// The exponent S (an integer: no `powf` in `no_std`).
+    pub exponent: u8,
+}
+
+impl Saturation {
+    /// L_m / L_m0 at rotor flux linkage `psi` (Wb).
+    pub fn factor(&self, psi: f32) -> f32 {
+        let x = self.beta * psi;
+        let mut xs = 1.0f32;
+        for _ in 0..self.exponent {
+            xs *= x;
+        }
+        1.0 / (1.0 + xs)
+    }
+}
+
 /// Number of integrated states: i_alpha, i_beta, psi_alpha, psi_beta, Omega, angle.
 const NX: usize = 6;
 /// Number of integrated powers: input, stator Cu, rotor Cu, friction, load, v_alpha,
@@ -207,6 +234,7 @@ pub struct InductionMachine {
     comp: [f32; NX],
     locked: bool,
     energy: EnergyAccount,
+    saturation: Option<Saturation>,
 }
 
 fn finite_or_zero(x: f32) -> f32 {
@@ -227,6 +255,7 @@ impl InductionMachine {
             comp: [0.0; NX],
             locked: false,
             energy: EnergyAccount::default(),
+            saturation: None,
         }
     }
 
@@ -239,6 +268,44 @@ impl InductionMachine {
     pub fn set_params(&mut self, params: MachineParams) {
         self.params = params;
         self.c = Coeffs::new(&params);
+    }
+
+    /// Switches main-flux saturation on (`Some`) or off.
+    pub fn set_saturation(&mut self, saturation: Option<Saturation>) {
+        self.saturation = saturation;
+    }
+
+    /// The parameters at flux linkage `psi` (Wb) under saturation (the unsaturated ones
+    /// without it, or if the saturated set is not valid).
+    fn params_at(&self, psi: f32) -> MachineParams {
+        let Some(sat) = self.saturation else {
+            return self.params;
+        };
+        let d = self.params.data();
+        let lm = d.mutual_inductance * sat.factor(psi);
+        let ls = d.stator_inductance - d.mutual_inductance + lm;
+        let lr = d.rotor_inductance - d.mutual_inductance + lm;
+        MachineParams::new(acim::params::MachineData {
+            stator_inductance: ls,
+            rotor_inductance: lr,
+            mutual_inductance: lm,
+            ..d
+        })
+        .unwrap_or(self.params)
+    }
+
+    /// The parameters in effect now: at the present rotor flux under saturation.
+    pub fn effective_params(&self) -> MachineParams {
+        let (pa, pb) = (self.x.psi_alpha, self.x.psi_beta);
+        self.params_at(acim::math::sqrt(pa * pa + pb * pb))
+    }
+
+    /// The coefficients in effect now (at the present flux under saturation).
+    fn coeffs_now(&self) -> Coeffs {
+        match self.saturation {
+            None => self.c,
+            Some(_) => Coeffs::new(&self.effective_params()),
+        }
     }
 
     /// The full state.
@@ -322,8 +389,8 @@ impl InductionMachine {
     /// `lambda_r` of the paper's eq. (8), (13) and of the controller.
     pub fn lambda_r(&self) -> AlphaBeta {
         AlphaBeta {
-            alpha: self.c.kr * self.x.psi_alpha,
-            beta: self.c.kr * self.x.psi_beta,
+            alpha: self.coeffs_now().kr * self.x.psi_alpha,
+            beta: self.coeffs_now().kr * self.x.psi_beta,
         }
     }
 
@@ -349,14 +416,16 @@ impl InductionMachine {
 
     /// Electromagnetic torque Te (eq. 3 with the amplitude-invariant 1.5), N m.
     pub fn torque(&self) -> f32 {
-        self.c.kt * (self.x.psi_alpha * self.x.i_beta - self.x.psi_beta * self.x.i_alpha)
+        self.coeffs_now().kt * (self.x.psi_alpha * self.x.i_beta - self.x.psi_beta * self.x.i_alpha)
     }
 
     /// Rotor current i_r = (psi_r - Lm i_s)/Lr (alpha, beta), A.
     pub fn rotor_current(&self) -> AlphaBeta {
         AlphaBeta {
-            alpha: (self.x.psi_alpha - self.c.lm * self.x.i_alpha) * self.c.inv_lr,
-            beta: (self.x.psi_beta - self.c.lm * self.x.i_beta) * self.c.inv_lr,
+            alpha: (self.x.psi_alpha - self.coeffs_now().lm * self.x.i_alpha)
+                * self.coeffs_now().inv_lr,
+            beta: (self.x.psi_beta - self.coeffs_now().lm * self.x.i_beta)
+                * self.coeffs_now().inv_lr,
         }
     }
 
@@ -411,7 +480,15 @@ impl InductionMachine {
     where
         F: Fn(f32, f32) -> StageSource,
     {
-        let c = &self.c;
+        let saturated;
+        let c = match self.saturation {
+            None => &self.c,
+            Some(_) => {
+                let psi = acim::math::sqrt(x[2] * x[2] + x[3] * x[3]);
+                saturated = Coeffs::new(&self.params_at(psi));
+                &saturated
+            }
+        };
         let [ia, ib, pa, pb, w, _th] = *x;
         let s = src(ia, ib);
         let (va, vb) = (finite_or_zero(s.v_alpha), finite_or_zero(s.v_beta));
@@ -620,6 +697,34 @@ fn axpy(x: &[f32; NX], h: f32, k: &[f32; NX]) -> [f32; NX] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Saturation: a DC voltage on a locked rotor settles where the rotor flux linkage
+    /// is L_m(psi) i_s (the magnetizing curve's fixed point), below the linear L_m0 i_s.
+    #[test]
+    fn saturation_settles_on_the_magnetizing_curve() {
+        let params = MachineParams::paper_table1();
+        let mut m = InductionMachine::new(params);
+        m.set_locked(true);
+        let sat = Saturation {
+            beta: 1.2,
+            exponent: 7,
+        };
+        m.set_saturation(Some(sat));
+        let v = 1.5 * params.stator_resistance();
+        for _ in 0..200_000 {
+            m.step(v, 0.0, LoadTorque::None, 20e-6);
+        }
+        let i = m.current_alpha_beta().alpha;
+        let psi = m.psi_r().alpha;
+        assert!((i - 1.5).abs() < 1e-3, "{i}");
+        let lm = params.mutual_inductance() * sat.factor(psi);
+        assert!((psi - lm * i).abs() < 1e-3 * psi, "{psi} vs {}", lm * i);
+        assert!(
+            psi < 0.9 * params.mutual_inductance() * i,
+            "{psi}: not saturated"
+        );
+        assert!(m.effective_params().mutual_inductance() < params.mutual_inductance());
+    }
 
     #[test]
     fn dc_excitation_settles_to_flux_without_torque() {

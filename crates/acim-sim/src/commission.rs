@@ -126,6 +126,8 @@ pub fn commission(sc: &Scenario) -> Result<Report, String> {
     let mut pwm = PwmPreload::new();
     let mut com = Commissioning::new(&nameplate, &board).map_err(|e| e.to_string())?;
     let mut t = 0.0f32;
+    // the plant's magnetizing inductance at the no-load test's flux (saturation)
+    let mut at_rated_flux = v.plant;
     while !matches!(com.stage(), Stage::Done | Stage::Failed(_)) {
         if t > TIMEOUT_S {
             return Err(format!("commissioning: no result within {TIMEOUT_S} s"));
@@ -135,6 +137,9 @@ pub fn commission(sc: &Scenario) -> Result<Report, String> {
             phase_currents: m.phase_currents,
             dc_bus: m.dc_bus,
         });
+        if com.stage() == Stage::NoLoad {
+            at_rated_flux = plant.machine().effective_params();
+        }
         plant.set_dc_bus(sc.dc_link.source_v);
         plant.run_pwm_period(pwm.advance(out), LoadTorque::None);
         t += ts;
@@ -155,7 +160,10 @@ pub fn commission(sc: &Scenario) -> Result<Report, String> {
         rs_ohm: pair(id.stator_resistance, p.stator_resistance()),
         rr_ohm: pair(id.rotor_resistance, p.referred_rotor_resistance()),
         l_sigma_h: pair(id.leakage_inductance, p.transient_inductance()),
-        l_m_h: pair(id.magnetizing_inductance, p.magnetizing_inductance()),
+        l_m_h: pair(
+            id.magnetizing_inductance,
+            at_rated_flux.magnetizing_inductance(),
+        ),
         rated_flux_current_a: id.rated_flux_current,
         inertia_kgm2: id.inertia.map(|j| pair(j, p.inertia())),
         friction_nms: pair(id.viscous_friction, p.viscous_friction().max(1e-9)),

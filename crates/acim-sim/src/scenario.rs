@@ -515,6 +515,17 @@ impl BoardSpec {
     }
 }
 
+/// Main-flux saturation of the plant: L_m = L_m0 / (1 + (beta |psi_r|)^S)
+/// (`acim_plant::Saturation`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SaturationSpec {
+    /// beta, 1/Wb (L_m halves at 1/beta).
+    pub beta_per_wb: f32,
+    /// The integer exponent S.
+    pub exponent: u8,
+}
+
 /// A time window over which steady-state metrics are computed.
 #[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -577,6 +588,9 @@ pub struct Scenario {
     /// working directory. Resolved when the scenario is loaded from a file or by name.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub controller_file: Option<String>,
+    /// Main-flux saturation of the plant (absent: linear).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub saturation: Option<SaturationSpec>,
     /// Steady-state metric windows.
     pub windows: Vec<Window>,
 }
@@ -602,6 +616,7 @@ impl Default for Scenario {
             nameplate: None,
             board: None,
             controller_file: None,
+            saturation: None,
             windows: vec![],
         }
     }
@@ -825,6 +840,12 @@ impl Scenario {
             -10_000.0,
             10_000.0,
         )?;
+        if let Some(sat) = self.saturation {
+            check_range("saturation.beta_per_wb", sat.beta_per_wb, 1e-3, 100.0)?;
+            if !(1..=20).contains(&sat.exponent) {
+                return err("saturation.exponent", "must be an integer in 1 ..= 20");
+            }
+        }
         let f = &self.faults;
         for (name, t) in [
             ("faults.phase_short_at_s", f.phase_short_at_s),

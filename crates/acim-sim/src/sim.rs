@@ -211,6 +211,14 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
         BusVoltageSensor::new(bs, sc.seed.wrapping_add(0x5eed)),
     );
     plant.set_substeps(sc.inverter.substeps);
+    if let Some(sat) = sc.saturation {
+        plant
+            .machine_mut()
+            .set_saturation(Some(acim_plant::Saturation {
+                beta: sat.beta_per_wb,
+                exponent: sat.exponent,
+            }));
+    }
     plant.set_mode(if sc.inverter.switching {
         PwmMode::Switched
     } else {

@@ -17,7 +17,7 @@
 //!    4/3 V_e on alpha). A straight-line fit gives Rs (slope) and V_e (intercept); the
 //!    dead time is (V_e - V_drop) T_pwm / V_dc with the board's device drop.
 //! 3. **Impedance at standstill**, alpha axis only (a pulsating field: no torque, the
-//!    rotor stays): on a DC bias of 50 % rated current (so no phase current crosses zero
+//!    rotor stays): on a DC bias of 30 % rated current (so no phase current crosses zero
 //!    and the inverter error stays constant), a sinusoid at 4 % of the rated frequency
 //!    (current reference, tracked by the loops) and one at the rated frequency (voltage
 //!    injected over the loops); Fourier sums of the applied voltage (its timing: it acts
@@ -57,14 +57,16 @@ pub const DC_LEVELS: [f32; 4] = [0.25, 0.4, 0.55, 0.7];
 pub const DC_STEP_TIME: f32 = 1.2;
 /// The last part of each DC step that is averaged, s.
 pub const DC_MEASURE_TIME: f32 = 0.3;
-/// DC bias of the impedance tests, fraction of the rated peak current.
-pub const AC_BIAS: f32 = 0.5;
+/// DC bias of the impedance tests, fraction of the rated peak current: low enough that a
+/// saturating machine stays on the linear part of its magnetizing curve (the rated-flux
+/// L_M comes from the no-load test).
+pub const AC_BIAS: f32 = 0.3;
 /// AC amplitude of the impedance tests, fraction of the rated peak current.
-pub const AC_AMPLITUDE: f32 = 0.25;
+pub const AC_AMPLITUDE: f32 = 0.15;
 /// The injected voltage at the rated frequency, in rated current times the guessed
-/// impedance (about 0.15-0.5 of the rated current flows: no phase current crosses zero on
+/// impedance (about 0.08-0.25 of the rated current flows: no phase current crosses zero on
 /// the bias).
-pub const AC_INJECTION: f32 = 0.15;
+pub const AC_INJECTION: f32 = 0.08;
 /// The low test frequency as a fraction of the rated frequency (near the rotor corner).
 pub const LOW_FREQUENCY: f32 = 0.04;
 /// The no-load test frequency as a fraction of the rated frequency (voltage headroom).
