@@ -234,6 +234,7 @@ pub struct InductionMachine {
     comp: [f32; NX],
     locked: bool,
     energy: EnergyAccount,
+    #[cfg(feature = "saturation")]
     saturation: Option<Saturation>,
 }
 
@@ -255,6 +256,7 @@ impl InductionMachine {
             comp: [0.0; NX],
             locked: false,
             energy: EnergyAccount::default(),
+            #[cfg(feature = "saturation")]
             saturation: None,
         }
     }
@@ -270,13 +272,15 @@ impl InductionMachine {
         self.c = Coeffs::new(&params);
     }
 
-    /// Switches main-flux saturation on (`Some`) or off.
+    /// Switches main-flux saturation on (`Some`) or off (feature `saturation`).
+    #[cfg(feature = "saturation")]
     pub fn set_saturation(&mut self, saturation: Option<Saturation>) {
         self.saturation = saturation;
     }
 
     /// The parameters at flux linkage `psi` (Wb) under saturation (the unsaturated ones
     /// without it, or if the saturated set is not valid).
+    #[cfg(feature = "saturation")]
     fn params_at(&self, psi: f32) -> MachineParams {
         let Some(sat) = self.saturation else {
             return self.params;
@@ -296,16 +300,22 @@ impl InductionMachine {
 
     /// The parameters in effect now: at the present rotor flux under saturation.
     pub fn effective_params(&self) -> MachineParams {
-        let (pa, pb) = (self.x.psi_alpha, self.x.psi_beta);
-        self.params_at(acim::math::sqrt(pa * pa + pb * pb))
+        #[cfg(feature = "saturation")]
+        {
+            let (pa, pb) = (self.x.psi_alpha, self.x.psi_beta);
+            self.params_at(acim::math::sqrt(pa * pa + pb * pb))
+        }
+        #[cfg(not(feature = "saturation"))]
+        self.params
     }
 
     /// The coefficients in effect now (at the present flux under saturation).
     fn coeffs_now(&self) -> Coeffs {
-        match self.saturation {
-            None => self.c,
-            Some(_) => Coeffs::new(&self.effective_params()),
+        #[cfg(feature = "saturation")]
+        if self.saturation.is_some() {
+            return Coeffs::new(&self.effective_params());
         }
+        self.c
     }
 
     /// The full state.
@@ -480,7 +490,9 @@ impl InductionMachine {
     where
         F: Fn(f32, f32) -> StageSource,
     {
+        #[cfg(feature = "saturation")]
         let saturated;
+        #[cfg(feature = "saturation")]
         let c = match self.saturation {
             None => &self.c,
             Some(_) => {
@@ -489,6 +501,8 @@ impl InductionMachine {
                 &saturated
             }
         };
+        #[cfg(not(feature = "saturation"))]
+        let c = &self.c;
         let [ia, ib, pa, pb, w, _th] = *x;
         let s = src(ia, ib);
         let (va, vb) = (finite_or_zero(s.v_alpha), finite_or_zero(s.v_beta));
@@ -701,6 +715,7 @@ mod tests {
     /// Saturation: a DC voltage on a locked rotor settles where the rotor flux linkage
     /// is L_m(psi) i_s (the magnetizing curve's fixed point), below the linear L_m0 i_s.
     #[test]
+    #[cfg(feature = "saturation")]
     fn saturation_settles_on_the_magnetizing_curve() {
         let params = MachineParams::paper_table1();
         let mut m = InductionMachine::new(params);

@@ -4,6 +4,7 @@
 pub mod builtins;
 pub mod commission;
 pub mod faults;
+pub mod machines;
 pub mod metrics;
 pub mod observers;
 pub mod output;
