@@ -236,6 +236,83 @@ class Logs(unittest.TestCase):
         json.dump(phases, open(os.path.join(HERE, "..", "..", "target", "fil-isr.json"), "w"))
 
 
+class Settings(unittest.TestCase):
+    """Issue 11 item 4: settings over the serial link, kept in the reserved flash page
+    (self-test build: the same main loop and flash code, a 20-period boot)."""
+
+    def boot(self, page=None):
+        m = fil.Machine(fil.default_elf("selftest"), settings_page=page)
+        m.run_until(lambda m: "ready" in m.output(), 100)
+        m.run(5)
+        self.assertIsNone(m.halted)
+        return m
+
+    def get(self, m, name):
+        reply = command(m, f"get {name}")
+        line = [l for l in reply.split("\r\n") if l.startswith(name + " = ")]
+        self.assertTrue(line, reply)
+        return float(line[0].split()[2])
+
+    def test_set_save_reboot_and_a_corrupted_page(self):
+        m = self.boot()
+        self.assertIn("settings: defaults (nothing saved)", m.output())
+        default_limit = self.get(m, "current_limit")
+        self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
+        self.assertIn("ok stator_resistance applied",
+                      command(m, "set stator_resistance 11.25"))
+        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        # the new drive runs: start, then everything that changes it is refused, naming it
+        command(m, "speed 300", 5)
+        self.assertIn("ok", command(m, "start", 20))
+        self.assertIn("err current_limit: refused while the drive is not idle",
+                      command(m, "set current_limit 3.5"))
+        self.assertIn("err save: refused", command(m, "save"))
+        self.assertIn("err defaults: refused", command(m, "defaults"))
+        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        command(m, "stop", 5)
+        self.assertEqual(state_fault(m), (0, 0))
+        # out of range: the library's rule, naming the field; nothing changes
+        self.assertIn("err (flux_current: must be below current_limit)",
+                      command(m, "set flux_current 4.5"))
+        self.assertIn("err (stator_resistance: must be finite and > 0)",
+                      command(m, "set stator_resistance 0"))
+        self.assertIn("err unknown setting", command(m, "set bogus 1"))
+        self.assertEqual(self.get(m, "flux_current"), 1.5)
+        erased = m.settings_page()
+        self.assertEqual(erased, b"\xff" * 2048)
+        self.assertIn("ok saved to flash", command(m, "save", 20))
+        page = m.settings_page()
+        self.assertEqual(page[:4], b"ACIM")
+        erases = [e for e in m.events if e[0] == "FLASH erase"]
+        self.assertEqual(erases, [("FLASH erase", fil.SETTINGS_ADDR, 2048)])
+        self.assertFalse([e for e in m.events if e[0].startswith("FLASH") and e[0] not in
+                          ("FLASH erase", "FLASH program")], m.events)
+        self.assertTrue(m.reg(0x4002_2000, 0x14) & fil.FLASH_LOCK, "flash left unlocked")
+        # reboot with that flash: the values are back, and the drive runs with them
+        m2 = self.boot(page)
+        self.assertIn("settings loaded from flash", m2.output())
+        self.assertEqual(self.get(m2, "current_limit"), 4.0)
+        self.assertEqual(self.get(m2, "stator_resistance"), 11.25)
+        self.assertEqual(state_fault(m2), (0, 0))
+        # one corrupted byte: defaults, a warning, Idle
+        bad = bytearray(page)
+        bad[20] ^= 0x01
+        m3 = self.boot(bytes(bad))
+        self.assertIn("warn settings in flash refused: CRC mismatch", m3.output())
+        self.assertIn("defaults in use, drive idle", m3.output())
+        self.assertEqual(self.get(m3, "current_limit"), default_limit)
+        self.assertEqual(state_fault(m3), (0, 0))
+        # another format version (CRC made to match): refused too
+        import zlib
+        other = bytearray(page)
+        other[4:6] = (2).to_bytes(2, "little")
+        other[64:68] = zlib.crc32(bytes(other[:64])).to_bytes(4, "little")
+        m4 = self.boot(bytes(other))
+        self.assertIn("warn settings in flash refused: record of another format version",
+                      m4.output())
+        self.assertEqual(self.get(m4, "current_limit"), default_limit)
+
+
 class SelfTest(unittest.TestCase):
     def test_selftest_build_reaches_500_rpm_and_holds_the_fig7_load_step(self):
         """The self-test build (motor model in the interrupt) closed loop in emulation:

@@ -73,14 +73,26 @@ pub fn install(state: IsrState) {
     READY.store(true, Ordering::Release);
 }
 
+/// Swaps in a drive rebuilt from new settings if the running one is Idle; otherwise the
+/// state that refused it. The check and the swap run with interrupts masked (a few
+/// microseconds: two moves of the drive), so the control interrupt cannot start the
+/// drive between them; it runs late, not never.
+pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveState> {
+    cortex_m::interrupt::free(|_| match state() {
+        Some(st) => st.ctl.replace_drive(drive),
+        None => Err(acim::DriveState::Fault),
+    })
+}
+
 #[inline(always)]
 fn state() -> Option<&'static mut IsrState> {
     if !READY.load(Ordering::Acquire) {
         return None;
     }
-    // SAFETY: STATE was initialised by `install` (READY is set after the write). Only the
-    // control interrupt takes this reference after `install`; it does not preempt itself,
-    // so the &mut is unique for the duration of one invocation.
+    // SAFETY: STATE was initialised by `install` (READY is set after the write). After
+    // `install` only the control interrupt takes this reference (it does not preempt
+    // itself), and `replace_drive_if_idle` with all interrupts masked: the &mut is unique
+    // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
 }
 

@@ -353,7 +353,7 @@ mod tests {
             let mut line: heapless::Vec<u8, 64> = heapless::Vec::new();
             line.extend_from_slice(b"set ").unwrap();
             line.extend_from_slice(f.name.as_bytes()).unwrap();
-            line.extend_from_slice(b" -123456.1234567").unwrap();
+            line.extend_from_slice(b" -123456.123").unwrap();
             assert!(line.len() <= MAX_LINE, "{}", f.name);
             assert!(matches!(parse(&line), Ok(Command::Set(..))), "{}", f.name);
         }

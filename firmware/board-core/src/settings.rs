@@ -226,7 +226,7 @@ impl Settings {
     pub fn drive_config(&self) -> Result<DriveConfig, SettingError> {
         let v = &self.values;
         let p = v[POLE_PAIRS];
-        if !(p >= 1.0 && p <= 32.0 && p == (p as u32) as f32) {
+        if !((1.0..=32.0).contains(&p) && p == (p as u32) as f32) {
             return Err(ParamError::PolePairs.into());
         }
         let machine = MachineParams::new(MachineData {
@@ -249,14 +249,14 @@ impl Settings {
         cfg.flux_current = v[4];
         cfg.max_speed = v[5] * RPM_TO_RAD_S;
         DriveDesign::new(cfg)?;
-        // NaN fails both comparisons below; the library has refused non-finite values
-        if !(cfg.overcurrent_trip <= TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale()) {
+        // both finite: DriveDesign::new has refused anything else
+        if cfg.overcurrent_trip > TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale() {
             return Err(SettingError {
                 field: "overcurrent_trip",
                 rule: "at most 90 % of the current-sense full scale (board::POWER_STAGE)",
             });
         }
-        if !(cfg.dc_bus_max <= BUS_FULL_SCALE_FRACTION * POWER_STAGE.bus_full_scale()) {
+        if cfg.dc_bus_max > BUS_FULL_SCALE_FRACTION * POWER_STAGE.bus_full_scale() {
             return Err(SettingError {
                 field: "dc_bus_max",
                 rule: "at most 95 % of the bus-sense full scale (board::POWER_STAGE)",
@@ -333,7 +333,8 @@ pub fn crc32(data: &[u8]) -> u32 {
 }
 
 /// Parses a setting value: optional sign, 1 to 6 integer digits, optionally `.` and 1 to
-/// 7 fraction digits (inductances and inertias need them). No exponent, no inf/nan.
+/// 7 fraction digits (inductances and inertias need them), at most 9 digits in all. No
+/// exponent, no inf/nan.
 pub fn parse_value(s: &[u8]) -> Option<f32> {
     const POW10: [f32; 8] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7];
     let (neg, rest) = match s.split_first() {
@@ -353,12 +354,16 @@ pub fn parse_value(s: &[u8]) -> Option<f32> {
     if frac.len() > 7 || (frac.is_empty() && rest.contains(&b'.')) {
         return None;
     }
-    let mut mant: u64 = 0;
+    // at most 9 digits in all: the mantissa fits a u32 (and f32 keeps 7 of them anyway)
+    if int.len() + frac.len() > 9 {
+        return None;
+    }
+    let mut mant: u32 = 0;
     for &d in int.iter().chain(frac) {
         if !d.is_ascii_digit() {
             return None;
         }
-        mant = mant * 10 + (d - b'0') as u64;
+        mant = mant * 10 + (d - b'0') as u32;
     }
     let v = mant as f32 / POW10[frac.len()];
     Some(if neg { -v } else { v })
@@ -367,24 +372,25 @@ pub fn parse_value(s: &[u8]) -> Option<f32> {
 /// Formats a value to about 7 significant digits (at most 6 fraction digits), trailing
 /// zeros dropped (`4.67`, `0.0049`, `-12`); values of 1e7 or more, and non-finite ones,
 /// print as `?`. Returns the used part of `buf`.
+#[inline(never)]
 pub fn format_value(v: f32, buf: &mut [u8; 24]) -> &[u8] {
-    const POW10: [f32; 7] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6];
-    const POW10U: [u64; 7] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000];
+    const POW10: [u32; 7] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000];
     let a = v.abs();
-    if !(a < 1e7) {
+    if !a.is_finite() || a >= 1e7 {
         buf[0] = b'?';
         return &buf[..1];
     }
-    // f32 keeps about 7 significant digits: as many fraction digits as the integer
-    // part leaves of them
+    // f32 keeps about 7 significant digits: as many fraction digits as the integer part
+    // leaves of them (so the scaled value stays below 1e7 and fits a u32)
     let mut digits = 6usize;
     let mut lim = 10.0f32;
     while digits > 0 && a >= lim {
         digits -= 1;
         lim *= 10.0;
     }
-    let scaled = (a * POW10[digits] + 0.5) as u64;
-    let (mut int, mut frac) = (scaled / POW10U[digits], scaled % POW10U[digits]);
+    let scale = POW10[digits];
+    let scaled = (a * scale as f32 + 0.5) as u32;
+    let (mut int, mut frac) = (scaled / scale, scaled % scale);
     let mut tmp = [0u8; 24];
     let mut n = 0;
     while digits > 0 && frac % 10 == 0 {
