@@ -403,7 +403,7 @@ fn say(out: &mut Deque<u8, OUT_LEN>, text: &[u8]) {
 }
 
 #[cfg(target_os = "none")]
-/// " (<field>: <rule>)"
+/// ` (field: rule)`
 #[inline(never)]
 fn say_setting_error(out: &mut Deque<u8, OUT_LEN>, e: &settings::SettingError) {
     say(out, b" (");
@@ -414,7 +414,7 @@ fn say_setting_error(out: &mut Deque<u8, OUT_LEN>, e: &settings::SettingError) {
 }
 
 #[cfg(target_os = "none")]
-/// "<name> = <value> <unit>\r\n"
+/// One `name = value unit` line.
 #[inline(never)]
 fn say_setting(out: &mut Deque<u8, OUT_LEN>, s: &Settings, i: usize) {
     let Some(f) = FIELDS.get(i) else { return };

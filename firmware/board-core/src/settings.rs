@@ -634,14 +634,14 @@ mod tests {
         }
         // every default prints to a value that parses back to itself
         let s = Settings::defaults();
-        for i in 0..FIELD_COUNT {
+        for (i, field) in FIELDS.iter().enumerate() {
             let v = s.get(i);
             let text = format_value(v, &mut buf);
             let back = parse_value(text).unwrap();
             assert!(
                 (back - v).abs() <= 1e-6 * v.abs().max(1.0),
                 "{}",
-                FIELDS[i].name
+                field.name
             );
         }
     }
