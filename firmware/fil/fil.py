@@ -119,6 +119,27 @@ def load_elf(path):
     return segs
 
 
+def elf_symbol(path, name):
+    """The address of symbol `name` in an ELF32's .symtab (None if absent)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    e_shoff, = struct.unpack_from("<I", data, 32)
+    e_shentsize, e_shnum = struct.unpack_from("<HH", data, 46)
+    sections = [struct.unpack_from("<10I", data, e_shoff + i * e_shentsize)
+                for i in range(e_shnum)]
+    for sh in sections:
+        if sh[1] != 2:                                   # SHT_SYMTAB
+            continue
+        strtab = sections[sh[6]]                         # sh_link
+        for off in range(sh[4], sh[4] + sh[5], 16):
+            st_name, st_value = struct.unpack_from("<II", data, off)
+            start = strtab[4] + st_name
+            end = data.index(b"\0", start)
+            if data[start:end] == name.encode():
+                return st_value
+    return None
+
+
 class RlLoad:
     """A standstill motor as three star-connected R-L branches (the paper's machine's
     stator: Rs = 10.5 ohm, L = 0.07 H), driven by the PWM duties' period averages: enough

@@ -73,6 +73,7 @@ pub fn read_record() -> [u8; RECORD_LEN] {
     r
 }
 
+#[inline(never)]
 fn wait_idle(f: &pac::flash::RegisterBlock) -> Result<u32, FlashError> {
     for _ in 0..BUSY_POLLS {
         let sr = f.sr().read().bits();
