@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Firmware-in-the-loop suite: installs the emulator (Unicorn, pinned), builds both firmware
-# ELFs if they are missing (firmware/check.sh leaves them in target/), runs the tests.
+# ELFs if they are missing (firmware/check.sh leaves them in target/) and the self-test with
+# the software sin/cos (for the host/target bit-exactness test), runs the tests.
 #
 #   bash firmware/fil/ci.sh          (FIL_UPDATE=1 rewrites golden-boot-writes.txt and isr-budget.json)
 set -euo pipefail
@@ -12,6 +13,10 @@ OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/release"
 if [ ! -f "$OUT/acim-firmware-power-stage.elf" ] || [ ! -f "$OUT/acim-firmware-selftest.elf" ]; then
   bash firmware/check.sh
 fi
+# the bit-exactness test's third ELF: the self-test with the software sin/cos (always
+# rebuilt: cargo relinks only if something changed since the last build of these features)
+cargo build --release -p acim-firmware --target thumbv7em-none-eabihf --features selftest,soft-sincos
+cp "$OUT/acim-firmware" "$OUT/acim-firmware-selftest-soft.elf"
 mkdir -p "${CARGO_TARGET_DIR:-$PWD/target}"
 cd firmware/fil
 python3 -m unittest -v test_fil

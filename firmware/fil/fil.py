@@ -82,7 +82,7 @@ PERIPHERALS = {
                           0x20: "CICR", 0x48: "AHB1ENR", 0x4C: "AHB2ENR", 0x50: "AHB3ENR",
                           0x58: "APB1ENR1", 0x5C: "APB1ENR2", 0x60: "APB2ENR", 0x88: "CCIPR",
                           0x90: "BDCR", 0x94: "CSR", 0x9C: "CCIPR2"}),
-    0x4002_2000: ("FLASH", {0x0: "ACR"}),
+    0x4002_2000: ("FLASH", {0x0: "ACR", 0x8: "KEYR", 0x10: "SR", 0x14: "CR", 0x20: "OPTR"}),
     0x4800_0000: ("GPIOA", {}), 0x4800_0400: ("GPIOB", {}), 0x4800_0800: ("GPIOC", {}),
     0x5000_0000: ("ADC1", {}), 0x5000_0100: ("ADC2", {}), 0x5000_0300: ("ADC12", {0x8: "CCR"}),
     0xE004_2000: ("DBGMCU", {0x4: "CR", 0x8: "APB1FZR1", 0xC: "APB1FZR2", 0x10: "APB2FZR"}),
@@ -92,6 +92,14 @@ GPIO_REGS = {0x0: "MODER", 0x4: "OTYPER", 0x8: "OSPEEDR", 0xC: "PUPDR", 0x14: "O
 ADC_REGS = {0x0: "ISR", 0x4: "IER", 0x8: "CR", 0xC: "CFGR", 0x10: "CFGR2", 0x14: "SMPR1",
             0x18: "SMPR2", 0x4C: "JSQR"}
 TIM1_BREAK_FLAGS = (1 << 7) | (1 << 8) | (1 << 13)
+# the last 4 KiB of flash (Unicorn maps whole 4 KiB pages) are modelled as flash memory:
+# programmed only through FLASH_KEYR/CR/SR; its upper 2 KiB page (bank 2, page 127) is the
+# firmware's settings page (firmware/board-core/src/settings.rs)
+FLASH_TOP = 0x0807_F000
+SETTINGS_ADDR = 0x0807_F800
+FLASH_KEYS = (0x4567_0123, 0xCDEF_89AB)
+FLASH_LOCK = 1 << 31
+FLASH_BSY = 1 << 16
 MOE = 1 << 15
 
 
@@ -109,6 +117,27 @@ def load_elf(path):
         if p_type == 1 and p_filesz:
             segs.append((p_paddr, data[p_offset:p_offset + p_filesz]))
     return segs
+
+
+def elf_symbol(path, name):
+    """The address of symbol `name` in an ELF32's .symtab (None if absent)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    e_shoff, = struct.unpack_from("<I", data, 32)
+    e_shentsize, e_shnum = struct.unpack_from("<HH", data, 46)
+    sections = [struct.unpack_from("<10I", data, e_shoff + i * e_shentsize)
+                for i in range(e_shnum)]
+    for sh in sections:
+        if sh[1] != 2:                                   # SHT_SYMTAB
+            continue
+        strtab = sections[sh[6]]                         # sh_link
+        for off in range(sh[4], sh[4] + sh[5], 16):
+            st_name, st_value = struct.unpack_from("<II", data, off)
+            start = strtab[4] + st_name
+            end = data.index(b"\0", start)
+            if data[start:end] == name.encode():
+                return st_value
+    return None
 
 
 class RlLoad:
@@ -134,10 +163,22 @@ class RlLoad:
 class Machine:
     """The emulated MCU with its peripherals, running one ELF."""
 
-    def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0):
+    def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0,
+                 settings_page=None):
+        """`settings_page`: the 2 KiB settings page's contents at power-up (default erased),
+        e.g. another Machine's `settings_page()` after a `save`: a reboot with that flash."""
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
-        for base, size in [(0x0800_0000, 0x8_0000), (0x2000_0000, 0x2_0000),
+        self.flash_top = bytearray(b"\xff" * 0x1000)
+        if settings_page is not None:
+            if len(settings_page) != 0x800:
+                raise ValueError("settings_page must be 2048 bytes")
+            self.flash_top[0x800:] = settings_page
+        self._flash_key = 0          # unlock sequence position
+        self._flash_half = None      # first word of a double word being programmed
+        self.uc.mmio_map(FLASH_TOP, 0x1000, self._flash_mem_read, None,
+                         self._flash_mem_write, None)
+        for base, size in [(0x0800_0000, FLASH_TOP - 0x0800_0000), (0x2000_0000, 0x2_0000),
                            (0x1000_0000, 0x8000), (STOP, 0x1000), (0x1FFF_0000, 0x1_0000)]:
             self.uc.mem_map(base, size)
         for paddr, blob in load_elf(elf):
@@ -195,6 +236,8 @@ class Machine:
         r[(0x4000_7000, 0x8)] = 0x0000_8000     # PWR_CR3
         r[(0x4000_7000, 0x80)] = 0x0000_0100    # PWR_CR5: R1MODE = 1 (boost off)
         r[(0x4002_2000, 0x0)] = 0x0000_0600     # FLASH_ACR
+        r[(0x4002_2000, 0x14)] = 0xC000_0000    # FLASH_CR: LOCK, OPTLOCK
+        r[(0x4002_2000, 0x20)] = 0xFFEF_F8AA    # FLASH_OPTR (factory): DBANK = 1
         r[(0x4800_0000, 0x0)] = 0xABFF_FFFF     # GPIOA_MODER
         r[(0x4800_0400, 0x0)] = 0xFFFF_FEBF     # GPIOB_MODER
         r[(0x4800_0800, 0x0)] = 0xFFFF_FFFF     # GPIOC_MODER
@@ -298,6 +341,9 @@ class Machine:
         if base in (0x5000_0000, 0x5000_0100):
             self._adc_write(base, off4, value)
             return
+        if base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14):
+            self._flash_reg_write(off4, value)
+            return
         if base == 0x4001_2C00:
             self._tim1_write(off4, value)
             return
@@ -354,6 +400,81 @@ class Machine:
         if off == 0x14 and value & 1:                   # EGR.UG
             self.regs[(b, 0x10)] = self.reg(b, 0x10) | 1
         self.regs[(b, off)] = value
+
+    # --- flash (RM0440 3.3.6-3.3.7: unlock, page erase, double-word programming) --------
+    def _flash_mem_read(self, _uc, off, size, _d):
+        return int.from_bytes(self.flash_top[off:off + size], "little")
+
+    def _flash_sr(self, bits):
+        self.regs[(0x4002_2000, 0x10)] = self.reg(0x4002_2000, 0x10) | bits
+
+    def _flash_mem_write(self, _uc, off, size, value, _d):
+        cr = self.reg(0x4002_2000, 0x14)
+        addr = FLASH_TOP + off
+        if cr & FLASH_LOCK or not cr & 1:
+            self.events.append(("FLASH write without PG", addr))
+            self._flash_sr(1 << 7)                       # PGSERR
+            return
+        if size != 4:
+            self._flash_sr(1 << 6)                       # SIZERR
+            return
+        if self._flash_half is None:
+            if addr % 8:
+                self._flash_sr(1 << 5)                   # PGAERR
+                return
+            self._flash_half = (addr, value)
+            return
+        first, lo = self._flash_half
+        self._flash_half = None
+        if addr != first + 4:
+            self._flash_sr(1 << 5)                       # PGAERR
+            return
+        o = first - FLASH_TOP
+        if self.flash_top[o:o + 8] != b"\xff" * 8:
+            self._flash_sr(1 << 3)                       # PROGERR: not erased
+            return
+        self.flash_top[o:o + 8] = struct.pack("<II", lo, value)
+        self.events.append(("FLASH program", first))
+
+    def _flash_reg_write(self, off, value):
+        b = 0x4002_2000
+        if off == 0x8:                                   # KEYR
+            if value == FLASH_KEYS[self._flash_key]:
+                self._flash_key += 1
+                if self._flash_key == 2:
+                    self._flash_key = 0
+                    self.regs[(b, 0x14)] = self.reg(b, 0x14) & ~FLASH_LOCK
+            else:
+                self._flash_key = 0
+                self.events.append(("FLASH bad key", value))
+            return
+        if off == 0x10:                                  # SR: rc_w1
+            self.regs[(b, off)] = self.reg(b, off) & ~(value & ~FLASH_BSY)
+            return
+        old = self.reg(b, 0x14)                           # CR
+        if old & FLASH_LOCK:
+            self.events.append(("FLASH CR write while locked", value))
+            return
+        if value & (1 << 16) and value & 2:              # STRT with PER: page erase
+            dual = self.reg(b, 0x20) & (1 << 22)
+            pnb = (value >> 3) & 0x7F
+            if dual:
+                addr = 0x0800_0000 + ((value >> 11) & 1) * 0x4_0000 + pnb * 0x800
+                size = 0x800
+            else:
+                addr, size = 0x0800_0000 + pnb * 0x1000, 0x1000
+            self.events.append(("FLASH erase", addr, size))
+            if addr >= FLASH_TOP:
+                o = addr - FLASH_TOP
+                self.flash_top[o:o + size] = b"\xff" * size
+            else:
+                self.uc.mem_write(addr, b"\xff" * size)
+            value &= ~(1 << 16)                          # STRT clears when done
+        self.regs[(b, 0x14)] = value
+
+    def settings_page(self):
+        """The settings page (2 KiB at 0x0807_F800) as the flash holds it now."""
+        return bytes(self.flash_top[0x800:])
 
     def _calibrated(self):
         return any(e[0] == "ADCAL" for e in self.events)

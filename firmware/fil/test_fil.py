@@ -236,6 +236,146 @@ class Logs(unittest.TestCase):
         json.dump(phases, open(os.path.join(HERE, "..", "..", "target", "fil-isr.json"), "w"))
 
 
+class Settings(unittest.TestCase):
+    """Issue 11 item 4: settings over the serial link, kept in the reserved flash page
+    (self-test build: the same main loop and flash code, a 20-period boot)."""
+
+    def boot(self, page=None):
+        m = fil.Machine(fil.default_elf("selftest"), settings_page=page)
+        m.run_until(lambda m: "ready" in m.output(), 100)
+        m.run(5)
+        self.assertIsNone(m.halted)
+        return m
+
+    def get(self, m, name):
+        reply = command(m, f"get {name}")
+        line = [l for l in reply.split("\r\n") if l.startswith(name + " = ")]
+        self.assertTrue(line, reply)
+        return float(line[0].split()[2])
+
+    def test_set_save_reboot_and_a_corrupted_page(self):
+        m = self.boot()
+        self.assertIn("settings: defaults (nothing saved)", m.output())
+        default_limit = self.get(m, "current_limit")
+        self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
+        self.assertIn("ok stator_resistance applied",
+                      command(m, "set stator_resistance 11.25"))
+        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        # the new drive runs: start, then everything that changes it is refused, naming it
+        command(m, "speed 300", 5)
+        self.assertIn("ok", command(m, "start", 20))
+        self.assertIn("err current_limit: refused while the drive is not idle",
+                      command(m, "set current_limit 3.5"))
+        self.assertIn("err save: refused", command(m, "save"))
+        self.assertIn("err defaults: refused", command(m, "defaults"))
+        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        command(m, "stop", 5)
+        self.assertEqual(state_fault(m), (0, 0))
+        # out of range: the library's rule, naming the field; nothing changes
+        self.assertIn("err (flux_current: must be below current_limit)",
+                      command(m, "set flux_current 4.5"))
+        self.assertIn("err (stator_resistance: must be finite and > 0)",
+                      command(m, "set stator_resistance 0"))
+        self.assertIn("err unknown setting", command(m, "set bogus 1"))
+        self.assertEqual(self.get(m, "flux_current"), 1.5)
+        erased = m.settings_page()
+        self.assertEqual(erased, b"\xff" * 2048)
+        self.assertIn("ok saved to flash", command(m, "save", 20))
+        page = m.settings_page()
+        self.assertEqual(page[:4], b"ACIM")
+        erases = [e for e in m.events if e[0] == "FLASH erase"]
+        self.assertEqual(erases, [("FLASH erase", fil.SETTINGS_ADDR, 2048)])
+        self.assertFalse([e for e in m.events if e[0].startswith("FLASH") and e[0] not in
+                          ("FLASH erase", "FLASH program")], m.events)
+        self.assertTrue(m.reg(0x4002_2000, 0x14) & fil.FLASH_LOCK, "flash left unlocked")
+        # reboot with that flash: the values are back, and the drive runs with them
+        m2 = self.boot(page)
+        self.assertIn("settings loaded from flash", m2.output())
+        self.assertEqual(self.get(m2, "current_limit"), 4.0)
+        self.assertEqual(self.get(m2, "stator_resistance"), 11.25)
+        self.assertEqual(state_fault(m2), (0, 0))
+        # one corrupted byte: defaults, a warning, Idle
+        bad = bytearray(page)
+        bad[20] ^= 0x01
+        m3 = self.boot(bytes(bad))
+        self.assertIn("warn settings in flash refused: CRC mismatch", m3.output())
+        self.assertIn("defaults in use, drive idle", m3.output())
+        self.assertEqual(self.get(m3, "current_limit"), default_limit)
+        self.assertEqual(state_fault(m3), (0, 0))
+        # another format version (CRC made to match): refused too
+        import zlib
+        other = bytearray(page)
+        other[4:6] = (2).to_bytes(2, "little")
+        other[64:68] = zlib.crc32(bytes(other[:64])).to_bytes(4, "little")
+        m4 = self.boot(bytes(other))
+        self.assertIn("warn settings in flash refused: record of another format version",
+                      m4.output())
+        self.assertEqual(self.get(m4, "current_limit"), default_limit)
+
+
+class BitExact(unittest.TestCase):
+    """Issue 11 item 3: the same closed loop on the host and in the emulated self-test
+    firmware (built with `--features selftest,soft-sincos`: the library's FastSinCos in
+    place of the CORDIC) gives identical duties, enable flags, speed and flux estimates and
+    model speeds, bit for bit, period for period. The firmware's FIL_PROBE words are read
+    after every interrupt; the commands it applied (speed 500, start, later the fig 7 load
+    step) are replayed in the same periods by the `hostloop` example, which runs the same
+    ControlLoop and SimulatedStage on the host."""
+    PERIODS = 10_500
+
+    def test_host_and_target_agree_bit_for_bit(self):
+        import struct
+        import subprocess
+        import tempfile
+        elf = fil.default_elf("selftest-soft")
+        addr = fil.elf_symbol(elf, "FIL_PROBE")
+        self.assertIsNotNone(addr, "FIL_PROBE missing from the self-test ELF")
+        rows = {}
+
+        def record(m):
+            w = struct.unpack("<10I", bytes(m.uc.mem_read(addr, 40)))
+            rows[w[0]] = w
+
+        m = fil.Machine(elf)
+        m.run_until(lambda m: "ready" in m.output(), 100, on_period=record)
+        m.send("speed 500\r\n")
+        m.run(5, on_period=record)
+        m.send("start\r\n")
+        m.run(8000, on_period=record)
+        m.send("load 1.5\r\n")
+        while len(rows) < self.PERIODS + 5 and m.halted is None:
+            m.run(500, on_period=record)
+        self.assertIsNone(m.halted)
+        n = self.PERIODS
+        missing = [k for k in range(n) if k not in rows]
+        self.assertFalse(missing, f"periods without an interrupt: {missing[:10]}")
+        target = [rows[k] for k in range(n)]
+        schedule = [(w[0], w[1], w[2]) for w in target if w[1]]
+        self.assertEqual([c for _, c, _ in schedule], [2, 1, 3], schedule)
+        root = os.path.join(HERE, "..", "..")
+        with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as f:
+            for p, c, a in schedule:
+                f.write(f"{p} {c} {a:08x}\n")
+        host = subprocess.run(
+            ["cargo", "run", "-q", "-p", "acim-firmware-core", "--example", "hostloop", "--",
+             str(n), f.name], cwd=root, check=True, capture_output=True, text=True).stdout
+        os.unlink(f.name)
+        host = [tuple(int(x, 16) for x in line.split()) for line in host.splitlines()]
+        self.assertEqual(len(host), n)
+        names = ["period", "command", "argument", "duty a", "duty b", "duty c", "enabled",
+                 "speed estimate", "flux estimate", "model speed"]
+        for k in range(n):
+            if host[k] != target[k]:
+                diff = [names[i] for i in range(10) if host[k][i] != target[k][i]]
+                self.fail(f"period {k}: {', '.join(diff)} differ: host {host[k]} target "
+                          f"{target[k]}")
+        # the run covers the loop doing something: enabled, at speed, then loaded
+        speed = struct.unpack("<f", struct.pack("<I", target[-1][9]))[0]
+        self.assertTrue(target[-1][6] and abs(speed - 500) < 25, speed)
+        print(f"\nhost and emulated self-test identical for {n} periods "
+              f"(commands at periods {[p for p, _, _ in schedule]})", file=sys.stderr)
+
+
 class SelfTest(unittest.TestCase):
     def test_selftest_build_reaches_500_rpm_and_holds_the_fig7_load_step(self):
         """The self-test build (motor model in the interrupt) closed loop in emulation:

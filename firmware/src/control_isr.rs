@@ -73,15 +73,72 @@ pub fn install(state: IsrState) {
     READY.store(true, Ordering::Release);
 }
 
+/// Swaps in a drive rebuilt from new settings if the running one is Idle; otherwise the
+/// state that refused it. The check and the swap run with interrupts masked (a few
+/// microseconds: two moves of the drive), so the control interrupt cannot start the
+/// drive between them; it runs late, not never.
+pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveState> {
+    cortex_m::interrupt::free(|_| match state() {
+        Some(st) => st.ctl.replace_drive(drive),
+        None => Err(acim::DriveState::Fault),
+    })
+}
+
 #[inline(always)]
 fn state() -> Option<&'static mut IsrState> {
     if !READY.load(Ordering::Acquire) {
         return None;
     }
-    // SAFETY: STATE was initialised by `install` (READY is set after the write). Only the
-    // control interrupt takes this reference after `install`; it does not preempt itself,
-    // so the &mut is unique for the duration of one invocation.
+    // SAFETY: STATE was initialised by `install` (READY is set after the write). After
+    // `install` only the control interrupt takes this reference (it does not preempt
+    // itself), and `replace_drive_if_idle` with all interrupts masked: the &mut is unique
+    // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
+}
+
+/// Words of [`FIL_PROBE`].
+#[cfg(feature = "selftest")]
+pub const PROBE_WORDS: usize = 10;
+
+/// Self-test: this period's step, for the firmware-in-the-loop harness that compares it
+/// bit for bit with the host (`firmware/fil/test_fil.py`, class `BitExact`; the
+/// `hostloop` example of acim-firmware-core prints the same words): period index, command
+/// applied (0 none, 1 start, 2 speed, 3 load, 4 stop, 5 vf, 6 reset, 7 other), its
+/// argument (f32 bits), the three duties (f32 bits), outputs enabled, speed estimate
+/// (rad/s, f32 bits), rotor flux estimate (Wb, f32 bits), model speed (rpm, f32 bits).
+/// Plain RAM the interrupt overwrites each period (ten stores); nothing reads it.
+#[cfg(feature = "selftest")]
+#[no_mangle]
+pub static FIL_PROBE: [AtomicU32; PROBE_WORDS] = [const { AtomicU32::new(0) }; PROBE_WORDS];
+
+#[cfg(feature = "selftest")]
+#[inline(always)]
+fn probe(st: &IsrState, cmd: Option<ControlCommand>, out: &acim::PwmOutput) {
+    let (code, arg) = match cmd {
+        None => (0, 0.0),
+        Some(ControlCommand::Start) => (1, 0.0),
+        Some(ControlCommand::SpeedRpm(rpm)) => (2, rpm),
+        Some(ControlCommand::PlantLoad(nm)) => (3, nm),
+        Some(ControlCommand::Stop) => (4, 0.0),
+        Some(ControlCommand::StartOpenLoop) => (5, 0.0),
+        Some(ControlCommand::ResetFault) => (6, 0.0),
+    };
+    let t = st.ctl.drive().telemetry();
+    let words = [
+        HEARTBEAT.load(Ordering::Relaxed),
+        code,
+        f32::to_bits(arg),
+        out.duties[0].to_bits(),
+        out.duties[1].to_bits(),
+        out.duties[2].to_bits(),
+        out.enabled as u32,
+        t.speed_estimate.to_bits(),
+        t.rotor_flux.to_bits(),
+        st.sim.speed_rpm().to_bits(),
+    ];
+    for (p, w) in FIL_PROBE.iter().zip(words) {
+        p.store(w, Ordering::Relaxed);
+    }
 }
 
 #[cfg(feature = "selftest")]
@@ -146,12 +203,13 @@ fn TIM6_DACUNDER() {
     let t0 = DWT::cycle_count();
     crate::hw::tim6_ack();
     let Some(st) = state() else { return };
-    commands(st);
+    let cmd = commands(st);
     let raw = st.sim.sample();
     let out = st.ctl.step(&raw);
     let t1 = DWT::cycle_count();
     // the model is the power stage: it runs outside the measured step
     st.sim.run_period(out);
+    probe(st, cmd, &out);
     if crate::hw::tim6_update_pending() {
         st.ctl.trip(FirmwareFault::DeadlineMissed);
         st.sim.switch_off();

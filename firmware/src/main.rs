@@ -29,6 +29,8 @@ mod control_isr;
 #[cfg(not(feature = "soft-sincos"))]
 mod cordic;
 #[cfg(target_os = "none")]
+mod flash;
+#[cfg(target_os = "none")]
 #[cfg_attr(feature = "selftest", allow(dead_code))]
 mod hw;
 
@@ -40,6 +42,7 @@ use {
     acim_firmware_core::command::{Command, LineAssembler, ParseError},
     acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop},
     acim_firmware_core::convert::Converter,
+    acim_firmware_core::settings::{self, LoadError, Settings, FIELDS},
     acim_firmware_core::telemetry::{self, TelemetrySample},
     control_isr::{IsrState, CMD_Q, TEL_Q},
     core::sync::atomic::Ordering,
@@ -70,6 +73,21 @@ mod board_cfg {
     }
     #[cfg(feature = "soft-sincos")]
     pub fn sincos(_c: stm32g4xx_hal::pac::CORDIC, _rcc: &mut stm32g4xx_hal::rcc::Rcc) -> Sc {
+        acim::frames::FastSinCos
+    }
+
+    /// Another handle on the sin/cos for a drive rebuilt from new settings (the old drive,
+    /// and its handle, are dropped when the new one is swapped in).
+    #[cfg(not(feature = "soft-sincos"))]
+    pub fn another(rcc: &mut stm32g4xx_hal::rcc::Rcc) -> Sc {
+        // SAFETY: the HAL's CORDIC handle is zero-sized; `new` sets the clock enable and
+        // CSR to the values `sincos` already set (same configuration), and the control
+        // interrupt's operations (write WDATA, read RDATA) are not split by it: the main
+        // loop never preempts the interrupt.
+        crate::cordic::CordicSinCos::new(unsafe { stm32g4xx_hal::pac::CORDIC::steal() }, rcc)
+    }
+    #[cfg(feature = "soft-sincos")]
+    pub fn another(_rcc: &mut stm32g4xx_hal::rcc::Rcc) -> Sc {
         acim::frames::FastSinCos
     }
 }
@@ -165,8 +183,18 @@ fn main() -> ! {
     let (mut tx, mut rx) = serial.split();
 
     let sincos = board_cfg::sincos(dp.CORDIC, &mut rcc);
-    let cfg = board::drive_config();
-    let drive = match Drive::with_sincos(cfg, sincos) {
+    // settings from the reserved flash page; anything but an intact, valid record of this
+    // version: the defaults, reported after the ready line (the drive starts Idle anyway)
+    let (mut settings, load) = match Settings::decode(&flash::read_record()) {
+        Ok(s) => (s, Ok(())),
+        Err(e) => (Settings::defaults(), Err(e)),
+    };
+    match load {
+        Ok(()) => defmt::info!("settings loaded from flash"),
+        Err(LoadError::Blank) => defmt::info!("no saved settings: defaults"),
+        Err(e) => defmt::warn!("saved settings refused ({}): defaults", e),
+    }
+    let (mut cfg, drive) = match build_drive(&settings, sincos) {
         Ok(d) => d,
         Err(e) => {
             defmt::error!("drive configuration rejected: {}", e);
@@ -274,9 +302,21 @@ fn main() -> ! {
     let mut last_beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
 
     let mut line = LineAssembler::new();
-    let mut out: Deque<u8, 512> = Deque::new();
+    let mut out: Deque<u8, OUT_LEN> = Deque::new();
     let mut stream = false;
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
+    match load {
+        Ok(()) => say(&mut out, b"settings loaded from flash\r\n"),
+        Err(LoadError::Blank) => say(&mut out, b"settings: defaults (nothing saved)\r\n"),
+        Err(e) => {
+            say(&mut out, b"warn settings in flash refused: ");
+            say(&mut out, e.as_str().as_bytes());
+            if let LoadError::Invalid(se) = e {
+                say_setting_error(&mut out, &se);
+            }
+            say(&mut out, b"; defaults in use, drive idle\r\n");
+        }
+    }
 
     loop {
         // watchdog: fed only while the control interrupt is alive
@@ -296,7 +336,15 @@ fn main() -> ! {
         match rx.read() {
             Ok(byte) => {
                 if let Some(parsed) = line.push(byte) {
-                    handle(parsed, &mut cmd_p, &mut out, &mut stream, &cfg);
+                    let mut ctx = Ctx {
+                        cmd_p: &mut cmd_p,
+                        out: &mut out,
+                        stream: &mut stream,
+                        cfg: &mut cfg,
+                        settings: &mut settings,
+                        rcc: &mut rcc,
+                    };
+                    handle(parsed, &mut ctx);
                 }
             }
             Err(stm32g4xx_hal::nb::Error::WouldBlock) => {}
@@ -341,7 +389,12 @@ fn main() -> ! {
 }
 
 #[cfg(target_os = "none")]
-fn say(out: &mut Deque<u8, 512>, text: &[u8]) {
+/// UART output buffer, bytes (`get` lists every setting in one go).
+const OUT_LEN: usize = 1024;
+
+#[cfg(target_os = "none")]
+#[inline(never)]
+fn say(out: &mut Deque<u8, OUT_LEN>, text: &[u8]) {
     for &b in text {
         if out.push_back(b).is_err() {
             break;
@@ -350,20 +403,105 @@ fn say(out: &mut Deque<u8, 512>, text: &[u8]) {
 }
 
 #[cfg(target_os = "none")]
-fn handle(
-    parsed: Result<Command, ParseError>,
-    cmd_p: &mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
-    out: &mut Deque<u8, 512>,
-    stream: &mut bool,
-    cfg: &acim::DriveConfig,
-) {
+/// ` (field: rule)`
+#[inline(never)]
+fn say_setting_error(out: &mut Deque<u8, OUT_LEN>, e: &settings::SettingError) {
+    say(out, b" (");
+    say(out, e.field.as_bytes());
+    say(out, b": ");
+    say(out, e.rule.as_bytes());
+    say(out, b")");
+}
+
+#[cfg(target_os = "none")]
+/// One `name = value unit` line.
+#[inline(never)]
+fn say_setting(out: &mut Deque<u8, OUT_LEN>, s: &Settings, i: usize) {
+    let Some(f) = FIELDS.get(i) else { return };
+    let mut buf = [0u8; 24];
+    say(out, f.name.as_bytes());
+    say(out, b" = ");
+    say(out, settings::format_value(s.get(i), &mut buf));
+    if !f.unit.is_empty() {
+        say(out, b" ");
+        say(out, f.unit.as_bytes());
+    }
+    say(out, b"\r\n");
+}
+
+#[cfg(target_os = "none")]
+/// What the command handler works on.
+struct Ctx<'a> {
+    cmd_p: &'a mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
+    out: &'a mut Deque<u8, OUT_LEN>,
+    stream: &'a mut bool,
+    cfg: &'a mut acim::DriveConfig,
+    settings: &'a mut Settings,
+    rcc: &'a mut stm32g4xx_hal::rcc::Rcc,
+}
+
+#[cfg(target_os = "none")]
+/// The drive is Idle (the last period's state; `replace_drive_if_idle` re-checks
+/// atomically).
+fn idle() -> bool {
+    control_isr::STATE_CODE.load(Ordering::Relaxed) == acim::DriveState::Idle.code()
+}
+
+#[cfg(target_os = "none")]
+/// The drive for `s` (the one place a drive is built: at boot and on `set`/`defaults`).
+#[inline(never)]
+fn build_drive(
+    s: &Settings,
+    sincos: board_cfg::Sc,
+) -> Result<(acim::DriveConfig, Drive<board_cfg::Sc>), settings::SettingError> {
+    let cfg = s.drive_config()?;
+    Ok((cfg, Drive::with_sincos(cfg, sincos)?))
+}
+
+#[cfg(target_os = "none")]
+/// Rebuilds the drive from `next` and swaps it in if Idle; replies naming `field`.
+#[inline(never)]
+fn apply_settings(ctx: &mut Ctx, next: Settings, field: &str) {
+    let refused = |out: &mut Deque<u8, OUT_LEN>| {
+        say(out, b"err ");
+        say(out, field.as_bytes());
+        say(
+            out,
+            b": refused while the drive is not idle (stop or reset first)\r\n",
+        );
+    };
+    if !idle() {
+        return refused(ctx.out);
+    }
+    match build_drive(&next, board_cfg::another(ctx.rcc)) {
+        Err(e) => {
+            say(ctx.out, b"err");
+            say_setting_error(ctx.out, &e);
+            say(ctx.out, b"\r\n");
+        }
+        Ok((cfg, drive)) => match control_isr::replace_drive_if_idle(drive) {
+            Ok(()) => {
+                *ctx.settings = next;
+                *ctx.cfg = cfg;
+                say(ctx.out, b"ok ");
+                say(ctx.out, field.as_bytes());
+                say(ctx.out, b" applied (save to keep it)\r\n");
+            }
+            Err(_) => refused(ctx.out),
+        },
+    }
+}
+
+#[cfg(target_os = "none")]
+#[inline(never)]
+fn handle(parsed: Result<Command, ParseError>, ctx: &mut Ctx) {
     let c = match parsed {
         Ok(c) => c,
         Err(e) => {
             defmt::warn!("command rejected: {}", e);
-            say(out, b"err ");
-            say(out, e.as_str().as_bytes());
-            say(out, b"\r\n");
+            say(ctx.out, b"err ");
+            say(ctx.out, e.as_str().as_bytes());
+            say(ctx.out, b"\r\n");
             return;
         }
     };
@@ -378,18 +516,19 @@ fn handle(
                 Some(ControlCommand::PlantLoad(nm))
             } else {
                 say(
-                    out,
+                    ctx.out,
                     b"err load applies to the self-test's motor model only\r\n",
                 );
                 None
             }
         }
         Command::Stream(on) => {
-            *stream = on;
-            say(out, b"ok\r\n");
+            *ctx.stream = on;
+            say(ctx.out, b"ok\r\n");
             None
         }
         Command::Params => {
+            let cfg = &*ctx.cfg;
             let m = &cfg.machine;
             defmt::info!(
                 "params: Ts {} s, flux current {} A, current limit {} A, trip {} A, bus {}..{} V, max speed {} rpm, ramp {} rpm/s, Rs0 {} ohm, Rs estimation {}, dead time {} s, sensing {}, pole pairs {}",
@@ -415,7 +554,7 @@ fn handle(
                 board::PWM_ARR,
                 board::SAMPLE_LEAD_TICKS
             );
-            say(out, b"ok parameters logged on RTT (defmt)\r\n");
+            say(ctx.out, b"ok parameters logged on RTT (defmt)\r\n");
             None
         }
         Command::Status => {
@@ -429,24 +568,76 @@ fn handle(
                 control_isr::HEARTBEAT.load(Ordering::Relaxed),
                 control_isr::TEL_DROPPED.load(Ordering::Relaxed)
             );
-            say(out, b"ok state ");
-            say(out, &[b'0' + st.min(9)]);
-            say(out, b" fault ");
-            say(out, &[b'0' + fault / 10 % 10, b'0' + fault % 10]);
-            say(out, b"\r\n");
+            say(ctx.out, b"ok state ");
+            say(ctx.out, &[b'0' + st.min(9)]);
+            say(ctx.out, b" fault ");
+            say(ctx.out, &[b'0' + fault / 10 % 10, b'0' + fault % 10]);
+            say(ctx.out, b"\r\n");
+            None
+        }
+        Command::Set(i, v) => {
+            let Some(field) = FIELDS.get(i) else {
+                say(ctx.out, b"err unknown setting\r\n");
+                return;
+            };
+            match ctx.settings.set(i, v) {
+                Ok(next) => apply_settings(ctx, next, field.name),
+                Err(e) => {
+                    say(ctx.out, b"err");
+                    say_setting_error(ctx.out, &e);
+                    say(ctx.out, b"\r\n");
+                }
+            }
+            None
+        }
+        Command::Defaults(low_voltage) => {
+            let p = if low_voltage {
+                board::LOW_VOLTAGE
+            } else {
+                board::PROFILE
+            };
+            let next = Settings::from_config(&board::drive_config_for(&p));
+            apply_settings(ctx, next, "defaults");
+            None
+        }
+        Command::Get(which) => {
+            match which {
+                Some(i) => say_setting(ctx.out, ctx.settings, i),
+                None => (0..FIELDS.len()).for_each(|i| say_setting(ctx.out, ctx.settings, i)),
+            }
+            say(ctx.out, b"ok\r\n");
+            None
+        }
+        Command::Save => {
+            if !idle() {
+                say(
+                    ctx.out,
+                    b"err save: refused while the drive is not idle (stop or reset first)\r\n",
+                );
+            } else {
+                match flash::write_record(&ctx.settings.encode()) {
+                    Ok(()) => say(ctx.out, b"ok saved to flash\r\n"),
+                    Err(e) => {
+                        defmt::error!("settings save failed: {}", e.as_str());
+                        say(ctx.out, b"err save failed: ");
+                        say(ctx.out, e.as_str().as_bytes());
+                        say(ctx.out, b"\r\n");
+                    }
+                }
+            }
             None
         }
         Command::Help => {
             say(
-                out,
-                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test)\r\n",
+                ctx.out,
+                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage]\r\n",
             );
             None
         }
     };
     if let Some(cmd) = to_isr {
-        if cmd_p.enqueue(cmd).is_err() {
-            say(out, b"err busy, command dropped\r\n");
+        if ctx.cmd_p.enqueue(cmd).is_err() {
+            say(ctx.out, b"err busy, command dropped\r\n");
         }
         // the reply ("ok" / "err refused") comes back from the interrupt
     }

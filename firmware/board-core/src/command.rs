@@ -10,6 +10,10 @@
 //! status           print the state, fault and timing
 //! stream on|off    text telemetry frames on the UART as well as RTT
 //! load <N m>       self-test only: the motor model's load torque (a brake), |N m| <= 20
+//! set <name> <v>   change a setting (crate::settings::FIELDS), Idle only, e.g. "set current_limit 2.5"
+//! get [<name>]     print one setting, or all of them
+//! save             write the settings to the reserved flash page (Idle only)
+//! defaults [low-voltage]  this build's default settings (or the 24-60 V bring-up profile), Idle only, not saved
 //! help             list the commands
 //! ```
 //!
@@ -18,13 +22,14 @@
 //! [`MAX_LINE`]) yields a [`ParseError`] and no command: nothing changes.
 
 use crate::board::MAX_SPEED_COMMAND_RPM;
+use crate::settings::{field_index, parse_value};
 
 /// Largest load torque the self-test's `load` command accepts, N m.
 pub const MAX_LOAD_COMMAND_NM: f32 = 20.0;
 use heapless::Vec;
 
 /// Longest accepted line, bytes (without the terminator).
-pub const MAX_LINE: usize = 32;
+pub const MAX_LINE: usize = 48;
 
 /// A parsed command.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +53,14 @@ pub enum Command {
     Stream(bool),
     /// Self-test: the motor model's (passive) load torque, N m.
     Load(f32),
+    /// Change setting `.0` (index into [`crate::settings::FIELDS`]) to `.1`.
+    Set(usize, f32),
+    /// Print one setting (`Some` index) or all.
+    Get(Option<usize>),
+    /// Write the settings to flash.
+    Save,
+    /// Load the default settings (`true`: the low-voltage bring-up profile).
+    Defaults(bool),
     /// List the commands.
     Help,
 }
@@ -74,6 +87,10 @@ pub enum ParseError {
     OutOfRange,
     /// Expected `on` or `off`.
     BadSwitch,
+    /// Not a setting name (see `get`).
+    UnknownSetting,
+    /// Expected `low-voltage` or nothing.
+    BadProfile,
 }
 
 impl ParseError {
@@ -89,6 +106,8 @@ impl ParseError {
             ParseError::BadNumber => "bad number",
             ParseError::OutOfRange => "out of range",
             ParseError::BadSwitch => "expected on or off",
+            ParseError::UnknownSetting => "unknown setting (get lists them)",
+            ParseError::BadProfile => "expected defaults or defaults low-voltage",
         }
     }
 }
@@ -109,13 +128,15 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
         .filter(|w| !w.is_empty());
     let cmd = words.next().ok_or(ParseError::Empty)?;
     let arg = words.next();
-    if words.next().is_some() {
+    let arg2 = words.next();
+    if words.next().is_some() || (arg2.is_some() && cmd != b"set") {
         return Err(ParseError::UnexpectedArgument);
     }
     let no_arg = |c: Command| match arg {
         None => Ok(c),
         Some(_) => Err(ParseError::UnexpectedArgument),
     };
+    let setting = |a: &[u8]| field_index(a).ok_or(ParseError::UnknownSetting);
     match cmd {
         b"start" => no_arg(Command::Start),
         b"vf" => no_arg(Command::StartOpenLoop),
@@ -124,6 +145,22 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
         b"params" => no_arg(Command::Params),
         b"status" => no_arg(Command::Status),
         b"help" => no_arg(Command::Help),
+        b"save" => no_arg(Command::Save),
+        b"set" => {
+            let i = setting(arg.ok_or(ParseError::MissingArgument)?)?;
+            let v = parse_value(arg2.ok_or(ParseError::MissingArgument)?)
+                .ok_or(ParseError::BadNumber)?;
+            Ok(Command::Set(i, v))
+        }
+        b"get" => match arg {
+            None => Ok(Command::Get(None)),
+            Some(a) => Ok(Command::Get(Some(setting(a)?))),
+        },
+        b"defaults" => match arg {
+            None => Ok(Command::Defaults(false)),
+            Some(b"low-voltage") => Ok(Command::Defaults(true)),
+            Some(_) => Err(ParseError::BadProfile),
+        },
         b"speed" => {
             let a = arg.ok_or(ParseError::MissingArgument)?;
             let rpm = parse_decimal(a).ok_or(ParseError::BadNumber)?;
@@ -276,6 +313,50 @@ mod tests {
         assert_eq!(parse(b"speed 1800"), Ok(Command::Speed(1800.0)));
         assert_eq!(parse(b"stream on"), Ok(Command::Stream(true)));
         assert_eq!(parse(b"stream off"), Ok(Command::Stream(false)));
+    }
+
+    #[test]
+    fn settings_commands() {
+        use crate::settings::FIELDS;
+        let lim = FIELDS
+            .iter()
+            .position(|f| f.name == "current_limit")
+            .unwrap();
+        assert_eq!(parse(b"set current_limit 2.5"), Ok(Command::Set(lim, 2.5)));
+        assert_eq!(
+            parse(b"set stator_inductance 0.4476"),
+            Ok(Command::Set(8, 0.4476))
+        );
+        assert_eq!(parse(b"get"), Ok(Command::Get(None)));
+        assert_eq!(parse(b"get current_limit"), Ok(Command::Get(Some(lim))));
+        assert_eq!(parse(b"save"), Ok(Command::Save));
+        assert_eq!(parse(b"defaults"), Ok(Command::Defaults(false)));
+        assert_eq!(parse(b"defaults low-voltage"), Ok(Command::Defaults(true)));
+        use ParseError::*;
+        let cases: &[(&[u8], ParseError)] = &[
+            (b"set", MissingArgument),
+            (b"set current_limit", MissingArgument),
+            (b"set currentlimit 2", UnknownSetting),
+            (b"set current_limit x", BadNumber),
+            (b"set current_limit 1e3", BadNumber),
+            (b"set current_limit 2 3", UnexpectedArgument),
+            (b"get bogus", UnknownSetting),
+            (b"save now", UnexpectedArgument),
+            (b"defaults mains", BadProfile),
+            (b"speed 1 2", UnexpectedArgument),
+        ];
+        for (line, err) in cases {
+            assert_eq!(parse(line), Err(*err), "{:?}", core::str::from_utf8(line));
+        }
+        // every setting name fits a line with a long value
+        for f in FIELDS {
+            let mut line: heapless::Vec<u8, 64> = heapless::Vec::new();
+            line.extend_from_slice(b"set ").unwrap();
+            line.extend_from_slice(f.name.as_bytes()).unwrap();
+            line.extend_from_slice(b" -123456.123").unwrap();
+            assert!(line.len() <= MAX_LINE, "{}", f.name);
+            assert!(matches!(parse(&line), Ok(Command::Set(..))), "{}", f.name);
+        }
     }
 
     #[test]

@@ -179,6 +179,19 @@ impl<S: SinCos> ControlLoop<S> {
         }
     }
 
+    /// Swaps in a drive rebuilt from new settings ([`crate::settings`]), only while Idle:
+    /// otherwise the state that refused it (the machine model of a running drive never
+    /// changes under it). The new drive starts Idle, with fresh estimator state.
+    pub fn replace_drive(&mut self, drive: Drive<S>) -> Result<(), DriveState> {
+        let state = self.drive.state();
+        if state != DriveState::Idle {
+            return Err(state);
+        }
+        self.drive = drive;
+        self.fw_fault = None;
+        Ok(())
+    }
+
     /// Closes the period: records the step's cycle count and, every `decimation` periods,
     /// returns a telemetry sample. `plant_speed_rpm` is the self-test model's speed (0 on
     /// hardware).
@@ -323,6 +336,31 @@ mod tests {
             }
         }
         assert_eq!(samples, 10);
+    }
+
+    /// New settings reach the drive only while it is Idle (`set` is refused while
+    /// running, magnetizing, in V/f or faulted).
+    #[test]
+    fn settings_are_refused_while_running() {
+        use crate::settings::{field_index, Settings};
+        let conv = Converter::new(&POWER_STAGE);
+        let i = field_index(b"current_limit").unwrap();
+        let s = Settings::defaults().set(i, 4.0).unwrap();
+        let rebuilt = || Drive::new(s.drive_config().unwrap()).unwrap();
+        let mut l = looped();
+        assert!(l.apply(ControlCommand::Start).result.is_ok());
+        l.step(&raw_at_bus(&conv, 325.0));
+        assert_eq!(l.replace_drive(rebuilt()), Err(DriveState::Magnetizing));
+        assert_eq!(
+            l.drive().config().current_limit,
+            Settings::defaults().get(i)
+        );
+        l.trip(FirmwareFault::HardwareBreak);
+        assert_eq!(l.replace_drive(rebuilt()), Err(DriveState::Fault));
+        assert!(l.apply(ControlCommand::ResetFault).result.is_ok());
+        assert_eq!(l.replace_drive(rebuilt()), Ok(()));
+        assert_eq!(l.drive().config().current_limit, 4.0);
+        assert_eq!(l.state(), DriveState::Idle);
     }
 
     #[test]

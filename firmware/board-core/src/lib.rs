@@ -12,6 +12,8 @@
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
 //! - [`telemetry`]: the decimated telemetry sample and its text framing;
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
+//! - [`settings`]: the serial-settable limits and machine parameters, their flash record
+//!   (version, CRC) and validation by the library's constructors;
 //! - [`sim`]: the motor model behind this board's ADC, for the self-test;
 //! - [`control`]: the per-period control loop (conversion, faults, drive step, telemetry)
 //!   that the firmware's interrupt calls, generic over the sin/cos provider;
@@ -30,6 +32,7 @@ pub mod clock;
 pub mod command;
 pub mod control;
 pub mod convert;
+pub mod settings;
 pub mod sim;
 pub mod stage;
 pub mod telemetry;
