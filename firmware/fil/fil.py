@@ -160,6 +160,81 @@ class RlLoad:
         self.i = [v[k] / self.r + (self.i[k] - v[k] / self.r) * a for k in range(3)]
 
 
+class InductionMotorLoad:
+    """The paper's induction machine (Table 1, J = 0.01 kg m^2, B = 2e-3 N m s/rad) as
+    the power stage's load: the same equations as the project's plant
+    (`crates/acim-plant/src/machine.rs`, eq. 1-3 in the stationary frame, states i_s and
+    psi_r, RK4 with `substeps` per period), driven by the period averages of the PWM
+    duties with the inverter's dead-time and device-drop error (the plant's averaged
+    inverter: each leg's pole voltage loses s (t_dead/T Vdc + V_drop), s = clamp(i/band,
+    -1, 1)). `torque` is a passive load (N m, opposing the rotation)."""
+
+    def __init__(self, rs=10.5, rr=8.4, ls=0.56, lr=0.56, lm=0.54, p=2, j=0.01, b=2e-3,
+                 dead_time=1.5e-6, drop=1.0, band=0.05, substeps=5):
+        self.p, self.j, self.b = p, j, b
+        self.kr = lm / lr
+        self.inv_tau_r = rr / lr
+        self.lm_over_tau_r = lm * self.inv_tau_r
+        self.rseq = rs + self.kr * self.kr * rr
+        self.inv_sigma_ls = 1.0 / (ls - lm * lm / lr)
+        self.kt = 1.5 * p * self.kr
+        self.dead_time, self.drop, self.band = dead_time, drop, band
+        self.substeps = substeps
+        self.x = [0.0] * 5          # i_alpha, i_beta, psi_alpha, psi_beta, Omega
+        self.i = [0.0, 0.0, 0.0]
+        self.torque = 0.0
+
+    @property
+    def speed_rpm(self):
+        return self.x[4] * 30.0 / math.pi
+
+    def _deriv(self, x, va, vb):
+        ia, ib, pa, pb, w = x
+        we = self.p * w
+        dia = self.inv_sigma_ls * (va - self.rseq * ia
+                                   + self.kr * (self.inv_tau_r * pa + we * pb))
+        dib = self.inv_sigma_ls * (vb - self.rseq * ib
+                                   + self.kr * (self.inv_tau_r * pb - we * pa))
+        dpa = -self.inv_tau_r * pa + self.lm_over_tau_r * ia - we * pb
+        dpb = -self.inv_tau_r * pb + self.lm_over_tau_r * ib + we * pa
+        te = self.kt * (pa * ib - pb * ia)
+        tl = self.torque * max(-1.0, min(1.0, w / 0.5))   # passive: opposes the motion
+        dw = (te - self.b * w - tl) / self.j
+        return [dia, dib, dpa, dpb, dw]
+
+    def period(self, duties, enabled, vdc, ts=200e-6):
+        if not enabled:
+            # switches off: the currents collapse through the diodes within a period or
+            # two (the plant's freewheel model); the rotor flux decays with tau_r
+            self.x[0] = self.x[1] = 0.0
+            h = ts
+            self.x[2] *= math.exp(-self.inv_tau_r * h)
+            self.x[3] *= math.exp(-self.inv_tau_r * h)
+            self.x[4] += h * (-self.b * self.x[4]) / self.j
+            self.i = [0.0, 0.0, 0.0]
+            return
+        delta = self.dead_time / ts
+        h = ts / self.substeps
+        for _ in range(self.substeps):
+            ia, ib = self.x[0], self.x[1]
+            ph = [ia, -0.5 * ia + 0.8660254 * ib, -0.5 * ia - 0.8660254 * ib]
+            pole = []
+            for d, i in zip(duties, ph):
+                s = max(-1.0, min(1.0, i / self.band))
+                pole.append(d * vdc - s * (delta * vdc + self.drop))
+            va = (2 * pole[0] - pole[1] - pole[2]) / 3.0
+            vb = (pole[1] - pole[2]) / math.sqrt(3.0)
+            x = self.x
+            k1 = self._deriv(x, va, vb)
+            k2 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k1)], va, vb)
+            k3 = self._deriv([a + 0.5 * h * b for a, b in zip(x, k2)], va, vb)
+            k4 = self._deriv([a + h * b for a, b in zip(x, k3)], va, vb)
+            self.x = [a + h / 6.0 * (b + 2 * c + 2 * d + e)
+                      for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+        ia, ib = self.x[0], self.x[1]
+        self.i = [ia, -0.5 * ia + 0.8660254 * ib, -0.5 * ia - 0.8660254 * ib]
+
+
 class Machine:
     """The emulated MCU with its peripherals, running one ELF."""
 
