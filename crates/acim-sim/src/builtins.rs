@@ -349,7 +349,67 @@ pub fn all() -> Vec<Scenario> {
     s.windows = vec![win("reversed", 4.5, 5.0)];
     v.push(s);
 
+    // the whole speed range (issue 15): field weakening up to 2x the nameplate speed
+    let mut s = fw_base(
+        "fw-ramp-3000",
+        "field weakening: ramp 0 -> 3000 rpm with a 1 N m passive load",
+        12.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 1.0)];
+    s.windows = vec![win("steady", 10.0, 12.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-reversal-3000",
+        "field weakening: reversal +3000 -> -3000 rpm, no load",
+        24.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(9.0, -3000.0)];
+    s.windows = vec![win("forward", 7.5, 9.0), win("reverse", 22.0, 24.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-load-step-2500",
+        "field weakening: 2500 rpm, passive load step to 1 N m at 8 s",
+        14.0,
+    );
+    s.speed_profile = vec![sp(0.5, 2500.0)];
+    s.load_profile = vec![load(8.0, LoadKind::Passive, 1.0)];
+    s.windows = vec![win("no-load", 6.5, 8.0), win("load", 11.0, 14.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-unreachable-3200",
+        "target 3200 rpm with a 1.2 N m load: held at the reachable speed and reported",
+        12.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3200.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 1.2)];
+    s.windows = vec![win("held", 10.0, 12.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-braking-3000",
+        "braking 3000 -> 0 rpm at 2000 rpm/s on a 470 uF link, no chopper: over-voltage control",
+        12.0,
+    );
+    s.dc_link.capacitance_f = 470e-6;
+    s.drive.overvoltage_control = true;
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
+    s.windows = vec![win("top", 6.5, 8.0)];
+    v.push(s);
+
     v
+}
+
+/// The common base of the field-weakening cases (issue 15): the paper machine on 325 V
+/// with the over-speed trip at 3600 rpm (targets up to 3240 rpm).
+fn fw_base(name: &str, description: &str, duration_s: f32) -> Scenario {
+    let mut s = base(name, description, duration_s);
+    s.drive.max_speed_rpm = Some(3600.0);
+    s.csv_decimation = Some(10);
+    s
 }
 
 /// The built-in scenario called `name`.
