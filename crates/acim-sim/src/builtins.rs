@@ -371,11 +371,11 @@ pub fn all() -> Vec<Scenario> {
 
     let mut s = fw_base(
         "fw-load-step-2500",
-        "field weakening: 2500 rpm, passive load step to 1 N m at 8 s",
+        "field weakening: 2500 rpm, passive load step to 0.8 N m at 8 s (with friction about 90 % of the torque held there)",
         14.0,
     );
     s.speed_profile = vec![sp(0.5, 2500.0)];
-    s.load_profile = vec![load(8.0, LoadKind::Passive, 1.0)];
+    s.load_profile = vec![load(8.0, LoadKind::Passive, 0.8)];
     s.windows = vec![win("no-load", 6.5, 8.0), win("load", 11.0, 14.0)];
     v.push(s);
 
@@ -397,6 +397,8 @@ pub fn all() -> Vec<Scenario> {
     s.dc_link.capacitance_f = 470e-6;
     s.drive.overvoltage_control = true;
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
+    // up at the default 500 rpm/s (rate-limited below), down as fast as 2000 rpm/s
+    s.drive.speed_ramp_rpm_s = 2000.0;
     s.windows = vec![win("top", 6.5, 8.0)];
     v.push(s);
 
