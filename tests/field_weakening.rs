@@ -115,3 +115,30 @@ fn steady_speed_error_within_half_a_percent() {
         assert!(w.speed_err_max_rpm <= 15.0, "{w:?}");
     }
 }
+
+/// The 2.2 kW machine (`../shared/machines/motulator-2k2.toml`) from its nameplate on
+/// 540 V: reversal +3000 -> -3000 rpm, 2x its base speed (window means 3044.5 and
+/// -3043.6 rpm measured, flux down to 0.40 Wb), control kept.
+#[test]
+fn machine_2k2_reversal_at_twice_base_speed() {
+    let m = run("fw-2k2-reversal-3000", &[]);
+    kept(&m);
+    assert!(m.windows["forward"].speed_mean_rpm > 2985.0, "{m:#?}");
+    assert!(m.windows["reverse"].speed_mean_rpm < -2985.0, "{m:#?}");
+}
+
+/// The 2.2 kW machine braking from 3000 rpm to 0 on 470 uF with the over-voltage
+/// control: bus peak below the drive's over-voltage trip (657.7 V measured), stopped.
+#[test]
+fn machine_2k2_braking_stays_below_the_overvoltage_trip() {
+    let sc = acim_sim::builtins::get("fw-2k2-braking-3000").unwrap();
+    let (r, m) = acim_sim::run_with_metrics(&sc).unwrap();
+    kept(&m);
+    let peak = r.rows.iter().map(|x| x.dc_bus_v).fold(0.0f32, f32::max);
+    assert!(
+        peak < r.config.dc_bus_max,
+        "bus peak {peak} V vs {}",
+        r.config.dc_bus_max
+    );
+    assert!(r.rows.last().unwrap().speed_rpm.abs() < 20.0);
+}

@@ -953,6 +953,11 @@ impl Scenario {
             }
             cfg.orientation_gain = drive.orientation_gain;
             cfg.current_sensing = drive.current_sensing;
+            cfg.field_weakening = drive.field_weakening;
+            cfg.overvoltage_control = drive.overvoltage_control;
+            if d.max_speed_rpm.is_some() {
+                cfg.max_speed = drive.max_speed;
+            }
             bases = acim::nameplate::per_unit_bases(&cfg, &b);
             board = Some(b);
             drive = cfg;

@@ -939,45 +939,59 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 fw.min_frequency
             };
             let v = N::gain(fw.voltage_fraction, v_max);
-            let v2 = v * v;
-            let iq = self.refs.i_sq_ref;
-            // q-axis share of the voltage at the present load, floored at the
-            // maximum-torque-per-voltage split (half of V^2 each)
-            let x = N::gain_mul(c.transient_inductance, w, iq);
-            let rest = v2 - x * x;
-            let half = v2.half();
-            let root = if rest > half { rest } else { half }.sqrt();
-            // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
-            // q current loop's integral: the voltage the model misses (dead time, device
-            // drop, parameter errors), measured
-            let drop = e.rs * iq + self.cur.q.integral();
-            let drop = if ws < N::ZERO { -drop } else { drop };
-            let i_d_v = N::gain(fw.inv_stator_inductance, N::ratio(root - drop, w));
-            // voltage-feedback trim of what the model misses (the current loops'
-            // integrals, parameter errors): integrates (|v*|^2 - V^2)/v_max ~ 2 (|v*| - V)
-            // of the last command, per flux linkage (/w), kept >= 0; zero while the
-            // command stays inside V, so it never acts below base speed
-            // (only where the rated flux needs most of V: w Ls i_sd_rated above
-            // FW_TRIM_GATE V, so that faults below base speed do not move the flux)
-            let va = self.applied.v_dq;
-            let vt = N::gain(fw.trim_fraction, v_max);
-            let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
+            // field weakening is evaluated only where the no-load voltage at rated flux
+            // w Ls i_sd_rated exceeds FW_TRIM_GATE V (or the trim has not decayed yet): below
+            // that the rated flux is kept without computing the model (the cheap path)
             let near_base =
                 N::gain_mul(fw.flux_voltage, w, fw.rated_linkage) > N::gain(fw.trim_gate, v);
-            let excess = if near_base { excess } else { -excess.abs() };
-            let trim = self.refs.fw_trim + N::gain(fw.trim_gain, N::ratio(excess, w));
-            let trim = trim.clamp(N::ZERO, c.i_sd_ref - fw.min_flux_current);
-            self.refs.fw_trim = trim;
-            let i_d_v = if c.i_sd_ref - trim < i_d_v {
-                c.i_sd_ref - trim
+            let i_d_v = if near_base || self.refs.fw_trim > N::ZERO {
+                let v2 = v * v;
+                let iq = self.refs.i_sq_ref;
+                // q-axis share of the voltage at the present load, floored at the
+                // maximum-torque-per-voltage split (half of V^2 each)
+                let x = N::gain_mul(c.transient_inductance, w, iq);
+                let rest = v2 - x * x;
+                let half = v2.half();
+                let budget = if rest > half { rest } else { half };
+                // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
+                // q current loop's integral: the voltage the model misses (dead time, device
+                // drop, parameter errors), measured
+                let drop = e.rs * iq + self.cur.q.integral();
+                let drop = if ws < N::ZERO { -drop } else { drop };
+                // the rated flux fits when sqrt(budget) - drop >= w Ls i_sd_rated: decided
+                // without the square root and the division (the cheap path below base speed)
+                let need = N::gain_mul(fw.stator_inductance, w, c.i_sd_ref) + drop;
+                let i_d_model = if need <= N::ZERO || need * need <= budget {
+                    c.i_sd_ref
+                } else {
+                    N::gain(fw.inv_stator_inductance, N::ratio(budget.sqrt() - drop, w))
+                };
+                // voltage-feedback trim of what the model misses (the current loops'
+                // integrals, parameter errors): integrates (|v*|^2 - V_t^2)/v_max
+                // ~ 2 (|v*| - V_t) of the last command, per flux linkage (/w), kept >= 0,
+                // only where the rated flux needs most of V (`near_base`), so that faults
+                // below base speed do not move the flux; elsewhere it only decays
+                let trim = {
+                    let va = self.applied.v_dq;
+                    let vt = N::gain(fw.trim_fraction, v_max);
+                    let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
+                    let excess = if near_base { excess } else { -excess.abs() };
+                    let trim = self.refs.fw_trim + N::gain(fw.trim_gain, N::ratio(excess, w));
+                    trim.clamp(N::ZERO, c.i_sd_ref - fw.min_flux_current)
+                };
+                self.refs.fw_trim = trim;
+                if c.i_sd_ref - trim < i_d_model {
+                    c.i_sd_ref - trim
+                } else {
+                    i_d_model
+                }
             } else {
-                i_d_v
+                c.i_sd_ref
             };
             let i_d = i_d_v.clamp(fw.min_flux_current, c.i_sd_ref);
             if i_d < c.i_sd_ref {
                 // constant-power / breakdown region: the current circle with the lower
-                // flux current, and the maximum-torque-per-voltage bound
-                // sigma Ls i_sq <= V/(sqrt 2 w) (beyond it more i_sq lowers the torque);
+                // flux current, and the maximum-torque-per-voltage bound below;
                 // the voltage itself is shared by the current loops (d priority) and
                 // the trim above lowers the flux while the q loop is short of voltage
                 let circle = (fw.current_limit * fw.current_limit - i_d * i_d).sqrt();
