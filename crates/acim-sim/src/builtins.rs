@@ -349,7 +349,130 @@ pub fn all() -> Vec<Scenario> {
     s.windows = vec![win("reversed", 4.5, 5.0)];
     v.push(s);
 
+    // the whole speed range (issue 15): field weakening up to 2x the nameplate speed
+    let mut s = fw_base(
+        "fw-ramp-3000",
+        "field weakening: ramp 0 -> 3000 rpm with a 1 N m passive load",
+        12.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 1.0)];
+    s.windows = vec![win("steady", 10.0, 12.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-reversal-3000",
+        "field weakening: reversal +3000 -> -3000 rpm, no load",
+        24.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(9.0, -3000.0)];
+    s.windows = vec![win("forward", 7.5, 9.0), win("reverse", 22.0, 24.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-load-step-2500",
+        "field weakening: 2500 rpm, passive load step to 0.8 N m at 8 s (with friction about 90 % of the torque held there)",
+        14.0,
+    );
+    s.speed_profile = vec![sp(0.5, 2500.0)];
+    s.load_profile = vec![load(8.0, LoadKind::Passive, 0.8)];
+    s.windows = vec![win("no-load", 6.5, 8.0), win("load", 11.0, 14.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-unreachable-3200",
+        "target 3200 rpm with a 1.2 N m load: held at the reachable speed and reported",
+        12.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3200.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 1.2)];
+    s.windows = vec![win("held", 10.0, 12.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-braking-3000",
+        "braking 3000 -> 0 rpm at 2000 rpm/s on a 470 uF link, no chopper: over-voltage control",
+        12.0,
+    );
+    s.dc_link.capacitance_f = 470e-6;
+    s.drive.overvoltage_control = true;
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
+    // up at the default 500 rpm/s (rate-limited below), down as fast as 2000 rpm/s
+    s.drive.speed_ramp_rpm_s = 2000.0;
+    s.windows = vec![win("top", 6.5, 8.0)];
+    v.push(s);
+
+    // the 2.2 kW machine of ../shared/machines/motulator-2k2.toml from its nameplate on
+    // its 540 V board, up to 2x its 1500 rpm base speed
+    let mut s = fw_2k2(
+        "fw-2k2-reversal-3000",
+        "2.2 kW machine, 540 V: reversal +3000 -> -3000 rpm (2x base speed), no load",
+        24.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, -3000.0)];
+    s.windows = vec![win("forward", 7.0, 8.0), win("reverse", 22.0, 24.0)];
+    v.push(s);
+
+    let mut s = fw_2k2(
+        "fw-2k2-braking-3000",
+        "2.2 kW machine, 540 V: braking 3000 -> 0 rpm on a 470 uF link, over-voltage control",
+        16.0,
+    );
+    s.dc_link.capacitance_f = 470e-6;
+    s.drive.overvoltage_control = true;
+    s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
+    s.windows = vec![win("top", 7.0, 8.0)];
+    v.push(s);
+
     v
+}
+
+/// The 2.2 kW machine (motulator's example, `../shared/machines/motulator-2k2.toml`, the
+/// exact T-model of its inverse-Gamma data) from its nameplate on a 540 V board, with
+/// the over-speed trip at 3600 rpm (the nameplate's 500 rpm/s ramp).
+fn fw_2k2(name: &str, description: &str, duration_s: f32) -> Scenario {
+    use crate::scenario::{BoardSpec, MachineSpec, NameplateSpec};
+    let mut s = fw_base(name, description, duration_s);
+    let plant = MachineSpec {
+        rs_ohm: 3.7,
+        rr_ohm: 2.296_875,
+        ls_h: 0.245,
+        lr_h: 0.245,
+        lm_h: 0.234_265,
+        pole_pairs: 2,
+        inertia_kgm2: 0.015,
+        friction_nms: 0.002,
+    };
+    s.plant = plant;
+    s.controller = plant;
+    s.nameplate = Some(NameplateSpec {
+        power_w: 2200.0,
+        voltage_v: 400.0,
+        current_a: 5.0,
+        frequency_hz: 50.0,
+        speed_rpm: None,
+        power_factor: None,
+        pole_pairs: Some(2),
+        torque_nm: Some(14.6),
+    });
+    s.board = Some(BoardSpec {
+        dc_bus_v: 540.0,
+        current_full_scale_a: 20.0,
+        bus_full_scale_v: None,
+        pwm_frequency_hz: None,
+    });
+    s.dc_link.source_v = 540.0;
+    s.sensors.noise_a = 0.02;
+    s
+}
+
+/// The common base of the field-weakening cases (issue 15): the paper machine on 325 V
+/// with the over-speed trip at 3600 rpm (targets up to 3240 rpm).
+fn fw_base(name: &str, description: &str, duration_s: f32) -> Scenario {
+    let mut s = base(name, description, duration_s);
+    s.drive.max_speed_rpm = Some(3600.0);
+    s.csv_decimation = Some(10);
+    s
 }
 
 /// The built-in scenario called `name`.

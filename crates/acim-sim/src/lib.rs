@@ -2,6 +2,7 @@
 //! motor model, metrics, CSV/JSON output and paper-style plots.
 
 pub mod builtins;
+pub mod capability;
 pub mod commission;
 pub mod faults;
 pub mod machines;

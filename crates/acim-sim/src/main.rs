@@ -30,6 +30,9 @@ const USAGE: &str = "usage:
   acim-sim observers [FILE] [OPTIONS]       reduced- vs full-order observer, closed loop (table
                                             to FILE, default docs/observers.md; with --set:
                                             <out>/observers.md)
+  acim-sim capability [FILE]                steady torque held per speed vs the envelope of the
+                                            machine equations (table to FILE, default
+                                            docs/capability.md, plot next to it)
   acim-sim faults [FILE] [OPTIONS]          every fault-* scenario: reason, detection time,
                                             peaks (table to FILE, default docs/faults.md; with
                                             --set: <out>/faults.md)
@@ -597,6 +600,28 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 .map_or_else(|| PathBuf::from("any-motor"), |d| d.join("any-motor"));
             let md = any_motor(&out, &figs, &o)?;
             write_table(&file, &md, &out)?;
+        }
+        Some("capability") => {
+            o.at_most_positional("capability", 1, "at most one table file")?;
+            let file = table_file(&o, "capability.md");
+            let out = o.out();
+            let points = acim_sim::capability::measure_with(&mut |sc| {
+                acim_sim::run_with_metrics(sc)
+                    .map(|r| r.1)
+                    .map_err(|e| format!("{}: {e}", sc.name))
+            })?;
+            for p in &points {
+                println!(
+                    "{:6.0} rpm: held {:6.2} N m, envelope {:6.2} N m ({:3.0} %)",
+                    p.rpm,
+                    p.held_nm,
+                    p.envelope_nm,
+                    100.0 * p.held_nm / p.envelope_nm.max(1e-6)
+                );
+            }
+            let png = file.with_extension("png");
+            acim_sim::capability::plot(&points, &png).map_err(|e| format!("{e}"))?;
+            write_table(&file, &acim_sim::capability::markdown(&points), &out)?;
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),

@@ -251,6 +251,13 @@ pub struct DriveSpec {
     pub arithmetic: Arithmetic,
     /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
     pub observer: ObserverKind,
+    /// Over-speed trip, rpm (the drive's default, 2000 rpm, when absent); speed targets
+    /// are limited to 90 % of it.
+    pub max_speed_rpm: Option<f32>,
+    /// Field weakening above base speed (issue 15).
+    pub field_weakening: bool,
+    /// Over-voltage control: regenerative torque reduced near the bus trip (issue 15).
+    pub overvoltage_control: bool,
 }
 
 impl Default for DriveSpec {
@@ -278,6 +285,9 @@ impl Default for DriveSpec {
             orientation_gain: d.orientation_gain,
             arithmetic: Arithmetic::F32,
             observer: ObserverKind::Reduced,
+            max_speed_rpm: None,
+            field_weakening: d.field_weakening,
+            overvoltage_control: d.overvoltage_control,
         }
     }
 }
@@ -928,6 +938,11 @@ impl Scenario {
         drive.device_drop = d.device_drop_comp_v;
         drive.stall_time = d.stall_time_s;
         drive.orientation_gain = d.orientation_gain;
+        if let Some(rpm) = d.max_speed_rpm {
+            drive.max_speed = rpm * acim::math::RPM_TO_RAD_S;
+        }
+        drive.field_weakening = d.field_weakening;
+        drive.overvoltage_control = d.overvoltage_control;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -966,6 +981,11 @@ impl Scenario {
             }
             cfg.orientation_gain = drive.orientation_gain;
             cfg.current_sensing = drive.current_sensing;
+            cfg.field_weakening = drive.field_weakening;
+            cfg.overvoltage_control = drive.overvoltage_control;
+            if d.max_speed_rpm.is_some() {
+                cfg.max_speed = drive.max_speed;
+            }
             bases = acim::nameplate::per_unit_bases(&cfg, &b);
             board = Some(b);
             drive = cfg;

@@ -235,9 +235,28 @@ struct References<N> {
     rs_settled_steps: u32,
     /// The target is beyond the reachable speed (reported in the telemetry).
     target_limited: bool,
+    /// The previous step's i_sq*, A (the field-weakening model's load, issue 15).
+    i_sq_ref: N,
+    /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
+    fw_trim: N,
+    /// Field weakening has moved the flux and it has not settled back at its rated value
+    /// yet: the estimators take the moving flux into account (issue 15).
+    fw_active: bool,
     /// A flying start: magnetizing in a frame turning with the rotor at the speed the
     /// search measured.
     flying: bool,
+}
+
+/// The field-weakening stage's output (issue 15).
+#[derive(Clone, Copy, Debug)]
+struct FwLimits<N> {
+    /// i_sd*, A.
+    i_sd_ref: N,
+    /// Lower and upper i_sq* limits, A.
+    i_sq_min: N,
+    i_sq_max: N,
+    /// The torque limit is set by the voltage or the bus, not the current circle.
+    torque_limited: bool,
 }
 
 /// Current-control stage state: the d and q PIs.
@@ -327,6 +346,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
                 target_limited: false,
+                i_sq_ref: N::ZERO,
+                fw_trim: N::ZERO,
+                fw_active: false,
                 flying: false,
             },
             cur: CurrentControl {
@@ -491,6 +513,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     fn reset_dynamic_state(&mut self) {
         self.refs.speed_reference = N::ZERO;
         self.refs.speed_ctl.reset();
+        self.refs.i_sq_ref = N::ZERO;
+        self.refs.fw_trim = N::ZERO;
+        self.refs.fw_active = false;
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
         self.cur.d.reset();
@@ -574,7 +599,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
-        let i_ref = match self.references(&m, &e, magnetizing, limit.max) {
+        let i_ref = match self.references(&m, &e, magnetizing, limit) {
             Ok(i_ref) => i_ref,
             Err(reason) => return self.enter_fault(reason),
         };
@@ -708,12 +733,22 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.begin(StepRegion::RsEstimator);
         let flux_settled = est.flux.rotor_flux >= c.settled_flux;
         let ws_prev = est.flux.stator_frequency;
+        // eq. (20) holds with settled flux; while field weakening moves it, the rotor
+        // part of eq. (9a), R_R i_sd - lambda_r/tau_r (the flux's rate of change), is
+        // taken out of v_sd so that the residual stays the orientation's (issue 15)
+        let weakened = self.refs.fw_active;
+        let v_sd = if weakened {
+            self.applied.v_dq.d - c.referred_rotor_resistance * i.d
+                + N::gain(c.inv_rotor_time_constant, est.flux.rotor_flux)
+        } else {
+            self.applied.v_dq.d
+        };
         est.rs.update(
             &c.rs,
             &RsEstimatorInputs {
                 i_sd: i.d,
                 i_sq: i.q,
-                v_sd: self.applied.v_dq.d,
+                v_sd,
                 stator_frequency: ws_prev,
                 flux_settled,
             },
@@ -731,6 +766,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // speed error locks the frame onto the rotor as the flux builds)
         let correction = if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
+        } else if weakened {
+            // field weakening: the correction stays on (the orientation mode
+            // s^2 + s/tau_r + w_s w_slip is lightly damped at high w_s without it), with
+            // its gain per flux k/lambda_ref taken at the present flux, k/lambda_r
+            let k = orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q);
+            let lim = c.orientation.limit;
+            (k * (c.fw.flux_reference * est.flux.inv_rotor_flux)).clamp(-lim, lim)
         } else {
             N::ZERO
         };
@@ -762,8 +804,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         m: &Measured<N>,
         e: &Estimate<N>,
         magnetizing: bool,
-        voltage_limit: N,
+        limit: VoltageLimit<N>,
     ) -> Result<Dq<N>, FaultReason> {
+        let voltage_limit = limit.max;
         let c = &self.coeffs;
         let r = &mut self.refs;
         if magnetizing {
@@ -812,17 +855,43 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 q: N::ZERO,
             });
         }
-        // a target beyond the no-load speed the voltage limit reaches (back-EMF
-        // p Omega lambda_ref = v_max) is limited to it and reported in the telemetry
-        let reach = N::gain(c.speed_per_volt, voltage_limit);
-        let target = r.speed_target.clamp(-reach, reach);
+        let fw = self.field_weakening(m, e, limit);
+        // latched from the first weakened step until the flux is back at its rated value
+        self.refs.fw_active =
+            fw.i_sd_ref < self.coeffs.i_sd_ref || (self.refs.fw_active && !e.flux_settled);
+        let c = &self.coeffs;
+        let r = &mut self.refs;
+        let target = if c.fw.enabled {
+            // (the target is within speed_target_limit already): the reachable speed
+            // depends on the load and is found by holding the reference below
+            r.speed_target
+        } else {
+            // a target beyond the no-load speed the voltage limit reaches (back-EMF
+            // p Omega lambda_ref = v_max) is limited to it and reported in the telemetry
+            let reach = N::gain(c.speed_per_volt, voltage_limit);
+            r.speed_target.clamp(-reach, reach)
+        };
         r.target_limited = target != r.speed_target;
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        let i_sq_ref = r
-            .speed_ctl
-            .update(&c.pi_speed, r.speed_reference - speed, N::ZERO);
+        if fw.torque_limited && r.speed_ctl.saturated() {
+            // the torque is at the voltage (or bus) limit: the speed the drive reaches
+            // there is the reachable speed; hold the reference within a band of it (no
+            // growing speed error, no overload trip) and report it
+            let band = c.fw.hold_band;
+            let held = r.speed_reference.clamp(speed - band, speed + band);
+            r.target_limited = r.target_limited || held != r.speed_reference;
+            r.speed_reference = held;
+        }
+        let i_sq_ref = r.speed_ctl.update_with_limits(
+            &c.pi_speed,
+            r.speed_reference - speed,
+            N::ZERO,
+            fw.i_sq_min,
+            fw.i_sq_max,
+        );
+        r.i_sq_ref = i_sq_ref;
         let saturated = r.speed_ctl.saturated();
         let stall = self
             .sup
@@ -834,10 +903,126 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         match stall {
             Some(reason) => Err(reason),
             None => Ok(Dq {
-                d: c.i_sd_ref,
+                d: fw.i_sd_ref,
                 q: i_sq_ref,
             }),
         }
+    }
+
+    /// Field weakening and over-voltage control (issue 15, [`crate::design::FieldWeakeningDesign`] for
+    /// the equations): the flux current i_sd* and the torque-current limits at this
+    /// step's stator frequency, bus and load. Below base speed (i_sd* at its rated value)
+    /// and off the bus limit it returns the design's static values unchanged.
+    #[inline(always)]
+    fn field_weakening(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        limit: VoltageLimit<N>,
+    ) -> FwLimits<N> {
+        let v_max = limit.max;
+        let c = &self.coeffs;
+        let fw = &c.fw;
+        let mut out = FwLimits {
+            i_sd_ref: c.i_sd_ref,
+            i_sq_min: c.pi_speed.out_min,
+            i_sq_max: c.pi_speed.out_max,
+            torque_limited: false,
+        };
+        if fw.enabled {
+            let ws = e.stator_frequency;
+            // |w_s| floored at w_min > 0: the divisor cannot vanish
+            let w = ws.abs();
+            let w = if w > fw.min_frequency {
+                w
+            } else {
+                fw.min_frequency
+            };
+            let v = N::gain(fw.voltage_fraction, v_max);
+            // field weakening is evaluated only where the no-load voltage at rated flux
+            // w Ls i_sd_rated exceeds FW_TRIM_GATE V (or the trim has not decayed yet): below
+            // that the rated flux is kept without computing the model (the cheap path)
+            let near_base =
+                N::gain_mul(fw.flux_voltage, w, fw.rated_linkage) > N::gain(fw.trim_gate, v);
+            let i_d_v = if near_base || self.refs.fw_trim > N::ZERO {
+                let v2 = v * v;
+                let iq = self.refs.i_sq_ref;
+                // q-axis share of the voltage at the present load, floored at the
+                // maximum-torque-per-voltage split (half of V^2 each)
+                let x = N::gain_mul(c.transient_inductance, w, iq);
+                let rest = v2 - x * x;
+                let half = v2.half();
+                let budget = if rest > half { rest } else { half };
+                // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
+                // q current loop's integral: the voltage the model misses (dead time, device
+                // drop, parameter errors), measured
+                let drop = e.rs * iq + self.cur.q.integral();
+                let drop = if ws < N::ZERO { -drop } else { drop };
+                // the rated flux fits when sqrt(budget) - drop >= w Ls i_sd_rated: decided
+                // without the square root and the division (the cheap path below base speed)
+                let need = N::gain_mul(fw.stator_inductance, w, c.i_sd_ref) + drop;
+                let i_d_model = if need <= N::ZERO || need * need <= budget {
+                    c.i_sd_ref
+                } else {
+                    N::gain(fw.inv_stator_inductance, N::ratio(budget.sqrt() - drop, w))
+                };
+                // voltage-feedback trim of what the model misses (the current loops'
+                // integrals, parameter errors): integrates (|v*|^2 - V_t^2)/v_max
+                // ~ 2 (|v*| - V_t) of the last command, per flux linkage (/w), kept >= 0,
+                // only where the rated flux needs most of V (`near_base`), so that faults
+                // below base speed do not move the flux; elsewhere it only decays
+                let trim = {
+                    let va = self.applied.v_dq;
+                    let vt = N::gain(fw.trim_fraction, v_max);
+                    let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
+                    let excess = if near_base { excess } else { -excess.abs() };
+                    let trim = self.refs.fw_trim + N::gain(fw.trim_gain, N::ratio(excess, w));
+                    trim.clamp(N::ZERO, c.i_sd_ref - fw.min_flux_current)
+                };
+                self.refs.fw_trim = trim;
+                if c.i_sd_ref - trim < i_d_model {
+                    c.i_sd_ref - trim
+                } else {
+                    i_d_model
+                }
+            } else {
+                c.i_sd_ref
+            };
+            let i_d = i_d_v.clamp(fw.min_flux_current, c.i_sd_ref);
+            if i_d < c.i_sd_ref {
+                // constant-power / breakdown region: the current circle with the lower
+                // flux current, and the maximum-torque-per-voltage bound below;
+                // the voltage itself is shared by the current loops (d priority) and
+                // the trim above lowers the flux while the q loop is short of voltage
+                let circle = (fw.current_limit * fw.current_limit - i_d * i_d).sqrt();
+                // maximum torque per voltage at this flux current: with
+                // v_sq ~ Rs i_sq + w Ls i_sd and v_sd ~ -w sigma Ls i_sq, the product
+                // i_sd i_sq on |v| = V is largest at i_sq/i_sd = w Ls/|Rs + j w sigma Ls|;
+                // beyond it more i_sq (and the lower flux the trim then needs) lowers the
+                // torque, so the trim settles on that line instead of the flux floor
+                let x_q = N::gain_mul(c.transient_inductance, w, N::ONE);
+                let z_q = (x_q * x_q + e.rs * e.rs).sqrt();
+                let mtpv = N::ratio(N::gain_mul(fw.stator_inductance, w, i_d), z_q);
+                let i_q = if mtpv < circle { mtpv } else { circle };
+                out.i_sd_ref = i_d;
+                out.i_sq_min = -i_q;
+                out.i_sq_max = i_q;
+                out.torque_limited = mtpv < circle || self.cur.q.saturated();
+            }
+        }
+        if fw.overvoltage_control && m.dc_bus > fw.regen_start {
+            // over-voltage control: the regenerative side (i_sq against the speed) falls
+            // linearly to zero over the band above regen_start
+            let k = (N::ONE - N::gain(fw.inv_regen_band, m.dc_bus - fw.regen_start))
+                .clamp(N::ZERO, N::ONE);
+            if e.observer.speed > N::ZERO {
+                out.i_sq_min = out.i_sq_min * k;
+            } else {
+                out.i_sq_max = out.i_sq_max * k;
+            }
+            out.torque_limited = true;
+        }
+        out
     }
 
     /// Current-control stage: d/q PIs with decoupling feed-forward (eq. 9a, 9b), the
@@ -1150,12 +1335,15 @@ mod tests {
         assert!(d.refs.speed_target <= 0.9 * d.config().max_speed);
     }
 
-    /// A target above the speed the bus voltage can reach (back-EMF p Omega lambda_ref =
-    /// v_max: about 1130 rpm at 325 V for the paper's machine) is limited to it and
-    /// reported; a reachable target is not.
+    /// Without field weakening, a target above the speed the bus voltage can reach
+    /// (back-EMF p Omega lambda_ref = v_max: about 1130 rpm at 325 V for the paper's
+    /// machine) is limited to it and reported; a reachable target is not. (With field
+    /// weakening the reachable speed depends on the load: tests/field_weakening.rs.)
     #[test]
     fn unreachable_speed_targets_are_limited_and_reported() {
-        let mut d = drive();
+        let mut cfg = DriveConfig::paper_defaults();
+        cfg.field_weakening = false;
+        let mut d = Drive::new(cfg).unwrap();
         let i = 1.5;
         let magnetizing = DriveInputs {
             phase_currents: [i, -0.5 * i, -0.5 * i],

@@ -101,6 +101,9 @@ pub trait Num:
     fn recip(self) -> Self;
     /// `num / den` for 0 < num < den (the overmodulation scale).
     fn ratio(num: Self, den: Self) -> Self;
+    /// sqrt(x) for x >= 0 (0 for x <= 0): the field-weakening limits of
+    /// [`crate::Drive`] (issue 15).
+    fn sqrt(self) -> Self;
     /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
     fn neg_mean(a: Self, b: Self) -> Self;
 
@@ -200,6 +203,10 @@ impl Num for f32 {
     #[inline(always)]
     fn recip(self) -> f32 {
         1.0 / self
+    }
+    #[inline(always)]
+    fn sqrt(self) -> f32 {
+        crate::math::sqrt(self)
     }
     #[inline(always)]
     fn ratio(num: f32, den: f32) -> f32 {

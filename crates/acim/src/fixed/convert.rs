@@ -12,8 +12,8 @@ use super::q::{to_q24, Gain, Q24};
 use super::trig::COUNTS_PER_RAD;
 use super::PerUnitBases;
 use crate::design::{
-    ConfigError, DriveCoeffs, DriveDesign, MagnetizingDesign, OrientationDesign, SupervisionLimits,
-    VfDesign,
+    ConfigError, DriveCoeffs, DriveDesign, FieldWeakeningDesign, MagnetizingDesign,
+    OrientationDesign, SupervisionLimits, VfDesign,
 };
 use crate::flux::FluxModelConfig;
 use crate::math::is_finite;
@@ -308,5 +308,46 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             )?,
             boost: pu(cfg.vf.boost, b.voltage, "vf.boost")?,
         },
+        fw: field_weakening(&d.field_weakening, b)?,
+    })
+}
+
+/// Field weakening and over-voltage control (issue 15): voltages of V_base, currents of
+/// I_base, frequencies of w_base; flux linkage V/w comes out of the Q7.24 ratio in
+/// V_base/w_base. The frequency floor must be inside the reciprocal's domain (2^-6 pu).
+fn field_weakening(
+    f: &FieldWeakeningDesign,
+    b: &PerUnitBases,
+) -> Result<FieldWeakeningDesign<Q24>, ConfigError> {
+    if f.min_frequency / b.frequency < 0.02 {
+        return Err(not_representable("max_speed"));
+    }
+    Ok(FieldWeakeningDesign {
+        enabled: f.enabled,
+        voltage_fraction: gain(f.voltage_fraction, "field_weakening")?,
+        min_frequency: pu(f.min_frequency, b.frequency, "max_speed")?,
+        min_flux_current: pu(f.min_flux_current, b.current, "flux_current")?,
+        current_limit: pu(f.current_limit, b.current, "current_limit")?,
+        inv_stator_inductance: gain(
+            f.inv_stator_inductance * b.voltage / (b.frequency * b.current),
+            "machine",
+        )?,
+        stator_inductance: gain(
+            f.stator_inductance * b.frequency * b.current / b.voltage,
+            "machine",
+        )?,
+        flux_voltage: gain(f.flux_voltage * b.frequency * b.flux / b.voltage, "machine")?,
+        hold_band: pu(f.hold_band, b.speed, "max_speed")?,
+        trim_gain: gain(
+            f.trim_gain * b.voltage / (b.frequency * b.current),
+            "field_weakening",
+        )?,
+        trim_gate: gain(f.trim_gate, "field_weakening")?,
+        trim_fraction: gain(f.trim_fraction, "field_weakening")?,
+        rated_linkage: pu(f.rated_linkage, b.flux, "flux_current")?,
+        flux_reference: pu(f.flux_reference, b.flux, "flux_current")?,
+        overvoltage_control: f.overvoltage_control,
+        regen_start: pu(f.regen_start, b.voltage, "dc_bus_max")?,
+        inv_regen_band: gain(f.inv_regen_band * b.voltage, "dc_bus_max")?,
     })
 }

@@ -235,6 +235,32 @@ impl Gain {
     }
 }
 
+/// Square root of a Q7.24 value, in Q7.24 (0 for x <= 0): exact to the floor of the
+/// last bit (integer square root of x 2^24). Used by the field-weakening limits (issue 15).
+#[inline]
+pub fn sqrt_q24(x: i32) -> i32 {
+    if x <= 0 {
+        return 0;
+    }
+    // sqrt(x / 2^24) * 2^24 = isqrt(x * 2^24): digit-by-digit integer square root of a
+    // value below 2^55, 28 fixed iterations (no division, no panic path)
+    let n = (x as u64) << FRAC_BITS;
+    let mut rem = n;
+    let mut root = 0u64;
+    let mut bit = 1u64 << 54;
+    while bit != 0 {
+        let trial = root.wrapping_add(bit);
+        if rem >= trial {
+            rem = rem.wrapping_sub(trial);
+            root = (root >> 1).wrapping_add(bit);
+        } else {
+            root >>= 1;
+        }
+        bit >>= 2;
+    }
+    root as i32
+}
+
 /// Reciprocal of a positive Q7.24 value, in Q7.24: `2^48 / x`, for x in [2^-6, 128) pu
 /// (inputs below 2^-6 pu, zero or negative are taken as 2^-6 pu, so the result is at most
 /// 64 pu). Relative error below 1e-8 plus the final rounding (tests check 2 LSB).
@@ -420,6 +446,10 @@ impl crate::num::Num for Q24 {
     #[inline(always)]
     fn recip(self) -> Q24 {
         Q24(reciprocal(self.0))
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Q24 {
+        Q24(sqrt_q24(self.0))
     }
     #[inline(always)]
     fn ratio(num: Q24, den: Q24) -> Q24 {

@@ -1,0 +1,144 @@
+//! The whole speed range (issue 15): field weakening on the paper machine at 325 V up to
+//! 3000 rpm (2x its nameplate speed, about 2.9x the no-load base speed at rated flux),
+//! the reachable speed held and reported, braking without a brake resistor on a 470 uF
+//! link with the over-voltage control. Scenarios in `acim_sim::builtins` (`fw-*`).
+//!
+//! Measured (f32, `cargo run --release -p acim-sim -- run <name>`): see the numbers in
+//! each test. The issue's 0.5 % steady speed error is not met at 3000 rpm: the true speed
+//! runs about 1.2 % above the estimate there (the estimated rotor flux is about 1 %
+//! above the plant's at 0.22 Wb); that acceptance is kept as an ignored test below.
+
+use acim_sim::metrics::Metrics;
+use acim_tests::run;
+
+fn kept(m: &Metrics) {
+    assert!(m.control_kept, "{}: control lost: {m:#?}", m.name);
+    assert!(m.fault.is_none(), "{}: fault {:?}", m.name, m.fault);
+}
+
+/// No-load reversal +3000 -> -3000 rpm: both directions reach the target (window means
+/// 3036.5 and -3036.9 rpm measured), control kept, no fault.
+#[test]
+fn reversal_at_twice_nameplate_speed() {
+    let m = run("fw-reversal-3000", &[]);
+    kept(&m);
+    let f = &m.windows["forward"];
+    let r = &m.windows["reverse"];
+    assert!(f.speed_mean_rpm > 2985.0, "{f:?}");
+    assert!(r.speed_mean_rpm < -2985.0, "{r:?}");
+    // the flux is weakened to below a third of its rated 0.78 Wb
+    assert!(f.rotor_flux_true_min < 0.26, "{f:?}");
+}
+
+/// Ramp to 3000 rpm against a 1 N m passive load plus 2e-3 N m s/rad friction (1.63 N m
+/// at 3000 rpm, above the 1.42 N m the machine equations allow there with the linear
+/// modulation limit): the drive holds the speed it can reach (2336 rpm measured), keeps
+/// control and does not trip.
+#[test]
+fn ramp_with_load_holds_the_reachable_speed() {
+    let m = run("fw-ramp-3000", &[]);
+    kept(&m);
+    let w = &m.windows["steady"];
+    assert!(
+        w.speed_mean_rpm > 2200.0 && w.speed_mean_rpm < 3000.0,
+        "{w:?}"
+    );
+    // held: the reference stays with the speed instead of running away to 3000 rpm
+    assert!(w.speed_err_max_rpm < 60.0, "{w:?}");
+}
+
+/// A target of 3200 rpm with 1.2 N m: held at the reachable speed (2146 rpm measured),
+/// reported (telemetry `speed_target_limited`), control kept.
+#[test]
+fn unreachable_target_is_held() {
+    let m = run("fw-unreachable-3200", &[]);
+    kept(&m);
+    let w = &m.windows["held"];
+    assert!(
+        w.speed_mean_rpm > 1900.0 && w.speed_mean_rpm < 3000.0,
+        "{w:?}"
+    );
+    assert!(w.speed_err_max_rpm < 60.0, "{w:?}");
+}
+
+/// 0.8 N m load step at 2500 rpm (with friction about 90 % of the torque the drive holds
+/// there): held at 2500 rpm, control kept.
+#[test]
+fn load_step_at_2500_rpm() {
+    let m = run("fw-load-step-2500", &[]);
+    kept(&m);
+    for (name, w) in &m.windows {
+        assert!((w.speed_mean_rpm - 2500.0).abs() < 40.0, "{name}: {w:?}");
+    }
+}
+
+/// Braking from 3000 rpm at up to 2000 rpm/s on 470 uF without a brake resistor: the
+/// over-voltage control keeps the bus below the 400 V trip (peak 389.9 V measured) and
+/// the drive does not trip. The regenerated power is limited to the losses, so the speed
+/// falls slowly (about 1470 rpm at 11 s). Open: the simulator's verdict is "lost"
+/// (|speed - ref| up to 190 rpm): the reference is held within 36 rpm of the speed
+/// estimate, which runs about 2 % below the true speed while braking in field weakening.
+#[test]
+fn braking_from_3000_rpm_stays_below_the_overvoltage_trip() {
+    let sc = acim_sim::builtins::get("fw-braking-3000").unwrap();
+    let (r, m) = acim_sim::run_with_metrics(&sc).unwrap();
+    assert!(m.fault.is_none(), "{:?}", m.fault);
+    let peak = r.rows.iter().map(|x| x.dc_bus_v).fold(0.0f32, f32::max);
+    assert!(peak < sc.drive.dc_bus_max_v, "bus peak {peak} V");
+    let last = r.rows.last().unwrap();
+    assert!(last.speed_rpm < 2000.0, "{}", last.speed_rpm);
+}
+
+/// The same braking without the over-voltage control trips on over-voltage: the control
+/// is what keeps the bus down.
+#[test]
+fn braking_without_overvoltage_control_trips() {
+    let m = run("fw-braking-3000", &["drive.overvoltage_control=false"]);
+    assert_eq!(m.fault.as_deref(), Some("DcBusOverVoltage"), "{m:#?}");
+}
+
+/// Fixed point (Q7.24) keeps control through the reversal as f32 does.
+#[test]
+fn fixed_point_reversal() {
+    let m = run("fw-reversal-3000", &["drive.arithmetic=\"fixed\""]);
+    kept(&m);
+    assert!(m.windows["forward"].speed_mean_rpm > 2985.0);
+}
+
+/// The issue's acceptance: steady speed error at most 0.5 % of the reference at
+/// 3000 rpm. Not met (about 1.2 %, see the module doc).
+#[test]
+#[ignore = "open: speed estimate about 1.2 % low at 3000 rpm in field weakening"]
+fn steady_speed_error_within_half_a_percent() {
+    let m = run("fw-reversal-3000", &[]);
+    for w in m.windows.values() {
+        assert!(w.speed_err_max_rpm <= 15.0, "{w:?}");
+    }
+}
+
+/// The 2.2 kW machine (`../shared/machines/motulator-2k2.toml`) from its nameplate on
+/// 540 V: reversal +3000 -> -3000 rpm, 2x its base speed (window means 3044.5 and
+/// -3043.6 rpm measured, flux down to 0.40 Wb), control kept.
+#[test]
+fn machine_2k2_reversal_at_twice_base_speed() {
+    let m = run("fw-2k2-reversal-3000", &[]);
+    kept(&m);
+    assert!(m.windows["forward"].speed_mean_rpm > 2985.0, "{m:#?}");
+    assert!(m.windows["reverse"].speed_mean_rpm < -2985.0, "{m:#?}");
+}
+
+/// The 2.2 kW machine braking from 3000 rpm to 0 on 470 uF with the over-voltage
+/// control: bus peak below the drive's over-voltage trip (657.7 V measured), stopped.
+#[test]
+fn machine_2k2_braking_stays_below_the_overvoltage_trip() {
+    let sc = acim_sim::builtins::get("fw-2k2-braking-3000").unwrap();
+    let (r, m) = acim_sim::run_with_metrics(&sc).unwrap();
+    kept(&m);
+    let peak = r.rows.iter().map(|x| x.dc_bus_v).fold(0.0f32, f32::max);
+    assert!(
+        peak < r.config.dc_bus_max,
+        "bus peak {peak} V vs {}",
+        r.config.dc_bus_max
+    );
+    assert!(r.rows.last().unwrap().speed_rpm.abs() < 20.0);
+}
