@@ -156,6 +156,13 @@ fn a_fault_clears_the_speed_target() {
     assert_eq!(d.state(), DriveState::Fault);
     Controller::reset_fault(&mut d).unwrap();
     assert_eq!(Controller::telemetry(&d).speed_reference, 0.0);
+    // the restart waits 5 tau_r for the rotor flux to decay (acim::design::DEMAGNETIZE_TAU_R)
+    for _ in 0..2000 {
+        d.step(&DriveInputs {
+            phase_currents: [0.0; 3],
+            dc_bus: 325.0,
+        });
+    }
     d.start().unwrap();
     for _ in 0..10 {
         d.step(&DriveInputs {

@@ -40,7 +40,7 @@ use {
     acim::Drive,
     acim_firmware_core::board::{self, POWER_STAGE},
     acim_firmware_core::command::{Command, LineAssembler, ParseError},
-    acim_firmware_core::control::{CommandReply, ControlCommand, ControlLoop},
+    acim_firmware_core::control::{self, CommandReply, ControlCommand, ControlLoop},
     acim_firmware_core::convert::Converter,
     acim_firmware_core::settings::{self, LoadError, Settings, FIELDS},
     acim_firmware_core::telemetry::{self, TelemetrySample},
@@ -363,7 +363,7 @@ fn main() -> ! {
                 }
                 Err(e) => {
                     defmt::warn!("refused {}: {}", r.command, e);
-                    say(&mut out, b"err refused in this state\r\n");
+                    say(&mut out, control::refusal_text(e));
                 }
             }
         }

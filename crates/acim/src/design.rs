@@ -354,6 +354,14 @@ pub const OFFSET_FRACTION: f32 = 0.02;
 /// Magnetizing gives up after this many rotor time constants beyond the standstill Rs
 /// identification's own timeout (the flux settles in about 3).
 pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
+/// After a switch-off the rotor flux decays with tau_r (open stator: d lambda_r/dt =
+/// -lambda_r / tau_r, eq. 13 with i_sd = 0); a start is refused until this many rotor
+/// time constants have passed, leaving exp(-5) = 0.7 % of the flux. A start into the
+/// remaining flux of a turning rotor meets a back-EMF the flying start's speed search
+/// (which assumes the flux builds from zero) and the current-response check cannot
+/// explain. Industrial drives have the same wait (e.g. Siemens' motor de-excitation time,
+/// p0347).
+pub const DEMAGNETIZE_TAU_R: f32 = 5.0;
 
 /// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
 /// of the step reads only these.
@@ -406,6 +414,8 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r, plus the flying start's speed search (when
     /// it runs).
     pub magnetizing_timeout_steps: u32,
+    /// Periods after a switch-off before a start is accepted: [`DEMAGNETIZE_TAU_R`] tau_r.
+    pub demagnetize_steps: u32,
     /// Idle offset means: leaky-mean gain Ts / [`OFFSET_FILTER_TIME`].
     pub offset_filter: N::Gain,
     /// Idle samples before the offset means are trusted.
@@ -913,6 +923,7 @@ impl DriveDesign {
                 current_sum_limit: CURRENT_SUM_FRACTION * cfg.overcurrent_trip,
                 model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
                     + RESIDUAL_VOLTAGE_FRACTION * v_static,
+                demagnetize_steps: (DEMAGNETIZE_TAU_R * m.rotor_time_constant() / ts) as u32,
                 offset_filter: (ts / OFFSET_FILTER_TIME).min(1.0),
                 offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts) as u32,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,

@@ -293,6 +293,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     offsets: OffsetMonitor<N>,
     /// The offsets subtracted from the samples since the last start.
     offset_compensation: [N; 3],
+    /// Periods with the switches off since they last switched (saturating; `u32::MAX` at
+    /// power-up: no flux to wait for).
+    off_steps: u32,
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
     /// The flying start's speed search ([`crate::speed_search`]), used only while
@@ -361,6 +364,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             monitor: ControlMonitor::new(),
             offsets: OffsetMonitor::new(),
             offset_compensation: [N::ZERO; 3],
+            off_steps: u32::MAX,
             open_loop: OpenLoop::default(),
             telemetry: DriveTelemetry {
                 stator_resistance_estimate: rs_initial,
@@ -434,17 +438,23 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.check_sensors_before_start()?;
         self.sup.start(DriveState::Magnetizing)?;
         self.reset_dynamic_state();
+        self.off_steps = 0;
         Ok(())
     }
 
-    /// Idle only: a current channel whose offset, measured with the switches off, is
-    /// beyond its limit refuses the start and faults the drive (`CurrentSensor`);
-    /// otherwise the settled offsets are subtracted from the samples until the next stop.
+    /// Idle only: a start sooner than [`crate::design::DEMAGNETIZE_TAU_R`] rotor time
+    /// constants after the last switch-off is refused (`Demagnetizing`, nothing changes);
+    /// a current channel whose offset, measured with the switches off, is beyond its
+    /// limit refuses the start and faults the drive (`CurrentSensor`); otherwise the
+    /// settled offsets are subtracted from the samples until the next stop.
     fn check_sensors_before_start(&mut self) -> Result<(), CommandError> {
         if self.sup.state() != DriveState::Idle {
             return Ok(()); // the state machine refuses the start
         }
         let limits = &self.coeffs.limits;
+        if self.off_steps < limits.demagnetize_steps {
+            return Err(CommandError::Demagnetizing);
+        }
         if let Some(reason) = self.sup.check_offsets(limits, &self.offsets) {
             self.sup.trip(reason);
             return Err(CommandError::SensorOffset);
@@ -458,6 +468,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.check_sensors_before_start()?;
         self.sup.start(DriveState::OpenLoop)?;
         self.reset_dynamic_state();
+        self.off_steps = 0;
         Ok(())
     }
 
@@ -565,6 +576,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let mode = match gate {
             Gate::Run(mode) => mode,
             Gate::Off(None) => {
+                self.off_steps = self.off_steps.saturating_add(1);
                 if self.sup.state() == DriveState::Idle {
                     // switches off: measure the current channels' zero offsets
                     self.offsets
@@ -1316,6 +1328,11 @@ mod tests {
             d.reset_fault().unwrap();
             assert_eq!(d.state(), DriveState::Idle);
             assert_eq!(d.fault(), None);
+            // a restart waits for the rotor flux to decay (5 tau_r after the switch-off)
+            assert_eq!(d.start(), Err(CommandError::Demagnetizing));
+            for _ in 0..d.coeffs.limits.demagnetize_steps {
+                d.step(&idle_inputs());
+            }
             d.start().unwrap();
         }
     }
@@ -1370,6 +1387,44 @@ mod tests {
             .unwrap();
         d.step(&magnetizing);
         assert!(!d.telemetry().speed_target_limited);
+    }
+
+    /// A start sooner than 5 tau_r after a switch-off (stop or fault) is refused with
+    /// `Demagnetizing` and changes nothing; once the flux has decayed it is accepted. At
+    /// power-up there is no flux to wait for.
+    #[test]
+    fn a_restart_waits_for_the_rotor_flux_to_decay() {
+        let idle = |d: &mut Drive, n: u32| {
+            for _ in 0..n {
+                d.step(&DriveInputs {
+                    phase_currents: [0.0; 3],
+                    dc_bus: 325.0,
+                });
+            }
+        };
+        let mut d = drive();
+        assert_eq!(d.start(), Ok(()));
+        idle(&mut d, 10);
+        assert_eq!(d.state(), DriveState::Magnetizing);
+        d.stop();
+        let wait = d.coeffs.limits.demagnetize_steps;
+        let tau_r = d.design.config.machine.rotor_time_constant();
+        let ts = d.design.config.control_period;
+        assert_eq!(wait, (5.0 * tau_r / ts) as u32);
+        idle(&mut d, wait - 1);
+        assert_eq!(d.start(), Err(CommandError::Demagnetizing));
+        assert_eq!(d.state(), DriveState::Idle);
+        assert_eq!(d.fault(), None);
+        idle(&mut d, 1);
+        assert_eq!(d.start(), Ok(()));
+        // after a fault and its reset the same wait applies (the fault switched off)
+        d.trip(FaultReason::HardwareBreak);
+        idle(&mut d, 10);
+        assert_eq!(d.reset_fault(), Ok(()));
+        assert_eq!(d.start(), Err(CommandError::Demagnetizing));
+        assert_eq!(d.start_open_loop(), Err(CommandError::Demagnetizing));
+        idle(&mut d, wait);
+        assert_eq!(d.start_open_loop(), Ok(()));
     }
 
     /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses

@@ -98,6 +98,10 @@ pub enum CommandError {
     /// A current channel's zero offset, measured with the switches off while idle, is
     /// beyond its limit: the start is refused and the drive faults (`CurrentSensor`).
     SensorOffset,
+    /// The switches turned off less than [`crate::design::DEMAGNETIZE_TAU_R`] rotor time
+    /// constants ago: the rotor flux of the last run has not decayed. Retry after that
+    /// time; nothing changed.
+    Demagnetizing,
 }
 
 /// What the estimation stage hands the supervisor's plausibility check.

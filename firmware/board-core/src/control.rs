@@ -105,6 +105,21 @@ pub struct CommandReply {
     pub result: Result<(), CommandError>,
 }
 
+/// The UART reply line to a refused command (ASCII, `\r\n`-terminated).
+pub fn refusal_text(e: CommandError) -> &'static [u8] {
+    match e {
+        CommandError::Demagnetizing => {
+            b"err the rotor flux has not decayed: retry 5 rotor time constants after the switch-off\r\n"
+        }
+        CommandError::SensorOffset => {
+            b"err current-sensor offset beyond its limit: fault CurrentSensor\r\n"
+        }
+        CommandError::NotFinite => b"err value not finite\r\n",
+        CommandError::OutOfRange => b"err value out of range\r\n",
+        CommandError::WrongState(_) => b"err refused in this state\r\n",
+    }
+}
+
 /// Drive + conversion + statistics, owned by the control interrupt.
 pub struct ControlLoop<S: SinCos> {
     drive: Drive<S>,
@@ -361,6 +376,27 @@ mod tests {
         assert_eq!(l.replace_drive(rebuilt()), Ok(()));
         assert_eq!(l.drive().config().current_limit, 4.0);
         assert_eq!(l.state(), DriveState::Idle);
+    }
+
+    /// A restart right after a stop is refused with its own reason and changes nothing;
+    /// after 5 tau_r it is accepted.
+    #[test]
+    fn a_restart_waits_for_the_flux_to_decay() {
+        let conv = Converter::new(&POWER_STAGE);
+        let mut l = looped();
+        assert!(l.apply(ControlCommand::Start).result.is_ok());
+        l.step(&raw_at_bus(&conv, 325.0));
+        assert!(l.apply(ControlCommand::Stop).result.is_ok());
+        let r = l.apply(ControlCommand::Start).result;
+        assert_eq!(r, Err(CommandError::Demagnetizing));
+        assert!(refusal_text(CommandError::Demagnetizing).starts_with(b"err the rotor flux"));
+        assert_eq!(l.state(), DriveState::Idle);
+        let m = l.drive().config().machine;
+        let wait = (5.0 * m.rotor_time_constant() / l.drive().config().control_period) as u32;
+        for _ in 0..wait {
+            l.step(&raw_at_bus(&conv, 325.0));
+        }
+        assert!(l.apply(ControlCommand::Start).result.is_ok());
     }
 
     #[test]

@@ -247,6 +247,17 @@ mod tests {
             .result
             .is_ok());
         assert!(!r.bif);
+        // a start before the rotor flux has decayed (5 tau_r) is refused, MOE stays clear
+        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
+            .result
+            .is_err());
+        assert!(!r.moe);
+        let cfg = ctl.drive().config();
+        let wait = (5.0 * cfg.machine.rotor_time_constant() / cfg.control_period) as u32;
+        for _ in 0..wait {
+            conversion(&mut r);
+            control_period(&mut ctl, &mut r);
+        }
         assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
             .result
             .is_ok());

@@ -277,6 +277,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             current_sum_limit: pu(d.limits.current_sum_limit, b.current, "overcurrent_trip")?,
             model_residual_limit: pu(d.limits.model_residual_limit, b.voltage, "dc_bus_max")?,
             magnetizing_timeout_steps: d.limits.magnetizing_timeout_steps,
+            demagnetize_steps: d.limits.demagnetize_steps,
             offset_filter: gain(d.limits.offset_filter, "control_period")?,
             offset_settle_steps: d.limits.offset_settle_steps,
             offset_limit: pu(d.limits.offset_limit, b.current, "overcurrent_trip")?,
