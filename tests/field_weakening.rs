@@ -4,9 +4,10 @@
 //! link with the over-voltage control. Scenarios in `acim_sim::builtins` (`fw-*`).
 //!
 //! Measured (f32, `cargo run --release -p acim-sim -- run <name>`): see the numbers in
-//! each test. The 0.5 % steady speed error is not met at 3000 rpm: the true speed
-//! runs about 1.2 % above the estimate there (the estimated rotor flux is about 1 %
-//! above the plant's at 0.22 Wb); that acceptance is kept as an ignored test below.
+//! each test. The 0.5 % steady speed error at 3000 rpm is met since the sense
+//! stage removes the current ripple a boundary sample carries (`DriveCoeffs::
+//! sample_ripple`): before, the true speed ran 1.2 % above the estimate there (the flux
+//! model read i_sd 2 % high at 0.22 Wb).
 
 use acim_sim::metrics::Metrics;
 use acim_tests::run;
@@ -106,13 +107,21 @@ fn fixed_point_reversal() {
 }
 
 /// The acceptance: steady speed error at most 0.5 % of the reference at
-/// 3000 rpm. Not met (about 1.2 %, see the module doc).
+/// 3000 rpm (15 rpm), on the paper machine and the 2.2 kW machine, and at 2500 rpm
+/// through the load step (12.5 rpm). Measured: 3.71 / 4.52 rpm (paper machine, forward /
+/// reverse), 4.28 / 4.02 rpm (2.2 kW), 3.41 / 2.20 rpm (2500 rpm, before / after the
+/// step); 37.6 / 37.8 rpm on the paper machine before the ripple correction.
 #[test]
-#[ignore = "open: speed estimate about 1.2 % low at 3000 rpm in field weakening"]
 fn steady_speed_error_within_half_a_percent() {
-    let m = run("fw-reversal-3000", &[]);
+    for name in ["fw-reversal-3000", "fw-2k2-reversal-3000"] {
+        let m = run(name, &[]);
+        for w in m.windows.values() {
+            assert!(w.speed_err_max_rpm <= 15.0, "{name}: {w:?}");
+        }
+    }
+    let m = run("fw-load-step-2500", &[]);
     for w in m.windows.values() {
-        assert!(w.speed_err_max_rpm <= 15.0, "{w:?}");
+        assert!(w.speed_err_max_rpm <= 12.5, "{w:?}");
     }
 }
 

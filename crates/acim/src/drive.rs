@@ -697,9 +697,17 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         let angle = self.est.flux.angle;
         let sc = self.sincos.sin_cos(angle);
+        // the fundamental's sample: the staircase ripple at the period boundary,
+        // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
+        let i = park(i_ab, sc);
+        let v = self.applied.v_dq;
+        let k = N::gain(self.coeffs.sample_ripple, self.est.flux.stator_frequency);
         Measured {
             i_ab,
-            i_dq: park(i_ab, sc),
+            i_dq: Dq {
+                d: i.d - k * v.q,
+                q: i.q + k * v.d,
+            },
             sc,
             angle,
             dc_bus: inp.dc_bus,

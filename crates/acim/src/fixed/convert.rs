@@ -212,6 +212,10 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             m.transient_inductance() * b.frequency * b.current / b.voltage,
             "machine",
         )?,
+        sample_ripple: gain(
+            d.sample_ripple * b.frequency * b.voltage / b.current,
+            "machine",
+        )?,
         referred_rotor_resistance: pu(m.referred_rotor_resistance(), b.resistance(), "machine")?,
         inv_rotor_time_constant: gain(b.flux / (m.rotor_time_constant() * b.voltage), "machine")?,
         pole_pairs: gain(pp * b.speed / b.frequency, "machine")?,
