@@ -33,7 +33,7 @@ import math
 import struct
 
 from unicorn import (Uc, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK,
-                     UC_HOOK_CODE, UcError)
+                     UC_HOOK_CODE, UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE, UcError)
 from unicorn.arm_const import (
     UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4,
     UC_ARM_REG_R5, UC_ARM_REG_R6, UC_ARM_REG_R7, UC_ARM_REG_R8, UC_ARM_REG_R9,
@@ -291,6 +291,9 @@ class Machine:
         self.pwr_gated_writes = pwr_gated_writes
         self.moe_history = []    # (period, moe)
         self.selftest = False
+        self.mpu_guard = None       # (base, size) of the no-access MPU region, once enabled
+        self.mpu_violation = None   # first address accessed inside it
+        self._mpu_pending = False
         self._reset_values()
         sp, reset = struct.unpack("<II", bytes(self.uc.mem_read(0x0800_0000, 8)))
         self.vectors = [struct.unpack_from("<I", bytes(self.uc.mem_read(0x0800_0000 + 4 * i, 4)))[0]
@@ -436,6 +439,9 @@ class Machine:
                 self.events.append(("IWDG start",))
             elif value == 0xAAAA:
                 self.iwdg_feeds += 1
+        if base == 0xE000_ED00 and off4 == 0x94 and value & 1:   # MPU_CTRL.ENABLE
+            self.events.append(("MPU enable", len(self.writes)))
+            self._mpu_pending = True  # the guard's hook is added between two runs
         if base == 0xE000_E100 and off4 < 0x20:       # NVIC_ISERn
             if self.boot_writes is None:
                 self.boot_writes = len(self.writes)   # the boot ends at the first unmask
@@ -634,6 +640,37 @@ class Machine:
         for lo, hi in ((0x0800_0000, 0x0808_0000), (0x1000_0000, 0x1000_8000)):
             self.uc.ctl_remove_cache(lo, hi)
 
+    def _arm_mpu_guard(self):
+        """The MPU as far as the firmware uses it: region 0 (RNR = 0) no access (AP = 000)
+        while MPU_CTRL.ENABLE: any access inside it is a MemManage fault."""
+        self._mpu_pending = False
+        rbar, rasr = self.reg(0xE000_ED00, 0x9C), self.reg(0xE000_ED00, 0xA0)
+        if self.reg(0xE000_ED00, 0x98) != 0 or not rasr & 1 or (rasr >> 24) & 7:
+            return
+        size = 1 << (((rasr >> 1) & 0x1F) + 1)
+        base = rbar & ~(size - 1) & 0xFFFF_FFE0
+        self.mpu_guard = (base, size)
+        self.uc.hook_add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, self._guard_hit,
+                         begin=base, end=base + size - 1)
+        self._flush()
+
+    def _guard_hit(self, uc, _access, address, _size, _value, _data):
+        if self.mpu_violation is None:
+            self.mpu_violation = address
+            self.events.append(("MPU guard", address))
+        uc.emu_stop()
+
+    def _stack_fault(self):
+        """An access inside the guard: a stack overflow, so the MemManage exception's own
+        stacking (8 words below SP) lands in the guard too: a derived fault, escalated to
+        HardFault, whose stacking faults again: LOCKUP. SYSCFG_CFGR2.CLL turns LOCKUP into
+        a TIM1 system break (MOE cleared, SBIF set); without that link MOE stays."""
+        if self.reg(0x4001_0000, 0x1C) & 1:
+            b = 0x4001_2C00
+            self.regs[(b, 0x44)] = self.reg(b, 0x44) & ~MOE
+            self.regs[(b, 0x10)] = self.reg(b, 0x10) | (1 << 13)
+        self.halted = f"lockup: the stack reached its MPU guard at 0x{self.mpu_violation:08x}"
+
     def run_exception(self, vector, limit=5_000_000):
         """Runs the handler of `vector` to its return (or `limit` instructions); returns the
         instructions it executed when counting is on, else None."""
@@ -658,6 +695,8 @@ class Machine:
         except UcError as e:
             self.halted = f"exception in vector {vector}: {e} at 0x{self.uc.reg_read(UC_ARM_REG_PC):08x}"
         finally:
+            if self.mpu_violation is not None and self.halted is None:
+                self._stack_fault()
             if ht is not None:
                 self.uc.hook_del(ht)
                 self.isr_traces.append(trace)
@@ -686,6 +725,11 @@ class Machine:
                 break
             self.pc = self.uc.reg_read(UC_ARM_REG_PC)
             self.instret += n
+            if self.mpu_violation is not None:
+                self._stack_fault()
+                break
+            if self._mpu_pending:
+                self._arm_mpu_guard()
             if self.instret >= next_period:
                 next_period += INSTRUCTIONS_PER_PERIOD
                 self._period_hardware()

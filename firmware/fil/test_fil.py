@@ -138,6 +138,30 @@ class Protection(unittest.TestCase):
                 self.assertIn("ok", command(m, "start"))
                 self.assertTrue(m.moe())
 
+    def test_a_stack_overflow_hits_the_guard_and_switches_off(self):
+        """D16: the stack had no guard; an overflow silently corrupted the statics (SPSC
+        queues, RTT block). The firmware makes the 1 KiB above them a no-access MPU region
+        before it unmasks any interrupt; a stack pushed into it faults (LOCKUP, which the
+        system break turns into MOE cleared)."""
+        m = started()
+        sheap = fil.elf_symbol(fil.default_elf("power-stage"), "__sheap")
+        self.assertEqual(m.mpu_guard, ((sheap + 1023) & ~1023, 1024))
+        self.assertTrue(m.reg(0xE000_ED00, 0x24) & (1 << 16), "MemManage fault enabled")
+        enable = [e for e in m.events if e[0] == "MPU enable"]
+        self.assertTrue(enable and enable[0][1] <= m.boot_writes,
+                        "the guard must be on before the first interrupt is unmasked")
+        self.assertTrue(m.moe())
+        # the main stack pushed down to 16 bytes above the guard: the next interrupt's
+        # frame and pushes land in it
+        base, size = m.mpu_guard
+        m.uc.reg_write(fil.UC_ARM_REG_SP, base + size + 16)
+        m.run(2)
+        self.assertIsNotNone(m.mpu_violation)
+        self.assertTrue(base <= m.mpu_violation < base + size)
+        self.assertFalse(m.moe(), "outputs must switch off")
+        self.assertTrue(m.reg(0x4001_2C00, 0x10) & (1 << 13), "SBIF")
+        self.assertTrue(m.halted.startswith("lockup"), m.halted)
+
     def test_nmi_hardfault_and_unhandled_interrupts_switch_off(self):
         """D7: NMI and the default handler used to loop with MOE set."""
         for vector in (fil.NMI_VECTOR, fil.HARDFAULT_VECTOR, 16 + 0, 16 + 40):

@@ -212,6 +212,34 @@ pub fn clock_registers() -> acim_firmware_core::clock::ClockRegisters {
     }
 }
 
+/// The stack guard (review D16): MPU region 0 made a 32-byte no-access region on the
+/// statics' end (`board::stack_guard_region`), the MPU enabled with the default map
+/// elsewhere, and the MemManage fault enabled so that an overflow runs its handler
+/// (outputs off) rather than escalating. Written once at start-up, before any interrupt
+/// is unmasked.
+pub fn stack_guard(mpu: &mut cortex_m::peripheral::MPU, scb: &mut cortex_m::peripheral::SCB) {
+    extern "C" {
+        // cortex-m-rt's link.x: the end of .bss/.uninit, where the (unused) heap would
+        // start; above it only the main stack, growing down from the top of SRAM
+        static __sheap: u32;
+    }
+    // only the symbol's address is taken, never its value
+    let end = core::ptr::addr_of!(__sheap) as u32;
+    let (rbar, rasr) = acim_firmware_core::board::stack_guard_region(end);
+    // SAFETY: MPU programming at start-up with interrupts masked; region 0 is the only
+    // region used, the default map stays in force elsewhere (PRIVDEFENA), and the
+    // barriers make the new map effective before the next access.
+    unsafe {
+        mpu.rnr.write(0);
+        mpu.rbar.write(rbar);
+        mpu.rasr.write(rasr);
+        mpu.ctrl.write(acim_firmware_core::board::MPU_CTRL_GUARD);
+    }
+    scb.enable(cortex_m::peripheral::scb::Exception::MemoryManagement);
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
+}
+
 /// Debug halts stop TIM1 (outputs to their off-state) and the watchdog, so a breakpoint
 /// during bring-up leaves the bridge off instead of switching at a frozen duty (review
 /// D6). Written once at start-up.

@@ -122,6 +122,8 @@ fn main() -> ! {
     // debug halts stop TIM1 and the watchdog; lockup/ECC/parity/PVD break TIM1 in hardware
     hw::freeze_on_debug_halt();
     hw::link_system_break();
+    // a stack overflow faults (outputs off) instead of corrupting the statics (review D16)
+    hw::stack_guard(&mut cp.MPU, &mut cp.SCB);
 
     // 170 MHz from HSI16: 16 / 4 * 85 / 2; Range 1 boost mode (needed above 150 MHz);
     // the HAL sets the flash wait states (4 at 170 MHz) during the switch. The HAL does not
@@ -685,6 +687,17 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[cfg(target_os = "none")]
 #[exception]
 unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+    hw::emergency_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+#[cfg(target_os = "none")]
+/// MemManage: the stack ran into its guard (review D16): switch off, then wait for the
+/// watchdog.
+#[exception]
+unsafe fn MemoryManagement() {
     hw::emergency_off();
     loop {
         cortex_m::asm::nop();

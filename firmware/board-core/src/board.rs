@@ -254,9 +254,58 @@ pub fn drive_config_for(p: &BusProfile) -> DriveConfig {
     cfg
 }
 
+/// Size of the stack guard, bytes (an MPU region of 2^(SIZE+1) bytes, SIZE = 9, aligned to
+/// its size): larger than any single stack frame of the firmware, so that no function's
+/// frame can step over the guard into the statics (a 32-byte guard, the MPU's smallest,
+/// would catch only pushes); 1 KiB of the 92 KiB of SRAM the firmware leaves free.
+pub const STACK_GUARD_BYTES: u32 = 1024;
+const STACK_GUARD_SIZE_FIELD: u32 = 9;
+
+/// The MPU region that guards the stack (review D16): `(RBAR, RASR)` for region 0, a
+/// no-access, execute-never region of [`STACK_GUARD_BYTES`] at the first boundary of its
+/// size at or above `end_of_statics` (cortex-m-rt's `__sheap`: the end of `.bss`/`.uninit`,
+/// above which only the main stack lives, growing down from the top of SRAM). A stack
+/// that overflows writes into it and faults (MemManage; or LOCKUP when the fault's own
+/// stacking hits the guard, which SYSCFG_CFGR2.CLL turns into a TIM1 system break) instead
+/// of silently corrupting the SPSC queues and the RTT control block below it.
+pub const fn stack_guard_region(end_of_statics: u32) -> (u32, u32) {
+    let base = (end_of_statics + STACK_GUARD_BYTES - 1) & !(STACK_GUARD_BYTES - 1);
+    // RBAR: ADDR (bits 31:5), VALID = 0 (the region number comes from RNR)
+    let rbar = base;
+    // RASR: XN (28), AP = 000 no access (26:24), TEX/S/C/B = 0, SRD = 0,
+    // SIZE (bits 5:1, 2^(SIZE+1) bytes), ENABLE (0)
+    let rasr = (1 << 28) | (STACK_GUARD_SIZE_FIELD << 1) | 1;
+    (rbar, rasr)
+}
+
+/// MPU_CTRL for the guard: ENABLE, and PRIVDEFENA (the default memory map stays in force
+/// everywhere else; the firmware runs privileged), HFNMIENA off (the fault handlers run
+/// without the MPU, so they can still switch off).
+pub const MPU_CTRL_GUARD: u32 = 0b101;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// D16: the guard starts at the first boundary of its size at or above the statics,
+    /// is 1 KiB, no access, execute-never, and enabled.
+    #[test]
+    fn the_stack_guard_sits_on_the_statics_and_denies_access() {
+        for (end, base) in [
+            (0x2000_0878, 0x2000_0C00),
+            (0x2000_0C00, 0x2000_0C00),
+            (0x2000_0C01, 0x2000_1000),
+        ] {
+            let (rbar, rasr) = stack_guard_region(end);
+            assert_eq!(rbar, base);
+            assert_eq!(rbar % STACK_GUARD_BYTES, 0);
+            assert_eq!(1u32 << (((rasr >> 1) & 0x1F) + 1), STACK_GUARD_BYTES);
+            assert_eq!((rasr >> 24) & 0b111, 0, "AP: no access");
+            assert_eq!(rasr & (1 << 28), 1 << 28, "execute-never");
+            assert_eq!(rasr & 1, 1, "enabled");
+        }
+        assert_eq!(MPU_CTRL_GUARD & 0b111, 0b101);
+    }
     use acim::Drive;
 
     #[test]
