@@ -1,6 +1,10 @@
 //! DC link: a stiff source, or a diode rectifier charging the bus capacitor through a
 //! source resistance (no braking chopper), integrated once per control period with the
-//! inverter's mean DC current of that period.
+//! inverter's mean DC current of that period. The source may carry a sinusoidal ripple
+//! (a rectifier's 100 Hz on a small capacitor, as a fraction of the source voltage).
+
+use acim::frames::{FastSinCos, SinCos};
+use acim::math::wrap_angle;
 
 /// DC-link model.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -13,6 +17,12 @@ pub struct DcLink {
     source_resistance_ohm: f32,
     /// Bus voltage, V.
     bus_v: f32,
+    /// Ripple amplitude as a fraction of the source voltage (0: none).
+    ripple_fraction: f32,
+    /// Ripple frequency, rad/s.
+    ripple_frequency: f32,
+    /// Ripple phase, rad (wrapped: no loss of precision over long runs).
+    ripple_phase: f32,
 }
 
 impl DcLink {
@@ -25,7 +35,28 @@ impl DcLink {
             capacitance_f,
             source_resistance_ohm,
             bus_v: source_v,
+            ripple_fraction: 0.0,
+            ripple_frequency: 0.0,
+            ripple_phase: 0.0,
         }
+    }
+
+    /// The same link with a sinusoidal ripple on its source: `fraction` of the source
+    /// voltage (0.1 = +/-10 %) at `frequency_hz` (100 Hz: a single-phase rectifier on
+    /// 50 Hz mains). The bus starts at the ripple's zero crossing.
+    pub fn with_ripple(mut self, fraction: f32, frequency_hz: f32) -> Self {
+        self.ripple_fraction = fraction;
+        self.ripple_frequency = 2.0 * core::f32::consts::PI * frequency_hz;
+        self
+    }
+
+    /// The source voltage this instant, ripple included, V.
+    fn source_now(&self) -> f32 {
+        if self.ripple_fraction == 0.0 {
+            return self.source_v;
+        }
+        let s = FastSinCos.sin_cos(self.ripple_phase).sin;
+        self.source_v * (1.0 + self.ripple_fraction * s)
     }
 
     /// A stiff bus at `v` volts.
@@ -52,12 +83,14 @@ impl DcLink {
     /// the mean current `dc_current` (A; negative when regenerating): the rectifier only
     /// conducts into the bus, so braking energy charges the capacitor.
     pub fn step(&mut self, dc_current: f32, ts: f32) {
+        self.ripple_phase = wrap_angle(self.ripple_phase + self.ripple_frequency * ts);
+        let source = self.source_now();
         if self.capacitance_f > 0.0 && self.source_resistance_ohm > 0.0 {
-            let i_src = ((self.source_v - self.bus_v) / self.source_resistance_ohm).max(0.0);
+            let i_src = ((source - self.bus_v) / self.source_resistance_ohm).max(0.0);
             self.bus_v += ts * (i_src - dc_current) / self.capacitance_f;
             self.bus_v = self.bus_v.max(0.0);
         } else {
-            self.bus_v = self.source_v;
+            self.bus_v = source;
         }
     }
 }
@@ -74,6 +107,26 @@ mod tests {
         l.set_source_voltage(150.0);
         l.step(0.0, 200e-6);
         assert_eq!(l.bus_voltage(), 150.0);
+    }
+
+    /// A stiff link with a 10 % 100 Hz ripple: the bus swings +/-10 % with a 10 ms period.
+    #[test]
+    fn ripple_rides_on_the_source() {
+        let mut l = DcLink::stiff(300.0).with_ripple(0.1, 100.0);
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for _ in 0..100 {
+            l.step(0.0, 100e-6); // 10 ms: one ripple period
+            lo = lo.min(l.bus_voltage());
+            hi = hi.max(l.bus_voltage());
+        }
+        assert!(
+            (hi - 330.0).abs() < 0.1 && (lo - 270.0).abs() < 0.1,
+            "{lo} .. {hi}"
+        );
+        assert!(
+            (l.bus_voltage() - 300.0).abs() < 0.5,
+            "back at the zero crossing"
+        );
     }
 
     /// Regenerated current charges the capacitor: dv = i dt / C (the rectifier blocks).

@@ -380,6 +380,29 @@ pub fn all() -> Vec<Scenario> {
     v.push(s);
 
     let mut s = fw_base(
+        "fw-ripple-2500",
+        "field weakening at 2500 rpm, 0.5 N m, bus ripple +/-10 % at 100 Hz",
+        10.0,
+    );
+    s.speed_profile = vec![sp(0.5, 2500.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 0.5)];
+    s.dc_link.ripple_fraction = 0.1;
+    s.windows = vec![win("steady", 8.0, 10.0)];
+    v.push(s);
+
+    let mut s = fw_base(
+        "fw-sag-3000",
+        "3000 rpm target, 1 N m; bus sags 325 -> 260 V at 9 s: reachable speed held, reported",
+        14.0,
+    );
+    s.speed_profile = vec![sp(0.5, 3000.0)];
+    s.load_profile = vec![load(0.0, LoadKind::Passive, 1.0)];
+    s.faults.bus_sag_at_s = Some(9.0);
+    s.faults.bus_sag_to_v = 260.0;
+    s.windows = vec![win("325 V", 7.5, 9.0), win("260 V", 12.0, 14.0)];
+    v.push(s);
+
+    let mut s = fw_base(
         "fw-unreachable-3200",
         "target 3200 rpm with a 1.2 N m load: held at the reachable speed and reported",
         12.0,

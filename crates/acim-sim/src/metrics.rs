@@ -256,6 +256,9 @@ pub struct Metrics {
     /// Largest modulation index |v_dq| / (V_dc / sqrt 3) while switching (1 = the linear
     /// limit of space-vector modulation).
     pub modulation_index_max: f32,
+    /// Time running with the speed target beyond the reachable speed (the reference held
+    /// at what the drive reaches, reported by its telemetry), s.
+    pub speed_target_limited_s: f32,
     /// Largest |true phase current| while switching, A.
     pub peak_current_a: f32,
     /// Largest |true speed|, rpm.
@@ -509,6 +512,8 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     let active = || rows.iter().filter(|r| r.state == 2 || r.state == 3);
     let voltage_saturated_s =
         active().filter(|r| r.voltage_saturated).count() as f32 * r.config.control_period;
+    let speed_target_limited_s =
+        active().filter(|r| r.speed_target_limited).count() as f32 * r.config.control_period;
     let modulation_index_max = rows
         .iter()
         .filter(|r| r.pwm_enabled)
@@ -539,6 +544,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         zero_hold,
         voltage_saturated_s,
         modulation_index_max,
+        speed_target_limited_s,
         speed_err_max_running_rpm: max_running,
         speed_search: r.search,
         peak_current_a,

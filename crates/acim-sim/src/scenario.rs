@@ -363,6 +363,10 @@ pub struct DcLinkSpec {
     pub capacitance_f: f32,
     /// Source resistance, ohm.
     pub source_resistance_ohm: f32,
+    /// Ripple on the source as a fraction of `source_v` (0.1: +/-10 %; 0: none).
+    pub ripple_fraction: f32,
+    /// Ripple frequency, Hz (100: a single-phase rectifier on 50 Hz mains).
+    pub ripple_hz: f32,
 }
 
 impl Default for DcLinkSpec {
@@ -371,6 +375,8 @@ impl Default for DcLinkSpec {
             source_v: 325.0,
             capacitance_f: 0.0,
             source_resistance_ohm: 1.0,
+            ripple_fraction: 0.0,
+            ripple_hz: 100.0,
         }
     }
 }
@@ -818,6 +824,13 @@ impl Scenario {
             1e-3,
             1e3,
         )?;
+        check_range(
+            "dc_link.ripple_fraction",
+            self.dc_link.ripple_fraction,
+            0.0,
+            0.5,
+        )?;
+        check_range("dc_link.ripple_hz", self.dc_link.ripple_hz, 0.1, 1000.0)?;
         for (i, p) in self.speed_profile.iter().enumerate() {
             check_range(
                 &format!("speed_profile[{i}].t_s"),

@@ -27,7 +27,7 @@ const SQRT_3: f32 = 1.732_050_8;
 const SATURATED_MODULATION: f32 = acim::svpwm::VOLTAGE_MARGIN * 0.999;
 
 /// The CSV header: the required columns first, then extra ones.
-pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason";
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited";
 
 /// One recorded control step.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -89,6 +89,9 @@ pub struct Row {
     /// The fault that stopped the drive, while it is in the fault state.
     #[serde(skip)]
     pub fault: Option<FaultReason>,
+    /// The speed target is beyond what the drive can reach (voltage, torque or bus) and
+    /// the reference is held at the reachable speed (the drive's telemetry).
+    pub speed_target_limited: bool,
 }
 
 /// The drive state's name for a state code of [`Row::state`].
@@ -112,7 +115,7 @@ impl Row {
     /// CSV line for this row (same column order as [`CSV_HEADER`]).
     pub fn csv(&self) -> String {
         format!(
-            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{}",
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{},{}",
             self.t_s,
             self.speed_ref_rpm,
             self.speed_rpm,
@@ -141,6 +144,7 @@ impl Row {
             self.modulation_index,
             state_name(self.state),
             self.fault.map(fault_name).unwrap_or_default(),
+            self.speed_target_limited as u8,
         )
     }
 }
@@ -234,6 +238,7 @@ pub(crate) fn build_dc_link(sc: &Scenario) -> DcLink {
         sc.dc_link.capacitance_f,
         sc.dc_link.source_resistance_ohm,
     )
+    .with_ripple(sc.dc_link.ripple_fraction, sc.dc_link.ripple_hz)
 }
 
 /// The scenario's injected faults.
@@ -372,6 +377,8 @@ pub fn run_with_progress(
         }
         faults.begin_period(t, &mut plant, &mut dc_link);
         let bus_v = dc_link.bus_voltage();
+        // the bus of the period that starts now, which the sensor reads at its start
+        plant.set_dc_bus(bus_v);
 
         // sample at the period boundary
         let mut meas = plant.sample();
@@ -441,6 +448,7 @@ pub fn run_with_progress(
             } else {
                 None
             },
+            speed_target_limited: tel.speed_target_limited,
         });
 
         // apply: a switch-off acts at once, new duties from the next period

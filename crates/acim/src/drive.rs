@@ -213,6 +213,10 @@ pub struct Applied<N = f32> {
     pub v_dq: Dq<N>,
     /// In the stationary frame (at the advanced angle it acts at), V.
     pub v_ab: AlphaBeta<N>,
+    /// The bus its duties were computed for, V (0 before the first command).
+    pub dc_bus: N,
+    /// 1 / `dc_bus`, 1/V.
+    pub inv_dc_bus: N,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
@@ -235,6 +239,8 @@ struct References<N> {
     rs_settled_steps: u32,
     /// The target is beyond the reachable speed (reported in the telemetry).
     target_limited: bool,
+    /// Steps the target stays reported as limited since the hold last bound.
+    limited_hold: u32,
     /// The previous step's i_sq*, A (the field-weakening model's load, issue 15).
     i_sq_ref: N,
     /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
@@ -349,6 +355,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
                 target_limited: false,
+                limited_hold: 0,
                 i_sq_ref: N::ZERO,
                 fw_trim: N::ZERO,
                 fw_active: false,
@@ -523,6 +530,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
 
     fn reset_dynamic_state(&mut self) {
         self.refs.speed_reference = N::ZERO;
+        self.refs.limited_hold = 0;
         self.refs.speed_ctl.reset();
         self.refs.i_sq_ref = N::ZERO;
         self.refs.fw_trim = N::ZERO;
@@ -628,7 +636,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.begin(StepRegion::Svpwm);
         let (v_ab, modulation) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
         probe.end(StepRegion::Svpwm);
-        self.applied = Applied { v_dq: v, v_ab };
+        self.applied = Applied {
+            v_dq: v,
+            v_ab,
+            dc_bus: m.dc_bus,
+            inv_dc_bus,
+        };
         self.record(&m, &e, i_ref, v, modulation.saturated);
         PwmOutput {
             duties: modulation.duties,
@@ -688,6 +701,21 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
     #[inline(always)]
     fn sense(&mut self, inp: &DriveInputs<N>) -> Measured<N> {
+        // the last step's duties were made for the bus measured then; they act over the
+        // period this sample opens, at the bus measured now: a rippling or sagging bus
+        // scales the voltage they apply (duty x bus), and the estimators use that voltage
+        let a = &mut self.applied;
+        if inp.dc_bus != a.dc_bus && a.dc_bus > N::ZERO {
+            let k = inp.dc_bus * a.inv_dc_bus;
+            a.v_dq = Dq {
+                d: a.v_dq.d * k,
+                q: a.v_dq.q * k,
+            };
+            a.v_ab = AlphaBeta {
+                alpha: a.v_ab.alpha * k,
+                beta: a.v_ab.beta * k,
+            };
+        }
         let [oa, ob, oc] = self.offset_compensation;
         let [a, b, c] = inp.phase_currents;
         let (a, b, c) = (a - oa, b - ob, c - oc);
@@ -901,9 +929,15 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // growing speed error, no overload trip) and report it
             let band = c.fw.hold_band;
             let held = r.speed_reference.clamp(speed - band, speed + band);
-            r.target_limited = r.target_limited || held != r.speed_reference;
+            if held != r.speed_reference {
+                r.limited_hold = c.fw.report_steps;
+            }
             r.speed_reference = held;
         }
+        // reported while the hold binds and for a few speed-loop time constants after
+        // (the speed PI's saturation flickers at the reachable speed)
+        r.target_limited = r.target_limited || r.limited_hold > 0;
+        r.limited_hold = r.limited_hold.saturating_sub(1);
         let i_sq_ref = r.speed_ctl.update_with_limits(
             &c.pi_speed,
             r.speed_reference - speed,

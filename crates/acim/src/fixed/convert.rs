@@ -343,6 +343,7 @@ fn field_weakening(
         )?,
         flux_voltage: gain(f.flux_voltage * b.frequency * b.flux / b.voltage, "machine")?,
         hold_band: pu(f.hold_band, b.speed, "max_speed")?,
+        report_steps: f.report_steps,
         trim_gain: gain(
             f.trim_gain * b.voltage / (b.frequency * b.current),
             "field_weakening",
