@@ -425,6 +425,49 @@ impl LoadPoint {
     }
 }
 
+/// A change of the real machine's resistances over time (thermal drift, issue 13),
+/// relative to the `[plant]` values: from `t_s` the factors move linearly, over `ramp_s`
+/// (0: a step), from those in effect before (1 at the start) to `rs_factor` and
+/// `rr_factor`. The controller is not told.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PlantChange {
+    /// Start of the change, s.
+    pub t_s: f32,
+    /// Duration of the linear ramp, s (0: a step).
+    #[serde(default)]
+    pub ramp_s: f32,
+    /// Stator resistance at the end of the change over `plant.rs_ohm` (1: unchanged).
+    #[serde(default = "unit_factor")]
+    pub rs_factor: f32,
+    /// Rotor resistance at the end of the change over `plant.rr_ohm` (1: unchanged).
+    #[serde(default = "unit_factor")]
+    pub rr_factor: f32,
+}
+
+fn unit_factor() -> f32 {
+    1.0
+}
+
+/// The plant's (Rs, Rr) factors at time `t` (s) under the changes `changes`, which
+/// [`Scenario::validate`] has checked to be in time order and not overlapping.
+pub fn plant_factors(changes: &[PlantChange], t: f32) -> (f32, f32) {
+    let (mut rs, mut rr) = (1.0f32, 1.0f32);
+    for c in changes {
+        if t < c.t_s {
+            break;
+        }
+        let x = if c.ramp_s > 0.0 {
+            ((t - c.t_s) / c.ramp_s).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        rs += (c.rs_factor - rs) * x;
+        rr += (c.rr_factor - rr) * x;
+    }
+    (rs, rr)
+}
+
 /// A controller parameter change at run time is not modelled; faults are injected into
 /// the plant or its sensors.
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Default)]
@@ -582,6 +625,9 @@ pub struct Scenario {
     pub load_profile: Vec<LoadPoint>,
     /// Injected faults.
     pub faults: FaultSpec,
+    /// Changes of the plant's resistances over time (`[[plant_changes]]`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub plant_changes: Vec<PlantChange>,
     /// Start command time and initial rotor speed.
     pub start: StartSpec,
     /// The motor's nameplate: when present (with `[board]`), the drive's ratings, limits,
@@ -622,6 +668,7 @@ impl Default for Scenario {
             speed_profile: vec![],
             load_profile: vec![],
             faults: FaultSpec::default(),
+            plant_changes: vec![],
             start: StartSpec::default(),
             nameplate: None,
             board: None,
@@ -840,6 +887,30 @@ impl Scenario {
                 -1000.0,
                 1000.0,
             )?;
+        }
+        let mut free_from = 0.0f32;
+        for (i, c) in self.plant_changes.iter().enumerate() {
+            check_range(
+                &format!("plant_changes[{i}].t_s"),
+                c.t_s,
+                free_from,
+                self.duration_s,
+            )?;
+            check_range(&format!("plant_changes[{i}].ramp_s"), c.ramp_s, 0.0, 600.0)?;
+            check_range(
+                &format!("plant_changes[{i}].rs_factor"),
+                c.rs_factor,
+                0.2,
+                5.0,
+            )?;
+            check_range(
+                &format!("plant_changes[{i}].rr_factor"),
+                c.rr_factor,
+                0.2,
+                5.0,
+            )?;
+            // in time order, each after the previous ramp has ended
+            free_from = c.t_s + c.ramp_s;
         }
         if self.start.at_s != 0.0 {
             check_range("start.at_s", self.start.at_s, 0.0, self.duration_s)?;
