@@ -206,6 +206,26 @@ pub enum ObserverKind {
     FullOrder,
 }
 
+/// When the Rs estimator adapts (`acim::RsEstimationMode`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RsMode {
+    /// Standstill identification only (the default).
+    #[default]
+    Standstill,
+    /// Also while running (issue 13).
+    Running,
+}
+
+impl RsMode {
+    fn mode(self) -> acim::RsEstimationMode {
+        match self {
+            RsMode::Standstill => acim::RsEstimationMode::Standstill,
+            RsMode::Running => acim::RsEstimationMode::Running,
+        }
+    }
+}
+
 /// Drive (controller) settings.
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -234,6 +254,9 @@ pub struct DriveSpec {
     pub observer_poles_rad_s: [f32; 3],
     /// Stator-resistance estimator on.
     pub rs_estimation: bool,
+    /// When Rs adapts: "standstill" (the default: identification before the ramp) or
+    /// "running" (also while turning, issue 13).
+    pub rs_estimation_mode: RsMode,
     /// Initial Rs estimate, ohm (the controller model's Rs when absent).
     pub rs_initial_ohm: Option<f32>,
     /// Rs estimator convergence time constant, s.
@@ -277,6 +300,7 @@ impl Default for DriveSpec {
             speed_bandwidth_rad_s: d.speed_bandwidth,
             observer_poles_rad_s: [p.p1, p.p2, p.p3],
             rs_estimation: false,
+            rs_estimation_mode: RsMode::Standstill,
             rs_initial_ohm: None,
             rs_convergence_time_s: d.rs_convergence_time,
             dead_time_comp_s: d.dead_time,
@@ -1003,6 +1027,7 @@ impl Scenario {
             p3: d.observer_poles_rad_s[2],
         };
         drive.rs_estimation = d.rs_estimation;
+        drive.rs_estimation_mode = d.rs_estimation_mode.mode();
         drive.rs_initial = rs0;
         drive.rs_convergence_time = d.rs_convergence_time_s;
         drive.dead_time = d.dead_time_comp_s;
@@ -1047,6 +1072,7 @@ impl Scenario {
                     allowed: format!("{e}"),
                 })?;
             cfg.rs_estimation = drive.rs_estimation;
+            cfg.rs_estimation_mode = drive.rs_estimation_mode;
             if d.rs_initial_ohm.is_some() {
                 cfg.rs_initial = drive.rs_initial;
             }

@@ -27,6 +27,21 @@ pub enum CurrentSensing {
     ThreePhase,
 }
 
+/// When the stator-resistance estimator adapts (with `rs_estimation` on; issue 13).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RsEstimationMode {
+    /// The eq. (19) law below `rs_max_frequency` only, where the orientation part of the
+    /// d-axis residual vanishes: in practice the standstill identification before the
+    /// speed ramp (the behaviour before issue 13, the default).
+    #[default]
+    Standstill,
+    /// The standstill identification, then adaptation while running, motoring and
+    /// regenerating, from the q-axis and d-axis residuals together
+    /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
+    Running,
+}
+
 /// Open-loop V/f commissioning settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -68,6 +83,9 @@ pub struct DriveConfig {
     pub observer_poles: ObserverPoles,
     /// Whether the stator-resistance estimator adapts.
     pub rs_estimation: bool,
+    /// When Rs adapts (with `rs_estimation`): standstill only (default) or also while
+    /// running (issue 13).
+    pub rs_estimation_mode: RsEstimationMode,
     /// Initial stator-resistance estimate R0, ohm (eq. 19).
     pub rs_initial: f32,
     /// Convergence time constant of the Rs estimator, s.
@@ -147,6 +165,7 @@ impl DriveConfig {
             speed_bandwidth: 25.0,
             observer_poles: ObserverPoles::DEFAULT,
             rs_estimation: false,
+            rs_estimation_mode: RsEstimationMode::Standstill,
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
             rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
@@ -816,6 +835,7 @@ impl DriveDesign {
         let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
         rs.adapt = cfg.rs_estimation;
         rs.max_stator_frequency = cfg.rs_max_frequency;
+        rs.running = cfg.rs_estimation_mode == RsEstimationMode::Running;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill

@@ -751,6 +751,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 v_sd,
                 stator_frequency: ws_prev,
                 flux_settled,
+                v_sq: self.applied.v_dq.q,
+                rotor_flux: est.flux.rotor_flux,
+                frame_held,
             },
         );
         let rs = est.rs.stator_resistance_estimate;

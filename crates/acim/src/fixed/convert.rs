@@ -146,6 +146,12 @@ pub fn rs_estimator(cfg: &RsEstimatorConfig, b: &PerUnitBases) -> Option<RsEstim
         max_torque_current: Q24(to_q24(cfg.max_torque_current / b.current)),
         max_stator_frequency: Q24(to_q24(cfg.max_stator_frequency / b.frequency)),
         adapt: cfg.adapt,
+        running: cfg.running,
+        // the running law's input is a voltage: ohm per V per step
+        alpha_running_ts: Gain::from_f32(cfg.alpha_running_ts * b.voltage / r_base * RS_EXTRA)?,
+        min_running_frequency: Q24(to_q24(cfg.min_running_frequency / b.frequency)),
+        min_running_torque_current: Q24(to_q24(cfg.min_running_torque_current / b.current)),
+        flux_voltage: Gain::from_f32(cfg.flux_voltage * b.frequency * b.flux / b.voltage)?,
     })
 }
 
