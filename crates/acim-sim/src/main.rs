@@ -39,6 +39,9 @@ const USAGE: &str = "usage:
   acim-sim any-motor [FILE] [OPTIONS]       every acceptance machine commissioned, then
                                             driven with the identified model (table to FILE,
                                             default docs/any-motor.md; figures beside it)
+  acim-sim robustness [FILE]                issue 13's robustness matrix, Rs estimation in the
+                                            standstill and running modes (table to FILE,
+                                            default docs/robustness-matrix.md)
   acim-sim commission <scenario|machine.toml> [--nameplate FILE] [OPTIONS]
                                             self-commissioning against the plant: the
                                             inverse-Gamma model, J, B and the dead time to
@@ -622,6 +625,23 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let png = file.with_extension("png");
             acim_sim::capability::plot(&points, &png).map_err(|e| format!("{e}"))?;
             write_table(&file, &acim_sim::capability::markdown(&points), &out)?;
+        }
+        Some("robustness") => {
+            o.at_most_positional("robustness", 1, "at most one table file")?;
+            o.reject(
+                "robustness",
+                Some("its cases are defined in crates/acim-sim/src/robustness.rs"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "robustness-matrix.md");
+            let quiet = o.quiet;
+            let md = acim_sim::robustness::report(&mut |l| {
+                if !quiet {
+                    eprintln!("{l}");
+                }
+            })
+            .map_err(|e| e.to_string())?;
+            write_table(&file, &md, &o.out())?;
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),

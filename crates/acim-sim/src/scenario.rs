@@ -226,6 +226,17 @@ impl RsMode {
     }
 }
 
+/// A held zero speed target (`acim::ZeroSpeedPolicy`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ZeroSpeed {
+    /// Keep the flux, control zero speed (the default).
+    #[default]
+    Hold,
+    /// Switch off after the dwell.
+    Stop,
+}
+
 /// Drive (controller) settings.
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -281,6 +292,11 @@ pub struct DriveSpec {
     pub field_weakening: bool,
     /// Over-voltage control: regenerative torque reduced near the bus trip (issue 15).
     pub overvoltage_control: bool,
+    /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
+    /// `zero_speed_dwell_s`).
+    pub zero_speed_policy: ZeroSpeed,
+    /// The dwell at a zero reference before "stop" switches off, s.
+    pub zero_speed_dwell_s: f32,
 }
 
 impl Default for DriveSpec {
@@ -312,6 +328,8 @@ impl Default for DriveSpec {
             max_speed_rpm: None,
             field_weakening: d.field_weakening,
             overvoltage_control: d.overvoltage_control,
+            zero_speed_policy: ZeroSpeed::Hold,
+            zero_speed_dwell_s: d.zero_speed_dwell,
         }
     }
 }
@@ -834,6 +852,12 @@ impl Scenario {
         check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
         check_range("drive.orientation_gain", d.orientation_gain, 0.0, 50.0)?;
         check_range(
+            "drive.zero_speed_dwell_s",
+            d.zero_speed_dwell_s,
+            1e-3,
+            600.0,
+        )?;
+        check_range(
             "inverter.dead_time_s",
             self.inverter.dead_time_s,
             0.0,
@@ -1039,6 +1063,11 @@ impl Scenario {
         }
         drive.field_weakening = d.field_weakening;
         drive.overvoltage_control = d.overvoltage_control;
+        drive.zero_speed_policy = match d.zero_speed_policy {
+            ZeroSpeed::Hold => acim::ZeroSpeedPolicy::Hold,
+            ZeroSpeed::Stop => acim::ZeroSpeedPolicy::Stop,
+        };
+        drive.zero_speed_dwell = d.zero_speed_dwell_s;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -1080,6 +1109,8 @@ impl Scenario {
             cfg.current_sensing = drive.current_sensing;
             cfg.field_weakening = drive.field_weakening;
             cfg.overvoltage_control = drive.overvoltage_control;
+            cfg.zero_speed_policy = drive.zero_speed_policy;
+            cfg.zero_speed_dwell = drive.zero_speed_dwell;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

@@ -42,6 +42,23 @@ pub enum RsEstimationMode {
     Running,
 }
 
+/// What the drive does with a held zero speed target (issue 13, item 6). Speed
+/// reversals pass through zero as before with either policy: only a target of zero,
+/// reached by the ramp and held for `zero_speed_dwell`, counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ZeroSpeedPolicy {
+    /// Keep the flux and control zero speed (the behaviour before issue 13, the default
+    /// so that the paper's figures stay as they are). At zero stator frequency speed and
+    /// orientation are unobservable (design notes, section 10): the rotor may creep under
+    /// sensor offsets and load while the estimate reads 0.
+    #[default]
+    Hold,
+    /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
+    /// `zero_speed_dwell`: no operation on the unobservable line.
+    Stop,
+}
+
 /// Open-loop V/f commissioning settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -142,6 +159,11 @@ pub struct DriveConfig {
     /// so braking without a brake resistor cannot pump the bus to its trip. Off by
     /// default: the fault scenarios test the trip itself.
     pub overvoltage_control: bool,
+    /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
+    pub zero_speed_policy: ZeroSpeedPolicy,
+    /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
+    /// switches turn off, s.
+    pub zero_speed_dwell: f32,
     /// V/f mode settings.
     pub vf: VfConfig,
 }
@@ -186,6 +208,8 @@ impl DriveConfig {
             flying_start: true,
             field_weakening: true,
             overvoltage_control: false,
+            zero_speed_policy: ZeroSpeedPolicy::Hold,
+            zero_speed_dwell: 0.5,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
@@ -636,6 +660,9 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub torque_factor: N::Gain,
     /// Speed reference change per step, rad/s.
     pub ramp_step: N,
+    /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
+    /// (0: the `Hold` policy, never).
+    pub zero_stop_steps: u32,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
     /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
@@ -701,6 +728,8 @@ pub struct DriveDesign {
     pub torque_factor: f32,
     /// Speed reference change per step, rad/s.
     pub ramp_step: f32,
+    /// Steps at a zero reference before [`ZeroSpeedPolicy::Stop`] switches off (0: hold).
+    pub zero_stop_steps: u32,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -809,6 +838,7 @@ impl DriveDesign {
             "must be finite with 0 <= lower < upper",
         )?;
         positive(cfg.stall_time, "stall_time")?;
+        positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
         positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
         check(
@@ -888,6 +918,10 @@ impl DriveDesign {
             pole_pairs: pp,
             torque_factor: 1.5 * pp,
             ramp_step: cfg.speed_ramp * ts,
+            zero_stop_steps: match cfg.zero_speed_policy {
+                ZeroSpeedPolicy::Hold => 0,
+                ZeroSpeedPolicy::Stop => ((cfg.zero_speed_dwell / ts) as u32).max(1),
+            },
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -992,6 +1026,7 @@ impl DriveCoeffs<f32> {
             back_emf: d.pole_pairs,
             torque_factor: d.torque_factor,
             ramp_step: d.ramp_step,
+            zero_stop_steps: d.zero_stop_steps,
             speed_target_limit: d.speed_target_limit,
             speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),

@@ -245,6 +245,8 @@ struct References<N> {
     /// A flying start: magnetizing in a frame turning with the rotor at the speed the
     /// search measured.
     flying: bool,
+    /// Steps the speed target and reference have been zero ([`crate::ZeroSpeedPolicy`]).
+    zero_steps: u32,
 }
 
 /// The field-weakening stage's output (issue 15).
@@ -350,6 +352,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 fw_trim: N::ZERO,
                 fw_active: false,
                 flying: false,
+                zero_steps: 0,
             },
             cur: CurrentControl {
                 d: PiController::new(),
@@ -518,6 +521,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.refs.fw_active = false;
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
+        self.refs.zero_steps = 0;
         self.cur.d.reset();
         self.cur.q.reset();
         self.est.flux = FluxModel::new();
@@ -604,6 +608,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             Err(reason) => return self.enter_fault(reason),
         };
         probe.end(StepRegion::SpeedPi);
+        // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
+        if self.zero_speed_stop(magnetizing) {
+            self.sup.stop();
+            self.applied = Applied::default();
+            return PwmOutput::OFF;
+        }
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
         let v = self.current_control(&m, &e, i_ref, limit);
@@ -622,6 +632,25 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             duties: modulation.duties,
             enabled: true,
         }
+    }
+
+    /// [`crate::ZeroSpeedPolicy::Stop`]: counts the steps with the speed target and the
+    /// ramped reference both at zero while running; true once the dwell has passed (never
+    /// with `Hold`, whose step count is 0). A reversal passes through zero with a nonzero
+    /// target and does not count.
+    #[inline(always)]
+    fn zero_speed_stop(&mut self, magnetizing: bool) -> bool {
+        let n = self.coeffs.zero_stop_steps;
+        if n == 0 || magnetizing {
+            return false;
+        }
+        let r = &mut self.refs;
+        r.zero_steps = if r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
+            r.zero_steps.saturating_add(1)
+        } else {
+            0
+        };
+        r.zero_steps >= n
     }
 
     /// The supervisor's plausibility check of this step's estimates.

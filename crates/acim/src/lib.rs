@@ -71,6 +71,7 @@ pub mod full_order;
 pub use controller::Controller;
 pub use design::{
     ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, RsEstimationMode, VfConfig,
+    ZeroSpeedPolicy,
 };
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,

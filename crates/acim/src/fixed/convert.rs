@@ -224,6 +224,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         back_emf: gain(pp * b.speed * b.flux / b.voltage, "machine")?,
         torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "machine")?,
         ramp_step: Q24(to_q24(d.ramp_step / b.speed)),
+        zero_stop_steps: d.zero_stop_steps,
         speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
         speed_per_volt: gain(
             b.voltage / (pp * d.flux_reference * b.speed),
