@@ -297,6 +297,9 @@ pub struct DriveSpec {
     pub zero_speed_policy: ZeroSpeed,
     /// The dwell at a zero reference before "stop" switches off, s.
     pub zero_speed_dwell_s: f32,
+    /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
+    /// zero while holding a regenerating point, Hz electrical (0: off, the default).
+    pub regen_min_frequency_hz: f32,
 }
 
 impl Default for DriveSpec {
@@ -330,6 +333,7 @@ impl Default for DriveSpec {
             overvoltage_control: d.overvoltage_control,
             zero_speed_policy: ZeroSpeed::Hold,
             zero_speed_dwell_s: d.zero_speed_dwell,
+            regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
         }
     }
 }
@@ -1068,6 +1072,7 @@ impl Scenario {
             ZeroSpeed::Stop => acim::ZeroSpeedPolicy::Stop,
         };
         drive.zero_speed_dwell = d.zero_speed_dwell_s;
+        drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -1111,6 +1116,7 @@ impl Scenario {
             cfg.overvoltage_control = drive.overvoltage_control;
             cfg.zero_speed_policy = drive.zero_speed_policy;
             cfg.zero_speed_dwell = drive.zero_speed_dwell;
+            cfg.regen_min_frequency = drive.regen_min_frequency;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

@@ -159,6 +159,16 @@ pub struct DriveConfig {
     /// so braking without a brake resistor cannot pump the bus to its trip. Off by
     /// default: the fault scenarios test the trip itself.
     pub overvoltage_control: bool,
+    /// Low-frequency regeneration limit (issue 13, item 5), rad/s electrical; 0 = off (the
+    /// default, the behaviour before issue 13). While the drive holds a speed reference of
+    /// the rotor's sign, the regenerative torque current is limited so that the stator
+    /// frequency w_s = p Omega + R_R i_sq / lambda stays on the rotor's side of the
+    /// unobservable line w_s = 0 by at least this much: |i_sq| <= (p |Omega_hat| - w_min)
+    /// lambda_ref / R_R. An overhauling load larger than that raises the speed until the
+    /// operating point is observable again, instead of letting the estimates drift along
+    /// the line. Transits (reference zero or of the other sign: reversals, stops) are not
+    /// limited: they cross the line at the ramp's pace.
+    pub regen_min_frequency: f32,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -210,12 +220,17 @@ impl DriveConfig {
             overvoltage_control: false,
             zero_speed_policy: ZeroSpeedPolicy::Hold,
             zero_speed_dwell: 0.5,
+            regen_min_frequency: 0.0,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
             },
         }
     }
+}
+
+fn m_pole_pairs(cfg: &DriveConfig) -> f32 {
+    cfg.machine.pole_pairs_f32()
 }
 
 /// Why a drive configuration was rejected.
@@ -663,6 +678,10 @@ pub struct DriveCoeffs<N: Num = f32> {
     /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
     /// (0: the `Hold` policy, never).
     pub zero_stop_steps: u32,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: N,
+    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
+    pub regen_current_per_frequency: N::Gain,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
     /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
@@ -730,6 +749,10 @@ pub struct DriveDesign {
     pub ramp_step: f32,
     /// Steps at a zero reference before [`ZeroSpeedPolicy::Stop`] switches off (0: hold).
     pub zero_stop_steps: u32,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: f32,
+    /// lambda_ref / R_R, A per rad/s electrical.
+    pub regen_current_per_frequency: f32,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -839,6 +862,13 @@ impl DriveDesign {
         )?;
         positive(cfg.stall_time, "stall_time")?;
         positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
+        check(
+            is_finite(cfg.regen_min_frequency)
+                && cfg.regen_min_frequency >= 0.0
+                && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * m_pole_pairs(&cfg),
+            "regen_min_frequency",
+            "must be in 0 ..= p max_speed / 2 rad/s (0: off)",
+        )?;
         positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
         check(
@@ -922,6 +952,8 @@ impl DriveDesign {
                 ZeroSpeedPolicy::Hold => 0,
                 ZeroSpeedPolicy::Stop => ((cfg.zero_speed_dwell / ts) as u32).max(1),
             },
+            regen_min_frequency: cfg.regen_min_frequency,
+            regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -1027,6 +1059,8 @@ impl DriveCoeffs<f32> {
             torque_factor: d.torque_factor,
             ramp_step: d.ramp_step,
             zero_stop_steps: d.zero_stop_steps,
+            regen_min_frequency: d.regen_min_frequency,
+            regen_current_per_frequency: d.regen_current_per_frequency,
             speed_target_limit: d.speed_target_limit,
             speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),

@@ -131,6 +131,35 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub search_speed: N,
 }
 
+/// The torque-current limits with the low-frequency regeneration limit
+/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed reference has the
+/// sign of the speed estimate (holding, not in transit), the braking side is limited to
+/// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
+/// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
+/// the limits and whether the regeneration limit is tighter than the others.
+#[inline(always)]
+fn regen_limit<N: Num>(
+    c: &DriveCoeffs<N>,
+    reference: N,
+    speed: N,
+    fw: FwLimits<N>,
+) -> (N, N, bool) {
+    let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
+    if c.regen_min_frequency == N::ZERO {
+        return (lo, hi, false);
+    }
+    let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
+    let w = if w > N::ZERO { w } else { N::ZERO };
+    let i = N::gain(c.regen_current_per_frequency, w);
+    if speed > N::ZERO && reference > N::ZERO && lo < -i {
+        (-i, hi, true)
+    } else if speed < N::ZERO && reference < N::ZERO && hi > i {
+        (lo, i, true)
+    } else {
+        (lo, hi, false)
+    }
+}
+
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -907,10 +936,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        if fw.torque_limited && r.speed_ctl.saturated() {
-            // the torque is at the voltage (or bus) limit: the speed the drive reaches
-            // there is the reachable speed; hold the reference within a band of it (no
-            // growing speed error, no overload trip) and report it
+        let (i_sq_min, i_sq_max, regen_limited) = regen_limit(c, r.speed_reference, speed, fw);
+        if (fw.torque_limited || regen_limited) && r.speed_ctl.saturated() {
+            // the torque is at the voltage (or bus) limit, or at the low-frequency
+            // regeneration limit: the speed the drive reaches there is the reachable
+            // speed; hold the reference within a band of it (no growing speed error, no
+            // overload trip) and report it
             let band = c.fw.hold_band;
             let held = r.speed_reference.clamp(speed - band, speed + band);
             r.target_limited = r.target_limited || held != r.speed_reference;
@@ -920,8 +951,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             &c.pi_speed,
             r.speed_reference - speed,
             N::ZERO,
-            fw.i_sq_min,
-            fw.i_sq_max,
+            i_sq_min,
+            i_sq_max,
         );
         r.i_sq_ref = i_sq_ref;
         let saturated = r.speed_ctl.saturated();

@@ -225,6 +225,11 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "machine")?,
         ramp_step: Q24(to_q24(d.ramp_step / b.speed)),
         zero_stop_steps: d.zero_stop_steps,
+        regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
+        regen_current_per_frequency: gain(
+            d.regen_current_per_frequency * b.frequency / b.current,
+            "regen_min_frequency",
+        )?,
         speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
         speed_per_volt: gain(
             b.voltage / (pp * d.flux_reference * b.speed),
