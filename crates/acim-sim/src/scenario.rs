@@ -272,6 +272,10 @@ pub struct DriveSpec {
     pub rs_initial_ohm: Option<f32>,
     /// Rs estimator convergence time constant, s.
     pub rs_convergence_time_s: f32,
+    /// The standstill Rs identification waits at most this long, s (the drive's default
+    /// when absent; 0.001 s in effect switches it off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rs_identification_timeout_s: Option<f32>,
     /// Dead time the drive compensates, s.
     pub dead_time_comp_s: f32,
     /// Device drop the drive compensates, V.
@@ -322,6 +326,7 @@ impl Default for DriveSpec {
             rs_estimation_mode: RsMode::Standstill,
             rs_initial_ohm: None,
             rs_convergence_time_s: d.rs_convergence_time,
+            rs_identification_timeout_s: None,
             dead_time_comp_s: d.dead_time,
             device_drop_comp_v: d.device_drop,
             stall_time_s: d.stall_time,
@@ -1058,6 +1063,10 @@ impl Scenario {
         drive.rs_estimation_mode = d.rs_estimation_mode.mode();
         drive.rs_initial = rs0;
         drive.rs_convergence_time = d.rs_convergence_time_s;
+        if let Some(t) = d.rs_identification_timeout_s {
+            check_range("drive.rs_identification_timeout_s", t, 1e-3, 100.0)?;
+            drive.rs_identification_timeout = t;
+        }
         drive.dead_time = d.dead_time_comp_s;
         drive.device_drop = d.device_drop_comp_v;
         drive.stall_time = d.stall_time_s;
