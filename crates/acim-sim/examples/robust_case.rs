@@ -32,7 +32,7 @@ fn main() {
         sc.drive.rs_estimation = false;
     }
     for kv in a.iter().skip(5) {
-        sc = sc.with_overrides(&[kv.clone()]).unwrap();
+        sc = sc.with_overrides(std::slice::from_ref(kv)).unwrap();
     }
     let o = acim_sim::robustness::run_scenario(&case, &sc).unwrap();
     if let Ok(p) = std::env::var("CSV") {
