@@ -13,7 +13,7 @@ use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
-use crate::rs_estimator::RsEstimatorConfig;
+use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
 
@@ -675,13 +675,6 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub torque_factor: N::Gain,
     /// Speed reference change per step, rad/s.
     pub ramp_step: N,
-    /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
-    /// (0: the `Hold` policy, never).
-    pub zero_stop_steps: u32,
-    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
-    pub regen_min_frequency: N,
-    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
-    pub regen_current_per_frequency: N::Gain,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
     /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
@@ -702,6 +695,16 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub vf: VfDesign<N>,
     /// Field weakening and over-voltage control (issue 15).
     pub fw: FieldWeakeningDesign<N>,
+    // issue 13's additions last, so that the default path's field offsets stay as they were
+    /// The running Rs law ([`crate::rs_estimator`], "While running").
+    pub rs_running: RsRunningConfig<N>,
+    /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
+    /// (0: the `Hold` policy, never).
+    pub zero_stop_steps: u32,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: N,
+    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
+    pub regen_current_per_frequency: N::Gain,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -725,6 +728,8 @@ pub struct DriveDesign {
     pub observer: ObserverConfig,
     /// Rs estimator (eq. 19-20).
     pub rs: RsEstimatorConfig,
+    /// The running Rs law (issue 13).
+    pub rs_running: RsRunningConfig,
     /// Modulator (SVPWM with dead-time compensation).
     pub pwm: SvpwmConfig,
     /// i_sd*, A.
@@ -895,7 +900,8 @@ impl DriveDesign {
         let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
         rs.adapt = cfg.rs_estimation;
         rs.max_stator_frequency = cfg.rs_max_frequency;
-        rs.running = cfg.rs_estimation_mode == RsEstimationMode::Running;
+        let mut rs_running = RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d);
+        rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
@@ -932,6 +938,7 @@ impl DriveDesign {
             flux: FluxModelConfig::new(&m, ts, flux_reference),
             observer,
             rs,
+            rs_running,
             pwm: SvpwmConfig::new(
                 cfg.dead_time,
                 ts,
@@ -1073,6 +1080,7 @@ impl DriveCoeffs<f32> {
                 boost: cfg.vf.boost,
             },
             fw: d.field_weakening,
+            rs_running: d.rs_running,
         }
     }
 }

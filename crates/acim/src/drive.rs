@@ -54,7 +54,7 @@ use crate::observer::{
 };
 use crate::orientation;
 use crate::pi::PiController;
-use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
+use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::speed_search::{SearchOutcome, SpeedSearch};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
@@ -131,13 +131,50 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub search_speed: N,
 }
 
+/// The running Rs law's step ([`RsEstimator::update_running`]), out of line so that the
+/// default path's code is unchanged: currents `i` (A), the d-axis voltage `v_sd` the
+/// estimator uses (V), the last stator frequency `ws` (rad/s), the last applied `v_sq`
+/// (V) and the model flux `rotor_flux` (Wb).
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn rs_running_step<N: Num>(
+    rs: &mut RsEstimator<N>,
+    c: &DriveCoeffs<N>,
+    i: Dq<N>,
+    v_sd: N,
+    ws: N,
+    flux_settled: bool,
+    v_sq: N,
+    rotor_flux: N,
+    frame_held: bool,
+) {
+    rs.update_running(
+        &c.rs,
+        &c.rs_running,
+        &RsEstimatorInputs {
+            i_sd: i.d,
+            i_sq: i.q,
+            v_sd,
+            stator_frequency: ws,
+            flux_settled,
+        },
+        &RsRunningInputs {
+            v_sq,
+            rotor_flux,
+            frame_held,
+        },
+    );
+}
+
 /// The torque-current limits with the low-frequency regeneration limit
 /// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed reference has the
 /// sign of the speed estimate (holding, not in transit), the braking side is limited to
 /// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
 /// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
 /// the limits and whether the regeneration limit is tighter than the others.
-#[inline(always)]
+#[cold]
+#[inline(never)]
 fn regen_limit<N: Num>(
     c: &DriveCoeffs<N>,
     reference: N,
@@ -145,9 +182,6 @@ fn regen_limit<N: Num>(
     fw: FwLimits<N>,
 ) -> (N, N, bool) {
     let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
-    if c.regen_min_frequency == N::ZERO {
-        return (lo, hi, false);
-    }
     let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
     let w = if w > N::ZERO { w } else { N::ZERO };
     let i = N::gain(c.regen_current_per_frequency, w);
@@ -638,9 +672,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if self.zero_speed_stop(magnetizing) {
-            self.sup.stop();
-            self.applied = Applied::default();
+        if self.coeffs.zero_stop_steps != 0 && self.zero_speed_stop(magnetizing) {
             return PwmOutput::OFF;
         }
         // 6. current control, within the voltage limit
@@ -667,7 +699,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// ramped reference both at zero while running; true once the dwell has passed (never
     /// with `Hold`, whose step count is 0). A reversal passes through zero with a nonzero
     /// target and does not count.
-    #[inline(always)]
+    /// Switches off (to `Idle`) when it returns true. Out of line: off the default path.
+    #[cold]
+    #[inline(never)]
     fn zero_speed_stop(&mut self, magnetizing: bool) -> bool {
         let n = self.coeffs.zero_stop_steps;
         if n == 0 || magnetizing {
@@ -679,7 +713,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             0
         };
-        r.zero_steps >= n
+        if r.zero_steps >= n {
+            self.sup.stop();
+            self.applied = Applied::default();
+            return true;
+        }
+        false
     }
 
     /// The supervisor's plausibility check of this step's estimates.
@@ -801,19 +840,31 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             self.applied.v_dq.d
         };
-        est.rs.update(
-            &c.rs,
-            &RsEstimatorInputs {
-                i_sd: i.d,
-                i_sq: i.q,
+        if c.rs_running.enabled {
+            // issue 13: Rs also while running (out of line, off the default path)
+            rs_running_step(
+                &mut est.rs,
+                c,
+                i,
                 v_sd,
-                stator_frequency: ws_prev,
+                ws_prev,
                 flux_settled,
-                v_sq: self.applied.v_dq.q,
-                rotor_flux: est.flux.rotor_flux,
+                self.applied.v_dq.q,
+                est.flux.rotor_flux,
                 frame_held,
-            },
-        );
+            );
+        } else {
+            est.rs.update(
+                &c.rs,
+                &RsEstimatorInputs {
+                    i_sd: i.d,
+                    i_sq: i.q,
+                    v_sd,
+                    stator_frequency: ws_prev,
+                    flux_settled,
+                },
+            );
+        }
         let rs = est.rs.stator_resistance_estimate;
         est.filtered_residual = est.filtered_residual
             + N::gain(
@@ -936,7 +987,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        let (i_sq_min, i_sq_max, regen_limited) = regen_limit(c, r.speed_reference, speed, fw);
+        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO {
+            regen_limit(c, r.speed_reference, speed, fw)
+        } else {
+            (fw.i_sq_min, fw.i_sq_max, false)
+        };
         if (fw.torque_limited || regen_limited) && r.speed_ctl.saturated() {
             // the torque is at the voltage (or bus) limit, or at the low-frequency
             // regeneration limit: the speed the drive reaches there is the reachable

@@ -126,19 +126,42 @@ pub struct RsEstimatorConfig<N: Num = f32> {
     /// Whether the resistance adapts at all (the current model of eq. 20 always runs: the
     /// drive's orientation correction uses its error).
     pub adapt: bool,
-    /// Adapt while running from the q-axis and d-axis residuals (module docs, issue 13):
-    /// the eq. (19) law then runs only with the frame held (standstill identification).
-    /// False: the eq. (19) law below `max_stator_frequency` only (the behaviour before
-    /// issue 13).
-    pub running: bool,
-    /// Running law: alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
-    pub alpha_running_ts: N::Gain,
-    /// Running law: |w_s| at least this, rad/s electrical.
-    pub min_running_frequency: N,
-    /// Running law: |i_sq| at least this (i_min, also the divisor's floor), A.
-    pub min_running_torque_current: N,
+}
+
+/// The running law's configuration (module docs, "While running"; issue 13). A struct of
+/// its own, kept apart from [`RsEstimatorConfig`], so that the default path's coefficient
+/// layout (and cycle count) does not change.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RsRunningConfig<N: Num = f32> {
+    /// Adapt while running from the q-axis and d-axis residuals: the eq. (19) law then
+    /// runs only with the frame held (standstill identification). False: the eq. (19)
+    /// law below `max_stator_frequency` only (the behaviour before issue 13).
+    pub enabled: bool,
+    /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
+    pub alpha_ts: N::Gain,
+    /// Adapt with |w_s| at least this, rad/s electrical.
+    pub min_frequency: N,
+    /// Adapt with |i_sq| at least this (i_min, which keeps the divisor away from 0), A.
+    pub min_torque_current: N,
     /// Frequency times flux to voltage (1 in SI), for w_s lambda_hat of the q model.
     pub flux_voltage: N::Gain,
+}
+
+impl RsRunningConfig<f32> {
+    /// Period `ts` (s), convergence time constant `tau` (s) at flux current
+    /// `flux_current` (A): alpha_r = 1/(2 tau |i_sd*|); gates at
+    /// [`RUNNING_MIN_FREQUENCY_HZ`] and [`RUNNING_MIN_TORQUE_FRACTION`] of the flux
+    /// current. Disabled until `enabled` is set.
+    pub fn new(ts: f32, tau: f32, flux_current: f32) -> Self {
+        Self {
+            enabled: false,
+            alpha_ts: ts / (2.0 * tau.max(ts) * flux_current.abs().max(1e-3)),
+            min_frequency: 2.0 * core::f32::consts::PI * RUNNING_MIN_FREQUENCY_HZ,
+            min_torque_current: RUNNING_MIN_TORQUE_FRACTION * flux_current.abs(),
+            flux_voltage: 1.0,
+        }
+    }
 }
 
 impl RsEstimatorConfig<f32> {
@@ -159,11 +182,6 @@ impl RsEstimatorConfig<f32> {
             max_torque_current: 2.0 * flux_current.abs(),
             max_stator_frequency: 2.0 * core::f32::consts::PI * 40.0,
             adapt: true,
-            running: false,
-            alpha_running_ts: ts / (2.0 * tau.max(ts) * flux_current.abs().max(1e-3)),
-            min_running_frequency: 2.0 * core::f32::consts::PI * RUNNING_MIN_FREQUENCY_HZ,
-            min_running_torque_current: RUNNING_MIN_TORQUE_FRACTION * flux_current.abs(),
-            flux_voltage: 1.0,
         }
     }
 
@@ -187,12 +205,17 @@ pub struct RsEstimatorInputs<N = f32> {
     pub stator_frequency: N,
     /// Whether the flux model reports a settled flux (within tolerance of its reference).
     pub flux_settled: bool,
-    /// Commanded v_sq over the period, V (running law only).
+}
+
+/// The running law's extra inputs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RsRunningInputs<N = f32> {
+    /// Commanded v_sq over the period, V.
     pub v_sq: N,
-    /// Model rotor flux lambda_hat of eq. (13), Wb (running law only).
+    /// Model rotor flux lambda_hat of eq. (13), Wb.
     pub rotor_flux: N,
-    /// The frame is held (magnetizing at rest): the running mode's eq. (19) law runs only
-    /// then.
+    /// The frame is held (magnetizing at rest): the eq. (19) law runs only then.
     pub frame_held: bool,
 }
 
@@ -235,25 +258,29 @@ impl<N: Num> RsEstimator<N> {
         }
     }
 
-    /// One step: Euler update of eq. (20) and, inside the gate, of the corrected eq. (19);
-    /// with `cfg.running`, also the q-axis model and the running law (module docs).
+    /// One step of the mode before issue 13: Euler update of eq. (20) and, inside the
+    /// gate, of the corrected eq. (19). (The running mode is [`RsEstimator::update_running`].)
     #[inline]
     pub fn update(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>) -> N {
         let rs = self.stator_resistance_estimate;
         let e = self.current_estimate - u.i_sd;
         self.current_error = e.finite_or(N::ZERO);
-        let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
-        let low = flux_ok
+        self.adapting = cfg.adapt
+            && u.flux_settled
+            && u.i_sd.abs() >= cfg.min_flux_current
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;
-        if cfg.running {
-            self.update_running(cfg, u, rs, e, low && u.frame_held, flux_ok);
-        } else {
-            self.adapting = cfg.adapt && low;
-            if self.adapting && e.is_finite() {
-                self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
-            }
+        if self.adapting && e.is_finite() {
+            self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
         }
+        self.d_model_step(cfg, u, rs);
+        self.stator_resistance_estimate
+    }
+
+    /// Euler step of the eq. (20) d-axis current model with the estimate `rs` of the
+    /// step's start.
+    #[inline(always)]
+    fn d_model_step(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>, rs: N) {
         // sigma Ls di_hat/dt = -Rs_hat i_hat + sigma Ls w_s i_sq + v_sd (eq. 20)
         let di = N::gain(
             cfg.ts_over_transient_inductance,
@@ -262,7 +289,6 @@ impl<N: Num> RsEstimator<N> {
         let next_i = self.current_estimate + di;
         // keep the model finite; a bad sample resets it to the measurement
         self.current_estimate = next_i.finite_or(u.i_sd.finite_or(N::ZERO));
-        self.stator_resistance_estimate
     }
 
     /// One clamped step of the integrator by `g e` (sign: `positive`).
@@ -281,46 +307,55 @@ impl<N: Num> RsEstimator<N> {
         self.stator_resistance_estimate = N::from_fine(next);
     }
 
-    /// The running mode: eq. (19) with the frame held (`standstill`), the running law
-    /// (module docs) while turning, and the q-axis current model.
-    #[inline(always)]
-    fn update_running(
+    /// One step of the running mode ([`RsRunningConfig`]; the caller uses it when
+    /// `run.enabled`): eq. (19) with the frame held (standstill identification), the
+    /// running law (module docs) while turning, the q-axis and d-axis current models.
+    #[inline(never)]
+    pub fn update_running(
         &mut self,
         cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
         u: &RsEstimatorInputs<N>,
-        rs: N,
-        e: N,
-        standstill: bool,
-        flux_ok: bool,
-    ) {
+        x: &RsRunningInputs<N>,
+    ) -> N {
+        let rs = self.stator_resistance_estimate;
+        let e = self.current_estimate - u.i_sd;
+        self.current_error = e.finite_or(N::ZERO);
         let eq = self.q_current_estimate - u.i_sq;
         self.q_current_error = eq.finite_or(N::ZERO);
+        let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
+        let standstill = flux_ok
+            && x.frame_held
+            && u.i_sq.abs() <= cfg.max_torque_current
+            && u.stator_frequency.abs() <= cfg.max_stator_frequency;
         let turning = flux_ok
-            && !u.frame_held
-            && u.stator_frequency.abs() >= cfg.min_running_frequency
-            && u.i_sq.abs() >= cfg.min_running_torque_current;
+            && !x.frame_held
+            && u.stator_frequency.abs() >= run.min_frequency
+            && u.i_sq.abs() >= run.min_torque_current;
         self.adapting = cfg.adapt && (standstill || turning);
         if cfg.adapt && standstill && e.is_finite() {
             self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
         } else if cfg.adapt && turning {
-            // (i_sq r_d + i_sd r_q) / i_q with r = Rs_hat e: 2 dR i_sd on the slow manifold;
-            // |i_q| >= i_min > 0 (the gate)
-            // (sign(i_sq) sigma / |i_sq|: the fixed-point ratio takes a positive divisor)
+            // (i_sq r_d + i_sd r_q) / i_sq with r = Rs_hat e: 2 dR i_sd on the slow
+            // manifold; |i_sq| >= i_min > 0 (the gate), as sign(i_sq) sigma / |i_sq| (the
+            // fixed-point ratio takes a positive divisor)
             let sigma = rs * (u.i_sq * e + u.i_sd * eq);
             let v = N::ratio(sigma, u.i_sq.abs());
             if v.is_finite() {
                 let positive = (u.i_sd >= N::ZERO) == (u.i_sq >= N::ZERO);
-                self.adapt_step(cfg, cfg.alpha_running_ts, v, positive);
+                self.adapt_step(cfg, run.alpha_ts, v, positive);
             }
         }
         // sigma Ls di_q_hat/dt = -Rs_hat i_q_hat - sigma Ls w_s i_sd - w_s lambda_hat + v_sq
-        let emf = N::gain_mul(cfg.flux_voltage, u.stator_frequency, u.rotor_flux);
+        let emf = N::gain_mul(run.flux_voltage, u.stator_frequency, x.rotor_flux);
         let di = N::gain(
             cfg.ts_over_transient_inductance,
-            u.v_sq - rs * self.q_current_estimate - emf,
+            x.v_sq - rs * self.q_current_estimate - emf,
         ) - N::gain_mul(cfg.ts, u.stator_frequency, u.i_sd);
         let next = self.q_current_estimate + di;
         self.q_current_estimate = next.finite_or(u.i_sq.finite_or(N::ZERO));
+        self.d_model_step(cfg, u, rs);
+        self.stator_resistance_estimate
     }
 }
 
@@ -345,7 +380,6 @@ mod tests {
             v_sd,
             stator_frequency: ws,
             flux_settled: true,
-            ..Default::default()
         };
         let mut t_reach = None;
         for k in 0..(2.0 / ts) as usize {
@@ -390,7 +424,6 @@ mod tests {
             v_sd,
             stator_frequency: 0.0,
             flux_settled: false,
-            ..Default::default()
         };
         for _ in 0..5000 {
             est.update(&cfg, &u);
@@ -405,7 +438,6 @@ mod tests {
             v_sd: -v_sd,
             stator_frequency: 0.0,
             flux_settled: true,
-            ..Default::default()
         };
         for _ in 0..10_000 {
             est.update(&cfg, &u);
@@ -425,7 +457,6 @@ mod tests {
             v_sd: 150.0,
             stator_frequency: 0.0,
             flux_settled: true,
-            ..Default::default()
         };
         for _ in 0..50_000 {
             est.update(&cfg, &u);
@@ -438,7 +469,6 @@ mod tests {
             v_sd: f32::NAN,
             stator_frequency: 0.0,
             flux_settled: true,
-            ..Default::default()
         };
         let r = est.update(&cfg, &u);
         assert!(r.is_finite() && est.current_estimate.is_finite());
@@ -447,21 +477,31 @@ mod tests {
     /// Steady inputs of the true machine (module docs, "While running") with stator
     /// resistance `rs`, orientation error y (flux on the q axis, Wb) and the flux error
     /// a y it implies.
-    fn running_inputs(rs: f32, i_sd: f32, i_sq: f32, ws: f32, y: f32) -> RsEstimatorInputs {
+    fn running_inputs(
+        rs: f32,
+        i_sd: f32,
+        i_sq: f32,
+        ws: f32,
+        y: f32,
+    ) -> (RsEstimatorInputs, RsRunningInputs) {
         let m = MachineParams::paper_table1();
         let l = m.transient_inductance();
         let lambda = m.rotor_flux_for(i_sd);
         let a = i_sq / i_sd;
-        RsEstimatorInputs {
-            i_sd,
-            i_sq,
-            v_sd: rs * i_sd - l * ws * i_sq - ws * y,
-            v_sq: rs * i_sq + l * ws * i_sd + ws * (lambda + a * y),
-            stator_frequency: ws,
-            flux_settled: true,
-            rotor_flux: lambda,
-            frame_held: false,
-        }
+        (
+            RsEstimatorInputs {
+                i_sd,
+                i_sq,
+                v_sd: rs * i_sd - l * ws * i_sq - ws * y,
+                stator_frequency: ws,
+                flux_settled: true,
+            },
+            RsRunningInputs {
+                v_sq: rs * i_sq + l * ws * i_sd + ws * (lambda + a * y),
+                rotor_flux: lambda,
+                frame_held: false,
+            },
+        )
     }
 
     /// The running law converges to the true Rs with an orientation error present, in all
@@ -471,8 +511,9 @@ mod tests {
     fn running_law_separates_resistance_from_orientation() {
         let m = MachineParams::paper_table1();
         let ts = 200e-6;
-        let mut cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
-        cfg.running = true;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        run.enabled = true;
         for (i_sq, ws) in [
             (0.64, 60.0),
             (-0.64, 40.0),
@@ -481,10 +522,10 @@ mod tests {
             (1.9, -20.0),
         ] {
             for y in [0.0, 0.02, -0.03] {
-                let u = running_inputs(13.65, 1.5, i_sq, ws, y);
+                let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, y);
                 let mut est = RsEstimator::new(10.5);
                 for _ in 0..(1.0 / ts) as usize {
-                    est.update(&cfg, &u);
+                    est.update_running(&cfg, &run, &u, &x);
                 }
                 let r = est.stator_resistance_estimate;
                 assert!(
@@ -506,7 +547,7 @@ mod tests {
         let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
         let mut low = cfg;
         low.max_stator_frequency = 100.0;
-        let u = running_inputs(10.5, 1.5, 0.64, 20.0, 0.05);
+        let (u, _) = running_inputs(10.5, 1.5, 0.64, 20.0, 0.05);
         let mut est = RsEstimator::new(10.5);
         for _ in 0..(2.0 / ts) as usize {
             est.update(&low, &u);
@@ -525,22 +566,23 @@ mod tests {
     fn running_law_gates() {
         let m = MachineParams::paper_table1();
         let ts = 200e-6;
-        let mut cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
-        cfg.running = true;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        run.enabled = true;
         for (i_sq, ws) in [(0.0, 60.0), (0.1, 60.0), (0.64, 5.0)] {
-            let u = running_inputs(13.65, 1.5, i_sq, ws, 0.01);
+            let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, 0.01);
             let mut est = RsEstimator::new(10.5);
             for _ in 0..5000 {
-                est.update(&cfg, &u);
+                est.update_running(&cfg, &run, &u, &x);
             }
             assert_eq!(est.stator_resistance_estimate, 10.5, "i_sq {i_sq} w_s {ws}");
             assert!(!est.adapting);
         }
-        let mut u = running_inputs(13.65, 1.5, 0.0, 0.0, 0.0);
-        u.frame_held = true;
+        let (u, mut x) = running_inputs(13.65, 1.5, 0.0, 0.0, 0.0);
+        x.frame_held = true;
         let mut est = RsEstimator::new(10.5);
         for _ in 0..10_000 {
-            est.update(&cfg, &u);
+            est.update_running(&cfg, &run, &u, &x);
         }
         assert!((est.stator_resistance_estimate - 13.65).abs() < 0.05);
     }

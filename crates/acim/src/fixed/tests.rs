@@ -37,7 +37,9 @@ use crate::num::Num;
 use crate::observer::{ObserverConfig, ObserverInputs, ObserverPoles, ReducedOrderObserver};
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
-use crate::rs_estimator::{RsEstimator, RsEstimatorConfig, RsEstimatorInputs};
+use crate::rs_estimator::{
+    RsEstimator, RsEstimatorConfig, RsEstimatorInputs, RsRunningConfig, RsRunningInputs,
+};
 use crate::svpwm::{self, SvpwmConfig};
 use proptest::prelude::*;
 
@@ -294,10 +296,10 @@ proptest! {
         let (mut f, mut x) = (RsEstimator::new(r0), RsEstimator::<Q24>::new(q(r0, B.resistance())));
         for k in 0..5000usize {
             let rf = f.update(&c, &RsEstimatorInputs { i_sd, i_sq, v_sd, stator_frequency: ws,
-                flux_settled: settled, ..Default::default() });
+                flux_settled: settled });
             let rq = x.update(&cq, &RsEstimatorInputs { i_sd: q(i_sd, B.current), i_sq: q(i_sq, B.current),
                 v_sd: q(v_sd, B.voltage), stator_frequency: q(ws, B.frequency),
-                flux_settled: settled, ..Default::default() });
+                flux_settled: settled });
             prop_assert!((rf / B.resistance() - pu(rq)).abs() < 1e-4,
                 "step {k}: {rf} vs {}", si(rq, B.resistance()));
             prop_assert!((f.current_estimate / B.current - pu(x.current_estimate)).abs() < 2e-5,
@@ -337,9 +339,11 @@ proptest! {
 #[test]
 fn rs_running_law_matches_f32() {
     let m = m();
-    let mut c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
-    c.running = true;
+    let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
     let cq = convert::rs_estimator(&c, &B).unwrap();
+    let mut run = RsRunningConfig::new(TS, 0.2, 1.5);
+    run.enabled = true;
+    let runq = convert::rs_running(&run, &B).unwrap();
     let l = m.transient_inductance();
     let lambda = m.rotor_flux_for(1.5);
     for (i_sq, ws) in [(0.64f32, 60.0f32), (-0.64, 40.0), (1.9, -20.0)] {
@@ -350,9 +354,11 @@ fn rs_running_law_matches_f32() {
             i_sd,
             i_sq,
             v_sd,
-            v_sq,
             stator_frequency: ws,
             flux_settled: true,
+        };
+        let xf = RsRunningInputs {
+            v_sq,
             rotor_flux: lambda,
             frame_held: false,
         };
@@ -360,9 +366,11 @@ fn rs_running_law_matches_f32() {
             i_sd: q(i_sd, B.current),
             i_sq: q(i_sq, B.current),
             v_sd: q(v_sd, B.voltage),
-            v_sq: q(v_sq, B.voltage),
             stator_frequency: q(ws, B.frequency),
             flux_settled: true,
+        };
+        let xq = RsRunningInputs {
+            v_sq: q(v_sq, B.voltage),
             rotor_flux: q(lambda, B.flux),
             frame_held: false,
         };
@@ -371,8 +379,8 @@ fn rs_running_law_matches_f32() {
             RsEstimator::<Q24>::new(q(10.5, B.resistance())),
         );
         for k in 0..5000usize {
-            let rf = f.update(&c, &uf);
-            let rq = x.update(&cq, &uq);
+            let rf = f.update_running(&c, &run, &uf, &xf);
+            let rq = x.update_running(&cq, &runq, &uq, &xq);
             assert!(
                 (rf / B.resistance() - pu(rq)).abs() < 2e-4,
                 "i_sq {i_sq} step {k}: {rf} vs {}",
