@@ -39,6 +39,9 @@ const USAGE: &str = "usage:
   acim-sim any-motor [FILE] [OPTIONS]       every acceptance machine commissioned, then
                                             driven with the identified model (table to FILE,
                                             default docs/any-motor.md; figures beside it)
+  acim-sim robust-stability [FILE]          orientation growth rates over the torque-speed plane
+                                            with parameter and inverter errors (table to FILE,
+                                            default docs/robust-stability.md)
   acim-sim robustness [FILE]                issue 13's robustness matrix, Rs estimation in the
                                             standstill and running modes (table to FILE,
                                             default docs/robustness-matrix.md)
@@ -625,6 +628,23 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let png = file.with_extension("png");
             acim_sim::capability::plot(&points, &png).map_err(|e| format!("{e}"))?;
             write_table(&file, &acim_sim::capability::markdown(&points), &out)?;
+        }
+        Some("robust-stability") => {
+            o.at_most_positional("robust-stability", 1, "at most one table file")?;
+            o.reject(
+                "robust-stability",
+                Some("its points and errors are defined in crates/acim-sim/src/stability.rs"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "robust-stability.md");
+            let quiet = o.quiet;
+            let md = acim_sim::stability::robust_map_markdown(&mut |l| {
+                if !quiet {
+                    eprintln!("{l}");
+                }
+            })
+            .map_err(|e| e.to_string())?;
+            write_table(&file, &md, &o.out())?;
         }
         Some("robustness") => {
             o.at_most_positional("robustness", 1, "at most one table file")?;
