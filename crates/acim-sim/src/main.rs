@@ -8,6 +8,8 @@
 //! acim-sim stability [DIR]                 orientation stability map (docs/stability)
 //! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
 //! acim-sim faults [FILE] [OPTIONS]         fault table
+//! acim-sim robustness [FILE]               issue 13's robustness matrix
+//! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! ```
 
 use acim_sim::builtins;

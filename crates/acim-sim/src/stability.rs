@@ -231,9 +231,12 @@ pub const ROBUST_SPEEDS_RPM: [f32; 6] = [15.0, 30.0, 60.0, 120.0, 250.0, 500.0];
 /// regenerating at forward speed).
 pub const ROBUST_LOADS_NM: [f32; 7] = [-4.5, -3.0, -1.5, 0.0, 1.5, 3.0, 4.5];
 
+/// A change applied to a scenario before it is built.
+pub type ScenarioChange = Box<dyn Fn(&mut Scenario)>;
+
 /// The parameter and inverter errors of the issue-13 map: a name and the change to the
 /// scenario (the controller's model or the compensation differs from the plant).
-pub fn robust_errors() -> Vec<(&'static str, Box<dyn Fn(&mut Scenario)>)> {
+pub fn robust_errors() -> Vec<(&'static str, ScenarioChange)> {
     fn with_inverter(s: &mut Scenario, comp: f32) {
         s.inverter.dead_time_s = 1.5e-6;
         s.inverter.device_drop_v = 1.0;

@@ -39,7 +39,7 @@
 //! [`min_resistance`, `max_resistance`]; reaching a bound is reported so the drive can
 //! raise an "estimator out of range" fault.
 //!
-//! ## While running (issue 13, [`RsEstimatorConfig::running`])
+//! ## While running (issue 13, [`RsRunningConfig`])
 //!
 //! Above a few hertz the d-axis residual mixes the resistance error with the orientation
 //! error: r_d = dR i_sd - w_s y (dR = Rs - Rs_hat, y = lambda_q the flux on the q axis,
