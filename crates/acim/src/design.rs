@@ -39,6 +39,7 @@ pub enum RsEstimationMode {
     /// The standstill identification, then adaptation while running, motoring and
     /// regenerating, from the q-axis and d-axis residuals together
     /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
+    /// Needs the crate feature `robust`.
     Running,
 }
 
@@ -55,7 +56,8 @@ pub enum ZeroSpeedPolicy {
     #[default]
     Hold,
     /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
-    /// `zero_speed_dwell`: no operation on the unobservable line.
+    /// `zero_speed_dwell`: no operation on the unobservable line. Needs the crate feature
+    /// `robust`.
     Stop,
 }
 
@@ -167,7 +169,8 @@ pub struct DriveConfig {
     /// lambda_ref / R_R. An overhauling load larger than that raises the speed until the
     /// operating point is observable again, instead of letting the estimates drift along
     /// the line. Transits (reference zero or of the other sign: reversals, stops) are not
-    /// limited: they cross the line at the ramp's pace.
+    /// limited: they cross the line at the ramp's pace. Nonzero needs the crate feature
+    /// `robust`.
     pub regen_min_frequency: f32,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
@@ -867,6 +870,22 @@ impl DriveDesign {
         )?;
         positive(cfg.stall_time, "stall_time")?;
         positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
+        let robust = cfg!(feature = "robust");
+        check(
+            robust || cfg.rs_estimation_mode == RsEstimationMode::Standstill,
+            "rs_estimation_mode",
+            "Running needs the acim feature `robust`",
+        )?;
+        check(
+            robust || cfg.zero_speed_policy == ZeroSpeedPolicy::Hold,
+            "zero_speed_policy",
+            "Stop needs the acim feature `robust`",
+        )?;
+        check(
+            robust || cfg.regen_min_frequency == 0.0,
+            "regen_min_frequency",
+            "a nonzero value needs the acim feature `robust`",
+        )?;
         check(
             is_finite(cfg.regen_min_frequency)
                 && cfg.regen_min_frequency >= 0.0
@@ -1092,6 +1111,29 @@ mod tests {
 
     fn field(cfg: DriveConfig) -> Option<&'static str> {
         DriveDesign::new(cfg).err().map(|e| e.field())
+    }
+
+    /// Issue 13's settings need the feature `robust`; without it they are refused by
+    /// name (the firmware's build), with it accepted.
+    #[test]
+    fn robust_settings_follow_the_feature() {
+        let mut c = DriveConfig::paper_defaults();
+        c.rs_estimation_mode = RsEstimationMode::Running;
+        let mut z = DriveConfig::paper_defaults();
+        z.zero_speed_policy = ZeroSpeedPolicy::Stop;
+        let mut r = DriveConfig::paper_defaults();
+        r.regen_min_frequency = 9.4;
+        if cfg!(feature = "robust") {
+            assert_eq!(field(c), None);
+            assert_eq!(field(z), None);
+            assert_eq!(field(r), None);
+        } else {
+            assert_eq!(field(c), Some("rs_estimation_mode"));
+            assert_eq!(field(z), Some("zero_speed_policy"));
+            assert_eq!(field(r), Some("regen_min_frequency"));
+        }
+        r.regen_min_frequency = -1.0;
+        assert_eq!(field(r), Some("regen_min_frequency"));
     }
 
     /// Protections cannot be switched off by configuration, and errors name the field

@@ -672,7 +672,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if self.coeffs.zero_stop_steps != 0 && self.zero_speed_stop(magnetizing) {
+        if cfg!(feature = "robust")
+            && self.coeffs.zero_stop_steps != 0
+            && self.zero_speed_stop(magnetizing)
+        {
             return PwmOutput::OFF;
         }
         // 6. current control, within the voltage limit
@@ -840,7 +843,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             self.applied.v_dq.d
         };
-        if c.rs_running.enabled {
+        if cfg!(feature = "robust") && c.rs_running.enabled {
             // issue 13: Rs also while running (out of line, off the default path)
             rs_running_step(
                 &mut est.rs,
@@ -987,11 +990,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO {
-            regen_limit(c, r.speed_reference, speed, fw)
-        } else {
-            (fw.i_sq_min, fw.i_sq_max, false)
-        };
+        let (i_sq_min, i_sq_max, regen_limited) =
+            if cfg!(feature = "robust") && c.regen_min_frequency > N::ZERO {
+                regen_limit(c, r.speed_reference, speed, fw)
+            } else {
+                (fw.i_sq_min, fw.i_sq_max, false)
+            };
         if (fw.torque_limited || regen_limited) && r.speed_ctl.saturated() {
             // the torque is at the voltage (or bus) limit, or at the low-frequency
             // regeneration limit: the speed the drive reaches there is the reachable
