@@ -180,6 +180,12 @@ pub struct SearchRecord {
     pub true_rpm: f32,
 }
 
+/// The scenario's plant (machine, inverter, sensors), for tools that run their own loop
+/// (`examples/step_response.rs`).
+pub fn build_plant_pub(sc: &Scenario, v: &Validated) -> Plant {
+    build_plant(sc, v)
+}
+
 pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     let inv = Inverter::new(
         InverterConfig {
