@@ -232,10 +232,6 @@ impl DriveConfig {
     }
 }
 
-fn m_pole_pairs(cfg: &DriveConfig) -> f32 {
-    cfg.machine.pole_pairs_f32()
-}
-
 /// Why a drive configuration was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -889,7 +885,7 @@ impl DriveDesign {
         check(
             is_finite(cfg.regen_min_frequency)
                 && cfg.regen_min_frequency >= 0.0
-                && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * m_pole_pairs(&cfg),
+                && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * cfg.machine.pole_pairs_f32(),
             "regen_min_frequency",
             "must be in 0 ..= p max_speed / 2 rad/s (0: off)",
         )?;
