@@ -74,3 +74,67 @@ fn every_builtin_validates() {
         sc.validate().unwrap_or_else(|e| panic!("{}: {e}", sc.name));
     }
 }
+
+/// `[[plant_changes]]`: factors ramp linearly from the values in effect, bad entries name
+/// their field, and the closed loop sees the change (a +50 % Rs step without the
+/// estimator moves the speed estimate, as Fig. 8 shows).
+#[test]
+fn plant_changes_ramp_validate_and_act() {
+    use acim_sim::scenario::{plant_factors, PlantChange};
+    let ch = [
+        PlantChange {
+            t_s: 1.0,
+            ramp_s: 2.0,
+            rs_factor: 1.3,
+            rr_factor: 1.0,
+        },
+        PlantChange {
+            t_s: 4.0,
+            ramp_s: 0.0,
+            rs_factor: 1.0,
+            rr_factor: 1.5,
+        },
+    ];
+    assert_eq!(plant_factors(&ch, 0.5), (1.0, 1.0));
+    let (rs, rr) = plant_factors(&ch, 2.0);
+    assert!((rs - 1.15).abs() < 1e-6 && rr == 1.0, "{rs} {rr}");
+    assert_eq!(plant_factors(&ch, 3.5), (1.3, 1.0));
+    assert_eq!(plant_factors(&ch, 4.0), (1.0, 1.5));
+
+    let text = format!("{EXAMPLE}\n[[plant_changes]]\nt_s = 4.0\nramp_s = 0.0\nrs_factor = 1.5\n");
+    let sc = Scenario::from_toml(&text).unwrap();
+    sc.validate().unwrap();
+    // field errors: factor out of range, overlapping ramps, unknown key
+    let bad = |extra: &str| {
+        Scenario::from_toml(&format!("{EXAMPLE}\n{extra}"))
+            .and_then(|s| s.validate().map(|_| ()))
+            .unwrap_err()
+    };
+    let e = bad("[[plant_changes]]\nt_s = 1.0\nrs_factor = 0.0\n");
+    assert_eq!(e.field, "plant_changes[0].rs_factor");
+    assert!(e.allowed.contains("[0.2, 5]"), "{e}");
+    let e = bad("[[plant_changes]]\nt_s = 1.0\nramp_s = 2.0\nrs_factor = 1.2\n[[plant_changes]]\nt_s = 2.0\nrr_factor = 1.2\n");
+    assert_eq!(e.field, "plant_changes[1].t_s");
+    let e = bad("[[plant_changes]]\nt_s = 1.0\nramp_s = -1.0\n");
+    assert_eq!(e.field, "plant_changes[0].ramp_s");
+    let e = bad("[[plant_changes]]\nt_s = 1.0\nrs = 1.2\n");
+    assert!(e.allowed.contains("rs"), "{e}");
+
+    // the loop sees it: same scenario with and without the step at 4 s (load on from
+    // 3 s), speed-estimation error in the load window
+    let err_in_load = |sc: &Scenario| {
+        let r = acim_sim::sim::run(sc).unwrap();
+        let w: Vec<_> = r
+            .rows
+            .iter()
+            .filter(|x| x.t_s >= 5.0 && x.t_s < 6.0)
+            .collect();
+        w.iter().map(|x| x.speed_est_rpm - x.speed_rpm).sum::<f32>() / w.len() as f32
+    };
+    let base = err_in_load(&Scenario::from_toml(EXAMPLE).unwrap());
+    let hot = err_in_load(&sc);
+    assert!(
+        (hot - base).abs() > 3.0,
+        "a +50 % plant Rs step moved the speed-estimation error only from {base} to {hot} rpm"
+    );
+}

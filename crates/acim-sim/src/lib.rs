@@ -10,6 +10,7 @@ pub mod metrics;
 pub mod observers;
 pub mod output;
 pub mod plot;
+pub mod robustness;
 pub mod scenario;
 pub mod sim;
 pub mod stability;

@@ -8,6 +8,8 @@
 //! acim-sim stability [DIR]                 orientation stability map (docs/stability)
 //! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
 //! acim-sim faults [FILE] [OPTIONS]         fault table
+//! acim-sim robustness [FILE]               issue 13's robustness matrix
+//! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! ```
 
 use acim_sim::builtins;
@@ -39,6 +41,12 @@ const USAGE: &str = "usage:
   acim-sim any-motor [FILE] [OPTIONS]       every acceptance machine commissioned, then
                                             driven with the identified model (table to FILE,
                                             default docs/any-motor.md; figures beside it)
+  acim-sim robust-stability [FILE]          orientation growth rates over the torque-speed plane
+                                            with parameter and inverter errors (table to FILE,
+                                            default docs/robust-stability.md)
+  acim-sim robustness [FILE]                issue 13's robustness matrix, Rs estimation in the
+                                            standstill and running modes (table to FILE,
+                                            default docs/robustness-matrix.md)
   acim-sim commission <scenario|machine.toml> [--nameplate FILE] [OPTIONS]
                                             self-commissioning against the plant: the
                                             inverse-Gamma model, J, B and the dead time to
@@ -622,6 +630,40 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let png = file.with_extension("png");
             acim_sim::capability::plot(&points, &png).map_err(|e| format!("{e}"))?;
             write_table(&file, &acim_sim::capability::markdown(&points), &out)?;
+        }
+        Some("robust-stability") => {
+            o.at_most_positional("robust-stability", 1, "at most one table file")?;
+            o.reject(
+                "robust-stability",
+                Some("its points and errors are defined in crates/acim-sim/src/stability.rs"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "robust-stability.md");
+            let quiet = o.quiet;
+            let md = acim_sim::stability::robust_map_markdown(&mut |l| {
+                if !quiet {
+                    eprintln!("{l}");
+                }
+            })
+            .map_err(|e| e.to_string())?;
+            write_table(&file, &md, &o.out())?;
+        }
+        Some("robustness") => {
+            o.at_most_positional("robustness", 1, "at most one table file")?;
+            o.reject(
+                "robustness",
+                Some("its cases are defined in crates/acim-sim/src/robustness.rs"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "robustness-matrix.md");
+            let quiet = o.quiet;
+            let md = acim_sim::robustness::report(&mut |l| {
+                if !quiet {
+                    eprintln!("{l}");
+                }
+            })
+            .map_err(|e| e.to_string())?;
+            write_table(&file, &md, &o.out())?;
         }
         Some("-h" | "--help" | "help") => println!("{USAGE}"),
         Some(other) => return Err(format!("unknown command `{other}`\n{USAGE}")),

@@ -176,7 +176,13 @@ fn draw_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>
     let tl = col(|r| r.load_torque_nm);
     let tle = ctl(|r| r.load_torque_est_nm);
     let rs = ctl(|r| r.stator_resistance_est_ohm);
-    let rs_true = vec![r.scenario.plant.rs_ohm; rows.len()];
+    let rs_true: Vec<f32> = rows
+        .iter()
+        .map(|x| {
+            r.scenario.plant.rs_ohm
+                * crate::scenario::plant_factors(&r.scenario.plant_changes, x.t_s).0
+        })
+        .collect();
     let mut speed = vec![
         Series {
             label: "reference",

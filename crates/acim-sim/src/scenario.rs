@@ -206,6 +206,37 @@ pub enum ObserverKind {
     FullOrder,
 }
 
+/// When the Rs estimator adapts (`acim::RsEstimationMode`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RsMode {
+    /// Standstill identification only (the default).
+    #[default]
+    Standstill,
+    /// Also while running (issue 13).
+    Running,
+}
+
+impl RsMode {
+    fn mode(self) -> acim::RsEstimationMode {
+        match self {
+            RsMode::Standstill => acim::RsEstimationMode::Standstill,
+            RsMode::Running => acim::RsEstimationMode::Running,
+        }
+    }
+}
+
+/// A held zero speed target (`acim::ZeroSpeedPolicy`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ZeroSpeed {
+    /// Keep the flux, control zero speed (the default).
+    #[default]
+    Hold,
+    /// Switch off after the dwell.
+    Stop,
+}
+
 /// Drive (controller) settings.
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -234,10 +265,17 @@ pub struct DriveSpec {
     pub observer_poles_rad_s: [f32; 3],
     /// Stator-resistance estimator on.
     pub rs_estimation: bool,
+    /// When Rs adapts: "standstill" (the default: identification before the ramp) or
+    /// "running" (also while turning, issue 13).
+    pub rs_estimation_mode: RsMode,
     /// Initial Rs estimate, ohm (the controller model's Rs when absent).
     pub rs_initial_ohm: Option<f32>,
     /// Rs estimator convergence time constant, s.
     pub rs_convergence_time_s: f32,
+    /// The standstill Rs identification waits at most this long, s (the drive's default
+    /// when absent; 0.001 s in effect switches it off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rs_identification_timeout_s: Option<f32>,
     /// Dead time the drive compensates, s.
     pub dead_time_comp_s: f32,
     /// Device drop the drive compensates, V.
@@ -258,6 +296,14 @@ pub struct DriveSpec {
     pub field_weakening: bool,
     /// Over-voltage control: regenerative torque reduced near the bus trip (issue 15).
     pub overvoltage_control: bool,
+    /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
+    /// `zero_speed_dwell_s`).
+    pub zero_speed_policy: ZeroSpeed,
+    /// The dwell at a zero reference before "stop" switches off, s.
+    pub zero_speed_dwell_s: f32,
+    /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
+    /// zero while holding a regenerating point, Hz electrical (0: off, the default).
+    pub regen_min_frequency_hz: f32,
 }
 
 impl Default for DriveSpec {
@@ -277,8 +323,10 @@ impl Default for DriveSpec {
             speed_bandwidth_rad_s: d.speed_bandwidth,
             observer_poles_rad_s: [p.p1, p.p2, p.p3],
             rs_estimation: false,
+            rs_estimation_mode: RsMode::Standstill,
             rs_initial_ohm: None,
             rs_convergence_time_s: d.rs_convergence_time,
+            rs_identification_timeout_s: None,
             dead_time_comp_s: d.dead_time,
             device_drop_comp_v: d.device_drop,
             stall_time_s: d.stall_time,
@@ -288,6 +336,9 @@ impl Default for DriveSpec {
             max_speed_rpm: None,
             field_weakening: d.field_weakening,
             overvoltage_control: d.overvoltage_control,
+            zero_speed_policy: ZeroSpeed::Hold,
+            zero_speed_dwell_s: d.zero_speed_dwell,
+            regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
         }
     }
 }
@@ -429,6 +480,49 @@ impl LoadPoint {
             },
         }
     }
+}
+
+/// A change of the real machine's resistances over time (thermal drift, issue 13),
+/// relative to the `[plant]` values: from `t_s` the factors move linearly, over `ramp_s`
+/// (0: a step), from those in effect before (1 at the start) to `rs_factor` and
+/// `rr_factor`. The controller is not told.
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PlantChange {
+    /// Start of the change, s.
+    pub t_s: f32,
+    /// Duration of the linear ramp, s (0: a step).
+    #[serde(default)]
+    pub ramp_s: f32,
+    /// Stator resistance at the end of the change over `plant.rs_ohm` (1: unchanged).
+    #[serde(default = "unit_factor")]
+    pub rs_factor: f32,
+    /// Rotor resistance at the end of the change over `plant.rr_ohm` (1: unchanged).
+    #[serde(default = "unit_factor")]
+    pub rr_factor: f32,
+}
+
+fn unit_factor() -> f32 {
+    1.0
+}
+
+/// The plant's (Rs, Rr) factors at time `t` (s) under the changes `changes`, which
+/// [`Scenario::validate`] has checked to be in time order and not overlapping.
+pub fn plant_factors(changes: &[PlantChange], t: f32) -> (f32, f32) {
+    let (mut rs, mut rr) = (1.0f32, 1.0f32);
+    for c in changes {
+        if t < c.t_s {
+            break;
+        }
+        let x = if c.ramp_s > 0.0 {
+            ((t - c.t_s) / c.ramp_s).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        rs += (c.rs_factor - rs) * x;
+        rr += (c.rr_factor - rr) * x;
+    }
+    (rs, rr)
 }
 
 /// A controller parameter change at run time is not modelled; faults are injected into
@@ -588,6 +682,9 @@ pub struct Scenario {
     pub load_profile: Vec<LoadPoint>,
     /// Injected faults.
     pub faults: FaultSpec,
+    /// Changes of the plant's resistances over time (`[[plant_changes]]`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub plant_changes: Vec<PlantChange>,
     /// Start command time and initial rotor speed.
     pub start: StartSpec,
     /// The motor's nameplate: when present (with `[board]`), the drive's ratings, limits,
@@ -628,6 +725,7 @@ impl Default for Scenario {
             speed_profile: vec![],
             load_profile: vec![],
             faults: FaultSpec::default(),
+            plant_changes: vec![],
             start: StartSpec::default(),
             nameplate: None,
             board: None,
@@ -769,6 +867,12 @@ impl Scenario {
         check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
         check_range("drive.orientation_gain", d.orientation_gain, 0.0, 50.0)?;
         check_range(
+            "drive.zero_speed_dwell_s",
+            d.zero_speed_dwell_s,
+            1e-3,
+            600.0,
+        )?;
+        check_range(
             "inverter.dead_time_s",
             self.inverter.dead_time_s,
             0.0,
@@ -853,6 +957,30 @@ impl Scenario {
                 -1000.0,
                 1000.0,
             )?;
+        }
+        let mut free_from = 0.0f32;
+        for (i, c) in self.plant_changes.iter().enumerate() {
+            check_range(
+                &format!("plant_changes[{i}].t_s"),
+                c.t_s,
+                free_from,
+                self.duration_s,
+            )?;
+            check_range(&format!("plant_changes[{i}].ramp_s"), c.ramp_s, 0.0, 600.0)?;
+            check_range(
+                &format!("plant_changes[{i}].rs_factor"),
+                c.rs_factor,
+                0.2,
+                5.0,
+            )?;
+            check_range(
+                &format!("plant_changes[{i}].rr_factor"),
+                c.rr_factor,
+                0.2,
+                5.0,
+            )?;
+            // in time order, each after the previous ramp has ended
+            free_from = c.t_s + c.ramp_s;
         }
         if self.start.at_s != 0.0 {
             check_range("start.at_s", self.start.at_s, 0.0, self.duration_s)?;
@@ -945,8 +1073,13 @@ impl Scenario {
             p3: d.observer_poles_rad_s[2],
         };
         drive.rs_estimation = d.rs_estimation;
+        drive.rs_estimation_mode = d.rs_estimation_mode.mode();
         drive.rs_initial = rs0;
         drive.rs_convergence_time = d.rs_convergence_time_s;
+        if let Some(t) = d.rs_identification_timeout_s {
+            check_range("drive.rs_identification_timeout_s", t, 1e-3, 100.0)?;
+            drive.rs_identification_timeout = t;
+        }
         drive.dead_time = d.dead_time_comp_s;
         drive.device_drop = d.device_drop_comp_v;
         drive.stall_time = d.stall_time_s;
@@ -956,6 +1089,12 @@ impl Scenario {
         }
         drive.field_weakening = d.field_weakening;
         drive.overvoltage_control = d.overvoltage_control;
+        drive.zero_speed_policy = match d.zero_speed_policy {
+            ZeroSpeed::Hold => acim::ZeroSpeedPolicy::Hold,
+            ZeroSpeed::Stop => acim::ZeroSpeedPolicy::Stop,
+        };
+        drive.zero_speed_dwell = d.zero_speed_dwell_s;
+        drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -989,6 +1128,7 @@ impl Scenario {
                     allowed: format!("{e}"),
                 })?;
             cfg.rs_estimation = drive.rs_estimation;
+            cfg.rs_estimation_mode = drive.rs_estimation_mode;
             if d.rs_initial_ohm.is_some() {
                 cfg.rs_initial = drive.rs_initial;
             }
@@ -996,6 +1136,9 @@ impl Scenario {
             cfg.current_sensing = drive.current_sensing;
             cfg.field_weakening = drive.field_weakening;
             cfg.overvoltage_control = drive.overvoltage_control;
+            cfg.zero_speed_policy = drive.zero_speed_policy;
+            cfg.zero_speed_dwell = drive.zero_speed_dwell;
+            cfg.regen_min_frequency = drive.regen_min_frequency;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

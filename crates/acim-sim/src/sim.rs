@@ -184,6 +184,12 @@ pub struct SearchRecord {
     pub true_rpm: f32,
 }
 
+/// The scenario's plant (machine, inverter, sensors), for tools that run their own loop
+/// (`examples/step_response.rs`).
+pub fn build_plant_pub(sc: &Scenario, v: &Validated) -> Plant {
+    build_plant(sc, v)
+}
+
 pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     let inv = Inverter::new(
         InverterConfig {
@@ -358,6 +364,8 @@ pub fn run_with_progress(
     let mut faults = FaultInjector::new(fault_plan(sc));
     let mut fault_time = None;
     let mut search = None;
+    let plant_nominal = v.plant.data();
+    let mut plant_factors = (1.0f32, 1.0f32);
 
     for k in 0..n {
         if k % PROGRESS_EVERY == 0 {
@@ -377,6 +385,17 @@ pub fn run_with_progress(
         }
         faults.begin_period(t, &mut plant, &mut dc_link);
         let bus_v = dc_link.bus_voltage();
+        // thermal drift of the real machine (`[[plant_changes]]`)
+        let factors = crate::scenario::plant_factors(&sc.plant_changes, t);
+        if factors != plant_factors {
+            plant_factors = factors;
+            let mut d = plant_nominal;
+            d.stator_resistance *= factors.0;
+            d.rotor_resistance *= factors.1;
+            if let Ok(p) = acim::params::MachineParams::new(d) {
+                plant.machine_mut().set_params(p);
+            }
+        }
         // the bus of the period that starts now, which the sensor reads at its start
         plant.set_dc_bus(bus_v);
 

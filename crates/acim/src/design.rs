@@ -13,7 +13,7 @@ use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
-use crate::rs_estimator::RsEstimatorConfig;
+use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
 
@@ -25,6 +25,40 @@ pub enum CurrentSensing {
     TwoPhase,
     /// All three measured; the zero-sequence part is rejected.
     ThreePhase,
+}
+
+/// When the stator-resistance estimator adapts (with `rs_estimation` on; issue 13).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RsEstimationMode {
+    /// The eq. (19) law below `rs_max_frequency` only, where the orientation part of the
+    /// d-axis residual vanishes: in practice the standstill identification before the
+    /// speed ramp (the behaviour before issue 13, the default).
+    #[default]
+    Standstill,
+    /// The standstill identification, then adaptation while running, motoring and
+    /// regenerating, from the q-axis and d-axis residuals together
+    /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
+    /// Needs the crate feature `robust`.
+    Running,
+}
+
+/// What the drive does with a held zero speed target (issue 13, item 6). Speed
+/// reversals pass through zero as before with either policy: only a target of zero,
+/// reached by the ramp and held for `zero_speed_dwell`, counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ZeroSpeedPolicy {
+    /// Keep the flux and control zero speed (the behaviour before issue 13, the default
+    /// so that the paper's figures stay as they are). At zero stator frequency speed and
+    /// orientation are unobservable (design notes, section 10): the rotor may creep under
+    /// sensor offsets and load while the estimate reads 0.
+    #[default]
+    Hold,
+    /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
+    /// `zero_speed_dwell`: no operation on the unobservable line. Needs the crate feature
+    /// `robust`.
+    Stop,
 }
 
 /// Open-loop V/f commissioning settings.
@@ -68,6 +102,9 @@ pub struct DriveConfig {
     pub observer_poles: ObserverPoles,
     /// Whether the stator-resistance estimator adapts.
     pub rs_estimation: bool,
+    /// When Rs adapts (with `rs_estimation`): standstill only (default) or also while
+    /// running (issue 13).
+    pub rs_estimation_mode: RsEstimationMode,
     /// Initial stator-resistance estimate R0, ohm (eq. 19).
     pub rs_initial: f32,
     /// Convergence time constant of the Rs estimator, s.
@@ -124,6 +161,22 @@ pub struct DriveConfig {
     /// so braking without a brake resistor cannot pump the bus to its trip. Off by
     /// default: the fault scenarios test the trip itself.
     pub overvoltage_control: bool,
+    /// Low-frequency regeneration limit (issue 13, item 5), rad/s electrical; 0 = off (the
+    /// default, the behaviour before issue 13). While the drive holds a speed reference of
+    /// the rotor's sign, the regenerative torque current is limited so that the stator
+    /// frequency w_s = p Omega + R_R i_sq / lambda stays on the rotor's side of the
+    /// unobservable line w_s = 0 by at least this much: |i_sq| <= (p |Omega_hat| - w_min)
+    /// lambda_ref / R_R. An overhauling load larger than that raises the speed until the
+    /// operating point is observable again, instead of letting the estimates drift along
+    /// the line. Transits (reference zero or of the other sign: reversals, stops) are not
+    /// limited: they cross the line at the ramp's pace. Nonzero needs the crate feature
+    /// `robust`.
+    pub regen_min_frequency: f32,
+    /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
+    pub zero_speed_policy: ZeroSpeedPolicy,
+    /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
+    /// switches turn off, s.
+    pub zero_speed_dwell: f32,
     /// V/f mode settings.
     pub vf: VfConfig,
 }
@@ -147,6 +200,7 @@ impl DriveConfig {
             speed_bandwidth: 25.0,
             observer_poles: ObserverPoles::DEFAULT,
             rs_estimation: false,
+            rs_estimation_mode: RsEstimationMode::Standstill,
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
             rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
@@ -167,6 +221,9 @@ impl DriveConfig {
             flying_start: true,
             field_weakening: true,
             overvoltage_control: false,
+            zero_speed_policy: ZeroSpeedPolicy::Hold,
+            zero_speed_dwell: 0.5,
+            regen_min_frequency: 0.0,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
@@ -667,6 +724,16 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub vf: VfDesign<N>,
     /// Field weakening and over-voltage control (issue 15).
     pub fw: FieldWeakeningDesign<N>,
+    // issue 13's additions last, so that the default path's field offsets stay as they were
+    /// The running Rs law ([`crate::rs_estimator`], "While running").
+    pub rs_running: RsRunningConfig<N>,
+    /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
+    /// (0: the `Hold` policy, never).
+    pub zero_stop_steps: u32,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: N,
+    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
+    pub regen_current_per_frequency: N::Gain,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -690,6 +757,8 @@ pub struct DriveDesign {
     pub observer: ObserverConfig,
     /// Rs estimator (eq. 19-20).
     pub rs: RsEstimatorConfig,
+    /// The running Rs law (issue 13).
+    pub rs_running: RsRunningConfig,
     /// Modulator (SVPWM with dead-time compensation).
     pub pwm: SvpwmConfig,
     /// i_sd*, A.
@@ -715,6 +784,12 @@ pub struct DriveDesign {
     pub torque_factor: f32,
     /// Speed reference change per step, rad/s.
     pub ramp_step: f32,
+    /// Steps at a zero reference before [`ZeroSpeedPolicy::Stop`] switches off (0: hold).
+    pub zero_stop_steps: u32,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: f32,
+    /// lambda_ref / R_R, A per rad/s electrical.
+    pub regen_current_per_frequency: f32,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -823,6 +898,30 @@ impl DriveDesign {
             "must be finite with 0 <= lower < upper",
         )?;
         positive(cfg.stall_time, "stall_time")?;
+        positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
+        let robust = cfg!(feature = "robust");
+        check(
+            robust || cfg.rs_estimation_mode == RsEstimationMode::Standstill,
+            "rs_estimation_mode",
+            "Running needs the acim feature `robust`",
+        )?;
+        check(
+            robust || cfg.zero_speed_policy == ZeroSpeedPolicy::Hold,
+            "zero_speed_policy",
+            "Stop needs the acim feature `robust`",
+        )?;
+        check(
+            robust || cfg.regen_min_frequency == 0.0,
+            "regen_min_frequency",
+            "a nonzero value needs the acim feature `robust`",
+        )?;
+        check(
+            is_finite(cfg.regen_min_frequency)
+                && cfg.regen_min_frequency >= 0.0
+                && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * cfg.machine.pole_pairs_f32(),
+            "regen_min_frequency",
+            "must be in 0 ..= p max_speed / 2 rad/s (0: off)",
+        )?;
         positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
         check(
@@ -849,6 +948,8 @@ impl DriveDesign {
         let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
         rs.adapt = cfg.rs_estimation;
         rs.max_stator_frequency = cfg.rs_max_frequency;
+        let mut rs_running = RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d);
+        rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
@@ -885,6 +986,7 @@ impl DriveDesign {
             flux: FluxModelConfig::new(&m, ts, flux_reference),
             observer,
             rs,
+            rs_running,
             pwm: SvpwmConfig::new(
                 cfg.dead_time,
                 ts,
@@ -902,6 +1004,12 @@ impl DriveDesign {
             pole_pairs: pp,
             torque_factor: 1.5 * pp,
             ramp_step: cfg.speed_ramp * ts,
+            zero_stop_steps: match cfg.zero_speed_policy {
+                ZeroSpeedPolicy::Hold => 0,
+                ZeroSpeedPolicy::Stop => ((cfg.zero_speed_dwell / ts) as u32).max(1),
+            },
+            regen_min_frequency: cfg.regen_min_frequency,
+            regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -1008,6 +1116,9 @@ impl DriveCoeffs<f32> {
             back_emf: d.pole_pairs,
             torque_factor: d.torque_factor,
             ramp_step: d.ramp_step,
+            zero_stop_steps: d.zero_stop_steps,
+            regen_min_frequency: d.regen_min_frequency,
+            regen_current_per_frequency: d.regen_current_per_frequency,
             speed_target_limit: d.speed_target_limit,
             speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),
@@ -1020,6 +1131,7 @@ impl DriveCoeffs<f32> {
                 boost: cfg.vf.boost,
             },
             fw: d.field_weakening,
+            rs_running: d.rs_running,
         }
     }
 }
@@ -1031,6 +1143,29 @@ mod tests {
 
     fn field(cfg: DriveConfig) -> Option<&'static str> {
         DriveDesign::new(cfg).err().map(|e| e.field())
+    }
+
+    /// Issue 13's settings need the feature `robust`; without it they are refused by
+    /// name (the firmware's build), with it accepted.
+    #[test]
+    fn robust_settings_follow_the_feature() {
+        let mut c = DriveConfig::paper_defaults();
+        c.rs_estimation_mode = RsEstimationMode::Running;
+        let mut z = DriveConfig::paper_defaults();
+        z.zero_speed_policy = ZeroSpeedPolicy::Stop;
+        let mut r = DriveConfig::paper_defaults();
+        r.regen_min_frequency = 9.4;
+        if cfg!(feature = "robust") {
+            assert_eq!(field(c), None);
+            assert_eq!(field(z), None);
+            assert_eq!(field(r), None);
+        } else {
+            assert_eq!(field(c), Some("rs_estimation_mode"));
+            assert_eq!(field(z), Some("zero_speed_policy"));
+            assert_eq!(field(r), Some("regen_min_frequency"));
+        }
+        r.regen_min_frequency = -1.0;
+        assert_eq!(field(r), Some("regen_min_frequency"));
     }
 
     /// Protections cannot be switched off by configuration, and errors name the field

@@ -54,7 +54,7 @@ use crate::observer::{
 };
 use crate::orientation;
 use crate::pi::PiController;
-use crate::rs_estimator::{RsEstimator, RsEstimatorInputs};
+use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::speed_search::{SearchOutcome, SpeedSearch};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
@@ -129,6 +129,69 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// The flying start's measured rotor speed, rad/s mechanical (0 until the speed
     /// search decides, [`crate::speed_search`]).
     pub search_speed: N,
+}
+
+/// The running Rs law's step ([`RsEstimator::update_running`]), out of line so that the
+/// default path's code is unchanged: currents `i` (A), the d-axis voltage `v_sd` the
+/// estimator uses (V), the last stator frequency `ws` (rad/s), the last applied `v_sq`
+/// (V) and the model flux `rotor_flux` (Wb).
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn rs_running_step<N: Num>(
+    rs: &mut RsEstimator<N>,
+    c: &DriveCoeffs<N>,
+    i: Dq<N>,
+    v_sd: N,
+    ws: N,
+    flux_settled: bool,
+    v_sq: N,
+    rotor_flux: N,
+    frame_held: bool,
+) {
+    rs.update_running(
+        &c.rs,
+        &c.rs_running,
+        &RsEstimatorInputs {
+            i_sd: i.d,
+            i_sq: i.q,
+            v_sd,
+            stator_frequency: ws,
+            flux_settled,
+        },
+        &RsRunningInputs {
+            v_sq,
+            rotor_flux,
+            frame_held,
+        },
+    );
+}
+
+/// The torque-current limits with the low-frequency regeneration limit
+/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed reference has the
+/// sign of the speed estimate (holding, not in transit), the braking side is limited to
+/// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
+/// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
+/// the limits and whether the regeneration limit is tighter than the others.
+#[cold]
+#[inline(never)]
+fn regen_limit<N: Num>(
+    c: &DriveCoeffs<N>,
+    reference: N,
+    speed: N,
+    fw: FwLimits<N>,
+) -> (N, N, bool) {
+    let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
+    let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
+    let w = if w > N::ZERO { w } else { N::ZERO };
+    let i = N::gain(c.regen_current_per_frequency, w);
+    if speed > N::ZERO && reference > N::ZERO && lo < -i {
+        (-i, hi, true)
+    } else if speed < N::ZERO && reference < N::ZERO && hi > i {
+        (lo, i, true)
+    } else {
+        (lo, hi, false)
+    }
 }
 
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
@@ -251,6 +314,8 @@ struct References<N> {
     /// A flying start: magnetizing in a frame turning with the rotor at the speed the
     /// search measured.
     flying: bool,
+    /// Steps the speed target and reference have been zero ([`crate::ZeroSpeedPolicy`]).
+    zero_steps: u32,
 }
 
 /// The field-weakening stage's output (issue 15).
@@ -360,6 +425,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 fw_trim: N::ZERO,
                 fw_active: false,
                 flying: false,
+                zero_steps: 0,
             },
             cur: CurrentControl {
                 d: PiController::new(),
@@ -537,6 +603,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.refs.fw_active = false;
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
+        self.refs.zero_steps = 0;
         self.cur.d.reset();
         self.cur.q.reset();
         self.est.flux = FluxModel::new();
@@ -624,6 +691,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             Err(reason) => return self.enter_fault(reason),
         };
         probe.end(StepRegion::SpeedPi);
+        // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
+        if cfg!(feature = "robust")
+            && self.coeffs.zero_stop_steps != 0
+            && self.zero_speed_stop(magnetizing)
+        {
+            return PwmOutput::OFF;
+        }
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
         let v = self.current_control(&m, &e, i_ref, limit);
@@ -647,6 +721,32 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             duties: modulation.duties,
             enabled: true,
         }
+    }
+
+    /// [`crate::ZeroSpeedPolicy::Stop`]: counts the steps with the speed target and the
+    /// ramped reference both at zero while running; true once the dwell has passed (never
+    /// with `Hold`, whose step count is 0). A reversal passes through zero with a nonzero
+    /// target and does not count.
+    /// Switches off (to `Idle`) when it returns true. Out of line: off the default path.
+    #[cold]
+    #[inline(never)]
+    fn zero_speed_stop(&mut self, magnetizing: bool) -> bool {
+        let n = self.coeffs.zero_stop_steps;
+        if n == 0 || magnetizing {
+            return false;
+        }
+        let r = &mut self.refs;
+        r.zero_steps = if r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
+            r.zero_steps.saturating_add(1)
+        } else {
+            0
+        };
+        if r.zero_steps >= n {
+            self.sup.stop();
+            self.applied = Applied::default();
+            return true;
+        }
+        false
     }
 
     /// The supervisor's plausibility check of this step's estimates.
@@ -791,16 +891,31 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             self.applied.v_dq.d
         };
-        est.rs.update(
-            &c.rs,
-            &RsEstimatorInputs {
-                i_sd: i.d,
-                i_sq: i.q,
+        if cfg!(feature = "robust") && c.rs_running.enabled {
+            // issue 13: Rs also while running (out of line, off the default path)
+            rs_running_step(
+                &mut est.rs,
+                c,
+                i,
                 v_sd,
-                stator_frequency: ws_prev,
+                ws_prev,
                 flux_settled,
-            },
-        );
+                self.applied.v_dq.q,
+                est.flux.rotor_flux,
+                frame_held,
+            );
+        } else {
+            est.rs.update(
+                &c.rs,
+                &RsEstimatorInputs {
+                    i_sd: i.d,
+                    i_sq: i.q,
+                    v_sd,
+                    stator_frequency: ws_prev,
+                    flux_settled,
+                },
+            );
+        }
         let rs = est.rs.stator_resistance_estimate;
         est.filtered_residual = est.filtered_residual
             + N::gain(
@@ -923,10 +1038,17 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        if fw.torque_limited && r.speed_ctl.saturated() {
-            // the torque is at the voltage (or bus) limit: the speed the drive reaches
-            // there is the reachable speed; hold the reference within a band of it (no
-            // growing speed error, no overload trip) and report it
+        let (i_sq_min, i_sq_max, regen_limited) =
+            if cfg!(feature = "robust") && c.regen_min_frequency > N::ZERO {
+                regen_limit(c, r.speed_reference, speed, fw)
+            } else {
+                (fw.i_sq_min, fw.i_sq_max, false)
+            };
+        if (fw.torque_limited || regen_limited) && r.speed_ctl.saturated() {
+            // the torque is at the voltage (or bus) limit, or at the low-frequency
+            // regeneration limit: the speed the drive reaches there is the reachable
+            // speed; hold the reference within a band of it (no growing speed error, no
+            // overload trip) and report it
             let band = c.fw.hold_band;
             let held = r.speed_reference.clamp(speed - band, speed + band);
             if held != r.speed_reference {
@@ -942,8 +1064,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             &c.pi_speed,
             r.speed_reference - speed,
             N::ZERO,
-            fw.i_sq_min,
-            fw.i_sq_max,
+            i_sq_min,
+            i_sq_max,
         );
         r.i_sq_ref = i_sq_ref;
         let saturated = r.speed_ctl.saturated();

@@ -69,7 +69,10 @@ pub mod fixed;
 pub mod full_order;
 
 pub use controller::Controller;
-pub use design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, VfConfig};
+pub use design::{
+    ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, RsEstimationMode, VfConfig,
+    ZeroSpeedPolicy,
+};
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
     StepRegion,

@@ -38,9 +38,68 @@
 //! dominate v_sd). The estimate is clamped to
 //! [`min_resistance`, `max_resistance`]; reaching a bound is reported so the drive can
 //! raise an "estimator out of range" fault.
+//!
+//! ## While running (issue 13, [`RsRunningConfig`])
+//!
+//! Above a few hertz the d-axis residual mixes the resistance error with the orientation
+//! error: r_d = dR i_sd - w_s y (dR = Rs - Rs_hat, y = lambda_q the flux on the q axis,
+//! [`crate::orientation`]), and the orientation correction drives r_d itself toward zero.
+//! A second residual, of the q axis, separates them. With the rotor flux lambda_hat of
+//! eq. (13), a q-axis current model like eq. (20),
+//!
+//! ```text
+//! sigma Ls d i_sq_hat/dt = -Rs_hat i_sq_hat - sigma Ls w_s i_sd - w_s lambda_hat + v_sq
+//! ```
+//!
+//! has in steady state the error e_q = i_sq_hat - i_sq = r_q / Rs_hat, where the true
+//! steady q-axis equation v_sq = Rs i_sq + sigma Ls w_s i_sd + w_s lambda_d gives
+//! r_q = dR i_sq + w_s (lambda_d - lambda_hat). The rotor equation in the frame (the
+//! true slip w_s - p Omega = w_slip + eps) links the flux errors to y: linearised at
+//! lambda_d = lambda_hat = L_M i_sd, y = 0,
+//!
+//! ```text
+//! 0 = -d(lambda_d)/tau_r + w_slip y          =>  d(lambda_d) = a y,  a = tau_r w_slip = i_sq / i_sd
+//! 0 = -y/tau_r - w_slip d(lambda_d) - eps lambda
+//! r_d = dR i_sd - w_s y
+//! r_q = dR i_sq + a w_s y
+//! ```
+//!
+//! The combination `i_sq r_d + i_sd r_q = 2 dR i_sd i_sq` does not depend on y (nor on the
+//! speed error eps, nor on the orientation gain): it carries the resistance error alone,
+//! wherever i_sq != 0. (The other combination, i_sd r_q - i_sq r_d = 2 w_s i_sq y, is the
+//! reactive-power residual: Rs-free, it carries the orientation alone.) At zero torque
+//! both vanish: there dR and y enter the residuals only as dR i_sd - w_s y, and no
+//! fundamental-model scheme with an unknown speed can separate them in steady state; the
+//! estimate is held. The running law is
+//!
+//! ```text
+//! d Rs_hat/dt = alpha_r sign(i_sd) Rs_hat (i_sq e_d + i_sd e_q) / i_sq   (|i_sq| >= i_min)
+//! ```
+//!
+//! (the divisor is bounded away from zero by the gate), which on the slow manifold reads
+//! d Rs_hat/dt = 2 alpha_r |i_sd| (Rs - Rs_hat) for |i_sq| >= i_min: a first-order
+//! convergence with tau = 1/(2 alpha_r |i_sd|), whatever the load sign, speed sign or
+//! quadrant. Local stability of the whole loop follows by singular perturbation: the fast
+//! subsystem (current models, observer, orientation mode) is the drive without adaptation,
+//! stable for k > tau_r |w_slip| ([`crate::orientation`]); the slow one is the first-order
+//! law above, exponentially stable; for tau well above the fast modes' time constants
+//! (the orientation mode's slowest root, about 1/(k |w_s|) or tau_r) the pair is locally
+//! exponentially stable (Tikhonov; Khalil, Nonlinear Systems, thm. 11.4). It adapts only
+//! with settled flux, |w_s| >= `min_running_frequency` and |i_sq| >= `i_min`; the standstill
+//! identification (the eq. 19 law with the frame held) gives its initial value. What it
+//! assumes: the rotor model (R_R, L_M) right; an R_R error biases the estimate (the slip
+//! law's error enters eps and, through the flux, r_q), and so does an uncompensated
+//! inverter voltage error (it looks like a resistance, V_e/|i_s|).
 
 use crate::num::Num;
 use crate::params::MachineParams;
+
+/// The running law adapts from this stator frequency up, Hz (issue 13: "from about 1 Hz").
+pub const RUNNING_MIN_FREQUENCY_HZ: f32 = 1.0;
+/// The running law adapts with |i_sq| at least this fraction of the flux current (its
+/// information is 2 dR i_sd i_sq: none at zero torque); 0.2 x 1.5 A is 0.7 N m on the
+/// paper machine.
+pub const RUNNING_MIN_TORQUE_FRACTION: f32 = 0.2;
 
 /// Configuration of the stator-resistance estimator (designed in f32 SI; in fixed point
 /// the gains carry the per-unit base conversions and the clamps are in the finer
@@ -67,6 +126,42 @@ pub struct RsEstimatorConfig<N: Num = f32> {
     /// Whether the resistance adapts at all (the current model of eq. 20 always runs: the
     /// drive's orientation correction uses its error).
     pub adapt: bool,
+}
+
+/// The running law's configuration (module docs, "While running"; issue 13). A struct of
+/// its own, kept apart from [`RsEstimatorConfig`], so that the default path's coefficient
+/// layout (and cycle count) does not change.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RsRunningConfig<N: Num = f32> {
+    /// Adapt while running from the q-axis and d-axis residuals: the eq. (19) law then
+    /// runs only with the frame held (standstill identification). False: the eq. (19)
+    /// law below `max_stator_frequency` only (the behaviour before issue 13).
+    pub enabled: bool,
+    /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
+    pub alpha_ts: N::Gain,
+    /// Adapt with |w_s| at least this, rad/s electrical.
+    pub min_frequency: N,
+    /// Adapt with |i_sq| at least this (i_min, which keeps the divisor away from 0), A.
+    pub min_torque_current: N,
+    /// Frequency times flux to voltage (1 in SI), for w_s lambda_hat of the q model.
+    pub flux_voltage: N::Gain,
+}
+
+impl RsRunningConfig<f32> {
+    /// Period `ts` (s), convergence time constant `tau` (s) at flux current
+    /// `flux_current` (A): alpha_r = 1/(2 tau |i_sd*|); gates at
+    /// [`RUNNING_MIN_FREQUENCY_HZ`] and [`RUNNING_MIN_TORQUE_FRACTION`] of the flux
+    /// current. Disabled until `enabled` is set.
+    pub fn new(ts: f32, tau: f32, flux_current: f32) -> Self {
+        Self {
+            enabled: false,
+            alpha_ts: ts / (2.0 * tau.max(ts) * flux_current.abs().max(1e-3)),
+            min_frequency: 2.0 * core::f32::consts::PI * RUNNING_MIN_FREQUENCY_HZ,
+            min_torque_current: RUNNING_MIN_TORQUE_FRACTION * flux_current.abs(),
+            flux_voltage: 1.0,
+        }
+    }
 }
 
 impl RsEstimatorConfig<f32> {
@@ -112,6 +207,18 @@ pub struct RsEstimatorInputs<N = f32> {
     pub flux_settled: bool,
 }
 
+/// The running law's extra inputs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RsRunningInputs<N = f32> {
+    /// Commanded v_sq over the period, V.
+    pub v_sq: N,
+    /// Model rotor flux lambda_hat of eq. (13), Wb.
+    pub rotor_flux: N,
+    /// The frame is held (magnetizing at rest): the eq. (19) law runs only then.
+    pub frame_held: bool,
+}
+
 /// State of the stator-resistance estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -129,6 +236,10 @@ pub struct RsEstimator<N: Num = f32> {
     pub current_error: N,
     /// Whether the estimate sits at a clamp bound.
     pub at_bound: bool,
+    /// i_sq_hat of the running law's q-axis model, A.
+    pub q_current_estimate: N,
+    /// i_sq_hat - i_sq at the last step, A: in steady state r_q / Rs_hat.
+    pub q_current_error: N,
 }
 
 impl<N: Num> RsEstimator<N> {
@@ -142,10 +253,13 @@ impl<N: Num> RsEstimator<N> {
             current_error: N::ZERO,
             adapting: false,
             at_bound: false,
+            q_current_estimate: N::ZERO,
+            q_current_error: N::ZERO,
         }
     }
 
-    /// One step: Euler update of eq. (20) and, inside the gate, of the corrected eq. (19).
+    /// One step of the mode before issue 13: Euler update of eq. (20) and, inside the
+    /// gate, of the corrected eq. (19). (The running mode is [`RsEstimator::update_running`].)
     #[inline]
     pub fn update(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>) -> N {
         let rs = self.stator_resistance_estimate;
@@ -157,18 +271,16 @@ impl<N: Num> RsEstimator<N> {
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;
         if self.adapting && e.is_finite() {
-            let (next, at_bound) = N::fine_step(
-                self.resistance,
-                cfg.alpha_ts,
-                e,
-                u.i_sd >= N::ZERO,
-                cfg.min_resistance,
-                cfg.max_resistance,
-            );
-            self.resistance = next;
-            self.at_bound = at_bound;
-            self.stator_resistance_estimate = N::from_fine(next);
+            self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
         }
+        self.d_model_step(cfg, u, rs);
+        self.stator_resistance_estimate
+    }
+
+    /// Euler step of the eq. (20) d-axis current model with the estimate `rs` of the
+    /// step's start.
+    #[inline(always)]
+    fn d_model_step(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>, rs: N) {
         // sigma Ls di_hat/dt = -Rs_hat i_hat + sigma Ls w_s i_sq + v_sd (eq. 20)
         let di = N::gain(
             cfg.ts_over_transient_inductance,
@@ -177,6 +289,72 @@ impl<N: Num> RsEstimator<N> {
         let next_i = self.current_estimate + di;
         // keep the model finite; a bad sample resets it to the measurement
         self.current_estimate = next_i.finite_or(u.i_sd.finite_or(N::ZERO));
+    }
+
+    /// One clamped step of the integrator by `g e` (sign: `positive`).
+    #[inline(always)]
+    fn adapt_step(&mut self, cfg: &RsEstimatorConfig<N>, g: N::Gain, e: N, positive: bool) {
+        let (next, at_bound) = N::fine_step(
+            self.resistance,
+            g,
+            e,
+            positive,
+            cfg.min_resistance,
+            cfg.max_resistance,
+        );
+        self.resistance = next;
+        self.at_bound = at_bound;
+        self.stator_resistance_estimate = N::from_fine(next);
+    }
+
+    /// One step of the running mode ([`RsRunningConfig`]; the caller uses it when
+    /// `run.enabled`): eq. (19) with the frame held (standstill identification), the
+    /// running law (module docs) while turning, the q-axis and d-axis current models.
+    #[inline(never)]
+    pub fn update_running(
+        &mut self,
+        cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
+        u: &RsEstimatorInputs<N>,
+        x: &RsRunningInputs<N>,
+    ) -> N {
+        let rs = self.stator_resistance_estimate;
+        let e = self.current_estimate - u.i_sd;
+        self.current_error = e.finite_or(N::ZERO);
+        let eq = self.q_current_estimate - u.i_sq;
+        self.q_current_error = eq.finite_or(N::ZERO);
+        let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
+        let standstill = flux_ok
+            && x.frame_held
+            && u.i_sq.abs() <= cfg.max_torque_current
+            && u.stator_frequency.abs() <= cfg.max_stator_frequency;
+        let turning = flux_ok
+            && !x.frame_held
+            && u.stator_frequency.abs() >= run.min_frequency
+            && u.i_sq.abs() >= run.min_torque_current;
+        self.adapting = cfg.adapt && (standstill || turning);
+        if cfg.adapt && standstill && e.is_finite() {
+            self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
+        } else if cfg.adapt && turning {
+            // (i_sq r_d + i_sd r_q) / i_sq with r = Rs_hat e: 2 dR i_sd on the slow
+            // manifold; |i_sq| >= i_min > 0 (the gate), as sign(i_sq) sigma / |i_sq| (the
+            // fixed-point ratio takes a positive divisor)
+            let sigma = rs * (u.i_sq * e + u.i_sd * eq);
+            let v = N::ratio(sigma, u.i_sq.abs());
+            if v.is_finite() {
+                let positive = (u.i_sd >= N::ZERO) == (u.i_sq >= N::ZERO);
+                self.adapt_step(cfg, run.alpha_ts, v, positive);
+            }
+        }
+        // sigma Ls di_q_hat/dt = -Rs_hat i_q_hat - sigma Ls w_s i_sd - w_s lambda_hat + v_sq
+        let emf = N::gain_mul(run.flux_voltage, u.stator_frequency, x.rotor_flux);
+        let di = N::gain(
+            cfg.ts_over_transient_inductance,
+            x.v_sq - rs * self.q_current_estimate - emf,
+        ) - N::gain_mul(cfg.ts, u.stator_frequency, u.i_sd);
+        let next = self.q_current_estimate + di;
+        self.q_current_estimate = next.finite_or(u.i_sq.finite_or(N::ZERO));
+        self.d_model_step(cfg, u, rs);
         self.stator_resistance_estimate
     }
 }
@@ -294,5 +472,118 @@ mod tests {
         };
         let r = est.update(&cfg, &u);
         assert!(r.is_finite() && est.current_estimate.is_finite());
+    }
+
+    /// Steady inputs of the true machine (module docs, "While running") with stator
+    /// resistance `rs`, orientation error y (flux on the q axis, Wb) and the flux error
+    /// a y it implies.
+    fn running_inputs(
+        rs: f32,
+        i_sd: f32,
+        i_sq: f32,
+        ws: f32,
+        y: f32,
+    ) -> (RsEstimatorInputs, RsRunningInputs) {
+        let m = MachineParams::paper_table1();
+        let l = m.transient_inductance();
+        let lambda = m.rotor_flux_for(i_sd);
+        let a = i_sq / i_sd;
+        (
+            RsEstimatorInputs {
+                i_sd,
+                i_sq,
+                v_sd: rs * i_sd - l * ws * i_sq - ws * y,
+                stator_frequency: ws,
+                flux_settled: true,
+            },
+            RsRunningInputs {
+                v_sq: rs * i_sq + l * ws * i_sd + ws * (lambda + a * y),
+                rotor_flux: lambda,
+                frame_held: false,
+            },
+        )
+    }
+
+    /// The running law converges to the true Rs with an orientation error present, in all
+    /// four quadrants (the combination i_sq r_d + i_sd r_q does not see y), within 3 % in
+    /// 5 time constants of 1/(2 alpha_r i_sd) = 0.2 s.
+    #[test]
+    fn running_law_separates_resistance_from_orientation() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        run.enabled = true;
+        for (i_sq, ws) in [
+            (0.64, 60.0),
+            (-0.64, 40.0),
+            (0.64, -40.0),
+            (-1.9, -60.0),
+            (1.9, -20.0),
+        ] {
+            for y in [0.0, 0.02, -0.03] {
+                let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, y);
+                let mut est = RsEstimator::new(10.5);
+                for _ in 0..(1.0 / ts) as usize {
+                    est.update_running(&cfg, &run, &u, &x);
+                }
+                let r = est.stator_resistance_estimate;
+                assert!(
+                    (r - 13.65).abs() < 0.03 * 13.65,
+                    "i_sq {i_sq} w_s {ws} y {y}: {r}"
+                );
+                assert!(est.adapting);
+            }
+        }
+    }
+
+    /// The same steady state through the standstill law (d axis only) would settle on a
+    /// wrong resistance: r_d = dR i_sd - w_s y is zeroed by Rs_hat = Rs - w_s y / i_sd.
+    /// With the frame turning, the running mode does not use it.
+    #[test]
+    fn d_axis_law_alone_is_biased_by_orientation() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut low = cfg;
+        low.max_stator_frequency = 100.0;
+        let (u, _) = running_inputs(10.5, 1.5, 0.64, 20.0, 0.05);
+        let mut est = RsEstimator::new(10.5);
+        for _ in 0..(2.0 / ts) as usize {
+            est.update(&low, &u);
+        }
+        let expected = 10.5 - 20.0 * 0.05 / 1.5;
+        assert!(
+            (est.stator_resistance_estimate - expected).abs() < 0.05,
+            "{} vs {expected}",
+            est.stator_resistance_estimate
+        );
+    }
+
+    /// At zero torque (no information) and below 1 Hz the running law holds the estimate;
+    /// with the frame held (standstill identification) the eq. (19) law runs.
+    #[test]
+    fn running_law_gates() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        run.enabled = true;
+        for (i_sq, ws) in [(0.0, 60.0), (0.1, 60.0), (0.64, 5.0)] {
+            let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, 0.01);
+            let mut est = RsEstimator::new(10.5);
+            for _ in 0..5000 {
+                est.update_running(&cfg, &run, &u, &x);
+            }
+            assert_eq!(est.stator_resistance_estimate, 10.5, "i_sq {i_sq} w_s {ws}");
+            assert!(!est.adapting);
+        }
+        let (u, mut x) = running_inputs(13.65, 1.5, 0.0, 0.0, 0.0);
+        x.frame_held = true;
+        let mut est = RsEstimator::new(10.5);
+        for _ in 0..10_000 {
+            est.update_running(&cfg, &run, &u, &x);
+        }
+        assert!((est.stator_resistance_estimate - 13.65).abs() < 0.05);
     }
 }

@@ -19,7 +19,7 @@ use crate::flux::FluxModelConfig;
 use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::pi::PiConfig;
-use crate::rs_estimator::RsEstimatorConfig;
+use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::svpwm::SvpwmConfig;
 
 /// Largest |signal| in pu the configuration may ask for (limits, trips, references): 2 pu
@@ -146,6 +146,17 @@ pub fn rs_estimator(cfg: &RsEstimatorConfig, b: &PerUnitBases) -> Option<RsEstim
         max_torque_current: Q24(to_q24(cfg.max_torque_current / b.current)),
         max_stator_frequency: Q24(to_q24(cfg.max_stator_frequency / b.frequency)),
         adapt: cfg.adapt,
+    })
+}
+
+/// The running Rs law (issue 13); its input is a voltage: ohm per V per step.
+pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningConfig<Q24>> {
+    Some(RsRunningConfig {
+        enabled: cfg.enabled,
+        alpha_ts: Gain::from_f32(cfg.alpha_ts * b.voltage / b.resistance() * RS_EXTRA)?,
+        min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
+        min_torque_current: Q24(to_q24(cfg.min_torque_current / b.current)),
+        flux_voltage: Gain::from_f32(cfg.flux_voltage * b.frequency * b.flux / b.voltage)?,
     })
 }
 
@@ -314,6 +325,13 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             boost: pu(cfg.vf.boost, b.voltage, "vf.boost")?,
         },
         fw: field_weakening(&d.field_weakening, b)?,
+        rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
+        zero_stop_steps: d.zero_stop_steps,
+        regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
+        regen_current_per_frequency: gain(
+            d.regen_current_per_frequency * b.frequency / b.current,
+            "regen_min_frequency",
+        )?,
     })
 }
 

@@ -37,7 +37,9 @@ use crate::num::Num;
 use crate::observer::{ObserverConfig, ObserverInputs, ObserverPoles, ReducedOrderObserver};
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
-use crate::rs_estimator::{RsEstimator, RsEstimatorConfig, RsEstimatorInputs};
+use crate::rs_estimator::{
+    RsEstimator, RsEstimatorConfig, RsEstimatorInputs, RsRunningConfig, RsRunningInputs,
+};
 use crate::svpwm::{self, SvpwmConfig};
 use proptest::prelude::*;
 
@@ -328,5 +330,64 @@ proptest! {
             prop_assert!((f.duties[k] - pu(x.duties[k])).abs() < 2e-5,
                 "{:?} vs {:?}", f.duties, x.duties.map(pu));
         }
+    }
+}
+
+/// The running Rs law (issue 13) in Q7.24 follows the f32 trajectory: the same steady
+/// machine (resistance 30 % above the estimate, an orientation error), motoring and
+/// regenerating, forward and reverse.
+#[test]
+fn rs_running_law_matches_f32() {
+    let m = m();
+    let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
+    let cq = convert::rs_estimator(&c, &B).unwrap();
+    let mut run = RsRunningConfig::new(TS, 0.2, 1.5);
+    run.enabled = true;
+    let runq = convert::rs_running(&run, &B).unwrap();
+    let l = m.transient_inductance();
+    let lambda = m.rotor_flux_for(1.5);
+    for (i_sq, ws) in [(0.64f32, 60.0f32), (-0.64, 40.0), (1.9, -20.0)] {
+        let (i_sd, y, rs) = (1.5f32, 0.02f32, 13.65f32);
+        let v_sd = rs * i_sd - l * ws * i_sq - ws * y;
+        let v_sq = rs * i_sq + l * ws * i_sd + ws * (lambda + i_sq / i_sd * y);
+        let uf = RsEstimatorInputs {
+            i_sd,
+            i_sq,
+            v_sd,
+            stator_frequency: ws,
+            flux_settled: true,
+        };
+        let xf = RsRunningInputs {
+            v_sq,
+            rotor_flux: lambda,
+            frame_held: false,
+        };
+        let uq = RsEstimatorInputs {
+            i_sd: q(i_sd, B.current),
+            i_sq: q(i_sq, B.current),
+            v_sd: q(v_sd, B.voltage),
+            stator_frequency: q(ws, B.frequency),
+            flux_settled: true,
+        };
+        let xq = RsRunningInputs {
+            v_sq: q(v_sq, B.voltage),
+            rotor_flux: q(lambda, B.flux),
+            frame_held: false,
+        };
+        let (mut f, mut x) = (
+            RsEstimator::new(10.5f32),
+            RsEstimator::<Q24>::new(q(10.5, B.resistance())),
+        );
+        for k in 0..5000usize {
+            let rf = f.update_running(&c, &run, &uf, &xf);
+            let rq = x.update_running(&cq, &runq, &uq, &xq);
+            assert!(
+                (rf / B.resistance() - pu(rq)).abs() < 2e-4,
+                "i_sq {i_sq} step {k}: {rf} vs {}",
+                si(rq, B.resistance())
+            );
+            assert_eq!(f.adapting, x.adapting);
+        }
+        assert!((f.stator_resistance_estimate - rs).abs() < 0.03 * rs);
     }
 }
