@@ -161,7 +161,11 @@ fn zero_hold_scenario() {
     assert_eq!(r.final_state, acim::DriveState::Idle);
     // switched off 0.5 s after the reference reached zero (4.0 s), never on again; the
     // rotor coasts down from the creep it had then (3.1 rpm measured) and comes to rest
-    assert!(r.rows.iter().filter(|x| x.t_s >= 4.6).all(|x| !x.pwm_enabled));
+    assert!(r
+        .rows
+        .iter()
+        .filter(|x| x.t_s >= 4.6)
+        .all(|x| !x.pwm_enabled));
     assert!(max_after(&r) < 5.0, "{}", max_after(&r));
     let last = r.rows.last().unwrap().speed_rpm.abs();
     assert!(last < 0.1, "{last}");

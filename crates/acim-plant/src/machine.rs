@@ -479,17 +479,16 @@ impl InductionMachine {
                 + (self.kinetic_energy() - e.kinetic_at_reset))
     }
 
-    /// State derivative (eq. 1-3) and the powers, for stage state `x`.
-    fn deriv<F>(
+    /// State derivative (eq. 1-3) and the powers, for stage state `x`. The source is a
+    /// trait object: one copy of this code for every inverter model (the firmware's
+    /// self-test carries the plant in 64 KiB of flash).
+    fn deriv(
         &self,
         x: &[f32; NX],
         load: LoadTorque,
-        src: &F,
+        src: &dyn Fn(f32, f32) -> StageSource,
         open: bool,
-    ) -> ([f32; NX], [f32; NA])
-    where
-        F: Fn(f32, f32) -> StageSource,
-    {
+    ) -> ([f32; NX], [f32; NA]) {
         #[cfg(feature = "saturation")]
         let saturated;
         #[cfg(feature = "saturation")]
@@ -557,10 +556,13 @@ impl InductionMachine {
         self.rk4(dt, load, src, false)
     }
 
-    fn rk4<F>(&mut self, dt: f32, load: LoadTorque, src: &F, open: bool) -> StepSourceIntegral
-    where
-        F: Fn(f32, f32) -> StageSource,
-    {
+    fn rk4(
+        &mut self,
+        dt: f32,
+        load: LoadTorque,
+        src: &dyn Fn(f32, f32) -> StageSource,
+        open: bool,
+    ) -> StepSourceIntegral {
         if dt <= 0.0 || !is_finite(dt) {
             return StepSourceIntegral::default();
         }
