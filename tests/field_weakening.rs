@@ -180,3 +180,77 @@ fn a_bus_sag_lowers_the_reachable_speed_held_and_reported() {
         m.speed_target_limited_s
     );
 }
+
+/// Runs the paper machine at 500 rpm with a passive `light` N m load from 1 s and a step
+/// to `rated` N m at 6 s, flux optimisation on or off; returns the copper losses
+/// (stator + rotor, W, the plant's energy account) over 4-6 s and the time from the step
+/// until the speed is back within 5 rpm of the reference (s).
+fn light_load(optimise: bool, light: f32, rated: f32) -> (f32, f32, f32) {
+    use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
+    use acim::{Drive, DriveConfig, DriveInputs, DriveState};
+    use acim_plant::{LoadTorque, Plant, PwmPreload};
+    let mut cfg = DriveConfig::paper_defaults();
+    cfg.flux_optimisation = optimise;
+    let ts = cfg.control_period;
+    let mut drive = Drive::new(cfg).unwrap();
+    let mut plant = Plant::paper_default(3);
+    let mut pwm = PwmPreload::new();
+    drive.start().unwrap();
+    drive.set_speed_target(500.0 * RPM_TO_RAD_S).unwrap();
+    let (mut e4, mut e6, mut recovered, mut flux_light) = (0.0f32, 0.0f32, None, 0.0f32);
+    let copper =
+        |p: &Plant| p.machine().energy().stator_copper() + p.machine().energy().rotor_copper();
+    for k in 0..(10.0 / ts) as usize {
+        let t = k as f32 * ts;
+        let m = plant.sample();
+        let out = drive.step(&DriveInputs {
+            phase_currents: m.phase_currents,
+            dc_bus: m.dc_bus,
+        });
+        let torque = if t >= 6.0 {
+            rated
+        } else if t >= 1.0 {
+            light
+        } else {
+            0.0
+        };
+        plant.run_pwm_period(pwm.advance(out), LoadTorque::Passive { torque });
+        if k == (4.0 / ts) as usize {
+            e4 = copper(&plant);
+        }
+        if k == (6.0 / ts) as usize {
+            e6 = copper(&plant);
+            flux_light = drive.telemetry().rotor_flux;
+        }
+        let err = (plant.speed() * RAD_S_TO_RPM - 500.0).abs();
+        if t > 6.05 && recovered.is_none() && err < 5.0 {
+            recovered = Some(t - 6.0);
+        }
+        if t > 6.05 && err >= 5.0 {
+            recovered = None;
+        }
+    }
+    assert_eq!(drive.state(), DriveState::Running);
+    (
+        (e6 - e4) / 2.0,
+        recovered.expect("back within 5 rpm"),
+        flux_light,
+    )
+}
+
+/// Light-load flux optimisation (issue 15, item 4): at 20 % of the paper machine's rated
+/// torque (0.95 of 4.77 N m) at 500 rpm the copper losses (the plant's energy account,
+/// stator and rotor, 4-6 s) fall from 41.0 to 28.1 W (-31 %; the steady-state optimum of
+/// the equations predicts -36 % for the load alone, friction adds torque), the flux from
+/// 0.78 to 0.49 Wb; a step to rated torque is back within 5 rpm of the reference after
+/// 0.35 s (0.47 s at rated flux; the flux rebuilds with tau_r = 67 ms meanwhile).
+#[test]
+fn light_load_flux_optimisation_saves_copper_and_recovers() {
+    let (p_rated, t_rated, f_rated) = light_load(false, 0.95, 4.77);
+    let (p_opt, t_opt, f_opt) = light_load(true, 0.95, 4.77);
+    eprintln!("rated flux: {p_rated:.1} W, recovery {t_rated:.3} s, flux {f_rated:.3} Wb");
+    eprintln!("optimised:  {p_opt:.1} W, recovery {t_opt:.3} s, flux {f_opt:.3} Wb");
+    assert!(p_opt < 0.75 * p_rated, "{p_opt} W against {p_rated} W");
+    assert!(f_opt < 0.7 * f_rated);
+    assert!(t_opt < 0.6, "recovery {t_opt} s");
+}

@@ -296,6 +296,9 @@ pub struct DriveSpec {
     pub field_weakening: bool,
     /// Over-voltage control: regenerative torque reduced near the bus trip (issue 15).
     pub overvoltage_control: bool,
+    /// Light-load flux optimisation: the flux lowered to the copper-loss optimum at light
+    /// load (issue 15; off by default).
+    pub flux_optimisation: bool,
     /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
     /// `zero_speed_dwell_s`).
     pub zero_speed_policy: ZeroSpeed,
@@ -336,6 +339,7 @@ impl Default for DriveSpec {
             max_speed_rpm: None,
             field_weakening: d.field_weakening,
             overvoltage_control: d.overvoltage_control,
+            flux_optimisation: d.flux_optimisation,
             zero_speed_policy: ZeroSpeed::Hold,
             zero_speed_dwell_s: d.zero_speed_dwell,
             regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
@@ -1089,6 +1093,7 @@ impl Scenario {
         }
         drive.field_weakening = d.field_weakening;
         drive.overvoltage_control = d.overvoltage_control;
+        drive.flux_optimisation = d.flux_optimisation;
         drive.zero_speed_policy = match d.zero_speed_policy {
             ZeroSpeed::Hold => acim::ZeroSpeedPolicy::Hold,
             ZeroSpeed::Stop => acim::ZeroSpeedPolicy::Stop,
@@ -1136,6 +1141,7 @@ impl Scenario {
             cfg.current_sensing = drive.current_sensing;
             cfg.field_weakening = drive.field_weakening;
             cfg.overvoltage_control = drive.overvoltage_control;
+            cfg.flux_optimisation = drive.flux_optimisation;
             cfg.zero_speed_policy = drive.zero_speed_policy;
             cfg.zero_speed_dwell = drive.zero_speed_dwell;
             cfg.regen_min_frequency = drive.regen_min_frequency;

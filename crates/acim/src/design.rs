@@ -161,6 +161,13 @@ pub struct DriveConfig {
     /// so braking without a brake resistor cannot pump the bus to its trip. Off by
     /// default: the fault scenarios test the trip itself.
     pub overvoltage_control: bool,
+    /// Light-load flux optimisation (issue 15, item 4; off by default): below the torque
+    /// where the copper-loss optimum needs the rated flux, the flux current follows
+    /// i_sd* = sqrt((Rs + R_R) / Rs) |i_sq*| (the minimum of 1.5 (Rs |i_s|^2 + R_R i_sq^2)
+    /// at a given torque 1.5 p L_M i_sd i_sq, steady state), floored at
+    /// [`FLUX_OPT_MIN_FRACTION`] of `flux_current`; it rises at once with the torque
+    /// current and falls with [`FLUX_OPT_FALL_TAU_R`] rotor time constants.
+    pub flux_optimisation: bool,
     /// Low-frequency regeneration limit (issue 13, item 5), rad/s electrical; 0 = off (the
     /// default, the behaviour before issue 13). While the drive holds a speed reference of
     /// the rotor's sign, the regenerative torque current is limited so that the stator
@@ -221,6 +228,7 @@ impl DriveConfig {
             flying_start: true,
             field_weakening: true,
             overvoltage_control: false,
+            flux_optimisation: false,
             zero_speed_policy: ZeroSpeedPolicy::Hold,
             zero_speed_dwell: 0.5,
             regen_min_frequency: 0.0,
@@ -334,6 +342,13 @@ pub const FW_VOLTAGE_FRACTION: f32 = 0.97;
 /// Field weakening lowers the flux current to no less than this fraction of
 /// `flux_current` (the flux model's floor is 10 %, [`crate::flux`]).
 pub const FW_MIN_FLUX_FRACTION: f32 = 0.15;
+/// Light-load flux optimisation: the flux current never goes below this fraction of
+/// `flux_current` (the observer's gains follow 1/lambda_r, and a load step must find
+/// some flux to build torque on).
+pub const FLUX_OPT_MIN_FRACTION: f32 = 0.5;
+/// Light-load flux optimisation: the flux current falls towards a lower optimum with this
+/// many rotor time constants (the flux follows it with one more); it rises at once.
+pub const FLUX_OPT_FALL_TAU_R: f32 = 5.0;
 /// Below this fraction of the base electrical frequency p Omega_base (linear limit at
 /// `dc_bus_max`) the field-weakening model divides by this floor instead of |w_s|: there
 /// its flux current is far above `flux_current` and the rated flux is kept.
@@ -577,6 +592,14 @@ pub struct FieldWeakeningDesign<N: Num = f32> {
     pub flux_reference: N,
     /// Over-voltage control on ([`DriveConfig::overvoltage_control`]).
     pub overvoltage_control: bool,
+    /// Light-load flux optimisation on ([`DriveConfig::flux_optimisation`]).
+    pub flux_optimisation: bool,
+    /// sqrt((Rs + R_R) / Rs): the copper-loss optimum's i_sd / |i_sq|.
+    pub optimum_ratio: N::Gain,
+    /// The optimiser's floor, A ([`FLUX_OPT_MIN_FRACTION`] flux_current).
+    pub optimum_min_current: N,
+    /// Ts / ([`FLUX_OPT_FALL_TAU_R`] tau_r): the optimum's fall per step.
+    pub optimum_fall: N::Gain,
     /// Bus voltage where the regenerative current starts to be reduced, V.
     pub regen_start: N,
     /// 1/(bus band over which it falls to zero), 1/V.
@@ -606,6 +629,13 @@ impl FieldWeakeningDesign {
             rated_linkage: m.stator_inductance() * cfg.flux_current,
             flux_reference: m.rotor_flux_for(cfg.flux_current),
             overvoltage_control: cfg.overvoltage_control,
+            flux_optimisation: cfg.flux_optimisation,
+            optimum_ratio: sqrt(
+                (m.stator_resistance() + m.referred_rotor_resistance()) / m.stator_resistance(),
+            ),
+            optimum_min_current: FLUX_OPT_MIN_FRACTION * cfg.flux_current,
+            optimum_fall: (cfg.control_period / (FLUX_OPT_FALL_TAU_R * m.rotor_time_constant()))
+                .min(1.0),
             regen_start: OVC_START_FRACTION * cfg.dc_bus_max,
             inv_regen_band: 1.0 / band,
         }

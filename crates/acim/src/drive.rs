@@ -308,6 +308,8 @@ struct References<N> {
     i_sq_ref: N,
     /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
     fw_trim: N,
+    /// The light-load flux optimiser's i_sd*, A (issue 15; rated when off).
+    flux_optimum: N,
     /// Field weakening has moved the flux and it has not settled back at its rated value
     /// yet: the estimators take the moving flux into account (issue 15).
     fw_active: bool,
@@ -423,6 +425,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 limited_hold: 0,
                 i_sq_ref: N::ZERO,
                 fw_trim: N::ZERO,
+                flux_optimum: N::ZERO,
                 fw_active: false,
                 flying: false,
                 zero_steps: 0,
@@ -600,6 +603,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.refs.speed_ctl.reset();
         self.refs.i_sq_ref = N::ZERO;
         self.refs.fw_trim = N::ZERO;
+        self.refs.flux_optimum = self.coeffs.i_sd_ref;
         self.refs.fw_active = false;
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
@@ -1018,7 +1022,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 q: N::ZERO,
             });
         }
-        let fw = self.field_weakening(m, e, limit);
+        let mut fw = self.field_weakening(m, e, limit);
+        if self.coeffs.fw.flux_optimisation {
+            fw.i_sd_ref = self.flux_optimum(fw.i_sd_ref);
+        }
         // latched from the first weakened step until the flux is back at its rated value
         self.refs.fw_active =
             fw.i_sd_ref < self.coeffs.i_sd_ref || (self.refs.fw_active && !e.flux_settled);
@@ -1082,6 +1089,30 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 d: fw.i_sd_ref,
                 q: i_sq_ref,
             }),
+        }
+    }
+
+    /// Light-load flux optimisation (issue 15, [`crate::DriveConfig::flux_optimisation`]):
+    /// the copper-loss optimum i_sd* = sqrt((Rs + R_R)/Rs) |i_sq*| of the last step's
+    /// torque current, between the floor and `i_sd_max` (the rated or weakened flux
+    /// current). It rises at once (a load step takes the flux back up, with tau_r) and
+    /// falls slowly: with the lower flux the same torque needs more i_sq, so the optimum
+    /// found from i_sq is approached from above, where that loop settles.
+    #[inline(never)]
+    fn flux_optimum(&mut self, i_sd_max: N) -> N {
+        let fw = &self.coeffs.fw;
+        let r = &mut self.refs;
+        let target = N::gain(fw.optimum_ratio, r.i_sq_ref.abs());
+        let target = target.clamp(fw.optimum_min_current, i_sd_max);
+        r.flux_optimum = if target > r.flux_optimum {
+            target
+        } else {
+            r.flux_optimum + N::gain(fw.optimum_fall, target - r.flux_optimum)
+        };
+        if r.flux_optimum < i_sd_max {
+            r.flux_optimum
+        } else {
+            i_sd_max
         }
     }
 

@@ -371,6 +371,10 @@ fn field_weakening(
         rated_linkage: pu(f.rated_linkage, b.flux, "flux_current")?,
         flux_reference: pu(f.flux_reference, b.flux, "flux_current")?,
         overvoltage_control: f.overvoltage_control,
+        flux_optimisation: f.flux_optimisation,
+        optimum_ratio: gain(f.optimum_ratio, "machine")?,
+        optimum_min_current: pu(f.optimum_min_current, b.current, "flux_current")?,
+        optimum_fall: gain(f.optimum_fall, "machine")?,
         regen_start: pu(f.regen_start, b.voltage, "dc_bus_max")?,
         inv_regen_band: gain(f.inv_regen_band * b.voltage, "dc_bus_max")?,
     })
