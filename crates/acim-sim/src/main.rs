@@ -34,7 +34,8 @@ const USAGE: &str = "usage:
                                             <out>/observers.md)
   acim-sim capability [FILE]                steady torque held per speed vs the envelope of the
                                             machine equations (table to FILE, default
-                                            docs/capability.md, plot next to it)
+                                            docs/capability.md, plot next to it; --set is
+                                            not supported)
   acim-sim faults [FILE] [OPTIONS]          every fault-* scenario: reason, detection time,
                                             peaks (table to FILE, default docs/faults.md; with
                                             --set: <out>/faults.md)
@@ -596,11 +597,11 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
         }
         Some("any-motor") => {
             o.at_most_positional("any-motor", 1, "at most one table file")?;
-            if !o.sets.is_empty() {
-                return Err(
-                    "any-motor runs the machine files as they are: --set is not supported".into(),
-                );
-            }
+            o.reject(
+                "any-motor",
+                Some("it runs the machine files as they are"),
+                None,
+            )?;
             let file = table_file(&o, "any-motor.md");
             let out = o.out();
             let figs = file
@@ -611,8 +612,12 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
         }
         Some("capability") => {
             o.at_most_positional("capability", 1, "at most one table file")?;
+            o.reject(
+                "capability",
+                Some("its operating points are defined in crates/acim-sim/src/capability.rs"),
+                Some("it writes no CSV"),
+            )?;
             let file = table_file(&o, "capability.md");
-            let out = o.out();
             let points = acim_sim::capability::measure_with(&mut |sc| {
                 acim_sim::run_with_metrics(sc)
                     .map(|r| r.1)
@@ -627,9 +632,16 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                     100.0 * p.held_nm / p.envelope_nm.max(1e-6)
                 );
             }
+            let md = acim_sim::capability::markdown(&points);
+            print!("{md}");
+            if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
+                output::create_dir(dir).map_err(|e| e.to_string())?;
+            }
             let png = file.with_extension("png");
-            acim_sim::capability::plot(&points, &png).map_err(|e| format!("{e}"))?;
-            write_table(&file, &acim_sim::capability::markdown(&points), &out)?;
+            acim_sim::capability::plot(&points, &png)
+                .map_err(|e| format!("{}: {e}", png.display()))?;
+            output::write_file(&file, md.as_bytes()).map_err(|e| e.to_string())?;
+            println!("\nwrote {} and {}", file.display(), png.display());
         }
         Some("robust-stability") => {
             o.at_most_positional("robust-stability", 1, "at most one table file")?;

@@ -55,6 +55,12 @@ fn subcommands_reject_options_they_cannot_honour() {
         &sim(&["stability", "--set", "sensors.adc_bits=8"], &d),
         "`stability` does not take --set",
     );
+    for cmd in ["capability", "robustness", "robust-stability", "any-motor"] {
+        fails_with(
+            &sim(&[cmd, "--set", "drive.orientation_gain=3"], &d),
+            "does not take --set",
+        );
+    }
     fails_with(
         &sim(&["stability", "a", "--out", "b"], &d),
         "two output directories",
