@@ -269,6 +269,7 @@ class Machine:
                          self._bitband_write, None)
         self.regs = {}           # (base, offset) -> value
         self.writes = []         # (instret, peripheral, register, value)
+        self.write_offsets = []  # the register offset of each write, for the field decoding
         self.boot_writes = None  # number of writes before the first NVIC unmask
         self.events = []         # ordered named events for rule checks
         self.instret = 0         # instructions executed by the main program
@@ -409,6 +410,7 @@ class Machine:
         p, name = self._name(base, off4)
         if p is not None:
             self.writes.append((self.instret, p, name, value))
+            self.write_offsets.append(off4)
         if base == 0x4000_7000:
             self.events.append(("PWR write", self._pwr_clocked()))
             if not self._pwr_clocked() or self.pwr_gated_writes:
@@ -759,6 +761,17 @@ class Machine:
 
     def output(self):
         return self.tx.decode(errors="replace")
+
+    def decoded_writes(self, fields, count=None):
+        """The first `count` writes decoded against `fields` (an svd.FieldMaps):
+        [(line, reserved bits written, read-only bits written)], the line being
+        `P.REG = 0xVALUE  FIELD=v ...` (non-zero writable fields)."""
+        out = []
+        for (_t, p, name, v), off in list(zip(self.writes, self.write_offsets))[:count]:
+            text, reserved, readonly = fields.decode(p, off, v)
+            line = f"{p}.{name} = 0x{v:08X}" + (f"  {text}" if text else "")
+            out.append((line, reserved, readonly))
+        return out
 
     def write_log(self, until=None):
         """The peripheral register writes as text lines (up to instruction `until`)."""
