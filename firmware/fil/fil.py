@@ -119,8 +119,9 @@ def load_elf(path):
     return segs
 
 
-def elf_symbol(path, name):
-    """The address of symbol `name` in an ELF32's .symtab (None if absent)."""
+def elf_symbol(path, name, suffix=False):
+    """The address of symbol `name` in an ELF32's .symtab (None if absent); with `suffix`,
+    of the first symbol whose name ends with `name` (a v0-mangled one, for instance)."""
     with open(path, "rb") as f:
         data = f.read()
     e_shoff, = struct.unpack_from("<I", data, 32)
@@ -135,7 +136,8 @@ def elf_symbol(path, name):
             st_name, st_value = struct.unpack_from("<II", data, off)
             start = strtab[4] + st_name
             end = data.index(b"\0", start)
-            if data[start:end] == name.encode():
+            sym = data[start:end]
+            if sym == name.encode() or (suffix and sym.endswith(name.encode())):
                 return st_value
     return None
 
@@ -282,6 +284,7 @@ class Machine:
         self.rx = bytearray()
         self.rx_history = bytearray()
         self.break_after = None  # inject a break this many ISR instructions into the handler
+        self.conversion_after = None  # complete a new ADC sequence this far into the handler
         self.iwdg_feeds = 0
         self.iwdg_started = False
         self.nvic_enabled = set()
@@ -636,6 +639,11 @@ class Machine:
         if self.break_after is not None and self._isr_count >= self.break_after:
             self.break_after = None
             self.break_pulse()
+        if self.conversion_after is not None and self._isr_count >= self.conversion_after:
+            # the next injected sequence completes while the step still runs (a missed
+            # deadline): ADC1 JEOS and JEOC set again
+            self.conversion_after = None
+            self.regs[(0x5000_0000, 0)] = self.reg(0x5000_0000, 0) | (1 << 6) | (1 << 5)
 
     def _flush(self):
         # drop translated code (flash and CCM) so that a hook added or removed applies
@@ -673,6 +681,18 @@ class Machine:
             self.regs[(b, 0x10)] = self.reg(b, 0x10) | (1 << 13)
         self.halted = f"lockup: the stack reached its MPU guard at 0x{self.mpu_violation:08x}"
 
+    def call(self, addr, r0=0, limit=200_000):
+        """Runs the function at `addr` with `r0` as its first argument, as if called from
+        the main program (for handlers no vector points at, e.g. the panic handler)."""
+        saved = self.uc.reg_read(UC_ARM_REG_R0)
+        self.vectors.append(addr)
+        self.uc.reg_write(UC_ARM_REG_R0, r0)
+        try:
+            return self.run_exception(len(self.vectors) - 1, limit)
+        finally:
+            self.vectors.pop()
+            self.uc.reg_write(UC_ARM_REG_R0, saved)
+
     def run_exception(self, vector, limit=5_000_000):
         """Runs the handler of `vector` to its return (or `limit` instructions); returns the
         instructions it executed when counting is on, else None."""
@@ -683,7 +703,7 @@ class Machine:
         handler = self.vectors[vector]
         count = None
         h = None
-        if self.count_isr or self.break_after is not None:
+        if self.count_isr or self.break_after is not None or self.conversion_after is not None:
             self._isr_count = 0
             h = self.uc.hook_add(UC_HOOK_BLOCK, self._count_block)
             self._flush()  # blocks translated before the hook would skip it

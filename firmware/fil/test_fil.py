@@ -176,6 +176,33 @@ class Protection(unittest.TestCase):
                 m.run_exception(vector, limit=20_000)
                 self.assertFalse(m.moe())
 
+    def test_a_missed_deadline_switches_off_in_the_same_period(self):
+        """Issue 11, item 2: the next ADC sequence completing while the step still runs
+        (injected 600 instructions into the interrupt, after its acknowledge) is a missed
+        deadline: fault 17, MOE cleared in that period and not re-armed."""
+        m = started()
+        self.assertTrue(m.moe())
+        m.conversion_after = 600
+        m.run(1)
+        self.assertIsNone(m.conversion_after, "the conversion was not injected")
+        self.assertFalse(m.moe(), "a missed deadline must switch off")
+        m.run(20)
+        self.assertFalse(m.moe())
+        self.assertEqual(state_fault(m), (4, 17))
+
+    def test_a_panic_switches_off_first(self):
+        """Issue 11, item 2: the panic handler clears MOE before anything that could
+        fail. Called with a zeroed PanicInfo: it switches off, then may fault reading the
+        message; the outputs are off either way."""
+        m = started()
+        self.assertTrue(m.moe())
+        handler = fil.elf_symbol(fil.default_elf("power-stage"), "rust_begin_unwind",
+                                 suffix=True)
+        self.assertIsNotNone(handler)
+        m.uc.mem_write(0x2000_F000, bytes(64))
+        m.call(handler | 1, r0=0x2000_F000, limit=20_000)
+        self.assertFalse(m.moe(), "a panic must switch off")
+
     def test_watchdog_is_fed_only_while_the_control_interrupt_runs(self):
         m = started()
         f0 = m.iwdg_feeds
