@@ -176,6 +176,32 @@ class Protection(unittest.TestCase):
                 m.run_exception(vector, limit=20_000)
                 self.assertFalse(m.moe())
 
+    def test_a_full_rtt_buffer_does_not_starve_the_control_interrupt(self):
+        """Review item 5: defmt-rtt in blocking mode waits, interrupts masked, for a host
+        to drain its buffer; with the probe gone the control interrupt starved. The RTT
+        up-buffer is set to blocking (as a probe does) and made full (read offset one past
+        the write offset: nothing drains it) while the drive magnetizes; commands that log
+        and the telemetry keep coming, and the control interrupt must run every period.
+        Checked against a build without `disable-blocking-mode`: no interrupt ran in the
+        1200 periods, outputs on."""
+        import struct
+        m = started()
+        rtt = fil.elf_symbol(fil.default_elf("power-stage"), "_SEGGER_RTT")
+        self.assertIsNotNone(rtt)
+        # _SEGGER_RTT: id[16], max up, max down, then up[0] = name, buffer, size, write,
+        # read, flags
+        size, write = struct.unpack("<II", bytes(m.uc.mem_read(rtt + 32, 8)))
+        m.uc.mem_write(rtt + 40, struct.pack("<I", (write + 1) % size))
+        # flags = 2, BlockIfFull: what probe-rs sets when it attaches (a build without
+        # defmt-rtt's disable-blocking-mode then runs no interrupt at all here, MOE on)
+        m.uc.mem_write(rtt + 44, struct.pack("<I", 2))
+        m.count_isr = True
+        reply = command(m, "params", 1200)      # logs over RTT; 1200 periods: telemetry too
+        self.assertIn("ok parameters", reply, "the main loop must not hang on the full buffer")
+        self.assertGreaterEqual(len(m.isr_instructions), 1190, "interrupts were starved")
+        self.assertTrue(m.moe())
+        self.assertNotEqual(state_fault(m)[0], 4)
+
     def test_a_missed_deadline_switches_off_in_the_same_period(self):
         """Issue 11, item 2: the next ADC sequence completing while the step still runs
         (injected 600 instructions into the interrupt, after its acknowledge) is a missed
