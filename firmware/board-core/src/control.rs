@@ -240,6 +240,13 @@ impl<S: SinCos> ControlLoop<S> {
         })
     }
 
+    /// Telemetry every `every` periods from now on (the protocol's `rate`; 0 is taken as
+    /// 1). The window of cycle statistics restarts with it.
+    pub fn set_decimation(&mut self, every: u16) {
+        self.decim = Decimator::new(every);
+        self.stats = CycleStats::new();
+    }
+
     /// The published fault code.
     pub fn fault_code(&self) -> u8 {
         FaultCode::of(self.drive.fault(), self.fw_fault)

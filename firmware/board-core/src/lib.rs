@@ -11,6 +11,8 @@
 //!   counts: the one place where raw numbers become SI units;
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
 //! - [`telemetry`]: the decimated telemetry sample and its text framing;
+//! - [`protocol`]: protocol version 1 (framed commands and replies, hello, rate, the
+//!   telemetry extension), shared with the host tools (docs/protocol.md);
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
 //! - [`settings`]: the serial-settable limits and machine parameters, their flash record
 //!   (version, CRC) and validation by the library's constructors;
@@ -33,6 +35,7 @@ pub mod command;
 pub mod control;
 pub mod convert;
 pub mod settings;
+pub mod protocol;
 pub mod sim;
 pub mod stage;
 pub mod telemetry;
