@@ -24,6 +24,9 @@ use std::process::ExitCode;
 const USAGE: &str = "usage:
   acim-sim [OPTIONS]                        run all paper scenarios into out/, print metrics
   acim-sim list                             list built-in scenarios (takes no options)
+  acim-sim serve [--tcp ADDR] [--speed X|max] [--rate N]
+                                            the virtual board: the firmware's control loop live
+                                            on a TCP port (docs/protocol.md; see serve --help)
   acim-sim run <name|file.toml> [OPTIONS]   run one scenario: <out>/<name>.{csv,json,png}
   acim-sim figures [DIR] [OPTIONS]          every built-in scenario; PNGs and metrics.md to DIR
                                             (default docs/figures; with --set: <out>/figures)
@@ -433,6 +436,9 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
         Some((c, r)) if !c.starts_with('-') || c == "-h" || c == "--help" => (Some(c.as_str()), r),
         _ => (None, &args[..]),
     };
+    if cmd == Some("serve") {
+        return serve(rest);
+    }
     let o = Opts::parse(rest)?;
     match cmd {
         None => {
@@ -777,6 +783,72 @@ fn with_overrides_note(mut md: String, sets: &[String]) -> String {
     }
     md
 }
+
+/// `acim-sim serve [--tcp ADDR] [--speed FACTOR|max] [--rate PERIODS]`: the virtual
+/// board until the process is stopped.
+fn serve(args: &[String]) -> Result<(), String> {
+    let mut addr = "127.0.0.1:7878".to_string();
+    let mut opts = acim_vboard::server::Options::default();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let mut value = |what: &str| {
+            it.next()
+                .cloned()
+                .ok_or_else(|| format!("serve: {a} needs {what}"))
+        };
+        match a.as_str() {
+            "--tcp" => addr = value("an address, e.g. 127.0.0.1:7878")?,
+            "--speed" => opts.pace = acim_vboard::server::Pace::parse(&value("a factor or max")?)?,
+            "--rate" => {
+                let v = value("a number of control periods")?;
+                let n = v
+                    .parse::<u16>()
+                    .ok()
+                    .filter(|n| {
+                        (acim_vboard::protocol_limits::MIN_RATE_PERIODS
+                            ..=acim_vboard::protocol_limits::MAX_RATE_PERIODS)
+                            .contains(n)
+                    })
+                    .ok_or_else(|| {
+                        format!(
+                            "serve: --rate takes {}..={} control periods, got {v:?}",
+                            acim_vboard::protocol_limits::MIN_RATE_PERIODS,
+                            acim_vboard::protocol_limits::MAX_RATE_PERIODS
+                        )
+                    })?;
+                opts.rate = Some(n);
+            }
+            "-h" | "--help" => {
+                println!("{SERVE_USAGE}");
+                return Ok(());
+            }
+            other => return Err(format!("serve: unknown option {other:?}\n{SERVE_USAGE}")),
+        }
+    }
+    let listener = std::net::TcpListener::bind(&addr)
+        .map_err(|e| format!("serve: cannot listen on {addr}: {e}"))?;
+    let server = acim_vboard::server::start(listener, opts)
+        .map_err(|e| format!("serve: cannot start: {e}"))?;
+    let pace = match opts.pace {
+        acim_vboard::server::Pace::Max => "as fast as it runs".to_string(),
+        acim_vboard::server::Pace::Factor(f) if f == 1.0 => "real time".to_string(),
+        acim_vboard::server::Pace::Factor(f) => format!("{f}x real time"),
+    };
+    println!(
+        "virtual board on tcp {} ({pace}); watch it: cargo run --release -p acim-monitor -- --tcp {}",
+        server.local_addr(),
+        server.local_addr()
+    );
+    server.wait();
+    Ok(())
+}
+
+const SERVE_USAGE: &str = "usage: acim-sim serve [--tcp ADDR] [--speed FACTOR|max] [--rate PERIODS]
+  the virtual board: the firmware's control loop (ControlLoop + SimulatedStage) speaking
+  the firmware's protocol (docs/protocol.md) on a local TCP port
+  --tcp ADDR        listen address (default 127.0.0.1:7878; port 0 picks a free one)
+  --speed FACTOR    simulated seconds per second (default 1, real time), or max
+  --rate PERIODS    telemetry every PERIODS control periods at start (default 500: 10 Hz)";
 
 fn main() -> ExitCode {
     match real_main(std::env::args().skip(1).collect()) {

@@ -324,7 +324,11 @@ pub fn decode_extension(line: &[u8]) -> Result<Extension, crate::telemetry::Fram
         return Err(F::Field);
     }
     let u = |x: i64| u32::try_from(x).map_err(|_| F::Field);
-    let i = |x: i64| i32::try_from(x).map(|x| x as f32 / 1e3).map_err(|_| F::Field);
+    let i = |x: i64| {
+        i32::try_from(x)
+            .map(|x| x as f32 / 1e3)
+            .map_err(|_| F::Field)
+    };
     Ok(Extension {
         seq: u(v[0])?,
         period: u(v[1])?,
@@ -435,8 +439,14 @@ mod tests {
         assert_eq!(parse_plain(b"rate 5.5"), Err(ParseError::BadNumber));
         assert_eq!(parse_plain(b"rate -5"), Err(ParseError::OutOfRange));
         assert_eq!(parse_plain(b"rate"), Err(ParseError::MissingArgument));
-        assert_eq!(parse_plain(b"rate 5 5"), Err(ParseError::UnexpectedArgument));
-        assert_eq!(parse_plain(b"version 2"), Err(ParseError::UnexpectedArgument));
+        assert_eq!(
+            parse_plain(b"rate 5 5"),
+            Err(ParseError::UnexpectedArgument)
+        );
+        assert_eq!(
+            parse_plain(b"version 2"),
+            Err(ParseError::UnexpectedArgument)
+        );
         assert_eq!(parse_plain(b"bogus"), Err(ParseError::UnknownCommand));
         assert_eq!(parse_plain(b"stop"), Ok(Request::Command(Command::Stop)));
     }
@@ -478,7 +488,10 @@ mod tests {
     #[test]
     fn names_cover_every_code() {
         assert_eq!(state_name(acim::DriveState::Running.code()), "Running");
-        assert_eq!(fault_name(FaultCode::of(Some(FaultReason::Overload), None)), "Overload");
+        assert_eq!(
+            fault_name(FaultCode::of(Some(FaultReason::Overload), None)),
+            "Overload"
+        );
         for c in 0..20 {
             assert_ne!(fault_name(c), "?");
         }

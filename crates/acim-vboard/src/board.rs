@@ -1,0 +1,430 @@
+//! The board without its link: the firmware's control loop on the motor model, and the
+//! firmware's command handling with its reply texts (firmware/src/main.rs), plus protocol
+//! version 1 ([`acim_firmware_core::protocol`]).
+
+use acim::frames::FastSinCos;
+use acim::{Drive, DriveState};
+use acim_firmware_core::board::{self, POWER_STAGE, PWM_FREQUENCY_HZ, TELEMETRY_DECIMATION};
+use acim_firmware_core::command::{Command, ParseError};
+use acim_firmware_core::control::{refusal_text, ControlCommand, ControlLoop};
+use acim_firmware_core::convert::Converter;
+use acim_firmware_core::protocol::{self, Extension, Request, RequestError};
+use acim_firmware_core::settings::{self, Settings, FIELDS};
+use acim_firmware_core::sim::SimulatedStage;
+use acim_firmware_core::telemetry::{self, TelemetrySample};
+use std::time::Instant;
+
+/// The name in the hello frame and the `version` reply.
+pub const BOARD_NAME: &str = "acim-vboard (firmware ControlLoop + SimulatedStage)";
+
+/// The first line a connection receives after the hello frame (the firmware's boot line
+/// names the firmware instead).
+pub const READY_LINE: &str = "acim-vboard ready (help for commands)";
+
+/// Something that changed the drive or its telemetry, at the period it took effect.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// A command to the control loop (the firmware's interrupt queue).
+    Control(ControlCommand),
+    /// A new telemetry decimation.
+    Rate(u16),
+    /// A drive rebuilt from new settings.
+    Settings(Settings),
+}
+
+/// An [`Event`] and the period it was applied before.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Logged {
+    /// Index of the first period that ran with it.
+    pub period: u64,
+    /// What happened.
+    pub event: Event,
+}
+
+/// One decimated telemetry sample as the link sends it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// The `$T` frame's content.
+    pub t: TelemetrySample,
+    /// The `$X` frame's content.
+    pub x: Extension,
+}
+
+impl Sample {
+    /// `$T` then `$X`, each with its CRC and line end.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut v = telemetry::encode(&self.t).to_vec();
+        v.extend_from_slice(&protocol::encode_extension(&self.x));
+        v
+    }
+}
+
+/// The virtual board: the self-test firmware's interrupt body and main-loop command
+/// handling, with no I/O.
+pub struct Board {
+    ctl: ControlLoop<FastSinCos>,
+    stage: SimulatedStage,
+    settings: Settings,
+    saved: Settings,
+    period: u64,
+    timed: bool,
+    log: Vec<Logged>,
+}
+
+impl Default for Board {
+    fn default() -> Self {
+        Self::new(true)
+    }
+}
+
+impl Board {
+    /// A board with the firmware's default settings, idle, telemetry every
+    /// [`TELEMETRY_DECIMATION`] periods. `timed`: the interrupt-time fields carry the
+    /// host's step time (in 170 MHz cycles); otherwise 0 (reproducible runs).
+    pub fn new(timed: bool) -> Self {
+        let settings = Settings::defaults();
+        // the defaults are valid by construction (the firmware's own boot path)
+        let cfg = settings
+            .drive_config()
+            .unwrap_or_else(|_| board::drive_config());
+        let conv = Converter::new(&POWER_STAGE);
+        let drive = match Drive::new(cfg) {
+            Ok(d) => d,
+            Err(e) => panic!("the firmware's default drive configuration is refused: {e:?}"),
+        };
+        Self {
+            ctl: ControlLoop::new(drive, conv, TELEMETRY_DECIMATION),
+            stage: SimulatedStage::new(conv),
+            settings,
+            saved: settings,
+            period: 0,
+            timed,
+            log: Vec::new(),
+        }
+    }
+
+    /// Periods run so far.
+    pub fn period(&self) -> u64 {
+        self.period
+    }
+
+    /// Every event so far, in order.
+    pub fn log(&self) -> &[Logged] {
+        &self.log
+    }
+
+    /// The drive's state.
+    pub fn state(&self) -> DriveState {
+        self.ctl.state()
+    }
+
+    /// The settings in use.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// The motor model's true speed, rpm.
+    pub fn plant_speed_rpm(&self) -> f32 {
+        self.stage.speed_rpm()
+    }
+
+    /// Sends a command to the control loop before the next period (as the firmware's
+    /// interrupt takes it from its queue); `load` also reaches the motor model.
+    pub fn apply(&mut self, cmd: ControlCommand) -> Result<(), acim::CommandError> {
+        if let ControlCommand::PlantLoad(nm) = cmd {
+            self.stage.set_brake_nm(nm);
+        }
+        self.log.push(Logged {
+            period: self.period,
+            event: Event::Control(cmd),
+        });
+        self.ctl.apply(cmd).result
+    }
+
+    /// Telemetry every `every` periods from the next period on.
+    pub fn set_rate(&mut self, every: u16) {
+        self.log.push(Logged {
+            period: self.period,
+            event: Event::Rate(every),
+        });
+        self.ctl.set_decimation(every);
+    }
+
+    /// Runs one control period (sample, step, PWM into the model) and returns the
+    /// telemetry sample if this period closes a decimation window.
+    pub fn step(&mut self) -> Option<Sample> {
+        let raw = self.stage.sample();
+        let t0 = self.timed.then(Instant::now);
+        let out = self.ctl.step(&raw);
+        let cycles = t0.map_or(0, |t| {
+            (t.elapsed().as_nanos() as f64 * board::SYSCLK_HZ as f64 * 1e-9) as u32
+        });
+        self.stage.run_period(out);
+        let k = self.period;
+        self.period += 1;
+        let t = self.ctl.finish_period(cycles, self.stage.speed_rpm())?;
+        let r = self.ctl.drive().telemetry().current_reference;
+        Some(Sample {
+            t,
+            x: Extension {
+                seq: t.seq,
+                period: k as u32,
+                i_d_ref: r.d,
+                i_q_ref: r.q,
+            },
+        })
+    }
+
+    /// Handles one received line (plain or `$C` framed, without its terminator) and
+    /// returns the reply lines, each with its line end, framed if the request was.
+    /// `stream` is this connection's telemetry switch. Nothing changes on an error.
+    pub fn handle_line(&mut self, line: &[u8], stream: &mut bool) -> Vec<Vec<u8>> {
+        let p = protocol::parse_line(line);
+        let texts = match p.request {
+            Err(RequestError::Parse(ParseError::Empty)) => Vec::new(),
+            Err(e) => vec![format!("err {}", e.as_str())],
+            Ok(r) => self.handle(r, stream),
+        };
+        texts
+            .into_iter()
+            .map(|t| {
+                if p.framed {
+                    protocol::reply_frame(t.as_bytes()).to_vec()
+                } else {
+                    format!("{t}\r\n").into_bytes()
+                }
+            })
+            .collect()
+    }
+
+    /// The reply to a line too long to keep (`framed`: it started with `$`).
+    pub fn too_long(framed: bool) -> Vec<u8> {
+        let t = format!("err {}", ParseError::TooLong.as_str());
+        if framed {
+            protocol::reply_frame(t.as_bytes()).to_vec()
+        } else {
+            format!("{t}\r\n").into_bytes()
+        }
+    }
+
+    fn control(&mut self, cmd: ControlCommand) -> String {
+        match self.apply(cmd) {
+            Ok(()) => "ok".into(),
+            Err(e) => String::from_utf8_lossy(refusal_text(e))
+                .trim_end()
+                .to_string(),
+        }
+    }
+
+    fn setting_line(&self, i: usize) -> String {
+        let f = &FIELDS[i];
+        let mut buf = [0u8; 24];
+        let v = String::from_utf8_lossy(settings::format_value(self.settings.get(i), &mut buf))
+            .to_string();
+        if f.unit.is_empty() {
+            format!("{} = {v}", f.name)
+        } else {
+            format!("{} = {v} {}", f.name, f.unit)
+        }
+    }
+
+    fn apply_settings(&mut self, next: Settings, field: &str) -> String {
+        let refused =
+            format!("err {field}: refused while the drive is not idle (stop or reset first)");
+        if self.ctl.state() != DriveState::Idle {
+            return refused;
+        }
+        let drive = match next.drive_config() {
+            Ok(cfg) => Drive::new(cfg).map_err(settings::SettingError::from),
+            Err(e) => Err(e),
+        };
+        match drive {
+            Err(e) => format!("err ({}: {})", e.field, e.rule),
+            Ok(drive) => match self.ctl.replace_drive(drive) {
+                Ok(()) => {
+                    self.settings = next;
+                    self.log.push(Logged {
+                        period: self.period,
+                        event: Event::Settings(next),
+                    });
+                    format!("ok {field} applied (save to keep it)")
+                }
+                Err(_) => refused,
+            },
+        }
+    }
+
+    fn handle(&mut self, r: Request, stream: &mut bool) -> Vec<String> {
+        let c = match r {
+            Request::Version => {
+                return vec![format!(
+                    "ok protocol {} board {BOARD_NAME} pwm {PWM_FREQUENCY_HZ} Hz",
+                    protocol::PROTOCOL_VERSION
+                )]
+            }
+            Request::Rate(n) => {
+                self.set_rate(n);
+                return vec!["ok".into()];
+            }
+            Request::Command(c) => c,
+        };
+        let one = |s: String| vec![s];
+        match c {
+            Command::Start => one(self.control(ControlCommand::Start)),
+            Command::StartOpenLoop => one(self.control(ControlCommand::StartOpenLoop)),
+            Command::Stop => one(self.control(ControlCommand::Stop)),
+            Command::Speed(rpm) => one(self.control(ControlCommand::SpeedRpm(rpm))),
+            Command::ResetFault => one(self.control(ControlCommand::ResetFault)),
+            Command::Load(nm) => one(self.control(ControlCommand::PlantLoad(nm))),
+            Command::Stream(on) => {
+                *stream = on;
+                one("ok".into())
+            }
+            Command::Params => {
+                let mut v: Vec<String> = (0..FIELDS.len()).map(|i| self.setting_line(i)).collect();
+                v.insert(
+                    0,
+                    format!(
+                        "params: Ts {} s, telemetry every {} periods, board {}",
+                        1.0 / PWM_FREQUENCY_HZ as f32,
+                        TELEMETRY_DECIMATION,
+                        POWER_STAGE.name
+                    ),
+                );
+                v.push("ok parameters listed (the firmware logs them on RTT)".into());
+                v
+            }
+            Command::Status => one(format!(
+                "ok state {} fault {:02}",
+                self.ctl.state().code().min(9),
+                self.ctl.fault_code() % 100
+            )),
+            Command::Set(i, v) => match (FIELDS.get(i), self.settings.set(i, v)) {
+                (None, _) => one("err unknown setting".into()),
+                (Some(f), Ok(next)) => one(self.apply_settings(next, f.name)),
+                (Some(_), Err(e)) => one(format!("err ({}: {})", e.field, e.rule)),
+            },
+            Command::Defaults(low_voltage) => {
+                let p = if low_voltage {
+                    board::LOW_VOLTAGE
+                } else {
+                    board::PROFILE
+                };
+                let next = Settings::from_config(&board::drive_config_for(&p));
+                one(self.apply_settings(next, "defaults"))
+            }
+            Command::Get(which) => {
+                let mut v: Vec<String> = match which {
+                    Some(i) if i < FIELDS.len() => vec![self.setting_line(i)],
+                    Some(_) => Vec::new(),
+                    None => (0..FIELDS.len()).map(|i| self.setting_line(i)).collect(),
+                };
+                v.push("ok".into());
+                v
+            }
+            Command::Save => {
+                if self.ctl.state() != DriveState::Idle {
+                    one("err save: refused while the drive is not idle (stop or reset first)".into())
+                } else {
+                    self.saved = self.settings;
+                    one("ok saved (virtual board: kept in memory until it exits)".into())
+                }
+            }
+            Command::Help => one(
+                "commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | version | rate <periods>"
+                    .into(),
+            ),
+        }
+    }
+}
+
+/// Runs `periods` periods from power-up with the events of `log` applied at their
+/// periods, untimed: the reference trace a recording of the same run must reproduce.
+pub fn replay(log: &[Logged], periods: u64) -> Vec<Sample> {
+    let mut b = Board::new(false);
+    let mut out = Vec::new();
+    let mut next = log.iter().peekable();
+    while b.period() < periods {
+        while let Some(l) = next.next_if(|l| l.period <= b.period()) {
+            match l.event {
+                Event::Control(c) => {
+                    let _ = b.apply(c);
+                }
+                Event::Rate(n) => b.set_rate(n),
+                Event::Settings(s) => {
+                    if let Ok(d) = s.drive_config().map(Drive::new) {
+                        if let Ok(d) = d {
+                            if b.ctl.replace_drive(d).is_ok() {
+                                b.settings = s;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if let Some(s) = b.step() {
+            out.push(s);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn say(b: &mut Board, line: &str) -> String {
+        let mut stream = false;
+        let r = b.handle_line(line.as_bytes(), &mut stream);
+        String::from_utf8(r.concat()).unwrap()
+    }
+
+    #[test]
+    fn replies_follow_the_firmware() {
+        let mut b = Board::new(false);
+        assert_eq!(say(&mut b, "bogus"), "err unknown command (try help)\r\n");
+        assert_eq!(say(&mut b, "speed 1801"), "err out of range\r\n");
+        assert_eq!(say(&mut b, "status"), "ok state 0 fault 00\r\n");
+        assert_eq!(say(&mut b, "speed 500"), "ok\r\n");
+        assert_eq!(
+            say(&mut b, "get current_limit"),
+            "current_limit = 4.67 A\r\nok\r\n"
+        );
+        assert!(say(&mut b, "set current_limit -1").starts_with("err (current_limit: "));
+        assert_eq!(say(&mut b, "start"), "ok\r\n");
+        assert_eq!(
+            say(&mut b, "set current_limit 4"),
+            "err current_limit: refused while the drive is not idle (stop or reset first)\r\n"
+        );
+        assert!(say(&mut b, "version").starts_with("ok protocol 1 board acim-vboard"));
+        let f = say(&mut b, "$C,rate 1*0000");
+        assert!(f.starts_with("$E,err bad frame: checksum*"), "{f}");
+        let c = protocol::command_frame("rate 1");
+        let f = say(&mut b, std::str::from_utf8(&c).unwrap().trim_end());
+        assert!(f.starts_with("$E,err out of range*"), "{f}");
+        let c = protocol::command_frame("status");
+        let f = say(&mut b, std::str::from_utf8(&c).unwrap().trim_end());
+        assert!(f.starts_with("$R,ok state 1 fault 00*"), "{f}");
+    }
+
+    #[test]
+    fn replay_reproduces_a_run() {
+        let mut b = Board::new(false);
+        let mut live = Vec::new();
+        for k in 0..20_000u32 {
+            match k {
+                100 => assert!(b.apply(ControlCommand::Start).is_ok()),
+                200 => assert!(b.apply(ControlCommand::SpeedRpm(300.0)).is_ok()),
+                300 => b.set_rate(50),
+                _ => {}
+            }
+            live.extend(b.step());
+        }
+        assert!(
+            (b.plant_speed_rpm() - 300.0).abs() < 20.0,
+            "{}",
+            b.plant_speed_rpm()
+        );
+        assert_eq!(replay(b.log(), 20_000), live);
+    }
+}
