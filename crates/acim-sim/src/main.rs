@@ -831,7 +831,7 @@ fn serve(args: &[String]) -> Result<(), String> {
         .map_err(|e| format!("serve: cannot start: {e}"))?;
     let pace = match opts.pace {
         acim_vboard::server::Pace::Max => "as fast as it runs".to_string(),
-        acim_vboard::server::Pace::Factor(f) if f == 1.0 => "real time".to_string(),
+        acim_vboard::server::Pace::Factor(1.0) => "real time".to_string(),
         acim_vboard::server::Pace::Factor(f) => format!("{f}x real time"),
     };
     println!(

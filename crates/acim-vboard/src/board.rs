@@ -352,11 +352,9 @@ pub fn replay(log: &[Logged], periods: u64) -> Vec<Sample> {
                 }
                 Event::Rate(n) => b.set_rate(n),
                 Event::Settings(s) => {
-                    if let Ok(d) = s.drive_config().map(Drive::new) {
-                        if let Ok(d) = d {
-                            if b.ctl.replace_drive(d).is_ok() {
-                                b.settings = s;
-                            }
+                    if let Ok(Ok(d)) = s.drive_config().map(Drive::new) {
+                        if b.ctl.replace_drive(d).is_ok() {
+                            b.settings = s;
                         }
                     }
                 }

@@ -265,7 +265,7 @@ fn simulate(opts: Options, in_rx: Receiver<Incoming>, shared: &Shared) {
     let pwm = PWM_FREQUENCY_HZ as f64;
     let mut t0 = Instant::now();
     let mut p0 = 0u64;
-    let mut logged = board.log().len();
+    let mut logged = 0;
     while !shared.stop.load(Ordering::Relaxed) {
         while let Ok(m) = in_rx.try_recv() {
             match m {
