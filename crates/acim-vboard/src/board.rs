@@ -330,10 +330,13 @@ impl Board {
                     one("ok saved (virtual board: kept in memory until it exits)".into())
                 }
             }
-            Command::Help => one(
+            // protocol 1: every reply ends with an `ok` or `err` line (the firmware's help
+            // line has none)
+            Command::Help => vec![
                 "commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | version | rate <periods>"
                     .into(),
-            ),
+                "ok".into(),
+            ],
         }
     }
 }
