@@ -222,8 +222,16 @@ fn readout(f: &mut Frame, area: Rect, app: &App) {
         let s: Vec<String> = pair.iter().map(|(n, v)| format!("{n} {v}")).collect();
         lines.push(Line::from(format!("  {}", s.join("   "))));
     }
+    // switched off, the drive stops updating its estimates: say so rather than let the
+    // last running values pass for live ones
+    let off = app.last().is_some_and(|r| r.t.state == 0 || r.t.state == 4);
+    let title = if off {
+        " Drive (off: estimates hold their last values) "
+    } else {
+        " Drive "
+    };
     f.render_widget(
-        Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(" Drive ")),
+        Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(title)),
         area,
     );
 }
