@@ -1,7 +1,7 @@
 //! `acim-monitor`: the live monitor (see the crate documentation and the README's "Watch
 //! it live").
 use acim_monitor::app::App;
-use acim_monitor::link::{Link, Source};
+use acim_monitor::link::{Event, Link, Source};
 use acim_monitor::record::Recorder;
 use acim_monitor::{script, ui};
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEventKind, KeyModifiers};
@@ -170,11 +170,13 @@ fn headless(o: &Opts) -> Result<(), String> {
             ));
         }
     }
-    // the replies to the last commands
+    // the replies to the last commands, but no telemetry beyond --until (a board running
+    // faster than real time has sent more meanwhile)
     let settle = Instant::now();
     while settle.elapsed() < Duration::from_millis(200) {
-        if let Some(ev) = link.event_timeout(App::POLL) {
-            app.on_event(ev);
+        match link.event_timeout(App::POLL) {
+            Some(Event::Telemetry(_) | Event::Extension(_)) | None => {}
+            Some(ev) => app.on_event(ev),
         }
     }
     if let Some(p) = &o.screenshot {

@@ -163,7 +163,7 @@ pub fn start(listener: TcpListener, opts: Options) -> io::Result<ServerHandle> {
         let shared = shared.clone();
         thread::Builder::new()
             .name("vboard-accept".into())
-            .spawn(move || accept(listener, in_tx, &shared))?
+            .spawn(move || accept(listener, in_tx, &shared, opts.pace))?
     };
     Ok(ServerHandle {
         addr,
@@ -172,13 +172,13 @@ pub fn start(listener: TcpListener, opts: Options) -> io::Result<ServerHandle> {
     })
 }
 
-fn accept(listener: TcpListener, in_tx: Sender<Incoming>, shared: &Shared) {
+fn accept(listener: TcpListener, in_tx: Sender<Incoming>, shared: &Shared, pace: Pace) {
     let mut next_id = 0u64;
     while !shared.stop.load(Ordering::Relaxed) {
         match listener.accept() {
             Ok((sock, _)) => {
                 next_id += 1;
-                if let Err(e) = connect(next_id, sock, &in_tx, shared) {
+                if let Err(e) = connect(next_id, sock, &in_tx, shared, pace) {
                     eprintln!("acim-vboard: connection refused: {e}");
                 }
             }
@@ -193,10 +193,22 @@ fn accept(listener: TcpListener, in_tx: Sender<Incoming>, shared: &Shared) {
     }
 }
 
-fn connect(id: u64, sock: TcpStream, in_tx: &Sender<Incoming>, shared: &Shared) -> io::Result<()> {
+fn connect(
+    id: u64,
+    sock: TcpStream,
+    in_tx: &Sender<Incoming>,
+    shared: &Shared,
+    pace: Pace,
+) -> io::Result<()> {
     sock.set_nonblocking(false)?;
     sock.set_nodelay(true)?;
-    let (tx, rx) = mpsc::sync_channel::<Vec<u8>>(4096);
+    // at a factor: room for bursts before frames are dropped; as fast as it runs: a short
+    // queue, so a reader's view stays close to the board's present
+    let depth = match pace {
+        Pace::Factor(_) => 4096,
+        Pace::Max => 16,
+    };
+    let (tx, rx) = mpsc::sync_channel::<Vec<u8>>(depth);
     let mut hello = protocol::hello_frame(PWM_FREQUENCY_HZ, crate::board::BOARD_NAME).to_vec();
     hello.extend_from_slice(format!("{READY_LINE}\r\n").as_bytes());
     let _ = tx.send(hello);
