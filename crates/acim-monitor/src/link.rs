@@ -279,10 +279,21 @@ fn serve(
     let mut line: Vec<u8> = Vec::new();
     let mut buf = [0u8; 4096];
     let connected = Instant::now();
+    let mut known = false; // the protocol version is known
+    let mut probe: Option<Instant> = None;
     let mut resumed = false;
     loop {
-        // the board says hello first; a board without it (protocol 0) gets plain lines
-        if !resumed && (framed || connected.elapsed() > Duration::from_millis(300)) {
+        // the board says hello when a host connects; a board that was already running
+        // when the cable went in (a UART has no connection) is asked `version`; a board
+        // without either speaks protocol 0 and gets plain lines
+        if !known && probe.is_none() && connected.elapsed() > Duration::from_millis(300) {
+            if let Err(e) = port.write_all(b"version\r\n").and_then(|()| port.flush()) {
+                return Some(format!("write: {e}"));
+            }
+            probe = Some(Instant::now());
+        }
+        let probing = !known && probe.is_some_and(|p| p.elapsed() < Duration::from_secs(1));
+        if !resumed && (known || (probe.is_some() && !probing)) {
             resumed = true;
             pending.splice(0..0, session.iter().cloned());
         }
@@ -328,20 +339,45 @@ fn serve(
         for &b in &buf[..n] {
             if b == b'\r' || b == b'\n' {
                 if !line.is_empty() {
-                    let ev = decode_line(&line);
+                    let mut ev = decode_line(&line);
+                    line.clear();
+                    if let (true, Event::Reply { text, error }) = (probing && !known, &ev) {
+                        match version_reply(text) {
+                            Some(h) => ev = h,
+                            // the answer of a board without `version`: not the user's
+                            None if *error => {
+                                known = true;
+                                continue;
+                            }
+                            None => {}
+                        }
+                    }
                     if let Event::Hello { version, .. } = ev {
+                        known = true;
                         framed = version >= 1;
                     }
                     if events.send(ev).is_err() {
                         return None;
                     }
-                    line.clear();
                 }
             } else if line.len() < 1024 {
                 line.push(b);
             }
         }
     }
+}
+
+/// The hello in a `version` reply: `ok protocol <v> board <name> pwm <Hz> Hz`.
+fn version_reply(text: &str) -> Option<Event> {
+    let rest = text.strip_prefix("ok protocol ")?;
+    let (v, rest) = rest.split_once(' ')?;
+    let rest = rest.strip_prefix("board ")?;
+    let (board, pwm) = rest.rsplit_once(" pwm ")?;
+    Some(Event::Hello {
+        version: v.parse().ok()?,
+        pwm_hz: pwm.strip_suffix(" Hz")?.parse().ok()?,
+        board: board.to_string(),
+    })
 }
 
 #[cfg(test)]
@@ -385,6 +421,20 @@ mod tests {
                 board: "b".into()
             }
         );
+    }
+
+    #[test]
+    fn version_replies_are_hellos() {
+        assert_eq!(
+            version_reply("ok protocol 1 board acim-firmware power stage pwm 5000 Hz"),
+            Some(Event::Hello {
+                version: 1,
+                pwm_hz: 5000,
+                board: "acim-firmware power stage".into()
+            })
+        );
+        assert_eq!(version_reply("err unknown command (try help)"), None);
+        assert_eq!(version_reply("ok protocol x board b pwm 5000 Hz"), None);
     }
 
     #[test]
