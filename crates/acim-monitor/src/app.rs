@@ -217,7 +217,8 @@ impl App {
         }
     }
 
-    fn flush_pending(&mut self) {
+    /// Takes in a `$T` still waiting for its `$X` (call before closing a recording).
+    pub fn flush_pending(&mut self) {
         if let Some(t) = self.pending.take() {
             self.push(t, None);
         }

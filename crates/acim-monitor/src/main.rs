@@ -9,12 +9,14 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-const USAGE: &str = "usage: acim-monitor (--tcp ADDR | --serial PATH [--baud N]) [--record FILE] [--window S]
+const USAGE: &str = "usage: acim-monitor (--tcp ADDR | --serial PATH [--baud N]) [--record FILE] [--window S] [--rate N]
                     [--headless --until S [--script FILE] [--screenshot FILE] [--size WxH] [--timeout S]]
   --tcp ADDR         the virtual board (acim-sim serve) or any TCP bridge, e.g. 127.0.0.1:7878
   --serial PATH      the board's UART, e.g. /dev/ttyACM0 (--baud, default 115200)
   --record FILE      record every sample to a CSV file (also :record FILE at run time)
   --window S         seconds of board time in the plots (default 10)
+  --rate N           ask the board for a sample every N control periods (protocol 1;
+                     the firmware's own rate is 500, 10 Hz; 50 gives 100 Hz)
   --headless         no terminal: run --script against the board until --until seconds
                      of board time after the first sample, then write --screenshot (the
                      screen as text, --size, default 160x48); fails after --timeout
@@ -25,6 +27,7 @@ struct Opts {
     source: Source,
     record: Option<PathBuf>,
     window: f64,
+    rate: Option<u16>,
     headless: bool,
     until: Option<f64>,
     script: Option<PathBuf>,
@@ -41,6 +44,7 @@ fn parse_args(args: &[String]) -> Result<Opts, String> {
         source: Source::Tcp(String::new()),
         record: None,
         window: 10.0,
+        rate: None,
         headless: false,
         until: None,
         script: None,
@@ -72,6 +76,21 @@ fn parse_args(args: &[String]) -> Result<Opts, String> {
             }
             "--record" => o.record = Some(PathBuf::from(val()?)),
             "--window" => o.window = num(&val()?, "--window")?,
+            "--rate" => {
+                let v = val()?;
+                let (lo, hi) = (
+                    acim_firmware_core::protocol::MIN_RATE_PERIODS,
+                    acim_firmware_core::protocol::MAX_RATE_PERIODS,
+                );
+                o.rate = Some(
+                    v.parse::<u16>()
+                        .ok()
+                        .filter(|n| (lo..=hi).contains(n))
+                        .ok_or_else(|| {
+                            format!("--rate takes {lo}..={hi} control periods, got {v:?}")
+                        })?,
+                );
+            }
             "--headless" => o.headless = true,
             "--until" => o.until = Some(num(&val()?, "--until")?),
             "--script" => o.script = Some(PathBuf::from(val()?)),
@@ -116,6 +135,9 @@ fn start(o: &Opts) -> Result<(App, Link), String> {
     }
     let link = Link::spawn(o.source.clone());
     // telemetry on (repeated after every reconnection) and the parameters for the panel
+    if let Some(n) = o.rate {
+        link.send(&format!("rate {n}"));
+    }
     link.send("stream on");
     link.send("get");
     Ok((app, link))
@@ -175,7 +197,8 @@ fn headless(o: &Opts) -> Result<(), String> {
     let settle = Instant::now();
     while settle.elapsed() < Duration::from_millis(200) {
         match link.event_timeout(App::POLL) {
-            Some(Event::Telemetry(_) | Event::Extension(_)) | None => {}
+            // a `$X` still completes the last sample before --until
+            Some(Event::Telemetry(_)) | None => {}
             Some(ev) => app.on_event(ev),
         }
     }
@@ -183,6 +206,7 @@ fn headless(o: &Opts) -> Result<(), String> {
         let text = ui::screenshot(&app, o.size.0, o.size.1);
         std::fs::write(p, text).map_err(|e| format!("cannot write {}: {e}", p.display()))?;
     }
+    app.flush_pending();
     let rows = app.recorder.as_ref().map_or(0, |r| r.rows());
     if let Some(r) = app.recorder.take() {
         r.finish().map_err(|e| format!("recording: {e}"))?;
@@ -267,6 +291,7 @@ fn interactive(o: &Opts) -> Result<(), String> {
         }
     };
     ratatui::restore();
+    app.flush_pending();
     if let Some(r) = app.recorder.take() {
         let rows = r.rows();
         let p = r.finish().map_err(|e| format!("recording: {e}"))?;
