@@ -356,6 +356,16 @@ fn serve(
                         known = true;
                         framed = version >= 1;
                     }
+                    // the board restarted behind a live cable (its hello or boot line
+                    // again): its telemetry is off, so the connection's settings go again
+                    let boot = match &ev {
+                        Event::Hello { .. } => true,
+                        Event::Reply { text, .. } => text.ends_with(" ready (help for commands)"),
+                        _ => false,
+                    };
+                    if boot && resumed {
+                        pending.extend(session.iter().cloned());
+                    }
                     if events.send(ev).is_err() {
                         return None;
                     }
