@@ -39,9 +39,10 @@ use {
     acim::math::RAD_S_TO_RPM,
     acim::Drive,
     acim_firmware_core::board::{self, POWER_STAGE},
-    acim_firmware_core::command::{Command, LineAssembler, ParseError},
+    acim_firmware_core::command::Command,
     acim_firmware_core::control::{self, CommandReply, ControlCommand, ControlLoop},
     acim_firmware_core::convert::Converter,
+    acim_firmware_core::protocol::{self, Parsed, Request, RequestAssembler},
     acim_firmware_core::settings::{self, LoadError, Settings, FIELDS},
     acim_firmware_core::telemetry::{self, TelemetrySample},
     control_isr::{IsrState, CMD_Q, TEL_Q},
@@ -303,9 +304,11 @@ fn main() -> ! {
     watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
     let mut last_beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
 
-    let mut line = LineAssembler::new();
-    let mut out: Deque<u8, OUT_LEN> = Deque::new();
+    let mut line = RequestAssembler::new();
+    let mut out = Uart::new();
     let mut stream = false;
+    const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
+    raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
     match load {
         Ok(()) => say(&mut out, b"settings loaded from flash\r\n"),
@@ -373,16 +376,16 @@ fn main() -> ! {
         // telemetry
         while let Some(s) = tel_c.dequeue() {
             defmt::info!("{}", s);
-            if stream && out.capacity() - out.len() >= telemetry::FRAME_CAPACITY {
-                say(&mut out, &telemetry::encode(&s));
+            if stream && out.q.capacity() - out.q.len() >= telemetry::FRAME_CAPACITY {
+                raw(&mut out, &telemetry::encode(&s));
             }
         }
 
         // UART out, non-blocking
-        while let Some(&b) = out.front() {
+        while let Some(&b) = out.q.front() {
             match tx.write(b) {
                 Ok(()) => {
-                    out.pop_front();
+                    out.q.pop_front();
                 }
                 Err(_) => break,
             }
@@ -395,11 +398,71 @@ fn main() -> ! {
 const OUT_LEN: usize = 1024;
 
 #[cfg(target_os = "none")]
+/// The UART's output: its buffer, and whether reply lines go out framed (`$R`/`$E`,
+/// protocol 1: the last command came as a `$C` frame) or plain.
+struct Uart {
+    q: Deque<u8, OUT_LEN>,
+    framed: bool,
+    /// The reply line being framed, after its `K,` (kind, comma).
+    line: heapless::Vec<u8, { protocol::LINE_CAPACITY - 8 }>,
+}
+
+#[cfg(target_os = "none")]
+impl Uart {
+    fn new() -> Self {
+        Self {
+            q: Deque::new(),
+            framed: false,
+            line: heapless::Vec::new(),
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
 #[inline(never)]
-fn say(out: &mut Deque<u8, OUT_LEN>, text: &[u8]) {
-    for &b in text {
-        if out.push_back(b).is_err() {
+fn push(q: &mut Deque<u8, OUT_LEN>, bytes: &[u8]) {
+    for &b in bytes {
+        if q.push_back(b).is_err() {
             break;
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+/// Bytes as they are (frames, telemetry).
+fn raw(out: &mut Uart, bytes: &[u8]) {
+    push(&mut out.q, bytes)
+}
+
+#[cfg(target_os = "none")]
+/// Reply text: as it is, or each `\r\n`-ended line as one `$R`/`$E` frame (an `err`
+/// line is an `$E`), its CRC computed in place.
+#[inline(never)]
+fn say(out: &mut Uart, text: &[u8]) {
+    let Uart { q, framed, line } = out;
+    if !*framed {
+        return push(q, text);
+    }
+    for &b in text {
+        if line.is_empty() {
+            let _ = line.extend_from_slice(b"R,");
+        }
+        match b {
+            b'\r' => {}
+            b'\n' => {
+                if line[2..].starts_with(b"err") {
+                    line[0] = b'E';
+                }
+                push(q, b"$");
+                push(q, line);
+                push(q, b"*");
+                push(q, &protocol::crc_hex(telemetry::crc16(line)));
+                push(q, b"\r\n");
+                line.clear();
+            }
+            _ => {
+                let _ = line.push(b);
+            }
         }
     }
 }
@@ -407,7 +470,7 @@ fn say(out: &mut Deque<u8, OUT_LEN>, text: &[u8]) {
 #[cfg(target_os = "none")]
 /// ` (field: rule)`
 #[inline(never)]
-fn say_setting_error(out: &mut Deque<u8, OUT_LEN>, e: &settings::SettingError) {
+fn say_setting_error(out: &mut Uart, e: &settings::SettingError) {
     say(out, b" (");
     say(out, e.field.as_bytes());
     say(out, b": ");
@@ -418,7 +481,7 @@ fn say_setting_error(out: &mut Deque<u8, OUT_LEN>, e: &settings::SettingError) {
 #[cfg(target_os = "none")]
 /// One `name = value unit` line.
 #[inline(never)]
-fn say_setting(out: &mut Deque<u8, OUT_LEN>, s: &Settings, i: usize) {
+fn say_setting(out: &mut Uart, s: &Settings, i: usize) {
     let Some(f) = FIELDS.get(i) else { return };
     let mut buf = [0u8; 24];
     say(out, f.name.as_bytes());
@@ -435,7 +498,7 @@ fn say_setting(out: &mut Deque<u8, OUT_LEN>, s: &Settings, i: usize) {
 /// What the command handler works on.
 struct Ctx<'a> {
     cmd_p: &'a mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
-    out: &'a mut Deque<u8, OUT_LEN>,
+    out: &'a mut Uart,
     stream: &'a mut bool,
     cfg: &'a mut acim::DriveConfig,
     settings: &'a mut Settings,
@@ -464,7 +527,7 @@ fn build_drive(
 /// Rebuilds the drive from `next` and swaps it in if Idle; replies naming `field`.
 #[inline(never)]
 fn apply_settings(ctx: &mut Ctx, next: Settings, field: &str) {
-    let refused = |out: &mut Deque<u8, OUT_LEN>| {
+    let refused = |out: &mut Uart| {
         say(out, b"err ");
         say(out, field.as_bytes());
         say(
@@ -496,11 +559,30 @@ fn apply_settings(ctx: &mut Ctx, next: Settings, field: &str) {
 
 #[cfg(target_os = "none")]
 #[inline(never)]
-fn handle(parsed: Result<Command, ParseError>, ctx: &mut Ctx) {
-    let c = match parsed {
-        Ok(c) => c,
+fn handle(parsed: Parsed, ctx: &mut Ctx) {
+    // replies (also the interrupt's, which come later) go out as the command came
+    ctx.out.framed = parsed.framed;
+    let c = match parsed.request {
+        Ok(Request::Command(c)) => c,
+        Ok(Request::Version) => {
+            say(ctx.out, b"ok protocol 1 board acim-firmware ");
+            say(ctx.out, MODE.as_bytes());
+            const _: () = assert!(
+                board::PWM_FREQUENCY_HZ == 5000,
+                "the version reply says 5000"
+            );
+            say(ctx.out, b" pwm 5000 Hz\r\n");
+            return;
+        }
+        Ok(Request::Rate(_)) => {
+            say(
+                ctx.out,
+                b"err rate: this firmware sends telemetry every 500 periods (10 Hz)\r\n",
+            );
+            return;
+        }
         Err(e) => {
-            defmt::warn!("command rejected: {}", e);
+            defmt::warn!("command rejected: {}", e.as_str());
             say(ctx.out, b"err ");
             say(ctx.out, e.as_str().as_bytes());
             say(ctx.out, b"\r\n");
@@ -632,7 +714,7 @@ fn handle(parsed: Result<Command, ParseError>, ctx: &mut Ctx) {
         Command::Help => {
             say(
                 ctx.out,
-                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage]\r\n",
+                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | version\r\nok\r\n",
             );
             None
         }

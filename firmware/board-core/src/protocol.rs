@@ -215,6 +215,67 @@ pub fn parse_line(line: &[u8]) -> Parsed {
     }
 }
 
+/// Collects received bytes into lines (terminated by `\r` or `\n`) and parses each,
+/// plain or framed, in a fixed buffer: the firmware's receive path. An oversized line is
+/// discarded up to its terminator and reported once as [`ParseError::TooLong`] (framed if
+/// it started with `$`).
+#[derive(Clone, Debug, Default)]
+pub struct RequestAssembler {
+    buf: Vec<u8, MAX_FRAMED_LINE>,
+    overflow: bool,
+    dollar: bool,
+}
+
+impl RequestAssembler {
+    /// An empty assembler.
+    pub const fn new() -> Self {
+        Self {
+            buf: Vec::new(),
+            overflow: false,
+            dollar: false,
+        }
+    }
+
+    /// Feeds one byte; returns the parsed line when it completes a non-empty one.
+    pub fn push(&mut self, byte: u8) -> Option<Parsed> {
+        if byte == b'\r' || byte == b'\n' {
+            let overflow = core::mem::replace(&mut self.overflow, false);
+            let dollar = core::mem::replace(&mut self.dollar, false);
+            let result = if overflow {
+                Some(Parsed {
+                    framed: dollar,
+                    request: Err(RequestError::Parse(ParseError::TooLong)),
+                })
+            } else {
+                match parse_line(&self.buf) {
+                    Parsed {
+                        request: Err(RequestError::Parse(ParseError::Empty)),
+                        ..
+                    } => None,
+                    p => Some(p),
+                }
+            };
+            self.buf.clear();
+            return result;
+        }
+        if self.buf.is_empty() && !self.overflow {
+            self.dollar = byte == b'$';
+        }
+        if !self.overflow && self.buf.push(byte).is_err() {
+            self.overflow = true;
+            self.buf.clear();
+        }
+        None
+    }
+
+    /// Drops a partial line (e.g. after a UART overrun).
+    pub fn reset(&mut self) {
+        self.buf.clear();
+        self.overflow = false;
+        self.dollar = false;
+    }
+}
+
 /// The frame a host sends for `command` (e.g. `$C,speed 500*HHHH\r\n`).
 pub fn command_frame(command: &str) -> Line {
     frame(b'C', command.as_bytes())
@@ -226,6 +287,38 @@ pub fn reply_frame(text: &[u8]) -> Line {
     let kind = if text.starts_with(b"err") { b'E' } else { b'R' };
     frame(kind, text)
 }
+
+/// The four upper-case hex digits of a CRC.
+pub const fn crc_hex(crc: u16) -> [u8; 4] {
+    [
+        HEX[(crc >> 12) as usize & 15],
+        HEX[(crc >> 8) as usize & 15],
+        HEX[(crc >> 4) as usize & 15],
+        HEX[crc as usize & 15],
+    ]
+}
+
+/// The firmware's hello frame, built at compile time (the same bytes as
+/// [`hello_frame`]`(5000, "acim-firmware")`).
+pub const FIRMWARE_HELLO: [u8; 30] = {
+    const BODY: &[u8; 22] = b"V,1,5000,acim-firmware";
+    let h = crc_hex(crc16(BODY));
+    let mut out = [0u8; 30];
+    out[0] = b'$';
+    let mut i = 0;
+    while i < BODY.len() {
+        out[1 + i] = BODY[i];
+        i += 1;
+    }
+    out[23] = b'*';
+    out[24] = h[0];
+    out[25] = h[1];
+    out[26] = h[2];
+    out[27] = h[3];
+    out[28] = b'\r';
+    out[29] = b'\n';
+    out
+};
 
 /// The hello frame: `$V,<version>,<pwm Hz>,<board>*HHHH\r\n`.
 pub fn hello_frame(pwm_hz: u32, board: &str) -> Line {
@@ -431,6 +524,44 @@ mod tests {
     }
 
     #[test]
+    fn the_assembler_parses_plain_and_framed_lines() {
+        let mut a = RequestAssembler::new();
+        let mut got = heapless::Vec::<Parsed, 8>::new();
+        let f = command_frame("speed -1.5");
+        for &b in b"start\r\n\r\n".iter().chain(f.iter()).chain(b"bogus\n") {
+            if let Some(p) = a.push(b) {
+                got.push(p).unwrap();
+            }
+        }
+        assert_eq!(got.len(), 3);
+        assert_eq!(got[0].request, Ok(Request::Command(Command::Start)));
+        assert!(!got[0].framed);
+        assert_eq!(got[1].request, Ok(Request::Command(Command::Speed(-1.5))));
+        assert!(got[1].framed);
+        assert_eq!(
+            got[2].request,
+            Err(RequestError::Parse(ParseError::UnknownCommand))
+        );
+        // oversized: one error, framed if it started with `$`, then the next line parses
+        for &b in [b'$'; 100].iter() {
+            assert_eq!(a.push(b), None);
+        }
+        let p = a.push(b'\n').unwrap();
+        assert!(p.framed);
+        assert_eq!(p.request, Err(RequestError::Parse(ParseError::TooLong)));
+        for &b in b"stop" {
+            a.push(b);
+        }
+        assert_eq!(
+            a.push(b'\r').map(|p| p.request),
+            Some(Ok(Request::Command(Command::Stop)))
+        );
+        // every setting line fits framed
+        let long = command_frame("set stator_inductance -123456.123");
+        assert!(long.len() - 2 <= MAX_FRAMED_LINE);
+    }
+
+    #[test]
     fn version_and_rate() {
         assert_eq!(parse_plain(b"version"), Ok(Request::Version));
         assert_eq!(parse_plain(b"rate 50"), Ok(Request::Rate(50)));
@@ -449,6 +580,15 @@ mod tests {
         );
         assert_eq!(parse_plain(b"bogus"), Err(ParseError::UnknownCommand));
         assert_eq!(parse_plain(b"stop"), Ok(Request::Command(Command::Stop)));
+    }
+
+    #[test]
+    fn the_firmware_hello_is_the_hello_frame() {
+        assert_eq!(
+            FIRMWARE_HELLO.as_slice(),
+            hello_frame(5000, "acim-firmware").as_slice()
+        );
+        assert_eq!(crc_hex(0x29B1), *b"29B1");
     }
 
     #[test]

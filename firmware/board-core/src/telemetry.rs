@@ -113,18 +113,23 @@ fn push_int(out: &mut Frame, v: i64) {
 
 const HEX: &[u8; 16] = b"0123456789ABCDEF";
 
-/// CRC-16/CCITT-FALSE of `data` (bitwise: 2 of these per 10 Hz frame cost nothing).
-pub fn crc16(data: &[u8]) -> u16 {
+/// CRC-16/CCITT-FALSE of `data` (bitwise: 2 of these per 10 Hz frame cost nothing; a
+/// `const fn`, so fixed frames such as the protocol's hello are checked at compile time).
+pub const fn crc16(data: &[u8]) -> u16 {
     let mut crc: u16 = 0xFFFF;
-    for &b in data {
-        crc ^= (b as u16) << 8;
-        for _ in 0..8 {
+    let mut i = 0;
+    while i < data.len() {
+        crc ^= (data[i] as u16) << 8;
+        let mut bit = 0;
+        while bit < 8 {
             crc = if crc & 0x8000 != 0 {
                 (crc << 1) ^ 0x1021
             } else {
                 crc << 1
             };
+            bit += 1;
         }
+        i += 1;
     }
     crc
 }
