@@ -111,6 +111,43 @@ class Boot(unittest.TestCase):
         self.assertTrue(calibrated and start_seen)
 
 
+def crc16(data):
+    """CRC-16/CCITT-FALSE (docs/protocol.md)."""
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021 if crc & 0x8000 else crc << 1) & 0xFFFF
+    return crc
+
+
+def framed(kind, payload):
+    body = f"{kind},{payload}".encode()
+    return f"${kind},{payload}*{crc16(body):04X}"
+
+
+class Protocol(unittest.TestCase):
+    def test_protocol_1_hello_version_and_crc_framed_commands(self):
+        """Issue 18: the hello at boot, `version`, and $C frames answered with $R/$E; a
+        corrupted frame of a valid command is refused and not executed."""
+        self.assertEqual(crc16(b"123456789"), 0x29B1)
+        m = booted()
+        self.assertIn(framed("V", "1,5000,acim-firmware") + "\r\n", m.output())
+        self.assertIn("ok protocol 1 board acim-firmware power stage pwm 5000 Hz",
+                      command(m, "version"))
+        self.assertIn(framed("R", "ok state 0 fault 00"), command(m, framed("C", "status")))
+        bad = framed("C", "start").replace("start", "stArt")
+        self.assertIn(framed("E", "err bad frame: checksum"), command(m, bad, 20))
+        self.assertFalse(m.moe(), "a corrupted start must not start")
+        self.assertEqual(state_fault(m), (0, 0))
+        self.assertIn(framed("E", "err rate: this firmware sends telemetry every 500 periods (10 Hz)"),
+                      command(m, framed("C", "rate 50")))
+        self.assertIn(framed("R", "ok"), command(m, framed("C", "start"), 40))
+        self.assertTrue(m.moe())
+        # plain lines again get plain replies
+        self.assertIn("ok state ", command(m, "status"))
+
+
 class Protection(unittest.TestCase):
     def test_a_break_at_any_instant_stays_effective(self):
         """D3: pwm_write re-set MOE in the same period as a break during the step; a

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """acim-monitor against the firmware itself: the self-test release ELF on the emulated
 MCU (serve.py) with its UART on a TCP port, the monitor headless through speed 300 ->
-start -> a refused setting -> an unknown command. The firmware speaks protocol 0 (no
-hello, plain commands, $T frames only): the monitor must fall back to it, record the
-run, and show the firmware's own error replies.
+start -> a refused setting -> an unknown command. The monitor connects after the boot's
+hello: it must ask `version`, learn protocol 1 and send its commands as $C frames, record
+the run, and show the firmware's own (framed) error replies.
 
     python3 firmware/fil/test_monitor.py <acim-monitor binary>    (about 15 s)
 """
@@ -40,7 +40,7 @@ rows = [l.split(",") for l in open(csv).read().splitlines()[1:]] if r.returncode
 text = open(screen).read() if r.returncode == 0 else ""
 checks = {
     "the monitor ran to the end": r.returncode == 0,
-    "protocol 0 recognised (no hello)": "protocol 0 (no hello)" in text,
+    "protocol 1 learned from the version reply": "| protocol 1 |" in text,
     "every frame decoded": " 0 bad frames" in r.stdout,
     "the firmware reached 300 rpm on its motor model": any(
         x[3] == "2" and abs(float(x[7]) - 300) < 5 and abs(float(x[6]) - 300) < 5 for x in rows),
