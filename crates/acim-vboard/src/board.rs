@@ -6,6 +6,7 @@ use acim::frames::FastSinCos;
 use acim::{Drive, DriveState};
 use acim_firmware_core::board::{self, POWER_STAGE, PWM_FREQUENCY_HZ, TELEMETRY_DECIMATION};
 use acim_firmware_core::command::{Command, ParseError};
+use acim_firmware_core::commission::{self, Commissioning, NameplateArgs};
 use acim_firmware_core::control::{refusal_text, ControlCommand, ControlLoop};
 use acim_firmware_core::convert::Converter;
 use acim_firmware_core::protocol::{self, Extension, Request, RequestError};
@@ -30,6 +31,9 @@ pub enum Event {
     Rate(u16),
     /// A drive rebuilt from new settings.
     Settings(Settings),
+    /// Commissioning finished and its settings replaced the drive's (`None`: it failed
+    /// and nothing changed). [`replay`] re-derives it from the commission command.
+    Commissioned(Option<Settings>),
 }
 
 /// An [`Event`] and the period it was applied before.
@@ -69,6 +73,12 @@ pub struct Board {
     period: u64,
     timed: bool,
     log: Vec<Logged>,
+    /// The nameplate of the commissioning under way or last run.
+    nameplate: Option<NameplateArgs>,
+    /// The reply lines of the last finished commissioning.
+    commissioned: Option<Vec<String>>,
+    /// The period the commissioning under way started at.
+    commission_started: Option<u64>,
 }
 
 impl Default for Board {
@@ -100,6 +110,9 @@ impl Board {
             period: 0,
             timed,
             log: Vec::new(),
+            nameplate: None,
+            commissioned: None,
+            commission_started: None,
         }
     }
 
@@ -160,6 +173,20 @@ impl Board {
             (t.elapsed().as_nanos() as f64 * board::SYSCLK_HZ as f64 * 1e-9) as u32
         });
         self.stage.run_period(out);
+        if let Some(c) = self.ctl.take_finished_commissioning() {
+            self.finish_commissioning(&c);
+        } else if self.commission_started.is_some() && self.ctl.commissioning().is_none() {
+            // abandoned: a stop, or a trip (the drive's fault says which)
+            self.commission_started = None;
+            self.commissioned = Some(vec![if self.ctl.state() == DriveState::Fault {
+                format!(
+                    "err commissioning abandoned: the drive tripped (fault {}); settings unchanged",
+                    protocol::fault_name(self.ctl.fault_code())
+                )
+            } else {
+                "ok commissioning aborted by stop; settings unchanged".into()
+            }]);
+        }
         let k = self.period;
         self.period += 1;
         let t = self.ctl.finish_period(cycles, self.stage.speed_rpm())?;
@@ -204,6 +231,111 @@ impl Board {
             protocol::reply_frame(t.as_bytes()).to_vec()
         } else {
             format!("{t}\r\n").into_bytes()
+        }
+    }
+
+    /// The main loop's half of commissioning: the fits, the settings, the new drive.
+    fn finish_commissioning(&mut self, c: &Commissioning) {
+        let t = self.commission_started.take().map_or(0.0, |k| {
+            (self.period + 1 - k) as f32 / PWM_FREQUENCY_HZ as f32
+        });
+        let fail = |why: &str| {
+            vec![format!(
+                "err commissioning failed: {why}; settings unchanged"
+            )]
+        };
+        let rated = self
+            .nameplate
+            .and_then(|a| commission::nameplate(&a).rated().ok());
+        let (lines, applied) = match (c.identify(), rated) {
+            (Err(e), _) => {
+                let mut v = fail(commission::error_text(e));
+                if let Some(d) = commission::error_detail(e) {
+                    v[0] = format!(
+                        "err commissioning failed: {} ({d}); settings unchanged",
+                        commission::error_text(e)
+                    );
+                }
+                (v, None)
+            }
+            (Ok(_), None) => (fail("no nameplate"), None),
+            (Ok(id), Some(rated)) => {
+                match commission::settings_from(&id, &rated, &self.settings).and_then(|next| {
+                    Drive::new(next.drive_config()?)
+                        .map(|d| (next, d))
+                        .map_err(settings::SettingError::from)
+                }) {
+                    Err(e) => (
+                        fail(&format!(
+                            "the identified model is refused ({}: {})",
+                            e.field, e.rule
+                        )),
+                        None,
+                    ),
+                    Ok((next, drive)) => match self.ctl.replace_drive(drive) {
+                        Err(_) => (fail("the drive left Idle"), None),
+                        Ok(()) => {
+                            self.settings = next;
+                            let j = id.inertia.map_or("not resolved (kept)".to_string(), |j| {
+                                format!("{j:.5} kg m^2")
+                            });
+                            (
+                                vec![
+                                    format!(
+                                        "identified in {t:.1} s: Rs {:.3} ohm, R_R {:.3} ohm, L_sigma {:.2} mH, L_M {:.1} mH (inverse-Gamma)",
+                                        id.stator_resistance,
+                                        id.rotor_resistance,
+                                        id.leakage_inductance * 1e3,
+                                        id.magnetizing_inductance * 1e3
+                                    ),
+                                    format!(
+                                        "rated flux current {:.3} A, dead time {:.2} us, J {j}, friction {:.5} N m s/rad",
+                                        id.rated_flux_current,
+                                        id.dead_time * 1e6,
+                                        id.viscous_friction
+                                    ),
+                                    "ok commissioned: settings applied (get lists them; save to keep them)".into(),
+                                ],
+                                Some(next),
+                            )
+                        }
+                    },
+                }
+            }
+        };
+        self.log.push(Logged {
+            period: self.period,
+            event: Event::Commissioned(applied),
+        });
+        self.commissioned = Some(lines);
+    }
+
+    fn commission(&mut self, args: Option<NameplateArgs>) -> Vec<String> {
+        let Some(args) = args else {
+            if let Some(c) = self.ctl.commissioning() {
+                return vec![format!(
+                    "ok commissioning: {}, {:.1} s in this stage",
+                    commission::stage_name(c.stage()),
+                    c.stage_time()
+                )];
+            }
+            return self.commissioned.clone().unwrap_or_else(|| {
+                vec!["ok no commissioning yet (commission <P W> <V> <A> <Hz> <rpm>)".into()]
+            });
+        };
+        if let Err(e) = commission::check(&args, self.ctl.inputs().dc_bus, &self.settings) {
+            return vec![format!("err ({}: {})", e.field, e.rule)];
+        }
+        match self.apply(ControlCommand::Commission(args)) {
+            Ok(()) => {
+                self.nameplate = Some(args);
+                self.commissioned = None;
+                self.commission_started = Some(self.period);
+                vec!["ok commissioning started: about 20 s, the rotor turns in the last test (commission: progress; stop: abort)".into()]
+            }
+            Err(e) => vec![String::from_utf8_lossy(refusal_text(e))
+                .trim_end()
+                .to_string()],
         }
     }
 
@@ -276,6 +408,7 @@ impl Board {
             Command::Speed(rpm) => one(self.control(ControlCommand::SpeedRpm(rpm))),
             Command::ResetFault => one(self.control(ControlCommand::ResetFault)),
             Command::Load(nm) => one(self.control(ControlCommand::PlantLoad(nm))),
+            Command::Commission(args) => self.commission(args),
             Command::Stream(on) => {
                 *stream = on;
                 one("ok".into())
@@ -296,7 +429,7 @@ impl Board {
             }
             Command::Status => one(format!(
                 "ok state {} fault {:02}",
-                self.ctl.state().code().min(9),
+                self.ctl.state_code().min(9),
                 self.ctl.fault_code() % 100
             )),
             Command::Set(i, v) => match (FIELDS.get(i), self.settings.set(i, v)) {
@@ -333,7 +466,7 @@ impl Board {
             // protocol 1: every reply ends with an `ok` or `err` line (the firmware's help
             // line has none)
             Command::Help => vec![
-                "commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | version | rate <periods>"
+                "commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | commission [<P W> <V> <A> <Hz> <rpm>] | version | rate <periods>"
                     .into(),
                 "ok".into(),
             ],
@@ -351,8 +484,14 @@ pub fn replay(log: &[Logged], periods: u64) -> Vec<Sample> {
         while let Some(l) = next.next_if(|l| l.period <= b.period()) {
             match l.event {
                 Event::Control(c) => {
-                    let _ = b.apply(c);
+                    let accepted = b.apply(c).is_ok();
+                    if let (ControlCommand::Commission(args), true) = (c, accepted) {
+                        b.nameplate = Some(args);
+                        b.commission_started = Some(b.period);
+                    }
                 }
+                // re-derived by the replayed board itself
+                Event::Commissioned(_) => {}
                 Event::Rate(n) => b.set_rate(n),
                 Event::Settings(s) => {
                     if let Ok(Ok(d)) = s.drive_config().map(Drive::new) {

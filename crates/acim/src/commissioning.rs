@@ -314,7 +314,10 @@ impl Commissioning {
                 return PwmOutput::OFF;
             }
             Stage::DcStep(k) => {
-                let i_ref = DC_LEVELS[k as usize] * i_r;
+                // k < DC_LEVELS.len() by construction; `get` keeps a panic path out of the
+                // interrupt (an impossible k ends the steps)
+                let level = DC_LEVELS.get(k as usize).copied().unwrap_or(0.0);
+                let i_ref = level * i_r;
                 let v = self.regulate(i_ref, i, bus);
                 // the current must follow: 50 ms after the step, at least half of it
                 if self.steps == self.steps_of(0.05) && i.alpha < 0.5 * i_ref {
@@ -330,7 +333,9 @@ impl Commissioning {
                 }
                 if self.steps >= self.steps_of(DC_STEP_TIME) {
                     let n = (self.steps - measure_from) as f32;
-                    self.dc[k as usize] = (self.acc.0 / n, self.acc.1 / n);
+                    if let Some(d) = self.dc.get_mut(k as usize) {
+                        *d = (self.acc.0 / n, self.acc.1 / n);
+                    }
                     if (k as usize) + 1 < DC_LEVELS.len() {
                         self.next(Stage::DcStep(k + 1));
                     } else {

@@ -14,6 +14,9 @@
 //! get [<name>]     print one setting, or all of them
 //! save             write the settings to the reserved flash page (Idle only)
 //! defaults [low-voltage]  this build's default settings (or the 24-60 V bring-up profile), Idle only, not saved
+//! commission <P W> <V> <A> <Hz> <rpm>  self-commissioning from the nameplate (rated power, line
+//!                  voltage rms, line current rms, frequency, speed), Idle only; the rotor turns
+//! commission       its progress, or its result
 //! help             list the commands
 //! ```
 //!
@@ -61,6 +64,9 @@ pub enum Command {
     Save,
     /// Load the default settings (`true`: the low-voltage bring-up profile).
     Defaults(bool),
+    /// Start self-commissioning with this nameplate (`Some`), or report its progress or
+    /// result (`None`); see [`crate::commission`].
+    Commission(Option<crate::commission::NameplateArgs>),
     /// List the commands.
     Help,
 }
@@ -127,6 +133,9 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
         .split(|&b| b == b' ' || b == b'\t')
         .filter(|w| !w.is_empty());
     let cmd = words.next().ok_or(ParseError::Empty)?;
+    if cmd == b"commission" {
+        return commission(words);
+    }
     let arg = words.next();
     let arg2 = words.next();
     if words.next().is_some() || (arg2.is_some() && cmd != b"set") {
@@ -184,6 +193,27 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
         },
         _ => Err(ParseError::UnknownCommand),
     }
+}
+
+/// `commission` and its five positive nameplate numbers, or none.
+fn commission<'a>(mut words: impl Iterator<Item = &'a [u8]>) -> Result<Command, ParseError> {
+    let Some(first) = words.next() else {
+        return Ok(Command::Commission(None));
+    };
+    let mut args = [0.0f32; 5];
+    let mut word = Some(first);
+    for a in args.iter_mut() {
+        let w = word.ok_or(ParseError::MissingArgument)?;
+        *a = parse_decimal(w).ok_or(ParseError::BadNumber)?;
+        if *a <= 0.0 {
+            return Err(ParseError::OutOfRange);
+        }
+        word = words.next();
+    }
+    if word.is_some() {
+        return Err(ParseError::UnexpectedArgument);
+    }
+    Ok(Command::Commission(Some(args)))
 }
 
 /// A bounded decimal: optional sign, 1 to 5 integer digits, optionally `.` and 1 to 3
@@ -428,6 +458,35 @@ mod tests {
         assert_eq!(
             feed(&mut a, b"ed 1\n").as_slice(),
             &[Err(ParseError::UnknownCommand)]
+        );
+    }
+
+    #[test]
+    fn commission_takes_five_positive_numbers_or_none() {
+        assert_eq!(parse(b"commission"), Ok(Command::Commission(None)));
+        assert_eq!(
+            parse(b"commission 750 230 3.3 50 1500"),
+            Ok(Command::Commission(Some([750.0, 230.0, 3.3, 50.0, 1500.0])))
+        );
+        assert_eq!(
+            parse(b"commission 750 230 3.3 50"),
+            Err(ParseError::MissingArgument)
+        );
+        assert_eq!(
+            parse(b"commission 750 230 3.3 50 1500 2"),
+            Err(ParseError::UnexpectedArgument)
+        );
+        assert_eq!(
+            parse(b"commission 750 230 -3.3 50 1500"),
+            Err(ParseError::OutOfRange)
+        );
+        assert_eq!(
+            parse(b"commission 750 230 x 50 1500"),
+            Err(ParseError::BadNumber)
+        );
+        assert_eq!(
+            parse(b"commission 750 230 3.3 0 1500"),
+            Err(ParseError::OutOfRange)
         );
     }
 

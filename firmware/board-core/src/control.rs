@@ -5,6 +5,7 @@
 //! the CORDIC on the target, with [`acim::frames::FastSinCos`] in host tests, and against
 //! the motor model in the self-test ([`crate::sim`]).
 
+use crate::commission::{self, Commissioning, NameplateArgs};
 use crate::convert::{Converter, RawSample};
 use crate::telemetry::TelemetrySample;
 use crate::timing::{CycleStats, CycleSummary, Decimator};
@@ -93,7 +94,13 @@ pub enum ControlCommand {
     ResetFault,
     /// Self-test: the motor model's load torque, N m (the drive itself is unaffected).
     PlantLoad(f32),
+    /// Idle -> self-commissioning with this nameplate (checked by the main loop with
+    /// [`commission::check`] first); `Stop` aborts it.
+    Commission(NameplateArgs),
 }
+
+/// The telemetry state code while commissioning runs (the drive's own codes are 0..=4).
+pub const STATE_COMMISSIONING: u8 = 5;
 
 /// The interrupt's reply to a [`ControlCommand`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,6 +137,7 @@ pub struct ControlLoop<S: SinCos> {
     seq: u32,
     fw_fault: Option<FirmwareFault>,
     inputs: DriveInputs,
+    commissioning: Option<Commissioning>,
 }
 
 impl<S: SinCos> ControlLoop<S> {
@@ -144,6 +152,7 @@ impl<S: SinCos> ControlLoop<S> {
             seq: 0,
             fw_fault: None,
             inputs: DriveInputs::default(),
+            commissioning: None,
         }
     }
 
@@ -156,12 +165,18 @@ impl<S: SinCos> ControlLoop<S> {
         if c.saturated {
             return self.trip(FirmwareFault::AdcSaturated);
         }
+        // self-commissioning drives the switches instead of the (idle) drive; it switches
+        // off by itself when done or failed, and the main loop takes its result
+        if let Some(com) = self.commissioning.as_mut() {
+            return com.step(&c.inputs);
+        }
         self.drive.step(&c.inputs)
     }
 
-    /// Forces a fault; the first cause is kept.
+    /// Forces a fault; the first cause is kept. A running commissioning is abandoned.
     #[inline]
     pub fn trip(&mut self, fault: FirmwareFault) -> PwmOutput {
+        self.commissioning = None;
         if self.drive.fault().is_none() {
             self.fw_fault = Some(fault);
         }
@@ -170,10 +185,20 @@ impl<S: SinCos> ControlLoop<S> {
 
     /// Applies a command from the main loop.
     pub fn apply(&mut self, cmd: ControlCommand) -> CommandReply {
+        let busy = self.commissioning.is_some();
         let result = match cmd {
+            ControlCommand::Start
+            | ControlCommand::StartOpenLoop
+            | ControlCommand::Commission(_)
+                if busy =>
+            {
+                Err(CommandError::WrongState(self.drive.state()))
+            }
             ControlCommand::Start => self.drive.start(),
             ControlCommand::StartOpenLoop => self.drive.start_open_loop(),
+            ControlCommand::Commission(args) => self.start_commissioning(&args),
             ControlCommand::Stop => {
+                self.commissioning = None;
                 self.drive.stop();
                 Ok(())
             }
@@ -194,12 +219,43 @@ impl<S: SinCos> ControlLoop<S> {
         }
     }
 
-    /// Swaps in a drive rebuilt from new settings ([`crate::settings`]), only while Idle:
-    /// otherwise the state that refused it (the machine model of a running drive never
-    /// changes under it). The new drive starts Idle, with fresh estimator state.
-    pub fn replace_drive(&mut self, drive: Drive<S>) -> Result<(), DriveState> {
+    fn start_commissioning(&mut self, args: &NameplateArgs) -> Result<(), CommandError> {
         let state = self.drive.state();
         if state != DriveState::Idle {
+            return Err(CommandError::WrongState(state));
+        }
+        let board = commission::board(self.inputs.dc_bus);
+        match Commissioning::new(&commission::nameplate(args), &board) {
+            Ok(c) => {
+                self.commissioning = Some(c);
+                Ok(())
+            }
+            Err(_) => Err(CommandError::OutOfRange),
+        }
+    }
+
+    /// The running (or finished, not yet taken) commissioning.
+    pub fn commissioning(&self) -> Option<&Commissioning> {
+        self.commissioning.as_ref()
+    }
+
+    /// Takes a commissioning that has finished (done or failed; the switches are already
+    /// off) for its fits in the main loop; `None` while it runs or when there is none.
+    pub fn take_finished_commissioning(&mut self) -> Option<Commissioning> {
+        use acim::commissioning::Stage;
+        match self.commissioning.as_ref().map(|c| c.stage()) {
+            Some(Stage::Done | Stage::Failed(_)) => self.commissioning.take(),
+            _ => None,
+        }
+    }
+
+    /// Swaps in a drive rebuilt from new settings ([`crate::settings`]), only while Idle
+    /// and not commissioning: otherwise the state that refused it (the machine model of a
+    /// running drive never changes under it). The new drive starts Idle, with fresh
+    /// estimator state.
+    pub fn replace_drive(&mut self, drive: Drive<S>) -> Result<(), DriveState> {
+        let state = self.drive.state();
+        if state != DriveState::Idle || self.commissioning.is_some() {
             return Err(state);
         }
         self.drive = drive;
@@ -222,7 +278,7 @@ impl<S: SinCos> ControlLoop<S> {
         self.seq = self.seq.wrapping_add(1);
         Some(TelemetrySample {
             seq: self.seq,
-            state: self.drive.state().code(),
+            state: self.state_code(),
             fault: self.fault_code(),
             speed_ref_rpm: t.speed_reference * RAD_S_TO_RPM,
             speed_est_rpm: t.speed_estimate * RAD_S_TO_RPM,
@@ -245,6 +301,30 @@ impl<S: SinCos> ControlLoop<S> {
     pub fn set_decimation(&mut self, every: u16) {
         self.decim = Decimator::new(every);
         self.stats = CycleStats::new();
+    }
+
+    /// Whether the switches should be on: the drive magnetizing, running or in V/f, or
+    /// a commissioning still running (the interrupt trips if MOE is found cleared).
+    #[inline]
+    pub fn switching(&self) -> bool {
+        use acim::commissioning::Stage;
+        matches!(
+            self.drive.state(),
+            DriveState::Magnetizing | DriveState::Running | DriveState::OpenLoop
+        ) || self
+            .commissioning
+            .as_ref()
+            .is_some_and(|c| !matches!(c.stage(), Stage::Done | Stage::Failed(_)))
+    }
+
+    /// The published state code: the drive's ([`DriveState::code`]), or
+    /// [`STATE_COMMISSIONING`].
+    pub fn state_code(&self) -> u8 {
+        if self.commissioning.is_some() {
+            STATE_COMMISSIONING
+        } else {
+            self.drive.state().code()
+        }
     }
 
     /// The published fault code.
@@ -404,6 +484,54 @@ mod tests {
             l.step(&raw_at_bus(&conv, 325.0));
         }
         assert!(l.apply(ControlCommand::Start).result.is_ok());
+    }
+
+    /// Commissioning takes the switches from the idle drive, refuses a start and a
+    /// settings swap while it runs, and ends on stop or on any trip with the switches off.
+    #[test]
+    fn commissioning_owns_the_switches_until_stopped_or_tripped() {
+        let conv = Converter::new(&POWER_STAGE);
+        let paper = [750.0, 230.0, 3.3, 50.0, 1500.0];
+        let mut l = looped();
+        l.step(&raw_at_bus(&conv, 325.0));
+        assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
+        assert!(l.switching());
+        assert_eq!(l.state_code(), STATE_COMMISSIONING);
+        assert!(l.apply(ControlCommand::Start).result.is_err());
+        assert!(l.apply(ControlCommand::Commission(paper)).result.is_err());
+        let fresh = Drive::new(drive_config()).unwrap();
+        assert!(l.replace_drive(fresh).is_err());
+        assert!(l.take_finished_commissioning().is_none(), "still running");
+        // offsets first (switches off), then the DC steps switch
+        let mut on = false;
+        for _ in 0..2000 {
+            on |= l.step(&raw_at_bus(&conv, 325.0)).enabled;
+        }
+        // no current follows the zero-current raw samples: motor not connected
+        assert!(on);
+        let c = l.take_finished_commissioning().expect("failed: finished");
+        assert_eq!(
+            c.stage(),
+            acim::commissioning::Stage::Failed(
+                acim::commissioning::CommissioningError::MotorNotConnected
+            )
+        );
+        assert!(!l.switching());
+        assert_eq!(l.state_code(), 0);
+        // stop aborts
+        assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
+        assert!(l.apply(ControlCommand::Stop).result.is_ok());
+        assert!(l.commissioning().is_none() && !l.switching());
+        // a trip abandons it, the fault is the drive's
+        assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
+        l.step(&raw_at_bus(&conv, 325.0));
+        let mut raw = raw_at_bus(&conv, 325.0);
+        raw.currents[0] = 0;
+        assert!(!l.step(&raw).enabled);
+        assert!(l.commissioning().is_none());
+        assert_eq!(l.state(), DriveState::Fault);
+        assert_eq!(l.state_code(), 4);
+        assert!(l.apply(ControlCommand::Commission(paper)).result.is_err());
     }
 
     #[test]

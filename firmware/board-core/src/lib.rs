@@ -10,6 +10,8 @@
 //! - [`convert`]: ADC counts to amperes and volts, offset calibration, duty to compare
 //!   counts: the one place where raw numbers become SI units;
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
+//! - [`commission`]: the `commission` command (self-commissioning from a typed nameplate)
+//!   and how its result becomes the settings;
 //! - [`telemetry`]: the decimated telemetry sample and its text framing;
 //! - [`protocol`]: protocol version 1 (framed commands and replies, hello, rate, the
 //!   telemetry extension), shared with the host tools (docs/protocol.md);
@@ -32,6 +34,7 @@
 pub mod board;
 pub mod clock;
 pub mod command;
+pub mod commission;
 pub mod control;
 pub mod convert;
 pub mod protocol;

@@ -438,6 +438,7 @@ pub fn state_name(code: u8) -> &'static str {
         2 => "Running",
         3 => "OpenLoop",
         4 => "Fault",
+        5 => "Commissioning",
         _ => "?",
     }
 }

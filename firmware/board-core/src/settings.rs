@@ -199,6 +199,14 @@ impl Settings {
         }
     }
 
+    /// Values in [`FIELDS`] order, validated as a whole (commissioning's result,
+    /// [`crate::commission::settings_from`]).
+    pub(crate) fn from_values(values: [f32; FIELD_COUNT]) -> Result<Settings, SettingError> {
+        let s = Settings { values };
+        s.drive_config()?;
+        Ok(s)
+    }
+
     /// The value of field `i` (0 for an index beyond [`FIELD_COUNT`]).
     pub fn get(&self, i: usize) -> f32 {
         self.values.get(i).copied().unwrap_or(0.0)

@@ -15,7 +15,7 @@
 use crate::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
 use crate::convert::RawSample;
 use acim::frames::SinCos;
-use acim::{DriveState, PwmOutput};
+use acim::PwmOutput;
 
 /// What the period sequence needs from the power stage's registers.
 pub trait PowerStageIo {
@@ -53,7 +53,9 @@ pub fn apply_command<S: SinCos, P: PowerStageIo>(
     if reply.result.is_ok() {
         match cmd {
             ControlCommand::ResetFault => io.clear_break_flags(),
-            ControlCommand::Start | ControlCommand::StartOpenLoop => {
+            ControlCommand::Start
+            | ControlCommand::StartOpenLoop
+            | ControlCommand::Commission(_) => {
                 if io.break_flag() {
                     ctl.trip(FirmwareFault::HardwareBreak);
                     io.switch_off();
@@ -78,10 +80,7 @@ pub fn control_period<S: SinCos, P: PowerStageIo>(
     let (adc1_done, adc2_done) = io.conversions_done();
     let raw = io.read();
     io.acknowledge();
-    let switching = matches!(
-        ctl.state(),
-        DriveState::Magnetizing | DriveState::Running | DriveState::OpenLoop
-    );
+    let switching = ctl.switching();
     let out = if io.break_flag() || (switching && !io.outputs_enabled()) {
         ctl.trip(FirmwareFault::HardwareBreak)
     } else if !(adc1_done && adc2_done) {
@@ -114,7 +113,7 @@ mod tests {
     use crate::board::{drive_config, POWER_STAGE};
     use crate::control::ControlLoop;
     use crate::convert::Converter;
-    use acim::Drive;
+    use acim::{Drive, DriveState};
 
     /// A register model of TIM1 and ADC1/2 as the reference manual describes them:
     /// acknowledging clears both end flags, a break clears MOE and sets BIF, MOE can be
