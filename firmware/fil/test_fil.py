@@ -99,7 +99,9 @@ class Boot(unittest.TestCase):
 
     def test_adc_regulator_before_calibration(self):
         m = fil.Machine(fil.default_elf("power-stage"))
-        m.run(5)
+        # the boot copies the CCM image first (23 KiB with the commissioning step: about
+        # 48 000 emulated instructions, 6 periods, before the ADC set-up)
+        m.run(10)
         self.assertEqual([e for e in m.events if e[0] == "ADCAL before ADVREGEN"], [])
         self.assertEqual(len([e for e in m.events if e[0] == "ADCAL"]), 2)
 
@@ -553,6 +555,36 @@ class SelfTest(unittest.TestCase):
         worst = max(m.isr_instructions[-200:])
         print(f"\nself-test interrupt: at most {worst} instructions per period")
         self.assertLess(worst, 8000)
+    def test_commission_identifies_the_motor_model_and_applies_it(self):
+        """Issue 14 (the firmware runs the sequence on a command and stores the result in
+        its parameter page): `commission 750 230 3.3 50 1500` (the paper's nameplate) on
+        the self-test ELF: state 5 while it runs, then the settings it wrote, within the
+        issue's bounds of the model's inverse-Gamma values (Rs 10.5 ohm: 2 %; the T-form
+        settings are read back as Rs, R_R = Rr (Lm/Lr)^2: 5 %), then a start on them."""
+        m = fil.Machine(fil.default_elf("selftest"))
+        m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+        self.assertIn("err (nameplate.power_w", command(m, "commission 2000 230 3.3 50 1500"))
+        self.assertIn("ok commissioning started", command(m, "commission 750 230 3.3 50 1500"))
+        self.assertEqual(state_fault(m), (5, 0))
+        self.assertIn("err refused in this state", command(m, "start"))
+        m.run(5000 * 18)
+        reply = command(m, "commission")
+        print("\n" + reply, file=sys.stderr)
+        self.assertIn("ok commissioned: settings applied", reply)
+        vals = {l.split(" = ")[0]: float(l.split(" = ")[1].split()[0])
+                for l in reply.split("\r\n") if " = " in l}
+        rs, rr, lr, lm = (vals["stator_resistance"], vals["rotor_resistance"],
+                          vals["rotor_inductance"], vals["mutual_inductance"])
+        self.assertLess(abs(rs - 10.5) / 10.5, 0.02)
+        self.assertLess(abs(rr * (lm / lr) ** 2 - 7.810714) / 7.810714, 0.05)
+        self.assertEqual(vals["pole_pairs"], 2)
+        self.assertEqual(state_fault(m), (0, 0))
+        m.run(5000 * 3)
+        self.assertIn("ok", command(m, "speed 300"))
+        self.assertIn("ok", command(m, "start"))
+        m.run(5000 * 2)
+        self.assertEqual(state_fault(m), (2, 0))
+
     def test_selftest_build_reaches_500_rpm_and_holds_the_fig7_load_step(self):
         """The self-test build (motor model in the interrupt) closed loop in emulation:
         speed 500, start: the model reaches 500 rpm with the estimate tracking it; then the

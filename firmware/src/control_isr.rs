@@ -59,6 +59,11 @@ static READY: AtomicBool = AtomicBool::new(false);
 pub static HEARTBEAT: AtomicU32 = AtomicU32::new(0);
 /// Drive state code of the last period (for the LED and `status`).
 pub static STATE_CODE: AtomicU8 = AtomicU8::new(0);
+/// A commissioning has finished and waits for the main loop
+/// ([`take_finished_commissioning`]): the main loop masks interrupts only then.
+pub static COMMISSION_FINISHED: AtomicBool = AtomicBool::new(false);
+/// The bus of the last period, V (f32 bits), for the main loop's checks.
+pub static DC_BUS_BITS: AtomicU32 = AtomicU32::new(0);
 /// Fault code of the last period.
 pub static FAULT_CODE: AtomicU8 = AtomicU8::new(0);
 /// Telemetry samples dropped because the queue was full.
@@ -84,6 +89,26 @@ pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveSt
     })
 }
 
+/// Takes a finished commissioning (done or failed: the interrupt already switched off)
+/// for its fits in the main loop. Interrupts are masked for the move (about 400 bytes).
+pub fn take_finished_commissioning() -> Option<acim::commissioning::Commissioning> {
+    if !COMMISSION_FINISHED.load(Ordering::Acquire) {
+        return None;
+    }
+    let c = cortex_m::interrupt::free(|_| state()?.ctl.take_finished_commissioning());
+    COMMISSION_FINISHED.store(false, Ordering::Release);
+    c
+}
+
+/// The running commissioning's stage and its time in it, s (interrupts masked to read
+/// them).
+pub fn commissioning_progress() -> Option<(acim::commissioning::Stage, f32)> {
+    cortex_m::interrupt::free(|_| {
+        let c = state()?.ctl.commissioning()?;
+        Some((c.stage(), c.stage_time()))
+    })
+}
+
 #[inline(always)]
 fn state() -> Option<&'static mut IsrState> {
     if !READY.load(Ordering::Acquire) {
@@ -91,7 +116,8 @@ fn state() -> Option<&'static mut IsrState> {
     }
     // SAFETY: STATE was initialised by `install` (READY is set after the write). After
     // `install` only the control interrupt takes this reference (it does not preempt
-    // itself), and `replace_drive_if_idle` with all interrupts masked: the &mut is unique
+    // itself), and `replace_drive_if_idle` and the two commissioning accessors with all
+    // interrupts masked: the &mut is unique
     // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
 }
@@ -103,7 +129,7 @@ pub const PROBE_WORDS: usize = 10;
 /// Self-test: this period's step, for the firmware-in-the-loop harness that compares it
 /// bit for bit with the host (`firmware/fil/test_fil.py`, class `BitExact`; the
 /// `hostloop` example of acim-firmware-core prints the same words): period index, command
-/// applied (0 none, 1 start, 2 speed, 3 load, 4 stop, 5 vf, 6 reset, 7 other), its
+/// applied (0 none, 1 start, 2 speed, 3 load, 4 stop, 5 vf, 6 reset, 7 commission), its
 /// argument (f32 bits), the three duties (f32 bits), outputs enabled, speed estimate
 /// (rad/s, f32 bits), rotor flux estimate (Wb, f32 bits), model speed (rpm, f32 bits).
 /// Plain RAM the interrupt overwrites each period (ten stores); nothing reads it.
@@ -122,6 +148,7 @@ fn probe(st: &IsrState, cmd: Option<ControlCommand>, out: &acim::PwmOutput) {
         Some(ControlCommand::Stop) => (4, 0.0),
         Some(ControlCommand::StartOpenLoop) => (5, 0.0),
         Some(ControlCommand::ResetFault) => (6, 0.0),
+        Some(ControlCommand::Commission(_)) => (7, 0.0),
     };
     let t = st.ctl.drive().telemetry();
     let words = [
@@ -160,7 +187,13 @@ fn publish(st: &mut IsrState, cycles: u32, plant_speed_rpm: f32) {
             TEL_DROPPED.fetch_add(1, Ordering::Relaxed);
         }
     }
-    STATE_CODE.store(st.ctl.state().code(), Ordering::Relaxed);
+    let code = st.ctl.state_code();
+    if code == acim_firmware_core::control::STATE_COMMISSIONING {
+        // switched off while still holding it: done or failed, the fits are the main loop's
+        COMMISSION_FINISHED.store(!st.ctl.switching(), Ordering::Release);
+    }
+    STATE_CODE.store(code, Ordering::Relaxed);
+    DC_BUS_BITS.store(st.ctl.inputs().dc_bus.to_bits(), Ordering::Relaxed);
     FAULT_CODE.store(st.ctl.fault_code(), Ordering::Relaxed);
     HEARTBEAT.fetch_add(1, Ordering::Release);
 }

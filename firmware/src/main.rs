@@ -40,6 +40,7 @@ use {
     acim::Drive,
     acim_firmware_core::board::{self, POWER_STAGE},
     acim_firmware_core::command::Command,
+    acim_firmware_core::commission::{self, NameplateArgs},
     acim_firmware_core::control::{self, CommandReply, ControlCommand, ControlLoop},
     acim_firmware_core::convert::Converter,
     acim_firmware_core::protocol::{self, Parsed, Request, RequestAssembler},
@@ -307,6 +308,7 @@ fn main() -> ! {
     let mut line = RequestAssembler::new();
     let mut out = Uart::new();
     let mut stream = false;
+    let mut com = CommissionState::default();
     const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
     raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
@@ -331,7 +333,7 @@ fn main() -> ! {
             watchdog.feed();
         }
         let code = control_isr::STATE_CODE.load(Ordering::Relaxed);
-        if code == 1 || code == 2 || code == 3 {
+        if code == 1 || code == 2 || code == 3 || code == control::STATE_COMMISSIONING {
             led.set_high();
         } else {
             led.set_low();
@@ -348,6 +350,7 @@ fn main() -> ! {
                         cfg: &mut cfg,
                         settings: &mut settings,
                         rcc: &mut rcc,
+                        com: &mut com,
                     };
                     handle(parsed, &mut ctx);
                 }
@@ -364,13 +367,31 @@ fn main() -> ! {
             match r.result {
                 Ok(()) => {
                     defmt::info!("ok {}", r.command);
-                    say(&mut out, b"ok\r\n");
+                    if let ControlCommand::Commission(args) = r.command {
+                        com.start(args);
+                        say(&mut out, COMMISSION_STARTED);
+                    } else {
+                        say(&mut out, b"ok\r\n");
+                    }
                 }
                 Err(e) => {
                     defmt::warn!("refused {}: {}", r.command, e);
                     say(&mut out, control::refusal_text(e));
                 }
             }
+        }
+
+        // commissioning: the fits and the new drive once the interrupt has finished it
+        if let Some(c) = control_isr::take_finished_commissioning() {
+            com.finish(&c, &mut settings, &mut cfg, &mut rcc);
+        } else if com.running
+            && control_isr::STATE_CODE.load(Ordering::Relaxed) != control::STATE_COMMISSIONING
+        {
+            // stopped, or abandoned by a trip
+            com.running = false;
+            com.outcome = Some(Outcome::Aborted(
+                control_isr::FAULT_CODE.load(Ordering::Relaxed),
+            ));
         }
 
         // telemetry
@@ -495,6 +516,148 @@ fn say_setting(out: &mut Uart, s: &Settings, i: usize) {
 }
 
 #[cfg(target_os = "none")]
+const COMMISSION_STARTED: &[u8] = b"ok commissioning started: about 20 s, the rotor turns in the last test (commission: progress; stop: abort)\r\n";
+
+#[cfg(target_os = "none")]
+/// How the last commissioning ended.
+enum Outcome {
+    /// Its settings were applied.
+    Applied(acim::commissioning::Identified),
+    /// The sequence failed.
+    Failed(acim::commissioning::CommissioningError),
+    /// The identified model was refused by the settings' validation.
+    Refused(settings::SettingError),
+    /// Stopped (fault code 0) or abandoned by a trip (its fault code).
+    Aborted(u8),
+}
+
+#[cfg(target_os = "none")]
+/// The main loop's half of the `commission` command ([`commission`]).
+#[derive(Default)]
+struct CommissionState {
+    nameplate: Option<NameplateArgs>,
+    running: bool,
+    outcome: Option<Outcome>,
+}
+
+#[cfg(target_os = "none")]
+impl CommissionState {
+    fn start(&mut self, args: NameplateArgs) {
+        self.nameplate = Some(args);
+        self.running = true;
+        self.outcome = None;
+    }
+
+    /// The fits (a bisection: here, not in the interrupt), the settings, the new drive.
+    #[inline(never)]
+    fn finish(
+        &mut self,
+        c: &acim::commissioning::Commissioning,
+        settings: &mut Settings,
+        cfg: &mut acim::DriveConfig,
+        rcc: &mut stm32g4xx_hal::rcc::Rcc,
+    ) {
+        self.running = false;
+        let rated = self
+            .nameplate
+            .and_then(|a| commission::nameplate(&a).rated().ok());
+        self.outcome = Some(match (c.identify(), rated) {
+            (Err(e), _) => Outcome::Failed(e),
+            (Ok(_), None) => Outcome::Refused(settings::SettingError {
+                field: "nameplate",
+                rule: "missing",
+            }),
+            (Ok(id), Some(rated)) => {
+                match commission::settings_from(&id, &rated, settings)
+                    .and_then(|next| build_drive(&next, board_cfg::another(rcc)).map(|d| (next, d)))
+                {
+                    Err(e) => Outcome::Refused(e),
+                    Ok((next, (c2, drive))) => match control_isr::replace_drive_if_idle(drive) {
+                        Ok(()) => {
+                            *settings = next;
+                            *cfg = c2;
+                            Outcome::Applied(id)
+                        }
+                        Err(_) => Outcome::Aborted(0),
+                    },
+                }
+            }
+        });
+        defmt::info!("commissioning finished");
+    }
+}
+
+#[cfg(target_os = "none")]
+/// The `commission` query's reply: progress, or how the last one ended.
+#[inline(never)]
+fn say_commission(ctx: &mut Ctx) {
+    let mut buf = [0u8; 24];
+    if let Some((stage, t)) = control_isr::commissioning_progress() {
+        say(ctx.out, b"ok commissioning: ");
+        say(ctx.out, commission::stage_name(stage).as_bytes());
+        say(ctx.out, b", ");
+        say(ctx.out, settings::format_value(t, &mut buf));
+        say(ctx.out, b" s in this stage\r\n");
+        return;
+    }
+    match &ctx.com.outcome {
+        None => say(
+            ctx.out,
+            b"ok no commissioning yet (commission <P W> <V> <A> <Hz> <rpm>)\r\n",
+        ),
+        Some(Outcome::Applied(id)) => {
+            // the settings it wrote, then the inverter's dead time
+            for i in [4, 6, 7, 8, 9, 10, 11, 12, 13] {
+                say_setting(ctx.out, ctx.settings, i);
+            }
+            say(ctx.out, b"dead time = ");
+            say(
+                ctx.out,
+                settings::format_value(id.dead_time * 1e6, &mut buf),
+            );
+            say(ctx.out, b" us\r\n");
+            if id.inertia.is_none() {
+                say(ctx.out, b"inertia not resolved: kept\r\n");
+            }
+            say(
+                ctx.out,
+                b"ok commissioned: settings applied (get lists them; save to keep them)\r\n",
+            );
+        }
+        Some(Outcome::Failed(e)) => {
+            say(ctx.out, b"err commissioning failed: ");
+            say(ctx.out, commission::error_text(*e).as_bytes());
+            if let Some(d) = commission::error_detail(*e) {
+                say(ctx.out, b" (");
+                say(ctx.out, d.as_bytes());
+                say(ctx.out, b")");
+            }
+            say(ctx.out, b"; settings unchanged\r\n");
+        }
+        Some(Outcome::Refused(e)) => {
+            say(
+                ctx.out,
+                b"err commissioning failed: the identified model is refused",
+            );
+            say_setting_error(ctx.out, e);
+            say(ctx.out, b"; settings unchanged\r\n");
+        }
+        Some(Outcome::Aborted(0)) => say(
+            ctx.out,
+            b"ok commissioning aborted by stop; settings unchanged\r\n",
+        ),
+        Some(Outcome::Aborted(f)) => {
+            say(
+                ctx.out,
+                b"err commissioning abandoned: the drive tripped (fault ",
+            );
+            say(ctx.out, protocol::fault_name(*f).as_bytes());
+            say(ctx.out, b"); settings unchanged\r\n");
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
 /// What the command handler works on.
 struct Ctx<'a> {
     cmd_p: &'a mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
@@ -503,6 +666,7 @@ struct Ctx<'a> {
     cfg: &'a mut acim::DriveConfig,
     settings: &'a mut Settings,
     rcc: &'a mut stm32g4xx_hal::rcc::Rcc,
+    com: &'a mut CommissionState,
 }
 
 #[cfg(target_os = "none")]
@@ -611,6 +775,23 @@ fn handle(parsed: Parsed, ctx: &mut Ctx) {
             say(ctx.out, b"ok\r\n");
             None
         }
+        Command::Commission(None) => {
+            say_commission(ctx);
+            None
+        }
+        Command::Commission(Some(args)) => match commission::check(
+            &args,
+            f32::from_bits(control_isr::DC_BUS_BITS.load(Ordering::Relaxed)),
+            ctx.settings,
+        ) {
+            Ok(_) => Some(ControlCommand::Commission(args)),
+            Err(e) => {
+                say(ctx.out, b"err");
+                say_setting_error(ctx.out, &e);
+                say(ctx.out, b"\r\n");
+                None
+            }
+        },
         Command::Params => {
             let cfg = &*ctx.cfg;
             let m = &cfg.machine;
@@ -714,7 +895,7 @@ fn handle(parsed: Parsed, ctx: &mut Ctx) {
         Command::Help => {
             say(
                 ctx.out,
-                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | version\r\nok\r\n",
+                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | commission [<P W> <V> <A> <Hz> <rpm>] | version\r\nok\r\n",
             );
             None
         }
