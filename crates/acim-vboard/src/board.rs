@@ -249,14 +249,11 @@ impl Board {
             .and_then(|a| commission::nameplate(&a).rated().ok());
         let (lines, applied) = match (c.identify(), rated) {
             (Err(e), _) => {
-                let mut v = fail(commission::error_text(e));
-                if let Some(d) = commission::error_detail(e) {
-                    v[0] = format!(
-                        "err commissioning failed: {} ({d}); settings unchanged",
-                        commission::error_text(e)
-                    );
+                let why = commission::error_text(e);
+                match commission::error_detail(e) {
+                    Some(d) => (fail(&format!("{why} ({d})")), None),
+                    None => (fail(why), None),
                 }
-                (v, None)
             }
             (Ok(_), None) => (fail("no nameplate"), None),
             (Ok(id), Some(rated)) => {
