@@ -142,12 +142,49 @@ class Protocol(unittest.TestCase):
         self.assertIn(framed("E", "err bad frame: checksum"), command(m, bad, 20))
         self.assertFalse(m.moe(), "a corrupted start must not start")
         self.assertEqual(state_fault(m), (0, 0))
-        self.assertIn(framed("E", "err rate: this firmware sends telemetry every 500 periods (10 Hz)"),
-                      command(m, framed("C", "rate 50")))
+        self.assertIn(framed("E", "err out of range"), command(m, framed("C", "rate 1")))
         self.assertIn(framed("R", "ok"), command(m, framed("C", "start"), 40))
         self.assertTrue(m.moe())
         # plain lines again get plain replies
         self.assertIn("ok state ", command(m, "status"))
+
+
+    def test_rate_and_the_x_extension(self):
+        """Issue 18: `rate` reaches the interrupt's decimator; every `$T` frame is followed
+        by its `$X` (same seq, the control period of the sample, the d/q current
+        references in mA), both with a valid CRC; a rate faster than the UART carries is
+        accepted with a note saying what the user will see."""
+        m = booted(load=fil.InductionMotorLoad())
+        self.assertIn(framed("R", "ok"), command(m, framed("C", "rate 100")))
+        command(m, "stream on", 5)
+        before = len(m.output())
+        m.run(1100)
+        lines = [l for l in m.output()[before:].split("\r\n") if l.startswith(("$T,", "$X,"))]
+        self.assertGreaterEqual(len(lines), 20, lines)
+        self.assertEqual(len(lines) % 2, 0, lines)
+        t_frames, x_frames = lines[0::2], lines[1::2]
+        periods = []
+        for t, x in zip(t_frames, x_frames):
+            for f in (t, x):
+                body, crc = f[1:].split("*")
+                self.assertEqual(crc16(body.encode()), int(crc, 16), f)
+            self.assertTrue(t.startswith("$T,") and x.startswith("$X,"), (t, x))
+            tf, xf = t.split("*")[0].split(","), x.split("*")[0].split(",")
+            self.assertEqual(len(xf), 5, x)
+            self.assertEqual(tf[1], xf[1], "an $X repeats its $T's seq")
+            periods.append(int(xf[2]))
+            # idle: no current reference
+            self.assertEqual((int(xf[3]), int(xf[4])), (0, 0), x)
+        self.assertTrue(all(b - a == 100 for a, b in zip(periods, periods[1:])), periods)
+        # magnetizing: the d reference is the flux current (1.5 A), q none
+        command(m, "start", 110)
+        x = [l for l in m.output().split("\r\n") if l.startswith("$X,")][-1]
+        xf = x.split("*")[0].split(",")
+        self.assertEqual((int(xf[3]), int(xf[4])), (1500, 0), x)
+        reply = command(m, framed("C", "rate 50"))
+        note = [l for l in reply.split("\r\n") if "ok (the UART carries about 90 samples/s" in l]
+        self.assertEqual(len(note), 1, reply)
+        self.assertTrue(note[0].startswith("$R,"), note)
 
 
 class Protection(unittest.TestCase):

@@ -129,9 +129,10 @@ pub const PROBE_WORDS: usize = 10;
 /// Self-test: this period's step, for the firmware-in-the-loop harness that compares it
 /// bit for bit with the host (`firmware/fil/test_fil.py`, class `BitExact`; the
 /// `hostloop` example of acim-firmware-core prints the same words): period index, command
-/// applied (0 none, 1 start, 2 speed, 3 load, 4 stop, 5 vf, 6 reset, 7 commission), its
-/// argument (f32 bits), the three duties (f32 bits), outputs enabled, speed estimate
-/// (rad/s, f32 bits), rotor flux estimate (Wb, f32 bits), model speed (rpm, f32 bits).
+/// applied (0 none, 1 start, 2 speed, 3 load, 4 stop, 5 vf, 6 reset, 7 commission,
+/// 8 rate), its argument (f32 bits), the three duties (f32 bits), outputs enabled, speed
+/// estimate (rad/s, f32 bits), rotor flux estimate (Wb, f32 bits), model speed (rpm, f32
+/// bits).
 /// Plain RAM the interrupt overwrites each period (ten stores); nothing reads it.
 #[cfg(feature = "selftest")]
 #[no_mangle]
@@ -149,6 +150,7 @@ fn probe(st: &IsrState, cmd: Option<ControlCommand>, out: &acim::PwmOutput) {
         Some(ControlCommand::StartOpenLoop) => (5, 0.0),
         Some(ControlCommand::ResetFault) => (6, 0.0),
         Some(ControlCommand::Commission(_)) => (7, 0.0),
+        Some(ControlCommand::Rate(n)) => (8, n as f32),
     };
     let t = st.ctl.drive().telemetry();
     let words = [

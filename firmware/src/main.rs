@@ -370,6 +370,8 @@ fn main() -> ! {
                     if let ControlCommand::Commission(args) = r.command {
                         com.start(args);
                         say(&mut out, COMMISSION_STARTED);
+                    } else if matches!(r.command, ControlCommand::Rate(n) if n < UART_RATE_FLOOR) {
+                        say(&mut out, RATE_ABOVE_UART);
                     } else {
                         say(&mut out, b"ok\r\n");
                     }
@@ -397,8 +399,8 @@ fn main() -> ! {
         // telemetry
         while let Some(s) = tel_c.dequeue() {
             defmt::info!("{}", s);
-            if stream && out.q.capacity() - out.q.len() >= telemetry::FRAME_CAPACITY {
-                raw(&mut out, &telemetry::encode(&s));
+            if stream {
+                send_sample(&mut out, &s);
             }
         }
 
@@ -413,6 +415,23 @@ fn main() -> ! {
         }
     }
 }
+
+#[cfg(target_os = "none")]
+/// Telemetry samples per second the UART carries: a `$T` frame and its `$X` are about
+/// 128 bytes with the values of a running drive, 10 bits per byte on the line.
+const UART_SAMPLES_PER_S: u32 = board::UART_BAUD / 10 / 128;
+#[cfg(target_os = "none")]
+/// The fastest `rate` whose samples all fit the UART (periods).
+const UART_RATE_FLOOR: u16 = board::PWM_FREQUENCY_HZ.div_ceil(UART_SAMPLES_PER_S) as u16;
+#[cfg(target_os = "none")]
+/// The reply to a faster `rate`: accepted, with what the user will see.
+const RATE_ABOVE_UART: &[u8] =
+    b"ok (the UART carries about 90 samples/s, a rate of 56 periods: faster samples are dropped whole, seq shows the gaps)\r\n";
+#[cfg(target_os = "none")]
+const _: () = assert!(
+    UART_SAMPLES_PER_S == 90 && UART_RATE_FLOOR == 56,
+    "RATE_ABOVE_UART states these numbers"
+);
 
 #[cfg(target_os = "none")]
 /// UART output buffer, bytes (`get` lists every setting in one go).
@@ -453,6 +472,19 @@ fn push(q: &mut Deque<u8, OUT_LEN>, bytes: &[u8]) {
 /// Bytes as they are (frames, telemetry).
 fn raw(out: &mut Uart, bytes: &[u8]) {
     push(&mut out.q, bytes)
+}
+
+#[cfg(target_os = "none")]
+/// A telemetry sample as its `$T` frame and, protocol 1, its `$X`: together or not at all
+/// (a sample the UART has no room for is dropped whole; its `seq` shows the gap).
+#[inline(never)]
+fn send_sample(out: &mut Uart, s: &TelemetrySample) {
+    let t = telemetry::encode(s);
+    let x = protocol::encode_extension(&protocol::Extension::of(s));
+    if out.q.capacity() - out.q.len() >= t.len() + x.len() {
+        raw(out, &t);
+        raw(out, &x);
+    }
 }
 
 #[cfg(target_os = "none")]
@@ -738,11 +770,11 @@ fn handle(parsed: Parsed, ctx: &mut Ctx) {
             say(ctx.out, b" pwm 5000 Hz\r\n");
             return;
         }
-        Ok(Request::Rate(_)) => {
-            say(
-                ctx.out,
-                b"err rate: this firmware sends telemetry every 500 periods (10 Hz)\r\n",
-            );
+        Ok(Request::Rate(n)) => {
+            // to the interrupt's decimator; its "ok" comes back as for any command
+            if ctx.cmd_p.enqueue(ControlCommand::Rate(n)).is_err() {
+                say(ctx.out, b"err busy, command dropped\r\n");
+            }
             return;
         }
         Err(e) => {

@@ -16,7 +16,8 @@ const USAGE: &str = "usage: acim-monitor (--tcp ADDR | --serial PATH [--baud N])
   --record FILE      record every sample to a CSV file (also :record FILE at run time)
   --window S         seconds of board time in the plots (default 10)
   --rate N           ask the board for a sample every N control periods (protocol 1;
-                     the firmware's own rate is 500, 10 Hz; 50 gives 100 Hz)
+                     default 500, 10 Hz; the firmware's UART carries about 90 samples/s,
+                     a rate of 56)
   --headless         no terminal: run --script against the board until --until seconds
                      of board time after the first sample, then write --screenshot (the
                      screen as text, --size, default 160x48); fails after --timeout

@@ -160,7 +160,8 @@ impl Board {
             period: self.period,
             event: Event::Rate(every),
         });
-        self.ctl.set_decimation(every);
+        // as the firmware's interrupt applies it
+        let _ = self.ctl.apply(ControlCommand::Rate(every));
     }
 
     /// Runs one control period (sample, step, PWM into the model) and returns the
@@ -187,18 +188,13 @@ impl Board {
                 "ok commissioning aborted by stop; settings unchanged".into()
             }]);
         }
-        let k = self.period;
         self.period += 1;
+        // the loop counts the periods too (`t.period`, u32): the same as `self.period`
+        // before this one, wrapped
         let t = self.ctl.finish_period(cycles, self.stage.speed_rpm())?;
-        let r = self.ctl.drive().telemetry().current_reference;
         Some(Sample {
             t,
-            x: Extension {
-                seq: t.seq,
-                period: k as u32,
-                i_d_ref: r.d,
-                i_q_ref: r.q,
-            },
+            x: Extension::of(&t),
         })
     }
 

@@ -35,6 +35,7 @@ fn main() {
                 4 => ControlCommand::Stop,
                 5 => ControlCommand::StartOpenLoop,
                 6 => ControlCommand::ResetFault,
+                8 => ControlCommand::Rate(arg as u16),
                 _ => panic!("unknown command code {code}"),
             };
             schedule.insert(period, (code, arg, cmd));

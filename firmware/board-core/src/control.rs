@@ -97,6 +97,9 @@ pub enum ControlCommand {
     /// Idle -> self-commissioning with this nameplate (checked by the main loop with
     /// [`commission::check`] first); `Stop` aborts it.
     Commission(NameplateArgs),
+    /// Telemetry every this many periods from the next period on (the protocol's `rate`,
+    /// 2 ..= 50 000 checked by its parser; any state).
+    Rate(u16),
 }
 
 /// The telemetry state code while commissioning runs (the drive's own codes are 0..=4).
@@ -135,6 +138,8 @@ pub struct ControlLoop<S: SinCos> {
     last_summary: CycleSummary,
     decim: Decimator,
     seq: u32,
+    /// Periods closed by [`ControlLoop::finish_period`] since power-up (wraps).
+    period: u32,
     fw_fault: Option<FirmwareFault>,
     inputs: DriveInputs,
     commissioning: Option<Commissioning>,
@@ -150,6 +155,7 @@ impl<S: SinCos> ControlLoop<S> {
             last_summary: CycleSummary::default(),
             decim: Decimator::new(decimation),
             seq: 0,
+            period: 0,
             fw_fault: None,
             inputs: DriveInputs::default(),
             commissioning: None,
@@ -205,6 +211,10 @@ impl<S: SinCos> ControlLoop<S> {
             ControlCommand::SpeedRpm(rpm) => self.drive.set_speed_target(rpm * RPM_TO_RAD_S),
             // applied by the self-test's interrupt to its motor model
             ControlCommand::PlantLoad(_) => Ok(()),
+            ControlCommand::Rate(every) => {
+                self.set_decimation(every);
+                Ok(())
+            }
             ControlCommand::ResetFault => {
                 let r = self.drive.reset_fault();
                 if r.is_ok() {
@@ -268,6 +278,8 @@ impl<S: SinCos> ControlLoop<S> {
     /// hardware).
     #[inline]
     pub fn finish_period(&mut self, cycles: u32, plant_speed_rpm: f32) -> Option<TelemetrySample> {
+        let period = self.period;
+        self.period = period.wrapping_add(1);
         self.stats.record(cycles);
         if !self.decim.tick() {
             return None;
@@ -293,6 +305,9 @@ impl<S: SinCos> ControlLoop<S> {
             cycles_mean: cyc.mean,
             cycles_max: cyc.max,
             plant_speed_rpm,
+            period,
+            i_d_ref: t.current_reference.d,
+            i_q_ref: t.current_reference.q,
         })
     }
 
@@ -438,6 +453,45 @@ mod tests {
             }
         }
         assert_eq!(samples, 10);
+    }
+
+    /// `rate` takes effect from the next period in any state; the sample carries the
+    /// period it closes (for `$X`) and the current references.
+    #[test]
+    fn rate_changes_the_decimation_and_samples_carry_their_period() {
+        let mut l = looped();
+        let conv = Converter::new(&POWER_STAGE);
+        let mut periods: heapless::Vec<u32, 32> = heapless::Vec::new();
+        let mut i_d_ref_max = 0.0f32;
+        for k in 0..100u32 {
+            if k == 30 {
+                assert!(l.apply(ControlCommand::Start).result.is_ok());
+                assert!(l.apply(ControlCommand::Rate(4)).result.is_ok());
+                assert_eq!(
+                    l.state(),
+                    DriveState::Magnetizing,
+                    "a rate leaves the state alone"
+                );
+            }
+            l.step(&raw_at_bus(&conv, 325.0));
+            if let Some(s) = l.finish_period(1000, 0.0) {
+                assert_eq!(s.period, k);
+                let r = l.drive().telemetry().current_reference;
+                assert_eq!((s.i_d_ref, s.i_q_ref), (r.d, r.q));
+                i_d_ref_max = i_d_ref_max.max(s.i_d_ref);
+                periods.push(s.period).unwrap();
+            }
+        }
+        // every 10 periods before, every 4 from period 30 (the window restarts there)
+        let want: heapless::Vec<u32, 32> = [9, 19, 29]
+            .into_iter()
+            .chain((33..100).step_by(4))
+            .collect();
+        assert_eq!(periods, want);
+        assert!(
+            i_d_ref_max > 0.0,
+            "the magnetizing current reference is published"
+        );
     }
 
     /// New settings reach the drive only while it is Idle (`set` is refused while

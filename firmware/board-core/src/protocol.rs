@@ -363,6 +363,18 @@ pub struct Extension {
     pub i_q_ref: f32,
 }
 
+impl Extension {
+    /// The extension of a sample (its `seq`, `period` and current references).
+    pub fn of(s: &crate::telemetry::TelemetrySample) -> Self {
+        Self {
+            seq: s.seq,
+            period: s.period,
+            i_d_ref: s.i_d_ref,
+            i_q_ref: s.i_q_ref,
+        }
+    }
+}
+
 fn milli(x: f32) -> i32 {
     let v = x * 1e3;
     // `as` saturates (NaN -> 0)

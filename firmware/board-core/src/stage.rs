@@ -63,7 +63,10 @@ pub fn apply_command<S: SinCos, P: PowerStageIo>(
                     io.enable_outputs();
                 }
             }
-            ControlCommand::Stop | ControlCommand::SpeedRpm(_) | ControlCommand::PlantLoad(_) => {}
+            ControlCommand::Stop
+            | ControlCommand::SpeedRpm(_)
+            | ControlCommand::PlantLoad(_)
+            | ControlCommand::Rate(_) => {}
         }
     }
     reply

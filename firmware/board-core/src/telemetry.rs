@@ -52,6 +52,13 @@ pub struct TelemetrySample {
     pub cycles_max: u32,
     /// Self-test only: the motor model's true speed, rpm (0 on hardware).
     pub plant_speed_rpm: f32,
+    /// Control periods since power-up at the sample (wraps). Not in the `$T` frame: the
+    /// protocol's `$X` extension carries it ([`crate::protocol::Extension::of`]).
+    pub period: u32,
+    /// d-axis current reference, A (`$X` only).
+    pub i_d_ref: f32,
+    /// q-axis current reference, A (`$X` only).
+    pub i_q_ref: f32,
 }
 
 /// Capacity of an encoded frame, bytes (the longest possible frame is shorter).
@@ -234,6 +241,10 @@ pub fn decode(frame: &[u8]) -> Result<TelemetrySample, FrameError> {
         cycles_mean: u32_of(v[13])?,
         cycles_max: u32_of(v[14])?,
         plant_speed_rpm: v[15] as f32 / 10.0,
+        // the `$X` frame's fields (`crate::protocol::decode_extension`)
+        period: 0,
+        i_d_ref: 0.0,
+        i_q_ref: 0.0,
     })
 }
 
@@ -259,6 +270,7 @@ mod tests {
             cycles_mean: 2234,
             cycles_max: 2890,
             plant_speed_rpm: 499.0,
+            ..Default::default()
         }
     }
 
@@ -336,6 +348,7 @@ mod tests {
             cycles_mean: u32::MAX,
             cycles_max: u32::MAX,
             plant_speed_rpm: -1e30,
+            ..Default::default()
         };
         let f = encode(&s);
         assert!(f.len() < FRAME_CAPACITY);
