@@ -74,7 +74,7 @@ const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
 /// order of the issue.
-const REPORT_REGIONS: [&str; 11] = [
+const REPORT_REGIONS: [&str; 12] = [
     "sincos",
     "clarke_park",
     "current_pi",
@@ -86,6 +86,7 @@ const REPORT_REGIONS: [&str; 11] = [
     "svpwm",
     "fault_checks",
     "drive_step",
+    "overmodulation",
 ];
 
 fn main() {

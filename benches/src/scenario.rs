@@ -25,13 +25,14 @@ use core::hint::black_box;
 use core::sync::atomic::AtomicU32;
 
 use acim::drive::{Drive, DriveConfig, DriveInputs, DriveState, PwmOutput, StepProbe, StepRegion};
-use acim::frames::{clarke_two, inverse_park, FastSinCos};
+use acim::frames::{clarke_two, inverse_park, AlphaBeta, FastSinCos};
 use acim::full_order::{FullOrderConfig, FullOrderDesign, FullOrderObserver};
 use acim::math::RPM_TO_RAD_S;
+use acim::svpwm::SvpwmConfig;
 use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
-pub const REGIONS: [&str; 12] = [
+pub const REGIONS: [&str; 13] = [
     "empty",
     "fault_checks",
     "sincos",
@@ -44,6 +45,7 @@ pub const REGIONS: [&str; 12] = [
     "current_pi",
     "svpwm",
     "drive_step",
+    "overmodulation",
 ];
 
 /// Steps from `start()` on (magnetising is about 1350 steps), then this many measured
@@ -158,6 +160,7 @@ markers! {
     9 => bench_begin_current_pi, bench_end_current_pi;
     10 => bench_begin_svpwm, bench_end_svpwm;
     11 => bench_begin_drive_step, bench_end_drive_step;
+    12 => bench_begin_overmodulation, bench_end_overmodulation;
 }
 
 /// Calls the marker pair of each region of `Drive::step_probed`.
@@ -208,6 +211,8 @@ pub struct Passenger {
     pub full: FullOrderObserver,
     /// alpha-beta voltage applied over the coming period (the previous command), V.
     applied: (f32, f32),
+    /// The drive's modulator configuration, for the overmodulation region.
+    pwm: SvpwmConfig,
 }
 
 impl Passenger {
@@ -218,6 +223,12 @@ impl Passenger {
                 .ok()?,
             full: FullOrderObserver::new(),
             applied: (0.0, 0.0),
+            pwm: SvpwmConfig::new(
+                cfg.dead_time,
+                cfg.control_period,
+                cfg.device_drop,
+                cfg.dead_time_current_band,
+            ),
         })
     }
 
@@ -248,6 +259,30 @@ pub fn bench_regions_step(
     p.full
         .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
     bench_end_observer_full_order();
+
+    // issue 15's overmodulating modulator alone (not in the drive's default step): this
+    // step's command lengthened to 1.05 x the linear limit, at the measured bus
+    let v = twin.telemetry().voltage;
+    let rot = FastSinCos::eval(angle);
+    let v_ab = inverse_park(v, rot);
+    let norm = (v_ab.alpha * v_ab.alpha + v_ab.beta * v_ab.beta).max(1e-6);
+    let k = 1.05 * acim::svpwm::linear_limit(inp.dc_bus) / acim::math::sqrt(norm);
+    let v_om = AlphaBeta {
+        alpha: v_ab.alpha * k,
+        beta: v_ab.beta * k,
+    };
+    let inv_bus = 1.0 / inp.dc_bus.max(1.0);
+    let pwm = passenger.pwm;
+    let currents = black_box(inp.phase_currents);
+    bench_begin_overmodulation();
+    black_box(acim::svpwm::overmodulate(
+        black_box(&pwm),
+        black_box(v_om),
+        black_box(inp.dc_bus),
+        black_box(inv_bus),
+        currents,
+    ));
+    bench_end_overmodulation();
 
     let out = twin.step_probed(black_box(inp), &mut MarkerProbe);
     black_box(out)

@@ -8,6 +8,11 @@
 //! speed stays within 1 % of the target over the last second. The torque held is that
 //! load plus the plant's viscous friction at the speed.
 //!
+//! Both modulators are measured: linear SVPWM (the default), whose field weakening holds
+//! the command at 92 % of the current loops' limit for their transients, and
+//! overmodulation (`drive.modulation = "overmodulation"`), which holds it at the linear
+//! limit and gives the current loops the range up to six-step instead.
+//!
 //! Envelope: the steady-state T-model in the rotor-flux frame (eq. 9a/9b with
 //! lambda_r = (L_M^2/L_R) i_sd and the slip law eq. 8), |i| <= I_max (the drive's current
 //! limit) and |v| <= 0.98 V_dc/sqrt 3 (the current loops' voltage limit), torque
@@ -15,7 +20,9 @@
 
 use crate::builtins;
 use crate::metrics::Metrics;
-use crate::scenario::{LoadKind, LoadPoint, MachineSpec, Scenario, SpeedPoint, Window};
+use crate::scenario::{
+    LoadKind, LoadPoint, MachineSpec, ModulationKind, Scenario, SpeedPoint, Window,
+};
 use std::fmt::Write as _;
 
 /// One speed of the capability curve.
@@ -23,13 +30,18 @@ use std::fmt::Write as _;
 pub struct Point {
     /// Speed, rpm.
     pub rpm: f32,
-    /// Electromagnetic torque held (load + friction), N m.
+    /// Electromagnetic torque held (load + friction), linear SVPWM, N m.
     pub held_nm: f32,
+    /// The same with overmodulation, N m.
+    pub held_overmodulation_nm: f32,
     /// The envelope of the machine equations, N m.
     pub envelope_nm: f32,
     /// The same envelope at the voltage the field weakening holds the command at,
     /// [`acim::design::FW_TRIM_FRACTION`] x the current loops' limit, N m.
     pub envelope_trim_nm: f32,
+    /// The envelope at the six-step fundamental 2 V_dc/pi (no PWM), N m: what the
+    /// inverter could give in steady six-step operation.
+    pub envelope_six_step_nm: f32,
 }
 
 /// The speeds measured, rpm.
@@ -85,8 +97,9 @@ pub fn envelope_nm(m: &MachineSpec, i_max: f32, i_d_max: f32, v_max: f32, rpm: f
 }
 
 /// The scenario holding `rpm` with a passive `load_nm` applied once at speed.
-fn scenario(rpm: f32, load_nm: f32) -> Scenario {
+fn scenario(rpm: f32, load_nm: f32, modulation: ModulationKind) -> Scenario {
     let mut s = builtins::get("fw-ramp-3000").expect("fw-ramp-3000 is a built-in");
+    s.drive.modulation = modulation;
     let t_load = 0.5 + rpm / s.drive.speed_ramp_rpm_s + 1.0;
     s.name = format!("capability-{rpm:.0}");
     s.speed_profile = vec![SpeedPoint { t_s: 0.5, rpm }];
@@ -121,9 +134,17 @@ fn holds(m: &Metrics, rpm: f32) -> bool {
 pub fn measure_with(
     run: &mut dyn FnMut(&Scenario) -> Result<Metrics, String>,
 ) -> Result<Vec<Point>, String> {
+    measure_at(run, &SPEEDS_RPM)
+}
+
+/// Measures the speeds `speeds_rpm` (each run through `run`).
+pub fn measure_at(
+    run: &mut dyn FnMut(&Scenario) -> Result<Metrics, String>,
+    speeds_rpm: &[f32],
+) -> Result<Vec<Point>, String> {
     let mut points = Vec::new();
-    for rpm in SPEEDS_RPM {
-        let sc = scenario(rpm, 0.0);
+    for &rpm in speeds_rpm {
+        let sc = scenario(rpm, 0.0, ModulationKind::Linear);
         let i_max = sc.drive.current_limit_a;
         let v_max = 0.98 * sc.dc_link.source_v / 3f32.sqrt();
         let envelope = envelope_nm(&sc.plant, i_max, sc.drive.flux_current_a, v_max, rpm);
@@ -134,21 +155,42 @@ pub fn measure_with(
             acim::design::FW_TRIM_FRACTION * v_max,
             rpm,
         );
+        let envelope_six_step = envelope_nm(
+            &sc.plant,
+            i_max,
+            sc.drive.flux_current_a,
+            acim::svpwm::SIX_STEP * sc.dc_link.source_v,
+            rpm,
+        );
         let friction = sc.plant.friction_nms * rpm * std::f32::consts::PI / 30.0;
-        let (mut lo, mut hi) = (0.0f32, (1.2 * envelope - friction).max(0.1));
-        for _ in 0..8 {
-            let mid = 0.5 * (lo + hi);
-            if holds(&run(&scenario(rpm, mid))?, rpm) {
-                lo = mid;
-            } else {
-                hi = mid;
+        let mut held = [0.0f32; 2];
+        for (h, modulation) in held
+            .iter_mut()
+            .zip([ModulationKind::Linear, ModulationKind::Overmodulation])
+        {
+            // the bisection's upper end: above what the modulator's voltage can give
+            let top = match modulation {
+                ModulationKind::Linear => envelope,
+                ModulationKind::Overmodulation => envelope_six_step,
+            };
+            let (mut lo, mut hi) = (0.0f32, (1.2 * top - friction).max(0.1));
+            for _ in 0..8 {
+                let mid = 0.5 * (lo + hi);
+                if holds(&run(&scenario(rpm, mid, modulation))?, rpm) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
             }
+            *h = lo + friction;
         }
         points.push(Point {
             rpm,
-            held_nm: lo + friction,
+            held_nm: held[0],
+            held_overmodulation_nm: held[1],
             envelope_nm: envelope,
             envelope_trim_nm: envelope_trim,
+            envelope_six_step_nm: envelope_six_step,
         });
     }
     Ok(points)
@@ -161,20 +203,28 @@ pub fn markdown(points: &[Point]) -> String {
          Steady torque the drive holds (paper machine, 325 V, field weakening; load bisected \
          8 times, speed within 2 % over the last second) against the envelope of the \
          machine equations with the same current limit (4.67 A), flux current \
-         at most its rated 1.5 A and voltage limit (0.98 V_dc/sqrt 3), and at the 92 % of that voltage the field weakening holds \
-         the command at (its headroom for the current loops). Plot: `capability.png`.\n\n\
-         | speed (rpm) | held (N m) | envelope (N m) | held / envelope | envelope at 92 % voltage (N m) | held / that |\n|---|---|---|---|---|---|\n",
+         at most its rated 1.5 A and voltage limit (0.98 V_dc/sqrt 3, the linear range the \
+         drive runs in steady state). Linear SVPWM: the field weakening holds the command at \
+         92 % of that voltage (its headroom for the current loops). Overmodulation \
+         (`drive.modulation = \"overmodulation\"`): the command is held at the linear limit \
+         and the current loops' headroom is the range up to six-step. Last column: the \
+         envelope at the six-step fundamental 2 V_dc/pi, which steady six-step operation \
+         (not done: no current control left) would approach. Plot: `capability.png`.\n\n\
+         | speed (rpm) | envelope (N m) | linear SVPWM: held (N m) | held / envelope | overmodulation: held (N m) | held / envelope | envelope at 92 % voltage (N m) | envelope at six-step (N m) |\n|---|---|---|---|---|---|---|---|\n",
     );
     for p in points {
+        let pct = |x: f32| 100.0 * x / p.envelope_nm.max(1e-6);
         let _ = writeln!(
             s,
-            "| {:.0} | {:.2} | {:.2} | {:.0} % | {:.2} | {:.0} % |",
+            "| {:.0} | {:.2} | {:.2} | {:.0} % | {:.2} | {:.0} % | {:.2} | {:.2} |",
             p.rpm,
-            p.held_nm,
             p.envelope_nm,
-            100.0 * p.held_nm / p.envelope_nm.max(1e-6),
+            p.held_nm,
+            pct(p.held_nm),
+            p.held_overmodulation_nm,
+            pct(p.held_overmodulation_nm),
             p.envelope_trim_nm,
-            100.0 * p.held_nm / p.envelope_trim_nm.max(1e-6)
+            p.envelope_six_step_nm,
         );
     }
     s
@@ -185,6 +235,8 @@ pub fn plot(points: &[Point], path: &std::path::Path) -> Result<(), crate::plot:
     use crate::plot::{Color, LineStyle, Panel, Series};
     let x: Vec<f32> = points.iter().map(|p| p.rpm).collect();
     let held: Vec<f32> = points.iter().map(|p| p.held_nm).collect();
+    let held_om: Vec<f32> = points.iter().map(|p| p.held_overmodulation_nm).collect();
+    let env_six: Vec<f32> = points.iter().map(|p| p.envelope_six_step_nm).collect();
     let env: Vec<f32> = points.iter().map(|p| p.envelope_nm).collect();
     let env_trim: Vec<f32> = points.iter().map(|p| p.envelope_trim_nm).collect();
     crate::plot::render_panels_over(
@@ -199,17 +251,27 @@ pub fn plot(points: &[Point], path: &std::path::Path) -> Result<(), crate::plot:
                 Series {
                     label: "envelope (machine equations)",
                     values: &env,
-                    style: LineStyle::Dashed(Color::Gray),
+                    style: LineStyle::Solid(Color::Gray),
                 },
                 Series {
                     label: "envelope at 92 % voltage",
                     values: &env_trim,
-                    style: LineStyle::Dashed(Color::Orange),
+                    style: LineStyle::Solid(Color::Orange),
                 },
                 Series {
-                    label: "held by the drive",
+                    label: "envelope at six-step",
+                    values: &env_six,
+                    style: LineStyle::Solid(Color::Green),
+                },
+                Series {
+                    label: "held, linear SVPWM",
                     values: &held,
                     style: LineStyle::Solid(Color::Blue),
+                },
+                Series {
+                    label: "held, overmodulation",
+                    values: &held_om,
+                    style: LineStyle::Solid(Color::Red),
                 },
             ],
         }],

@@ -631,11 +631,13 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             })?;
             for p in &points {
                 println!(
-                    "{:6.0} rpm: held {:6.2} N m, envelope {:6.2} N m ({:3.0} %)",
+                    "{:6.0} rpm: envelope {:6.2} N m; held {:6.2} N m ({:3.0} %) linear, {:6.2} N m ({:3.0} %) overmodulation",
                     p.rpm,
-                    p.held_nm,
                     p.envelope_nm,
-                    100.0 * p.held_nm / p.envelope_nm.max(1e-6)
+                    p.held_nm,
+                    100.0 * p.held_nm / p.envelope_nm.max(1e-6),
+                    p.held_overmodulation_nm,
+                    100.0 * p.held_overmodulation_nm / p.envelope_nm.max(1e-6)
                 );
             }
             let md = acim_sim::capability::markdown(&points);

@@ -206,6 +206,19 @@ pub enum ObserverKind {
     FullOrder,
 }
 
+/// The drive's modulator (`acim::Modulator`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModulationKind {
+    /// SVPWM within 98 % of the inscribed circle (`acim::Svpwm`, the default).
+    #[default]
+    Linear,
+    /// Overmodulation through to six-step with fundamental gain compensation
+    /// (`acim::Overmodulation`, f32 only): the current loops' reserve above the linear
+    /// limit the field weakening holds.
+    Overmodulation,
+}
+
 /// When the Rs estimator adapts (`acim::RsEstimationMode`).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -289,6 +302,8 @@ pub struct DriveSpec {
     pub arithmetic: Arithmetic,
     /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
     pub observer: ObserverKind,
+    /// "linear" (the default) or "overmodulation" (through to six-step, f32 only).
+    pub modulation: ModulationKind,
     /// Over-speed trip, rpm (the drive's default, 2000 rpm, when absent); speed targets
     /// are limited to 90 % of it.
     pub max_speed_rpm: Option<f32>,
@@ -336,6 +351,7 @@ impl Default for DriveSpec {
             orientation_gain: d.orientation_gain,
             arithmetic: Arithmetic::F32,
             observer: ObserverKind::Reduced,
+            modulation: ModulationKind::Linear,
             max_speed_rpm: None,
             field_weakening: d.field_weakening,
             overvoltage_control: d.overvoltage_control,
@@ -1169,6 +1185,12 @@ impl Scenario {
                     allowed: format!("a valid full-order design ({e:?})"),
                 },
             )?;
+        }
+        if d.modulation == ModulationKind::Overmodulation && d.arithmetic == Arithmetic::Fixed {
+            return err(
+                "drive.modulation",
+                "\"overmodulation\" runs in f32 only (drive.arithmetic = \"f32\")",
+            );
         }
         if d.arithmetic == Arithmetic::Fixed {
             acim::fixed::FixedDrive::with_bases(drive, bases).map_err(|e| ScenarioError {

@@ -7,12 +7,15 @@
 //! duties are applied over the next period: the plant's [`PwmPreload`] is the one timing
 //! model (a switch-off acts at once).
 
-use crate::scenario::{Arithmetic, ControlMode, ObserverKind, Scenario, ScenarioError, Validated};
+use crate::scenario::{
+    Arithmetic, ControlMode, ModulationKind, ObserverKind, Scenario, ScenarioError, Validated,
+};
 use acim::fixed::FixedDrive;
 use acim::frames::FastSinCos;
 use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
-use acim::{Controller, DriveDesign, Svpwm};
+use acim::observer::ReducedOrderObserver;
+use acim::{Controller, DriveDesign, Overmodulation, Svpwm};
 use acim::{Drive, DriveInputs, DriveState, FaultReason};
 use acim_plant::{
     BusSensorConfig, BusVoltageSensor, CurrentSensorConfig, CurrentSensors, DcLink, FaultInjector,
@@ -25,6 +28,8 @@ const SQRT_3: f32 = 1.732_050_8;
 /// A modulation index at (or, by rounding, just under) the current loops' voltage limit,
 /// [`acim::svpwm::VOLTAGE_MARGIN`] of the linear limit, counts as saturated.
 const SATURATED_MODULATION: f32 = acim::svpwm::VOLTAGE_MARGIN * 0.999;
+/// The same with overmodulation, whose limit is the six-step fundamental 2 V_dc/pi.
+const SATURATED_OVERMODULATION: f32 = acim::svpwm::SIX_STEP * SQRT_3 * 0.999;
 
 /// The CSV header: the required columns first, then extra ones.
 pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited";
@@ -81,7 +86,9 @@ pub struct Row {
     /// The drive's stator frequency w_s / 2 pi, Hz (electrical).
     pub stator_frequency_hz: f32,
     /// Whether the voltage command is limited this step: at the current loops' limit
-    /// (98 % of V_dc / sqrt 3, `acim::svpwm::VOLTAGE_MARGIN`) or cut by the modulator.
+    /// (98 % of V_dc / sqrt 3, `acim::svpwm::VOLTAGE_MARGIN`; with overmodulation the
+    /// six-step fundamental 2 V_dc/pi) or cut by the modulator (with overmodulation: the
+    /// command beyond the inscribed circle, phases clamped).
     pub voltage_saturated: bool,
     /// Modulation index |v_dq| / (V_dc / sqrt 3) of the command, with the measured bus
     /// (1 = the linear limit of space-vector modulation).
@@ -287,6 +294,21 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
         }
     };
     Ok(match (sc.drive.arithmetic, sc.drive.observer) {
+        (Arithmetic::F32, ObserverKind::Reduced)
+            if sc.drive.modulation == ModulationKind::Overmodulation =>
+        {
+            let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
+            let d: Drive<FastSinCos, f32, ReducedOrderObserver, Overmodulation> =
+                Drive::with_parts(
+                    design,
+                    (),
+                    FastSinCos,
+                    ReducedOrderObserver::new(),
+                    Overmodulation,
+                )
+                .map_err(bad("drive"))?;
+            Box::new(d)
+        }
         (Arithmetic::F32, ObserverKind::Reduced) => {
             Box::new(Drive::new(v.drive).map_err(bad("drive"))?)
         }
@@ -345,6 +367,10 @@ pub fn run_with_progress(
         .machine_mut()
         .set_speed(sc.start.initial_speed_rpm * acim::math::RPM_TO_RAD_S);
     let start_step = (sc.start.at_s / ts).round() as usize;
+    let saturated_modulation = match sc.drive.modulation {
+        ModulationKind::Linear => SATURATED_MODULATION,
+        ModulationKind::Overmodulation => SATURATED_OVERMODULATION,
+    };
     let start = |drive: &mut Box<dyn Controller>| {
         match sc.drive.mode {
             ControlMode::Sensorless => drive.start(),
@@ -460,7 +486,7 @@ pub fn run_with_progress(
             current_error_a: tel.current_error,
             model_residual_v: tel.model_residual,
             stator_frequency_hz: tel.stator_frequency * (1.0 / acim::math::TAU),
-            voltage_saturated: tel.voltage_saturated || modulation >= SATURATED_MODULATION,
+            voltage_saturated: tel.voltage_saturated || modulation >= saturated_modulation,
             modulation_index: modulation,
             fault: if drive.state() == DriveState::Fault {
                 drive.fault()

@@ -357,6 +357,15 @@ pub const FW_MIN_FREQUENCY_FRACTION: f32 = 0.25;
 /// loop gain of i_sd* -> |v| is w Ls, normalised by the 1/w of the trim; an order below
 /// 1/tau_r of the paper machine (15 rad/s) so the lag of the flux does not destabilise it.
 pub const FW_TRIM_BANDWIDTH: f32 = 30.0;
+/// With an overmodulating modulator ([`crate::svpwm::Overmodulation`]) the current loops
+/// may use the range above the sustained (linear) voltage limit for this long in a row,
+/// s; then the sustained limit applies until the command is back below it, when the
+/// reserve refills at the same rate. Long enough for a load or speed step (the current
+/// loops settle in about 3 / 1 000 rad/s = 3 ms, the speed loop in about 0.1 s: the
+/// reserve covers the current transient and half the speed transient), short enough
+/// that a drive held at its voltage limit (a target beyond the reachable speed) runs in
+/// the linear range, where its current samples carry no overmodulation harmonics.
+pub const OVERMODULATION_RESERVE_TIME: f32 = 0.05;
 /// The voltage-feedback trim holds the voltage command at this fraction of the current
 /// loops' limit: 8 % headroom for the current loops' transients at high speed, where the
 /// machine runs on the voltage limit.
@@ -762,6 +771,10 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub zero_stop_steps: u32,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: N,
+    /// Steps the current loops may spend beyond the sustained voltage limit in a row
+    /// before it applies ([`OVERMODULATION_RESERVE_TIME`]; only a modulator whose
+    /// [`crate::svpwm::VoltageLimit::sustained`] is below its `max` has such a reserve).
+    pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
     pub regen_current_per_frequency: N::Gain,
 }
@@ -818,6 +831,8 @@ pub struct DriveDesign {
     pub zero_stop_steps: u32,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: f32,
+    /// [`OVERMODULATION_RESERVE_TIME`] in steps.
+    pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical.
     pub regen_current_per_frequency: f32,
     /// Largest |speed target|, rad/s.
@@ -1039,6 +1054,7 @@ impl DriveDesign {
                 ZeroSpeedPolicy::Stop => ((cfg.zero_speed_dwell / ts) as u32).max(1),
             },
             regen_min_frequency: cfg.regen_min_frequency,
+            overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
@@ -1148,6 +1164,7 @@ impl DriveCoeffs<f32> {
             ramp_step: d.ramp_step,
             zero_stop_steps: d.zero_stop_steps,
             regen_min_frequency: d.regen_min_frequency,
+            overmodulation_reserve_steps: d.overmodulation_reserve_steps,
             regen_current_per_frequency: d.regen_current_per_frequency,
             speed_target_limit: d.speed_target_limit,
             speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),

@@ -318,6 +318,9 @@ struct References<N> {
     flying: bool,
     /// Steps the speed target and reference have been zero ([`crate::ZeroSpeedPolicy`]).
     zero_steps: u32,
+    /// Steps left of the overmodulation reserve (`DriveCoeffs::
+    /// overmodulation_reserve_steps` when full; see [`Drive::transient_limit`]).
+    overmodulation_reserve: u32,
 }
 
 /// The field-weakening stage's output (issue 15).
@@ -429,6 +432,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 fw_active: false,
                 flying: false,
                 zero_steps: 0,
+                overmodulation_reserve: 0,
             },
             cur: CurrentControl {
                 d: PiController::new(),
@@ -608,6 +612,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
         self.refs.zero_steps = 0;
+        self.refs.overmodulation_reserve = 0;
         self.cur.d.reset();
         self.cur.q.reset();
         self.est.flux = FluxModel::new();
@@ -688,6 +693,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let limit = self
             .modulator
             .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
+        let limit = self.transient_limit(limit);
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
         let i_ref = match self.references(&m, &e, magnetizing, limit) {
@@ -712,10 +718,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
         // 7. modulation at the angle the voltage will act at
         probe.begin(StepRegion::Svpwm);
-        let (v_ab, modulation) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
+        let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
         probe.end(StepRegion::Svpwm);
         self.applied = Applied {
-            v_dq: v,
+            v_dq,
             v_ab,
             dc_bus: m.dc_bus,
             inv_dc_bus,
@@ -973,7 +979,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         magnetizing: bool,
         limit: VoltageLimit<N>,
     ) -> Result<Dq<N>, FaultReason> {
-        let voltage_limit = limit.max;
+        let voltage_limit = limit.steady;
         let c = &self.coeffs;
         let r = &mut self.refs;
         if magnetizing {
@@ -1036,8 +1042,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // depends on the load and is found by holding the reference below
             r.speed_target
         } else {
-            // a target beyond the no-load speed the voltage limit reaches (back-EMF
-            // p Omega lambda_ref = v_max) is limited to it and reported in the telemetry
+            // a target beyond the no-load speed the steady voltage reaches (back-EMF
+            // p Omega lambda_ref = V_steady, `VoltageLimit::steady`) is limited to it and
+            // reported in the telemetry
             let reach = N::gain(c.speed_per_volt, voltage_limit);
             r.speed_target.clamp(-reach, reach)
         };
@@ -1127,7 +1134,6 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         e: &Estimate<N>,
         limit: VoltageLimit<N>,
     ) -> FwLimits<N> {
-        let v_max = limit.max;
         let c = &self.coeffs;
         let fw = &c.fw;
         let mut out = FwLimits {
@@ -1145,7 +1151,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             } else {
                 fw.min_frequency
             };
-            let v = N::gain(fw.voltage_fraction, v_max);
+            let v = N::gain(fw.voltage_fraction, limit.steady);
             // field weakening is evaluated only where the no-load voltage at rated flux
             // w Ls i_sd_rated exceeds FW_TRIM_GATE V (or the trim has not decayed yet): below
             // that the rated flux is kept without computing the model (the cheap path)
@@ -1175,12 +1181,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 };
                 // voltage-feedback trim of what the model misses (the current loops'
                 // integrals, parameter errors): integrates (|v*|^2 - V_t^2)/v_max
-                // ~ 2 (|v*| - V_t) of the last command, per flux linkage (/w), kept >= 0,
+                // ~ 2 (|v*| - V_t) of the last command (V_t = trim fraction x the steady
+                // voltage; with overmodulation v_max is 3.5 % above V_t / 0.92 and the
+                // loop gain that much lower), per flux linkage (/w), kept >= 0,
                 // only where the rated flux needs most of V (`near_base`), so that faults
                 // below base speed do not move the flux; elsewhere it only decays
                 let trim = {
                     let va = self.applied.v_dq;
-                    let vt = N::gain(fw.trim_fraction, v_max);
+                    let vt = N::gain(fw.trim_fraction, limit.steady);
                     let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
                     let excess = if near_base { excess } else { -excess.abs() };
                     let trim = self.refs.fw_trim + N::gain(fw.trim_gain, N::ratio(excess, w));
@@ -1230,6 +1238,36 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             out.torque_limited = true;
         }
         out
+    }
+
+    /// The current loops' voltage limit this step. A modulator with a range above its
+    /// sustained limit ([`crate::svpwm::Overmodulation`]) lends it as a reserve: each
+    /// step whose command (the last one) was beyond the sustained limit uses a step of
+    /// it, each step at or below returns one, and with none left the sustained limit
+    /// applies ([`crate::design::OVERMODULATION_RESERVE_TIME`]). A modulator without
+    /// one ([`crate::Svpwm`]: `sustained == max`) passes unchanged.
+    #[inline(always)]
+    fn transient_limit(&mut self, limit: VoltageLimit<N>) -> VoltageLimit<N> {
+        if !M::OVERMODULATES || limit.sustained >= limit.max {
+            return limit;
+        }
+        let v = self.applied.v_dq;
+        let s = limit.sustained;
+        let r = &mut self.refs.overmodulation_reserve;
+        if v.d * v.d + v.q * v.q > s * s {
+            *r = r.saturating_sub(1);
+        } else if *r < self.coeffs.overmodulation_reserve_steps {
+            *r += 1;
+        }
+        if *r == 0 {
+            VoltageLimit {
+                max: s,
+                inv_max: limit.inv_sustained,
+                ..limit
+            }
+        } else {
+            limit
+        }
     }
 
     /// Current-control stage: d/q PIs with decoupling feed-forward (eq. 9a, 9b), the
@@ -1286,7 +1324,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         v: Dq<N>,
         i_ref: Dq<N>,
         inv_dc_bus: N,
-    ) -> (AlphaBeta<N>, Modulation<N>) {
+    ) -> (AlphaBeta<N>, Modulation<N>, Dq<N>) {
         let c = &self.coeffs;
         let rot = N::rotate_ahead(&mut self.sincos, m.sc, m.angle, e.stator_frequency, c.lead);
         let v_ab = inverse_park(v, rot);
@@ -1297,7 +1335,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let out = self
             .modulator
             .modulate(c, v_ab, m.dc_bus, inv_dc_bus, i_ref_abc);
-        (v_ab, out)
+        if M::OVERMODULATES && out.saturated {
+            // the estimators model the voltage of each period: the limited one (the
+            // command's fundamental with overmodulation, not this period's vector)
+            return (out.voltage, out, park(out.voltage, rot));
+        }
+        (v_ab, out, v)
     }
 
     /// Telemetry record of a closed-loop step.

@@ -81,4 +81,4 @@ pub use num::Num;
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
 pub use params::{InverseGamma, MachineData, MachineParams, ParamError};
 pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};
-pub use svpwm::{Modulator, Svpwm};
+pub use svpwm::{Modulator, Overmodulation, Svpwm};

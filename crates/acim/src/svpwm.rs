@@ -17,6 +17,15 @@
 //!   (telemetry). The current controllers do not rely on it: they limit their own output
 //!   to the circle the modulator supplies ([`Modulator::voltage_limit`]), inside the
 //!   hexagon, so their integrators never wind up against the modulator.
+//! * Overmodulation (the [`Overmodulation`] modulator, selectable instead of [`Svpwm`]):
+//!   from the inscribed circle through to six-step, by minimum-distance limiting (each
+//!   phase's duty clamped to [0, 1] after the min-max offset: the nearest point of the
+//!   hexagon, a vertex for a long vector) of a reference pre-distorted so that the
+//!   fundamental equals the command ("fundamental gain compensation"; Hava, Sul, Kerkman
+//!   and Lipo, "Dynamic overmodulation characteristics of triangle intersection PWM
+//!   methods", IEEE Trans. Ind. Appl. 35(4), 1999, describe the clamped min-max
+//!   modulator's gain curve). The current loops may then ask for up to the six-step
+//!   fundamental 2 V_dc/pi, 10 % above the circle.
 //! * Bus compensation: the measured V_dc divides the voltages, so the output voltage does
 //!   not depend on bus ripple. V_dc is floored at `min_bus_voltage` (no division by a
 //!   vanishing bus; the drive faults on under-voltage before that matters).
@@ -26,9 +35,9 @@
 //!   by (t_d/T_pwm + V_drop/V_dc) sat(i_x/i_band): a sign function made linear within
 //!   +/- `current_band` so that it does not chatter around zero crossings.
 
-use crate::design::DriveCoeffs;
+use crate::design::{DriveCoeffs, FW_TRIM_FRACTION};
 use crate::frames::{inverse_clarke, AlphaBeta};
-use crate::math::clamp;
+use crate::math::{clamp, sqrt};
 use crate::num::Num;
 
 /// 1/sqrt(3): the linear limit per volt of bus.
@@ -162,12 +171,30 @@ pub struct VoltageLimit<N = f32> {
     pub max: N,
     /// 1 / `max`, 1/V.
     pub inv_max: N,
+    /// The voltage the field weakening sizes the flux for, V peak: its model uses 97 % of
+    /// it and its trim holds the command at [`FW_TRIM_FRACTION`] of it, the rest being
+    /// the current loops' reserve. [`Svpwm`]: `max` (8 % reserve). [`Overmodulation`]:
+    /// [`OVERMODULATION_STEADY`] of the linear limit / [`FW_TRIM_FRACTION`], so the trim
+    /// holds the command at 96 % of the linear limit and the range up to six-step
+    /// (15 % more) is the reserve.
+    pub steady: N,
+    /// The limit the current loops fall back to once a modulator's reserve above it is
+    /// used up (the drive's `transient_limit`), V peak: `max` for [`Svpwm`] (no
+    /// reserve), the linear limit for [`Overmodulation`].
+    pub sustained: N,
+    /// 1 / `sustained`, 1/V.
+    pub inv_sustained: N,
 }
 
 /// The seam for the PWM stage: turns an alpha-beta voltage into duties and supplies the
 /// voltage limit of the current controllers, so the two cannot disagree. Chosen by type
 /// parameter of [`crate::Drive`] (zero cost in the interrupt).
 pub trait Modulator<N: Num = f32> {
+    /// Whether the modulator goes beyond its sustained limit in normal operation (its
+    /// output then differs from the command: the drive gives the estimators the limited
+    /// vector and keeps a time-limited reserve, `VoltageLimit::sustained`). A constant, so
+    /// that a modulator without (the default, [`Svpwm`]) costs the step nothing.
+    const OVERMODULATES: bool = false;
     /// The largest voltage vector the current loops may command at bus `dc_bus` (V, > 0)
     /// with `inv_dc_bus` = 1/`dc_bus`.
     fn voltage_limit(&self, coeffs: &DriveCoeffs<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
@@ -191,10 +218,15 @@ impl Modulator<f32> for Svpwm {
     /// 98 % of the inscribed circle V_dc/sqrt(3) ([`VOLTAGE_MARGIN`]).
     #[inline(always)]
     fn voltage_limit(&self, _: &DriveCoeffs<f32>, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+        let max = linear_limit(dc_bus) * VOLTAGE_MARGIN;
+        // (the coefficient is 1/(0.98/sqrt 3), folded at compile time here)
+        let inv_max = inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3));
         VoltageLimit {
-            max: linear_limit(dc_bus) * VOLTAGE_MARGIN,
-            // (the coefficient is 1/(0.98/sqrt 3), folded at compile time here)
-            inv_max: inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3)),
+            max,
+            inv_max,
+            steady: max,
+            sustained: max,
+            inv_sustained: inv_max,
         }
     }
     #[inline(always)]
@@ -207,6 +239,154 @@ impl Modulator<f32> for Svpwm {
         phase_currents: [f32; 3],
     ) -> Modulation {
         modulate_with_inverse(&coeffs.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+    }
+}
+
+/// With [`Overmodulation`], the fraction of the linear limit V_dc/sqrt 3 the field
+/// weakening holds the steady command at: 2 % below the sustained limit
+/// ([`VOLTAGE_MARGIN`]), the ripple of the command's magnitude at steady 3000 rpm
+/// (`fw-reversal-3000`: 10th to 99.9th percentile within -1.7 % / +1.7 % of its median),
+/// so that steady operation does not draw on the overmodulation reserve.
+pub const OVERMODULATION_STEADY: f32 = 0.96;
+
+/// The six-step fundamental per volt of bus, 2/pi: the largest fundamental an inverter
+/// makes (1.1027 times the inscribed circle's 1/sqrt 3).
+pub const SIX_STEP: f32 = core::f32::consts::FRAC_2_PI;
+
+/// The fundamental (per volt of bus) above which [`Overmodulation`] gives six-step: the
+/// last 0.5 % below it needs an ever longer reference.
+pub const OVERMODULATION_TOP: f32 = 0.995 * SIX_STEP;
+
+/// The reference radius (per volt of bus) whose minimum-distance limiting gives the
+/// fundamental `INV_SQRT3 + i (OVERMODULATION_TOP - INV_SQRT3) / 32`, i = 0..=32: computed
+/// by bisection on the fundamental of the clamped min-max duties over a revolution (2 880
+/// points); linear interpolation between the nodes keeps the fundamental within 0.03 %
+/// of the command (checked by `overmodulation_gives_the_commanded_fundamental`).
+const OVERMODULATION_RADIUS: [f32; 33] = [
+    0.577_350, 0.579_308, 0.581_482, 0.583_838, 0.586_371, 0.589_088, 0.592_001, 0.595_126,
+    0.598_486, 0.602_109, 0.606_033, 0.610_309, 0.615_004, 0.620_214, 0.626_079, 0.632_820,
+    0.640_828, 0.650_915, 0.665_550, 0.686_704, 0.710_182, 0.736_396, 0.765_917, 0.799_500,
+    0.838_141, 0.883_259, 0.936_859, 1.001_939, 1.083_282, 1.188_943, 1.333_984, 1.550_919,
+    1.928_824,
+];
+
+/// A reference radius (per volt of bus) the limiting turns into six-step: every point of
+/// the circle is then nearest to a vertex except within 0.3 degrees of the side centres.
+const SIX_STEP_RADIUS: f32 = 100.0;
+
+/// Nodes per unit of fundamental in [`OVERMODULATION_RADIUS`].
+const OVERMODULATION_NODES_PER_UNIT: f32 = 32.0 / (OVERMODULATION_TOP - INV_SQRT3);
+
+/// The reference radius for the fundamental `m` (per volt of bus, >= 1/sqrt 3).
+#[inline(always)]
+fn overmodulation_radius(m: f32) -> f32 {
+    if m.is_nan() || m >= OVERMODULATION_TOP {
+        return SIX_STEP_RADIUS;
+    }
+    let t = ((m - INV_SQRT3) * OVERMODULATION_NODES_PER_UNIT).max(0.0);
+    // t < 32 here: i <= 31 (`get` keeps the step free of a panic path regardless)
+    let i = t as usize;
+    let (Some(&r0), Some(&r1)) = (
+        OVERMODULATION_RADIUS.get(i),
+        OVERMODULATION_RADIUS.get(i + 1),
+    ) else {
+        return SIX_STEP_RADIUS;
+    };
+    r0 + (r1 - r0) * (t - i as f32)
+}
+
+/// Minimum-distance overmodulation with fundamental gain compensation (f32): [`Svpwm`]
+/// inside the inscribed circle, beyond it through to six-step (module documentation).
+/// The current loops may ask for up to the six-step fundamental for a while (the drive's
+/// reserve, [`crate::design::OVERMODULATION_RESERVE_TIME`], then the sustained linear
+/// limit); the field weakening holds the steady command at 96 % of the linear limit
+/// ([`VoltageLimit::steady`]), so the samples of steady operation carry no
+/// overmodulation harmonics and a transient can use 15 % more voltage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Overmodulation;
+
+impl Modulator<f32> for Overmodulation {
+    const OVERMODULATES: bool = true;
+    /// The six-step fundamental 2 V_dc/pi; steady: the linear limit over
+    /// [`FW_TRIM_FRACTION`].
+    #[inline(always)]
+    fn voltage_limit(&self, _: &DriveCoeffs<f32>, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+        VoltageLimit {
+            max: dc_bus * SIX_STEP,
+            inv_max: inv_dc_bus * (1.0 / SIX_STEP),
+            steady: linear_limit(dc_bus) * (OVERMODULATION_STEADY / FW_TRIM_FRACTION),
+            sustained: linear_limit(dc_bus) * VOLTAGE_MARGIN,
+            inv_sustained: inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3)),
+        }
+    }
+    #[inline(always)]
+    fn modulate(
+        &self,
+        coeffs: &DriveCoeffs<f32>,
+        v: AlphaBeta,
+        dc_bus: f32,
+        inv_dc_bus: f32,
+        phase_currents: [f32; 3],
+    ) -> Modulation {
+        overmodulate(&coeffs.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+    }
+}
+
+/// [`modulate_with_inverse`] inside the inscribed circle; beyond it the vector is
+/// lengthened to the radius whose minimum-distance limiting has the command's
+/// fundamental, each phase's duty is clamped to [0, 1], and the dead-time compensation
+/// is added to the phases that switch in this period (a clamped phase has no dead time).
+/// `voltage` is the vector of this period (the limited one); `saturated` says the
+/// command was beyond the circle (overmodulating).
+#[inline(always)]
+pub fn overmodulate(
+    cfg: &SvpwmConfig,
+    v: AlphaBeta,
+    dc_bus: f32,
+    inv_dc_bus: f32,
+    phase_currents: [f32; 3],
+) -> Modulation {
+    let m2 = (v.alpha * v.alpha + v.beta * v.beta) * (inv_dc_bus * inv_dc_bus);
+    // (a NaN command takes the linear path, which keeps the duties in range)
+    if m2.is_nan() || m2 <= INV_SQRT3 * INV_SQRT3 {
+        return modulate_with_inverse(cfg, v, dc_bus, inv_dc_bus, phase_currents);
+    }
+    // m >= 1/sqrt 3 (up to rounding): the ratio's divisor cannot vanish
+    let m = sqrt(m2).max(INV_SQRT3);
+    let k = overmodulation_radius(m) / m * inv_dc_bus;
+    let [a, b, c] = inverse_clarke(v);
+    let (a, b, c) = (a * k, b * k, c * k);
+    let (hi_ab, lo_ab) = if a > b { (a, b) } else { (b, a) };
+    let max = if c > hi_ab { c } else { hi_ab };
+    let min = if c < lo_ab { c } else { lo_ab };
+    let base = 0.5 - 0.5 * (max + min);
+    let d = [
+        clamp(base + a, 0.0, 1.0),
+        clamp(base + b, 0.0, 1.0),
+        clamp(base + c, 0.0, 1.0),
+    ];
+    // the vector these duties make (the common mode drops out)
+    let voltage = AlphaBeta {
+        alpha: (d[0] - 0.5 * (d[1] + d[2])) * (2.0 / 3.0) * dc_bus,
+        beta: (d[1] - d[2]) * INV_SQRT3 * dc_bus,
+    };
+    let dt = cfg.dead_time_duty + cfg.device_drop * inv_dc_bus;
+    let comp = |d: f32, i: f32| {
+        if d > 0.0 && d < 1.0 {
+            let sign = clamp(i * cfg.inv_current_band, -1.0, 1.0);
+            clamp(d + dt * sign, 0.0, 1.0)
+        } else {
+            d
+        }
+    };
+    Modulation {
+        duties: [
+            comp(d[0], phase_currents[0]),
+            comp(d[1], phase_currents[1]),
+            comp(d[2], phase_currents[2]),
+        ],
+        voltage,
+        saturated: true,
     }
 }
 
@@ -272,6 +452,79 @@ mod tests {
         assert!(m.duties.iter().all(|d| (0.0..=1.0).contains(d)));
     }
 
+    /// The fundamental of the limited vectors over a revolution (720 steps) of a command
+    /// of `m` volts per volt of bus: (magnitude per volt of bus, phase error in rad).
+    fn fundamental(m: f32) -> (f32, f32) {
+        let vdc = 325.0;
+        let n = 720;
+        let (mut re, mut im) = (0.0f32, 0.0f32);
+        for k in 0..n {
+            let th = core::f32::consts::TAU * (k as f32 + 0.5) / n as f32;
+            let v = AlphaBeta {
+                alpha: m * vdc * th.cos(),
+                beta: m * vdc * th.sin(),
+            };
+            let o = overmodulate(&no_dt(), v, vdc, 1.0 / vdc, [0.0; 3]);
+            let back = reconstruct(o.duties, vdc);
+            assert!(
+                (back.alpha - o.voltage.alpha).abs() < 1e-3
+                    && (back.beta - o.voltage.beta).abs() < 1e-3
+            );
+            // back * e^{-j th}
+            re += back.alpha * th.cos() + back.beta * th.sin();
+            im += back.beta * th.cos() - back.alpha * th.sin();
+        }
+        let (re, im) = (re / (n as f32 * vdc), im / (n as f32 * vdc));
+        ((re * re + im * im).sqrt(), im.atan2(re))
+    }
+
+    #[test]
+    fn overmodulation_gives_the_commanded_fundamental() {
+        // through the table (nodes and between them): within 0.05 %, no phase error
+        for i in 0..=64 {
+            let m = INV_SQRT3 + (OVERMODULATION_TOP - INV_SQRT3) * (i as f32 + 0.25) / 64.5;
+            let (f, ph) = fundamental(m);
+            assert!((f / m - 1.0).abs() < 5e-4, "m {m}: fundamental {f}");
+            assert!(ph.abs() < 1e-3, "m {m}: phase {ph}");
+        }
+        // above the table, and beyond what an inverter makes: six-step
+        for m in [0.634, SIX_STEP, 0.7, 5.0] {
+            let (f, ph) = fundamental(m);
+            assert!((f / SIX_STEP - 1.0).abs() < 1e-3, "m {m}: fundamental {f}");
+            assert!(ph.abs() < 1e-3);
+        }
+        let six = overmodulate(
+            &no_dt(),
+            AlphaBeta {
+                alpha: 1e4,
+                beta: 10.0,
+            },
+            325.0,
+            1.0 / 325.0,
+            [0.0; 3],
+        );
+        assert_eq!(six.duties, [1.0, 0.0, 0.0], "a vertex: no switching");
+    }
+
+    #[test]
+    fn overmodulation_leaves_clamped_phases_without_dead_time_compensation() {
+        let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 1.0, 0.1);
+        // 0.6 V_dc towards a side's centre (30 degrees): phase a clamped high, c low
+        let v = AlphaBeta {
+            alpha: 195.0 * 0.866_025_4,
+            beta: 195.0 * 0.5,
+        };
+        let i = [-3.0, 1.5, 1.5];
+        let o = overmodulate(&cfg, v, 325.0, 1.0 / 325.0, i);
+        assert!(o.saturated);
+        // no compensation on the clamped phases, whatever their current
+        assert_eq!((o.duties[0], o.duties[2]), (1.0, 0.0));
+        let plain = overmodulate(&no_dt(), v, 325.0, 1.0 / 325.0, i);
+        let dt = 1.5e-6 / 200e-6 + 1.0 / 325.0;
+        assert!(plain.duties[1] > 0.0 && plain.duties[1] < 1.0);
+        assert!((o.duties[1] - (plain.duties[1] + dt)).abs() < 1e-6);
+    }
+
     proptest! {
         #[test]
         fn duties_in_range_and_linear_range_reproduced(
@@ -297,6 +550,48 @@ mod tests {
                 let mv = v.alpha * v.alpha + v.beta * v.beta;
                 prop_assert!(mb <= mv * (1.0 + 1e-5));
             }
+        }
+
+        #[test]
+        fn overmodulation_is_svpwm_inside_the_circle_and_in_range_everywhere(
+            mag in 0.0f32..3.0, ang in -4.0f32..4.0, vdc in 50.0f32..800.0,
+            ia in -10.0f32..10.0, ib in -10.0f32..10.0,
+        ) {
+            let lim = linear_limit(vdc);
+            let v = AlphaBeta { alpha: mag * lim * ang.cos(), beta: mag * lim * ang.sin() };
+            let i = [ia, ib, -ia - ib];
+            let cfg = SvpwmConfig::new(1.5e-6, 200e-6, 1.0, 0.1);
+            let o = overmodulate(&cfg, v, vdc, 1.0 / vdc, i);
+            prop_assert!(o.duties.iter().all(|d| (0.0..=1.0).contains(d)));
+            prop_assert!(o.voltage.alpha.is_finite() && o.voltage.beta.is_finite());
+            if mag < 0.999 {
+                prop_assert_eq!(o, modulate_with_inverse(&cfg, v, vdc, 1.0 / vdc, i));
+            } else if mag > 1.001 {
+                prop_assert!(o.saturated);
+            }
+        }
+    }
+
+    #[test]
+    fn overmodulation_keeps_bad_inputs_in_range() {
+        for (a, b) in [
+            (f32::NAN, 1.0),
+            (f32::INFINITY, 0.0),
+            (1e30, -1e30),
+            (0.0, f32::NEG_INFINITY),
+        ] {
+            let o = overmodulate(
+                &no_dt(),
+                AlphaBeta { alpha: a, beta: b },
+                325.0,
+                1.0 / 325.0,
+                [f32::NAN; 3],
+            );
+            assert!(
+                o.duties.iter().all(|d| (0.0..=1.0).contains(d)),
+                "{a} {b}: {:?}",
+                o.duties
+            );
         }
     }
 }

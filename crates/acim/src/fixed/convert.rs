@@ -327,6 +327,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
         zero_stop_steps: d.zero_stop_steps,
+        overmodulation_reserve_steps: d.overmodulation_reserve_steps,
         regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
         regen_current_per_frequency: gain(
             d.regen_current_per_frequency * b.frequency / b.current,

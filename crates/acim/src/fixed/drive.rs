@@ -45,9 +45,14 @@ impl Modulator<Q24> for Svpwm {
         dc_bus: Q24,
         inv_dc_bus: Q24,
     ) -> VoltageLimit<Q24> {
+        let max = dc_bus * V_MAX_PER_BUS;
+        let inv_max = Q24::gain(c.voltage_limit_per_inv_bus, inv_dc_bus);
         VoltageLimit {
-            max: dc_bus * V_MAX_PER_BUS,
-            inv_max: Q24::gain(c.voltage_limit_per_inv_bus, inv_dc_bus),
+            max,
+            inv_max,
+            steady: max,
+            sustained: max,
+            inv_sustained: inv_max,
         }
     }
     #[inline(always)]
