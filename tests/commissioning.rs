@@ -67,9 +67,10 @@ fn krause_50hp() {
 }
 
 /// TI's benchmark motor: the shared file's assumed 750 W rating is refused (more torque
-/// than the machine makes at 3 A); with 600 W the electrical model is identified, the
-/// inertia of its bare rotor (0.001 kg m^2) is not: the power balance's error (the
-/// inverter-loss model, about 0.07 N m) exceeds the ramp's acceleration torque (0.03).
+/// than the machine makes at 3 A); with 600 W it is identified, the inertia of its bare
+/// rotor (0.001 kg m^2) too. Without the V/f stabiliser of the no-load test
+/// (`acim::commissioning::VF_STABILISER_GAIN`) the rotor hunted (+/-9 % at 2.5 Hz,
+/// growing): L_M came out 4 % low and J was not resolved.
 #[test]
 fn ti_benchmark_motor() {
     let mut sc = machine(include_str!(
@@ -77,7 +78,7 @@ fn ti_benchmark_motor() {
     ));
     assert!(commission(&sc).unwrap_err().contains("nameplate.power_w"));
     sc.nameplate.as_mut().unwrap().power_w = 600.0;
-    check("ti-aci-benchmark", &sc, false);
+    check("ti-aci-benchmark", &sc, true);
 }
 
 #[test]

@@ -19,10 +19,14 @@
 //! - **speed limit**: [`SPEED_LIMIT_OVER_RATED`] times the synchronous speed; **ramp**: the
 //!   rated speed in [`RAMP_TIME`];
 //! - **bandwidths**: current loop [`CURRENT_BANDWIDTH_PERIODS`] / Ts (as the paper's 1 000
-//!   rad/s at 5 kHz), speed loop 1/[`SPEED_LOOP_SEPARATION`] of it; observer poles at
-//!   [`OBSERVER_POLE_FRACTION`] of the electrical pole `Rseq / (sigma Ls)` (the
-//!   observer's error dynamics stay slower than the current transient it models, as the
-//!   paper's 120/160/200 rad/s against 466 rad/s), and below 0.04 / Ts;
+//!   rad/s at 5 kHz), speed loop 1/[`SPEED_LOOP_SEPARATION`] of it, or faster where the
+//!   rotor is light: a rated-load step must not slow it by more than [`RATED_STEP_DIP`]
+//!   of the rated speed (at most 1/[`SPEED_LOOP_MIN_SEPARATION`] of the current loop);
+//!   observer poles at [`OBSERVER_POLE_FRACTION`] of the electrical pole `Rseq / (sigma
+//!   Ls)` (the observer's error dynamics stay slower than the current transient it
+//!   models, as the paper's 120/160/200 rad/s against 466 rad/s) or
+//!   [`OBSERVER_OVER_SPEED_LOOP`] times the speed loop if that is faster, and below
+//!   0.04 / Ts;
 //! - **estimator limits**: plausible load torque [`LOAD_ESTIMATE_OVER_RATED`] times the
 //!   rated torque; the initial Rs estimate is the machine's Rs (by construction);
 //! - **V/f**: rated phase voltage per rated frequency, boost `Rs i_sd`;
@@ -50,6 +54,21 @@ pub const RAMP_TIME: f32 = 3.0;
 pub const CURRENT_BANDWIDTH_PERIODS: f32 = 0.2;
 /// Current-loop bandwidth over the speed-loop bandwidth.
 pub const SPEED_LOOP_SEPARATION: f32 = 40.0;
+/// A rated-load step may slow the rotor by at most this fraction of the rated speed: the
+/// speed PI's proportional torque J w_b dOmega meets the load T_rated when dOmega =
+/// T_rated / (J w_b), so w_b >= 1 / (RATED_STEP_DIP tau_m) with the mechanical start time
+/// tau_m = J Omega_rated / T_rated. Binding only for light rotors: TI's benchmark motor
+/// (J = 0.001 kg m^2, tau_m = 56 ms: 71 rad/s instead of 25, with which a rated-load
+/// step at a third of rated speed stopped the rotor within 18 ms and the drive tripped
+/// on LossOfControl); the paper's machine (tau_m 0.3 s) and the 37 kW one keep the
+/// current-loop ratio.
+pub const RATED_STEP_DIP: f32 = 0.25;
+/// The speed loop stays at least this factor below the current loop.
+pub const SPEED_LOOP_MIN_SEPARATION: f32 = 10.0;
+/// The observer's fastest pole at least this many times the speed loop's bandwidth (the
+/// speed PI acts on the estimate: an estimate slower than the loop lags a load step; the
+/// paper's 200 rad/s is 8 times its 25 rad/s).
+pub const OBSERVER_OVER_SPEED_LOOP: f32 = 3.0;
 /// The fastest observer pole as a fraction of the electrical pole Rseq / (sigma Ls).
 pub const OBSERVER_POLE_FRACTION: f32 = 0.43;
 /// The fastest observer pole times the control period at most (the paper's p Ts <= 0.04).
@@ -326,8 +345,16 @@ pub fn drive_config(
     }
     // bandwidths and observer poles from the period and the machine's electrical pole
     let w_c = CURRENT_BANDWIDTH_PERIODS / ts;
+    // the speed loop: the cascade's ratio, or what a light rotor needs (RATED_STEP_DIP);
+    // J > 0 (MachineParams), rated speed and torque > 0 (Nameplate::rated)
+    let start_time = machine.inertia() * rated.speed / rated.torque;
+    let w_speed = (w_c / SPEED_LOOP_SEPARATION)
+        .max(1.0 / (RATED_STEP_DIP * start_time))
+        .min(w_c / SPEED_LOOP_MIN_SEPARATION);
     let electrical_pole = machine.equivalent_resistance() / machine.transient_inductance();
-    let p3 = (OBSERVER_POLE_FRACTION * electrical_pole).min(OBSERVER_POLE_PERIODS / ts);
+    let p3 = (OBSERVER_POLE_FRACTION * electrical_pole)
+        .max(OBSERVER_OVER_SPEED_LOOP * w_speed)
+        .min(OBSERVER_POLE_PERIODS / ts);
     let sync_rpm = rated.synchronous_speed * RAD_S_TO_RPM;
     let mut cfg = DriveConfig::paper_defaults();
     cfg.machine = machine;
@@ -340,7 +367,7 @@ pub fn drive_config(
     cfg.max_speed = SPEED_LIMIT_OVER_RATED * sync_rpm * RPM_TO_RAD_S;
     cfg.speed_ramp = rated.speed / RAMP_TIME;
     cfg.current_bandwidth = w_c;
-    cfg.speed_bandwidth = w_c / SPEED_LOOP_SEPARATION;
+    cfg.speed_bandwidth = w_speed;
     cfg.observer_poles = ObserverPoles {
         p1: 0.6 * p3,
         p2: 0.8 * p3,
@@ -521,6 +548,38 @@ mod tests {
         // the bases follow the same rules as the hand-picked ones
         let bases = per_unit_bases(&cfg, &b);
         assert_eq!(bases.current, PerUnitBases::PAPER.current);
+    }
+
+    /// A light rotor gets a speed loop that holds a rated-load step (RATED_STEP_DIP) and
+    /// an observer three times faster, within the discretisation cap; the heavier machines
+    /// keep the cascade's ratio.
+    #[test]
+    fn the_speed_loop_follows_a_light_rotor() {
+        for (name, m, mut n, b) in machines() {
+            if name == "ti-aci-benchmark" {
+                n.power_w = 600.0;
+            }
+            let cfg = drive_config(m, &n, &b).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let r = n.rated().unwrap();
+            let start_time = m.inertia() * r.speed / r.torque;
+            let dip = 1.0 / (start_time * cfg.speed_bandwidth);
+            let p3 = cfg.observer_poles.p3;
+            if name == "ti-aci-benchmark" {
+                // tau_m 56 ms: 71 rad/s instead of 25, the observer at its 200 rad/s cap
+                assert!((dip - RATED_STEP_DIP).abs() < 1e-3, "{name}: {dip}");
+                assert!(cfg.speed_bandwidth > 70.0, "{name}");
+                assert!((p3 - OBSERVER_POLE_PERIODS / cfg.control_period).abs() < 1e-2);
+            } else {
+                assert!(dip < RATED_STEP_DIP, "{name}: {dip}");
+                let w_c = cfg.current_bandwidth;
+                assert!((cfg.speed_bandwidth - w_c / SPEED_LOOP_SEPARATION).abs() < 1e-3);
+            }
+            assert!(
+                p3 >= OBSERVER_OVER_SPEED_LOOP * cfg.speed_bandwidth - 1e-3 || {
+                    p3 >= OBSERVER_POLE_PERIODS / cfg.control_period - 1e-2
+                }
+            );
+        }
     }
 
     #[test]
