@@ -1058,7 +1058,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             } else {
                 (fw.i_sq_min, fw.i_sq_max, false)
             };
-        if (fw.torque_limited || regen_limited) && r.speed_ctl.saturated() {
+        // the speed PI at its limit, or its torque current beyond what the voltage left
+        // to the q loop drives (the q loop at its limit: at the field-weakening onset the
+        // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
+        // out, while the ramp goes on)
+        let short = r.speed_ctl.saturated() || self.cur.q.saturated();
+        if (fw.torque_limited || regen_limited) && short {
             // the torque is at the voltage (or bus) limit, or at the low-frequency
             // regeneration limit: the speed the drive reaches there is the reachable
             // speed; hold the reference within a band of it (no growing speed error, no
@@ -1074,13 +1079,22 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // (the speed PI's saturation flickers at the reachable speed)
         r.target_limited = r.target_limited || r.limited_hold > 0;
         r.limited_hold = r.limited_hold.saturating_sub(1);
-        let i_sq_ref = r.speed_ctl.update_with_limits(
-            &c.pi_speed,
-            r.speed_reference - speed,
-            N::ZERO,
-            i_sq_min,
-            i_sq_max,
-        );
+        let error = r.speed_reference - speed;
+        // the torque per ampere is 1.5 p lambda_r and the speed PI is designed at lambda_ref
+        // (`PiConfig::speed_loop`): while the flux is weakened its gains are scaled by
+        // lambda_ref/lambda_r (the error it sees), so the loop keeps its bandwidth and
+        // damping as the flux falls. Unscaled, at a sixth of the flux the loop's gain fell
+        // to a sixth: in fw-braking-3000 the ramp lagged 79 rpm and the speed overshot
+        // 3000 rpm by 78 rpm. The error, not the output, is scaled: the torque current does
+        // not jump with the flux estimate (lambda_r >= the flux model's floor)
+        let error = if r.fw_active {
+            error * (c.fw.flux_reference * self.est.flux.inv_rotor_flux)
+        } else {
+            error
+        };
+        let i_sq_ref =
+            r.speed_ctl
+                .update_with_limits(&c.pi_speed, error, N::ZERO, i_sq_min, i_sq_max);
         r.i_sq_ref = i_sq_ref;
         let saturated = r.speed_ctl.saturated();
         let stall = self
