@@ -130,15 +130,75 @@ fn overhauling_load_beyond_capability_faults_as_overload() {
     check_safe("fault-overhauling-500-12nm");
 }
 
-/// At 120 rpm an 8 N m overhauling load holds the regenerating stator frequency near zero,
-/// where no fundamental-model estimator sees the rotor: the estimate settles at the slip
-/// (DC stator currents fit any rotor speed) while the rotor runs away. Torque at its
-/// limit with |w_s| in that band for one rotor time constant is an Overload, before the
-/// machine leaves the speed range (it used to run 21 ms above 110 % of the speed limit).
+/// At 120 rpm an 8 N m overhauling load would hold the regenerating stator frequency near
+/// zero, where no fundamental-model estimator sees the rotor: the estimate settles at the
+/// slip (DC stator currents fit any rotor speed) while the rotor runs away. By default the
+/// regeneration limit (2 Hz) keeps the operating point off that line: the load raises
+/// the speed to where the braking torque it allows balances the load (207 rpm measured),
+/// held and reported. With the limit off, torque at its limit with |w_s| in the blind band
+/// for one rotor time constant is an Overload (`Supervisor::blind`), before the machine
+/// leaves the speed range (it used to run 21 ms above 110 % of the speed limit).
 #[test]
-fn overhauling_load_that_blinds_the_estimator_faults_as_overload() {
-    check("fault-overhauling-120-8nm", "Overload", 2.5, 1.0);
-    check_safe("fault-overhauling-120-8nm");
+fn overhauling_load_that_would_blind_the_estimator_is_held_or_faults_as_overload() {
+    let sc = builtins::get("fault-overhauling-120-8nm").unwrap();
+    let (_, m) = acim_sim::run_with_metrics(&sc).unwrap();
+    assert_eq!(m.fault, None);
+    assert!(m.speed_target_limited_s > 1.0, "{m:#?}");
+    assert!(m.peak_speed_rpm < 400.0, "{}", m.peak_speed_rpm);
+    let off = sc
+        .with_overrides(&["drive.regen_min_frequency_hz=0.0".to_string()])
+        .unwrap();
+    let (_, m) = acim_sim::run_with_metrics(&off).unwrap();
+    assert_eq!(m.fault.as_deref(), Some("Overload"), "{m:#?}");
+    let t = m.fault_time_s.unwrap();
+    assert!((2.5..=3.5).contains(&t), "fault at {t} s");
+    assert!(m.switching_beyond_limits_s <= 0.005);
+}
+
+/// Issue 12's overhauling-load sweep (`acim_sim::overhauling`, `acim-sim overhauling`,
+/// docs/overhauling.md): 0..12 N m at 500, 120 and 60 rpm. Every case is held at its
+/// target, held at the reachable speed and reported (the regeneration limit keeps the
+/// stator frequency 2 Hz on the rotor's side of zero), or faults cleanly; none switches
+/// beyond the trip or 110 % of the speed limit for more than 5 ms. At 500 rpm, where the
+/// whole range is observable, the capability (about 10.3 N m at the current limit) is
+/// held up to 10 N m and 11 and 12 N m are an Overload. Without the regeneration limit
+/// (the default before) 6-8 N m at 60 rpm oscillated between 0 and 300 rpm with no fault
+/// and 7 N m at 120 rpm ran away to 4 500 rpm while switching (0.4 s beyond 110 %).
+#[test]
+fn overhauling_sweep_is_held_or_faults_cleanly() {
+    use acim_sim::overhauling::{sweep, Outcome};
+    let cells = sweep().unwrap();
+    for c in &cells {
+        assert!(
+            c.clean(),
+            "{} rpm, {} N m: {:?}, {} s beyond the limits",
+            c.rpm,
+            c.load_nm,
+            c.outcome,
+            c.metrics.switching_beyond_limits_s
+        );
+        assert!(
+            c.metrics.peak_current_a < 8.0,
+            "{} rpm, {} N m",
+            c.rpm,
+            c.load_nm
+        );
+        if c.rpm == 500.0 {
+            let held = c.load_nm <= 10.0;
+            match &c.outcome {
+                Outcome::Held => assert!(held, "{} N m held beyond the capability", c.load_nm),
+                Outcome::Fault { reason, .. } => {
+                    assert!(!held, "{} N m: {reason}", c.load_nm);
+                    assert_eq!(reason, "Overload");
+                }
+                o => panic!("500 rpm, {} N m: {o:?}", c.load_nm),
+            }
+        }
+        // a limited speed is reported, not silent: above the target, below the limit
+        if let Outcome::Limited { speed_rpm } = c.outcome {
+            assert!(speed_rpm > c.rpm && speed_rpm < 2000.0, "{speed_rpm}");
+        }
+    }
 }
 
 /// After a fault the speed target is cleared: reset and start do not ramp back to the old

@@ -304,7 +304,8 @@ pub fn all() -> Vec<Scenario> {
         let mut s = base(
             &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
             if rpm < 200.0 {
-                "overhauling load at 120 rpm that pins the stator frequency near zero: overload"
+                "overhauling load at 120 rpm that would pin the stator frequency near zero: \
+                 held at the reachable speed by the regeneration limit"
             } else if nm <= 10.0 {
                 "overhauling load at 500 rpm within the torque capability: held"
             } else {

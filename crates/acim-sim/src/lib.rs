@@ -9,6 +9,7 @@ pub mod machines;
 pub mod metrics;
 pub mod observers;
 pub mod output;
+pub mod overhauling;
 pub mod plot;
 pub mod robustness;
 pub mod scenario;

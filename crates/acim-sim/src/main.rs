@@ -8,6 +8,7 @@
 //! acim-sim stability [DIR]                 orientation stability map (docs/stability)
 //! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
 //! acim-sim faults [FILE] [OPTIONS]         fault table
+//! acim-sim overhauling [FILE] [OPTIONS]    overhauling-load sweep
 //! acim-sim robustness [FILE]               issue 13's robustness matrix
 //! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! ```
@@ -42,6 +43,10 @@ const USAGE: &str = "usage:
   acim-sim faults [FILE] [OPTIONS]          every fault-* scenario: reason, detection time,
                                             peaks (table to FILE, default docs/faults.md; with
                                             --set: <out>/faults.md)
+  acim-sim overhauling [FILE] [OPTIONS]     overhauling loads 0-12 N m at 500, 120 and 60 rpm:
+                                            held, limited or a clean fault (table to FILE,
+                                            default docs/overhauling.md; with --set:
+                                            <out>/overhauling.md; no run outputs)
   acim-sim any-motor [FILE] [OPTIONS]       every acceptance machine commissioned, then
                                             driven with the identified model (table to FILE,
                                             default docs/any-motor.md; figures beside it)
@@ -559,6 +564,25 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
             let md = acim_sim::faults::markdown(&rows);
             write_table(&file, &with_overrides_note(md, &o.sets), &out)?;
+        }
+        Some("overhauling") => {
+            o.at_most_positional("overhauling", 1, "at most one table file")?;
+            let file = table_file(&o, "overhauling.md");
+            let quiet = o.quiet;
+            let cells = acim_sim::overhauling::sweep_with(&o.sets, &mut |sc| {
+                let (_, m) =
+                    acim_sim::run_with_metrics(sc).map_err(|e| format!("{}: {e}", sc.name))?;
+                if !quiet {
+                    eprintln!("{}: {}", sc.name, acim_sim::overhauling::judge_text(sc, &m));
+                }
+                Ok(m)
+            })?;
+            let md = acim_sim::overhauling::markdown(&cells);
+            write_table(&file, &with_overrides_note(md, &o.sets), &o.out())?;
+            let bad = cells.iter().filter(|c| !c.clean()).count();
+            if bad > 0 {
+                return Err(format!("{bad} case(s) neither held nor faulted cleanly"));
+            }
         }
         Some("commission") => {
             let [spec] = o.positional.as_slice() else {

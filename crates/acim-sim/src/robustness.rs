@@ -71,15 +71,17 @@ pub struct Setup {
     pub regen_min_frequency_hz: f32,
 }
 
-/// The setups the report compares: before issue 13 (the defaults with the estimator on),
-/// Rs while running, and Rs while running with the low-frequency regeneration limit.
-pub const SETUPS: [(Setup, &str); 3] = [
+/// The setups the report compares: before issue 13 (the standstill Rs mode, no regeneration
+/// limit), Rs while running, Rs while running with a 1.5 Hz regeneration limit, and the
+/// defaults (standstill Rs mode with the 2 Hz regeneration limit, on by default since
+/// issue 12's overhauling-load sweep).
+pub const SETUPS: [(Setup, &str); 4] = [
     (
         Setup {
             mode: RsMode::Standstill,
             regen_min_frequency_hz: 0.0,
         },
-        "Rs mode standstill (the default: identification before the ramp, then eq. 19 below 1.5 Hz), no regeneration limit",
+        "Rs mode standstill (identification before the ramp, then eq. 19 below 1.5 Hz), no regeneration limit (regen_min_frequency_hz = 0: the defaults before the limit)",
     ),
     (
         Setup {
@@ -94,6 +96,13 @@ pub const SETUPS: [(Setup, &str); 3] = [
             regen_min_frequency_hz: 1.5,
         },
         "Rs mode running, regeneration limit 1.5 Hz (regen_min_frequency_hz = 1.5)",
+    ),
+    (
+        Setup {
+            mode: RsMode::Standstill,
+            regen_min_frequency_hz: 2.0,
+        },
+        "Rs mode standstill, regeneration limit 2 Hz (the defaults, with the Rs estimator on)",
     ),
 ];
 

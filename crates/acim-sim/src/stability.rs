@@ -93,6 +93,10 @@ pub fn measure_with(
     sc.drive.device_drop_comp_v = 0.0;
     sc.sensors.adc_bits = 16;
     sc.drive.speed_ramp_rpm_s = 2000.0;
+    // the map measures the estimators at the labelled operating point: without the
+    // regeneration limit (on by default), which would move a regenerating point near
+    // the unobservable line to a higher speed
+    sc.drive.regen_min_frequency_hz = 0.0;
     sc.speed_profile = vec![SpeedPoint {
         t_s: 0.0,
         rpm: speed_rpm,

@@ -32,9 +32,12 @@ fn kept_lost_and_faulted() {
     assert!(m.zero_hold.is_none());
     assert!(m.modulation_index_max > 0.1 && m.modulation_index_max < 1.2);
 
-    // the paper's scheme (no orientation correction) regenerating at 120 rpm: the speed
-    // error passes 100 rpm without a trip
-    let m = run("regen-120", &["drive.orientation_gain=0"]);
+    // the paper's scheme (no orientation correction, no regeneration limit) regenerating
+    // at 120 rpm: the speed error passes 100 rpm without a trip
+    let m = run(
+        "regen-120",
+        &["drive.orientation_gain=0", "drive.regen_min_frequency_hz=0"],
+    );
     assert_eq!(m.verdict, Verdict::Lost, "{m:#?}");
 
     let m = run("fault-short", &[]);

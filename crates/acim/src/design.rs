@@ -168,16 +168,24 @@ pub struct DriveConfig {
     /// [`FLUX_OPT_MIN_FRACTION`] of `flux_current`; it rises at once with the torque
     /// current and falls with [`FLUX_OPT_FALL_TAU_R`] rotor time constants.
     pub flux_optimisation: bool,
-    /// Low-frequency regeneration limit (issue 13, item 5), rad/s electrical; 0 = off (the
-    /// default, the behaviour before issue 13). While the drive holds a speed reference of
-    /// the rotor's sign, the regenerative torque current is limited so that the stator
-    /// frequency w_s = p Omega + R_R i_sq / lambda stays on the rotor's side of the
-    /// unobservable line w_s = 0 by at least this much: |i_sq| <= (p |Omega_hat| - w_min)
-    /// lambda_ref / R_R. An overhauling load larger than that raises the speed until the
-    /// operating point is observable again, instead of letting the estimates drift along
-    /// the line. Transits (reference zero or of the other sign: reversals, stops) are not
-    /// limited: they cross the line at the ramp's pace. Nonzero needs the crate feature
-    /// `robust`.
+    /// Low-frequency regeneration limit (issues 12 and 13), rad/s electrical; 0 = off. While
+    /// the drive holds a speed target of the rotor's sign, the regenerative torque current
+    /// is limited so that the stator frequency w_s = p Omega + R_R i_sq / lambda stays on
+    /// the rotor's side of the unobservable line w_s = 0 by at least this much:
+    /// |i_sq| <= (p |Omega_hat| - w_min) lambda_ref / R_R. An overhauling load larger than
+    /// that raises the speed until the operating point is observable again (the reachable
+    /// speed, held and reported), instead of letting the estimates drift along the line
+    /// while the rotor runs away. Transits (a zero target or one of the other sign: stops,
+    /// reversals) are not limited: they cross the line at the ramp's pace. Default 2 Hz:
+    /// the upper end of `orientation_fade` (1.5 Hz), where the orientation correction that
+    /// holds regeneration stable (k > tau_r |w_slip|) is at full strength, plus half the
+    /// fade's width, so that the measured stator frequency at the limit stays clear of
+    /// the fade and of the standstill-mode Rs estimator's gate (`rs_max_frequency`,
+    /// 1.5 Hz, which shares the d-axis residual). Measured without the limit
+    /// (`acim-sim overhauling`): 6-8 N m at 60 rpm oscillated between 0 and 300 rpm with
+    /// no fault; 7 N m at 120 rpm ran away to 4 500 rpm while switching. At exactly
+    /// 1.5 Hz the robustness matrix's 60 rpm / 4.5 N m regenerating cases with the
+    /// standstill Rs estimator faulted (`acim-sim robustness`).
     pub regen_min_frequency: f32,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
@@ -231,7 +239,8 @@ impl DriveConfig {
             flux_optimisation: false,
             zero_speed_policy: ZeroSpeedPolicy::Hold,
             zero_speed_dwell: 0.5,
-            regen_min_frequency: 0.0,
+            // the correction's fade-in end plus half its width (2 Hz, doc above)
+            regen_min_frequency: 2.0 * core::f32::consts::PI * 2.0,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
@@ -956,11 +965,6 @@ impl DriveDesign {
             "Stop needs the acim feature `robust`",
         )?;
         check(
-            robust || cfg.regen_min_frequency == 0.0,
-            "regen_min_frequency",
-            "a nonzero value needs the acim feature `robust`",
-        )?;
-        check(
             is_finite(cfg.regen_min_frequency)
                 && cfg.regen_min_frequency >= 0.0
                 && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * cfg.machine.pole_pairs_f32(),
@@ -1192,25 +1196,26 @@ mod tests {
         DriveDesign::new(cfg).err().map(|e| e.field())
     }
 
-    /// Issue 13's settings need the feature `robust`; without it they are refused by
-    /// name (the firmware's build), with it accepted.
+    /// Issue 13's Rs-while-running and zero-speed stop need the feature `robust`; without
+    /// it they are refused by name (the firmware's build), with it accepted.
     #[test]
     fn robust_settings_follow_the_feature() {
         let mut c = DriveConfig::paper_defaults();
         c.rs_estimation_mode = RsEstimationMode::Running;
         let mut z = DriveConfig::paper_defaults();
         z.zero_speed_policy = ZeroSpeedPolicy::Stop;
-        let mut r = DriveConfig::paper_defaults();
-        r.regen_min_frequency = 9.4;
         if cfg!(feature = "robust") {
             assert_eq!(field(c), None);
             assert_eq!(field(z), None);
-            assert_eq!(field(r), None);
         } else {
             assert_eq!(field(c), Some("rs_estimation_mode"));
             assert_eq!(field(z), Some("zero_speed_policy"));
-            assert_eq!(field(r), Some("regen_min_frequency"));
         }
+        // the regeneration limit is in every build (a protection, issue 12)
+        let mut r = DriveConfig::paper_defaults();
+        assert_eq!(field(r), None);
+        r.regen_min_frequency = 0.0;
+        assert_eq!(field(r), None);
         r.regen_min_frequency = -1.0;
         assert_eq!(field(r), Some("regen_min_frequency"));
     }

@@ -168,26 +168,22 @@ fn rs_running_step<N: Num>(
 }
 
 /// The torque-current limits with the low-frequency regeneration limit
-/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed reference has the
-/// sign of the speed estimate (holding, not in transit), the braking side is limited to
+/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed target has the
+/// sign of the speed estimate (holding a speed; a zero or opposite target is a transit,
+/// through zero to a stop or a reversal, which must cross the line), the braking side is
+/// limited to
 /// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
 /// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
 /// the limits and whether the regeneration limit is tighter than the others.
-#[cold]
-#[inline(never)]
-fn regen_limit<N: Num>(
-    c: &DriveCoeffs<N>,
-    reference: N,
-    speed: N,
-    fw: FwLimits<N>,
-) -> (N, N, bool) {
+#[inline(always)]
+fn regen_limit<N: Num>(c: &DriveCoeffs<N>, target: N, speed: N, fw: FwLimits<N>) -> (N, N, bool) {
     let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
     let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
     let w = if w > N::ZERO { w } else { N::ZERO };
     let i = N::gain(c.regen_current_per_frequency, w);
-    if speed > N::ZERO && reference > N::ZERO && lo < -i {
+    if speed > N::ZERO && target > N::ZERO && lo < -i {
         (-i, hi, true)
-    } else if speed < N::ZERO && reference < N::ZERO && hi > i {
+    } else if speed < N::ZERO && target < N::ZERO && hi > i {
         (lo, i, true)
     } else {
         (lo, hi, false)
@@ -1052,25 +1048,30 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        let (i_sq_min, i_sq_max, regen_limited) =
-            if cfg!(feature = "robust") && c.regen_min_frequency > N::ZERO {
-                regen_limit(c, r.speed_reference, speed, fw)
-            } else {
-                (fw.i_sq_min, fw.i_sq_max, false)
-            };
+        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO {
+            regen_limit(c, r.speed_target, speed, fw)
+        } else {
+            (fw.i_sq_min, fw.i_sq_max, false)
+        };
         // the speed PI at its limit, or its torque current beyond what the voltage left
         // to the q loop drives (the q loop at its limit: at the field-weakening onset the
         // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
         // out, while the ramp goes on)
         let short = r.speed_ctl.saturated() || self.cur.q.saturated();
-        if (fw.torque_limited || regen_limited) && short {
+        // the regeneration limit holds the torque only when the drive brakes (its last
+        // torque current against the speed): a motoring drive at its limit, e.g. a locked
+        // rotor, is the stall detector's case, with the reference kept
+        let braking = regen_limited && ((speed > N::ZERO) == (r.i_sq_ref < N::ZERO));
+        if (fw.torque_limited || braking) && short {
             // the torque is at the voltage (or bus) limit, or at the low-frequency
             // regeneration limit: the speed the drive reaches there is the reachable
             // speed; hold the reference within a band of it (no growing speed error, no
             // overload trip) and report it
             let band = c.fw.hold_band;
             let held = r.speed_reference.clamp(speed - band, speed + band);
-            if held != r.speed_reference {
+            // reported when the hold binds, and whenever the regeneration limit holds the
+            // torque: the speed then settles above the target, inside the band or not
+            if held != r.speed_reference || braking {
                 r.limited_hold = c.fw.report_steps;
             }
             r.speed_reference = held;
