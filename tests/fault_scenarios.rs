@@ -133,7 +133,7 @@ fn overhauling_load_beyond_capability_faults_as_overload() {
 /// At 120 rpm an 8 N m overhauling load would hold the regenerating stator frequency near
 /// zero, where no fundamental-model estimator sees the rotor: the estimate settles at the
 /// slip (DC stator currents fit any rotor speed) while the rotor runs away. By default the
-/// regeneration limit (2 Hz) keeps the operating point off that line: the load raises
+/// regeneration limit (1.5 Hz) keeps the operating point off that line: the load raises
 /// the speed to where the braking torque it allows balances the load (207 rpm measured),
 /// held and reported. With the limit off, torque at its limit with |w_s| in the blind band
 /// for one rotor time constant is an Overload (`Supervisor::blind`), before the machine
@@ -158,7 +158,7 @@ fn overhauling_load_that_would_blind_the_estimator_is_held_or_faults_as_overload
 /// Issue 12's overhauling-load sweep (`acim_sim::overhauling`, `acim-sim overhauling`,
 /// docs/overhauling.md): 0..12 N m at 500, 120 and 60 rpm. Every case is held at its
 /// target, held at the reachable speed and reported (the regeneration limit keeps the
-/// stator frequency 2 Hz on the rotor's side of zero), or faults cleanly; none switches
+/// stator frequency 1.5 Hz on the rotor's side of zero), or faults cleanly; none switches
 /// beyond the trip or 110 % of the speed limit for more than 5 ms. At 500 rpm, where the
 /// whole range is observable, the capability (about 10.3 N m at the current limit) is
 /// held up to 10 N m and 11 and 12 N m are an Overload. Without the regeneration limit

@@ -176,16 +176,16 @@ pub struct DriveConfig {
     /// that raises the speed until the operating point is observable again (the reachable
     /// speed, held and reported), instead of letting the estimates drift along the line
     /// while the rotor runs away. Transits (a zero target or one of the other sign: stops,
-    /// reversals) are not limited: they cross the line at the ramp's pace. Default 2 Hz:
-    /// the upper end of `orientation_fade` (1.5 Hz), where the orientation correction that
-    /// holds regeneration stable (k > tau_r |w_slip|) is at full strength, plus half the
-    /// fade's width, so that the measured stator frequency at the limit stays clear of
-    /// the fade and of the standstill-mode Rs estimator's gate (`rs_max_frequency`,
-    /// 1.5 Hz, which shares the d-axis residual). Measured without the limit
-    /// (`acim-sim overhauling`): 6-8 N m at 60 rpm oscillated between 0 and 300 rpm with
-    /// no fault; 7 N m at 120 rpm ran away to 4 500 rpm while switching. At exactly
-    /// 1.5 Hz the robustness matrix's 60 rpm / 4.5 N m regenerating cases with the
-    /// standstill Rs estimator faulted (`acim-sim robustness`).
+    /// reversals) are not limited: they cross the line at the ramp's pace. Default 1.5 Hz,
+    /// the upper end of `orientation_fade`, where the orientation correction that holds
+    /// regeneration stable (k > tau_r |w_slip|) is at full strength. Measured without the
+    /// limit (`acim-sim overhauling`): 6-8 N m at 60 rpm oscillated between 0 and 300 rpm
+    /// with no fault; 7 N m at 120 rpm ran away to 4 500 rpm while switching. Its cost: a
+    /// target below w_min / p (45 rpm on the paper machine) cannot be braked while held.
+    /// 2 Hz was tried: the robustness matrix with the standstill Rs estimator did better
+    /// near the line (9 of 14 low-frequency cases against 4), but the 60 rpm trapezoid of
+    /// fig 12 then estimated 4.2 rpm wrong (4 is its bound) and the any-motor 3 %
+    /// trapezoid 7-14 rpm (1.2-3.4 at 1.5 Hz).
     pub regen_min_frequency: f32,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
@@ -239,8 +239,8 @@ impl DriveConfig {
             flux_optimisation: false,
             zero_speed_policy: ZeroSpeedPolicy::Hold,
             zero_speed_dwell: 0.5,
-            // the correction's fade-in end plus half its width (2 Hz, doc above)
-            regen_min_frequency: 2.0 * core::f32::consts::PI * 2.0,
+            // the orientation correction's fade-in end (doc above)
+            regen_min_frequency: 2.0 * core::f32::consts::PI * 1.5,
             vf: VfConfig {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
