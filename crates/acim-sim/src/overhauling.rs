@@ -102,16 +102,15 @@ pub fn scenario(rpm: f32, load_nm: f32) -> Scenario {
 }
 
 /// Stator frequency of the steady operating point at `rpm` against `load_nm` of
-/// overhauling load, Hz (the paper machine at rated flux, the default drive).
+/// overhauling load, Hz (the robustness matrix's computation: paper machine, rated flux).
 pub fn stator_frequency_hz(rpm: f32, load_nm: f32) -> f32 {
-    let m = acim::MachineParams::paper_table1();
-    let d = acim::DriveConfig::paper_defaults();
-    let lambda = m.rotor_flux_for(d.flux_current);
-    let p = m.pole_pairs_f32();
-    let omega = rpm * acim::math::RPM_TO_RAD_S;
-    let te = -load_nm + m.viscous_friction() * omega;
-    let i_sq = te / (1.5 * p * lambda);
-    (p * omega + m.referred_rotor_resistance() * i_sq / lambda) / acim::math::TAU
+    crate::robustness::Case {
+        rpm,
+        regenerating: true,
+        load_nm,
+        variant: crate::robustness::Variant::Nominal,
+    }
+    .stator_frequency_hz()
 }
 
 /// Judges one run.

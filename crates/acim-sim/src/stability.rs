@@ -286,6 +286,55 @@ pub fn stator_frequency_hz(speed_rpm: f32, load_nm: f32) -> f32 {
     (m.pole_pairs_f32() * speed_rpm * RPM_TO_RAD_S + w_slip) / acim::math::TAU
 }
 
+/// Issue 12, item 3: the orientation gain against its stability bound up to the current
+/// limit. In regeneration the orientation mode is stable for k > tau_r |w_slip|
+/// (`docs/orientation-stability.md`); with lambda = L_M i_sd* and tau_r = L_M / R_R that is
+/// k > |i_sq| / i_sd*, independent of speed. The drive's gain is scheduled with the load,
+/// k max(1, c |i_sq|) (`OrientationDesign::load_factor_per_current`, c =
+/// `ORIENTATION_GAIN_MARGIN` / (k i_sd*)); the table gives both gains' margin k / (tau_r
+/// |w_slip|) from no load to the torque at the current limit (paper machine, defaults).
+pub fn gain_margin_markdown() -> String {
+    let cfg = acim::DriveConfig::paper_defaults();
+    let m = cfg.machine;
+    let k = cfg.orientation_gain;
+    let c = acim::design::ORIENTATION_GAIN_MARGIN / (k * cfg.flux_current);
+    let lambda = m.rotor_flux_for(cfg.flux_current);
+    let kt = 1.5 * m.pole_pairs_f32() * lambda;
+    let i_max =
+        (cfg.current_limit * cfg.current_limit - cfg.flux_current * cfg.flux_current).sqrt();
+    let mut md = format!(
+        "## Orientation gain against its stability bound (issue 12)\n\n\
+         Regeneration is stable for k > tau_r |w_slip| = |i_sq| / i_sd* (at any speed). The \
+         fixed gain k = {k} meets it up to {:.1} N m; the drive schedules the gain with the \
+         load, k max(1, {:.3} |i_sq|), which keeps the margin k / (tau_r |w_slip|) at least \
+         {} up to the current limit ({:.2} A of torque current, {:.2} N m).\n\n\
+         | torque (N m) | i_sq (A) | tau_r \\|w_slip\\| | margin, fixed k = {k} | scheduled k | margin, scheduled |\n\
+         |---|---|---|---|---|---|\n",
+        k * cfg.flux_current * kt,
+        c,
+        acim::design::ORIENTATION_GAIN_MARGIN,
+        i_max,
+        kt * i_max,
+    );
+    for t in [1.5, 3.0, 4.5, 6.0, 7.5, 9.0] {
+        let i = t / kt;
+        md.push_str(&margin_row(t, i, k, c, cfg.flux_current));
+    }
+    md.push_str(&margin_row(kt * i_max, i_max, k, c, cfg.flux_current));
+    md.push('\n');
+    md
+}
+
+fn margin_row(t: f32, i_sq: f32, k: f32, c: f32, i_sd: f32) -> String {
+    let bound = i_sq / i_sd;
+    let scheduled = k * (c * i_sq).max(1.0);
+    format!(
+        "| {t:.2} | {i_sq:.2} | {bound:.2} | {:.2} | {scheduled:.2} | {:.2} |\n",
+        k / bound,
+        scheduled / bound
+    )
+}
+
 /// The issue-13 map as Markdown: for each error of [`robust_errors`] and each Rs mode
 /// (estimator off, as in the paper's scheme with the correction, and the running mode),
 /// the measured growth rate of a 2 degree orientation step at every point of
@@ -314,6 +363,7 @@ pub fn robust_map_markdown(progress: &mut dyn FnMut(&str)) -> Result<String, Sce
         }
         md.push('\n');
     };
+    md.push_str(&gain_margin_markdown());
     md.push_str("## Stator frequency (Hz)\n\n");
     header(&mut md);
     for s in ROBUST_SPEEDS_RPM {
