@@ -339,6 +339,17 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
             m.rs.within_2pct_after_running_s.map_or("-".into(), |x| format!("{x:.3} s")),
         ));
     }
+    if let Some(t) = &m.inverter_test {
+        out.push(format!(
+            "{:<26} inverter test at start: {}; dead time compensated {:.3} us (configured {:.3}, true {:.3}: {:+.1} %)",
+            "",
+            t.outcome,
+            t.dead_time_us,
+            t.configured_dead_time_us,
+            t.true_dead_time_us,
+            100.0 * (t.dead_time_us - t.true_dead_time_us) / t.true_dead_time_us.max(1e-3),
+        ));
+    }
     out
 }
 

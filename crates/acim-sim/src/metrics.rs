@@ -278,6 +278,9 @@ pub struct Metrics {
     pub load_steps: Vec<LoadStepMetrics>,
     /// Rs estimator convergence.
     pub rs: RsMetrics,
+    /// The inverter test at start (only when the drive runs it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub inverter_test: Option<crate::sim::InverterTestRecord>,
     /// Wall-clock time of the simulation, s.
     pub wall_time_s: f64,
     /// Simulated seconds per wall-clock second.
@@ -547,6 +550,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         speed_target_limited_s,
         speed_err_max_running_rpm: max_running,
         speed_search: r.search,
+        inverter_test: r.inverter_test.clone(),
         peak_current_a,
         peak_speed_rpm,
         peak_speed_switching_rpm,

@@ -33,17 +33,24 @@ pub enum Variant {
     DeadTime2_2,
     /// 20 mA offsets on phases a and b after the drive measured them (drift).
     Offset20mA,
+    /// The inverter's dead time is 1.0 us, the drive is configured for 1.5 us and
+    /// identifies the error at start (`drive.inverter_identification`, issue 13 item 2).
+    DeadTime1_0Identified,
+    /// The inverter's dead time is 2.2 us, configured 1.5 us, identified at start.
+    DeadTime2_2Identified,
 }
 
 impl Variant {
     /// Every variant of the acceptance matrix (issue 13), in table order.
-    pub const MATRIX: [Variant; 7] = [
+    pub const MATRIX: [Variant; 9] = [
         Variant::Nominal,
         Variant::ControllerRsPlus20,
         Variant::ControllerRsMinus20,
         Variant::PlantRsDrift30,
         Variant::DeadTime1_0,
         Variant::DeadTime2_2,
+        Variant::DeadTime1_0Identified,
+        Variant::DeadTime2_2Identified,
         Variant::Offset20mA,
     ];
 
@@ -58,6 +65,8 @@ impl Variant {
             Variant::DeadTime1_0 => "dead time 1.0 us",
             Variant::DeadTime2_2 => "dead time 2.2 us",
             Variant::Offset20mA => "offsets 20 mA",
+            Variant::DeadTime1_0Identified => "dead time 1.0 us, identified at start",
+            Variant::DeadTime2_2Identified => "dead time 2.2 us, identified at start",
         }
     }
 }
@@ -209,6 +218,14 @@ impl Case {
             }
             Variant::DeadTime1_0 => s.inverter.dead_time_s = 1.0e-6,
             Variant::DeadTime2_2 => s.inverter.dead_time_s = 2.2e-6,
+            Variant::DeadTime1_0Identified => {
+                s.inverter.dead_time_s = 1.0e-6;
+                s.drive.inverter_identification = true;
+            }
+            Variant::DeadTime2_2Identified => {
+                s.inverter.dead_time_s = 2.2e-6;
+                s.drive.inverter_identification = true;
+            }
             // the start comes at t = 0, before the drive has measured the offsets with
             // the switches off: they stay uncompensated, as an offset that drifted in
             // after the start would

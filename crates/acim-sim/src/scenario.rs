@@ -322,6 +322,9 @@ pub struct DriveSpec {
     /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
     /// zero while holding a regenerating point, Hz electrical (0: off, the default).
     pub regen_min_frequency_hz: f32,
+    /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
+    /// `acim::DriveConfig::inverter_identification`; off by default).
+    pub inverter_identification: bool,
 }
 
 impl Default for DriveSpec {
@@ -359,6 +362,7 @@ impl Default for DriveSpec {
             zero_speed_policy: ZeroSpeed::Hold,
             zero_speed_dwell_s: d.zero_speed_dwell,
             regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
+            inverter_identification: d.inverter_identification,
         }
     }
 }
@@ -1116,6 +1120,7 @@ impl Scenario {
         };
         drive.zero_speed_dwell = d.zero_speed_dwell_s;
         drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
+        drive.inverter_identification = d.inverter_identification;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,

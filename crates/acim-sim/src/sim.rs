@@ -178,6 +178,23 @@ pub struct RunResult {
     pub search: Option<SearchRecord>,
     /// The drive configuration as run.
     pub config: acim::DriveConfig,
+    /// The inverter test at start, when the drive runs it
+    /// (`drive.inverter_identification`).
+    pub inverter_test: Option<InverterTestRecord>,
+}
+
+/// The inverter test at start (issue 13, item 2): what the drive identified.
+#[derive(Serialize, Clone, Debug, PartialEq)]
+pub struct InverterTestRecord {
+    /// The last test's outcome (`Identified`, `Skipped`, `Rejected`, ...).
+    pub outcome: String,
+    /// The dead time the drive compensates after it, us (configured plus the correction,
+    /// the configured device drop counted as known).
+    pub dead_time_us: f32,
+    /// The plant inverter's dead time, us.
+    pub true_dead_time_us: f32,
+    /// The dead time the drive was configured with, us.
+    pub configured_dead_time_us: f32,
 }
 
 /// The flying start's speed search at its decision.
@@ -512,5 +529,14 @@ pub fn run_with_progress(
         switches_off_at_end: !pwm.preloaded().enabled,
         search,
         config: v.drive,
+        inverter_test: v.drive.inverter_identification.then(|| {
+            let (outcome, dead_time) = drive.inverter_test();
+            InverterTestRecord {
+                outcome: format!("{outcome:?}"),
+                dead_time_us: dead_time * 1e6,
+                true_dead_time_us: sc.inverter.dead_time_s * 1e6,
+                configured_dead_time_us: v.drive.dead_time * 1e6,
+            }
+        }),
     })
 }

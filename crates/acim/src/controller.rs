@@ -6,6 +6,7 @@ use crate::design::DriveConfig;
 use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
 use crate::fixed::Q24;
 use crate::frames::SinCos;
+use crate::inverter_test::InverterTestOutcome;
 use crate::observer::SpeedObserver;
 use crate::supervisor::{CommandError, DriveState, FaultReason};
 use crate::svpwm::Modulator;
@@ -35,6 +36,10 @@ pub trait Controller {
     fn telemetry(&self) -> DriveTelemetry;
     /// The configuration the drive was built with.
     fn config(&self) -> &DriveConfig;
+    /// The inverter test at start: its last outcome and the dead time the drive now
+    /// compensates, s (the configured one plus the test's correction; the configured
+    /// device drop counted as known).
+    fn inverter_test(&self) -> (InverterTestOutcome, f32);
 }
 
 impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, M> {
@@ -70,6 +75,14 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, 
     }
     fn config(&self) -> &DriveConfig {
         Drive::config(self)
+    }
+    fn inverter_test(&self) -> (InverterTestOutcome, f32) {
+        let t = Drive::inverter_test(self);
+        let c = Drive::config(self);
+        (
+            t.outcome,
+            c.dead_time + t.correction_duty * c.control_period,
+        )
     }
 }
 
@@ -107,5 +120,13 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Dr
     }
     fn config(&self) -> &DriveConfig {
         Drive::config(self)
+    }
+    fn inverter_test(&self) -> (InverterTestOutcome, f32) {
+        let t = Drive::inverter_test(self);
+        let c = Drive::config(self);
+        (
+            t.outcome,
+            c.dead_time + crate::fixed::q::from_q24(t.correction_duty.0) * c.control_period,
+        )
     }
 }

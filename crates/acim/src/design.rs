@@ -187,6 +187,16 @@ pub struct DriveConfig {
     /// fig 12 then estimated 4.2 rpm wrong (4 is its bound) and the any-motor 3 %
     /// trapezoid 7-14 rpm (1.2-3.4 at 1.5 Hz).
     pub regen_min_frequency: f32,
+    /// Inverter voltage-error identification at every start (issue 13, item 2; off by
+    /// default): the first [`INVERTER_TEST_TIME`] of magnetizing holds the d-axis current at
+    /// three levels ([`INVERTER_TEST_LEVELS`] of `flux_current`) with the frame held on phase
+    /// a, and a straight-line fit of the d-axis voltage the current loop needed (the rotor
+    /// flux's rate of change from the flux model taken out) against the current gives the
+    /// voltage error the configured `dead_time` and `device_drop` leave uncompensated (the
+    /// intercept; see [`InverterTestDesign`]). It is then compensated with the configured
+    /// part. Needs a rotor at rest (skipped on a flying start) and `flux_current` of at
+    /// least [`INVERTER_TEST_MIN_BANDS`] times `dead_time_current_band`.
+    pub inverter_identification: bool,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -237,6 +247,7 @@ impl DriveConfig {
             field_weakening: true,
             overvoltage_control: false,
             flux_optimisation: false,
+            inverter_identification: false,
             zero_speed_policy: ZeroSpeedPolicy::Hold,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)
@@ -693,6 +704,96 @@ pub struct MagnetizingDesign<N: Num = f32> {
     pub search: SpeedSearchDesign<N>,
 }
 
+/// The inverter test's d-axis current levels, fractions of `flux_current` (rising, so
+/// that the last is the magnetizing current and the flux build-up goes on from it).
+pub const INVERTER_TEST_LEVELS: [f32; 3] = [0.4, 0.7, 1.0];
+/// Time each level of the inverter test is held, s (three levels: 0.45 s, within the
+/// 0.5 s issue 13 allows).
+pub const INVERTER_TEST_LEVEL_TIME: f32 = 0.15;
+/// The first part of each level is not measured, s (the current loop settles in a few ms;
+/// the rest lets the L_sigma di/dt part of the voltage die out).
+pub const INVERTER_TEST_SETTLE_TIME: f32 = 0.05;
+/// Time constant of the low-pass that takes each level's mean, s (a quarter of the
+/// measured 0.1 s: the mean of about the last 50 ms, 250 samples at 5 kHz).
+pub const INVERTER_TEST_FILTER_TIME: f32 = 0.025;
+/// The test's total time, s.
+pub const INVERTER_TEST_TIME: f32 = 3.0 * INVERTER_TEST_LEVEL_TIME;
+/// `flux_current` must be at least this many dead-time current bands: the lowest level
+/// (0.4 of it) then puts phases b and c (-0.2 of it each) at 4 bands, where the inverter's
+/// error is at its full value (the fit assumes the current-sign pattern (+, -, -)).
+pub const INVERTER_TEST_MIN_BANDS: f32 = 20.0;
+/// The largest correction the test applies, in duty (0.05: 10 us at 5 kHz); a fit beyond
+/// it is not believed (no correction, telemetry shows none).
+pub const INVERTER_TEST_MAX_DUTY: f32 = 0.05;
+
+/// The inverter test at start (issue 13, item 2; [`DriveConfig::inverter_identification`]).
+///
+/// At rest with the frame held on phase a (angle 0), a d-axis current i puts +i in phase a
+/// and -i/2 in b and c. Each leg's dead-time and device-drop error V_e opposes its current,
+/// and the amplitude-invariant Clarke transform of (+V_e, -V_e, -V_e) is (4/3) V_e on alpha
+/// (as in [`crate::commissioning`]'s DC steps). In the inverse-Gamma model the d-axis
+/// voltage is then
+///
+/// v_d = Rs i + L_sigma di/dt + d lambda_R/dt + (4/3) (V_e - V_e,comp),
+///
+/// with d lambda_R/dt = R_R i - lambda_R / tau_r, which the drive's flux model gives.
+/// Holding each level until L_sigma di/dt has died out and taking the flux model's rate
+/// out of the voltage leaves y = Rs i + (4/3) dV: a straight line whose slope is Rs and
+/// whose intercept is the uncompensated error dV. The flux does not need to settle, so
+/// three levels take 0.45 s where the commissioning's settled DC steps take 4.8 s. The
+/// fit's intercept does not depend on current-sensor gain errors (they scale i, so the
+/// slope); a sensor offset o moves it by Rs o (the offsets are measured before the start).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InverterTestDesign<N: Num = f32> {
+    /// Steps per level (0: no test).
+    pub level_steps: u32,
+    /// Steps at the start of each level that are not measured.
+    pub settle_steps: u32,
+    /// The d-axis current of each level, A.
+    pub levels: [N; 3],
+    /// How far each level's measured mean may be from its reference, A (a tenth of it:
+    /// the current loop did not follow the levels otherwise, and no fit is made).
+    pub tolerances: [N; 3],
+    /// Low-pass coefficient of each level's mean (Ts / [`INVERTER_TEST_FILTER_TIME`]).
+    pub filter: N::Gain,
+    /// The least-squares line through (level_k, y_k) has the intercept sum u_k y_k with
+    /// u_k = 1/3 - (L_k - L_mean) L_mean / sum (L_j - L_mean)^2 (dimensionless: the levels
+    /// are fixed fractions of one current); these are (3/4) u_k, so that the sum is the
+    /// leg error dV, V. The loop holds the measured current's mean at the reference, so
+    /// the references stand for the currents (a sensor gain error changes the slope only).
+    pub error_weights: [N::Gain; 3],
+    /// The slope's weights (L_k - L_mean) / sum (L_j - L_mean)^2, 1/A: sum w_k y_k is the
+    /// stator resistance the test saw, ohm (reported).
+    pub slope_weights: [N::Gain; 3],
+    /// [`INVERTER_TEST_MAX_DUTY`].
+    pub max_duty: N,
+}
+
+impl InverterTestDesign {
+    /// The test for control period `ts` (s) and flux current `i_d` (A); off unless
+    /// `enabled`.
+    pub fn new(enabled: bool, ts: f32, i_d: f32) -> Self {
+        let levels = INVERTER_TEST_LEVELS.map(|f| f * i_d);
+        let mean = (levels[0] + levels[1] + levels[2]) / 3.0;
+        let spread: f32 = levels.iter().map(|l| (l - mean) * (l - mean)).sum();
+        let slope_weights = levels.map(|l| (l - mean) / spread);
+        Self {
+            level_steps: if enabled {
+                ((INVERTER_TEST_LEVEL_TIME / ts) as u32).max(3)
+            } else {
+                0
+            },
+            settle_steps: (INVERTER_TEST_SETTLE_TIME / ts) as u32,
+            levels,
+            tolerances: levels.map(|l| 0.1 * l),
+            filter: (ts / INVERTER_TEST_FILTER_TIME).min(1.0),
+            error_weights: slope_weights.map(|w| 0.75 * (1.0 / 3.0 - w * mean)),
+            slope_weights,
+            max_duty: INVERTER_TEST_MAX_DUTY,
+        }
+    }
+}
+
 /// Open-loop V/f constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VfDesign<N: Num = f32> {
@@ -786,6 +887,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
     pub regen_current_per_frequency: N::Gain,
+    /// The inverter test at start ([`DriveConfig::inverter_identification`]).
+    pub inverter_test: InverterTestDesign<N>,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -844,6 +947,8 @@ pub struct DriveDesign {
     pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical.
     pub regen_current_per_frequency: f32,
+    /// The inverter test at start (issue 13, item 2).
+    pub inverter_test: InverterTestDesign,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -971,6 +1076,13 @@ impl DriveDesign {
             "regen_min_frequency",
             "must be in 0 ..= p max_speed / 2 rad/s (0: off)",
         )?;
+        check(
+            !cfg.inverter_identification
+                || cfg.flux_current >= INVERTER_TEST_MIN_BANDS * cfg.dead_time_current_band,
+            "inverter_identification",
+            "needs flux_current >= 20 x dead_time_current_band (INVERTER_TEST_MIN_BANDS): the \
+             test's lowest level must keep every phase current outside the band",
+        )?;
         positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
         check(
@@ -1060,6 +1172,7 @@ impl DriveDesign {
             regen_min_frequency: cfg.regen_min_frequency,
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
+            inverter_test: InverterTestDesign::new(cfg.inverter_identification, ts, i_d),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -1183,6 +1296,7 @@ impl DriveCoeffs<f32> {
             },
             fw: d.field_weakening,
             rs_running: d.rs_running,
+            inverter_test: d.inverter_test,
         }
     }
 }

@@ -48,6 +48,7 @@ use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
     SinCos, SinCosValue,
 };
+use crate::inverter_test::InverterTest;
 use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
@@ -165,6 +166,23 @@ fn rs_running_step<N: Num>(
             frame_held,
         },
     );
+}
+
+/// `v` (V, stationary) plus the leg error `error` (V) along each predicted phase current's
+/// linearised sign (the modulator's, [`crate::svpwm`]), Clarke-transformed: the inverter
+/// test's correction (issue 13, item 2). Out of line: off the default path.
+#[inline(never)]
+fn inverter_correction<N: Num>(
+    c: &DriveCoeffs<N>,
+    v: AlphaBeta<N>,
+    error: N,
+    currents: [N; 3],
+) -> AlphaBeta<N> {
+    let [a, b, cc] = currents.map(|i| N::gain(c.pwm.inv_current_band, i).clamp(-N::ONE, N::ONE));
+    AlphaBeta {
+        alpha: v.alpha + error * ((a.twice() - b - cc) * N::ONE_THIRD),
+        beta: v.beta + error * ((b - cc) * N::INV_SQRT3),
+    }
 }
 
 /// The torque-current limits with the low-frequency regeneration limit
@@ -373,6 +391,8 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     /// The flying start's speed search ([`crate::speed_search`]), used only while
     /// magnetizing (last: it keeps the running step's state within short load offsets).
     search: SpeedSearch<N>,
+    /// The inverter test at start and its correction (issue 13, item 2).
+    inverter: InverterTest<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -450,6 +470,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             coeffs,
             bases,
             search: SpeedSearch::new(),
+            inverter: InverterTest::default(),
         })
     }
 
@@ -494,6 +515,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         &self.design.observer
     }
     /// The speed observer.
+    /// The inverter test at start and the correction it identified
+    /// ([`DriveConfig::inverter_identification`]).
+    pub fn inverter_test(&self) -> &InverterTest<N> {
+        &self.inverter
+    }
+
+    /// The observer.
     pub fn observer(&self) -> &O {
         &self.est.observer
     }
@@ -514,6 +542,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.check_sensors_before_start()?;
         self.sup.start(DriveState::Magnetizing)?;
         self.reset_dynamic_state();
+        self.inverter.restart(&self.coeffs.inverter_test);
         self.off_steps = 0;
         Ok(())
     }
@@ -1011,7 +1040,29 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 || r.flying
                 || r.rs_settled_steps > mag.rs_settle_steps
                 || r.magnetizing_steps > mag.rs_timeout_steps;
-            if e.flux_settled && rs_done && self.search.done(&mag.search) {
+            // the inverter test (issue 13, item 2) holds the d-axis current at its levels
+            // for its first 0.45 s; on a flying start it does not apply
+            let mut i_sd = c.i_sd_ref;
+            if self.inverter.running() {
+                if r.flying {
+                    self.inverter.skip();
+                } else {
+                    // the d-axis voltage less the flux model's d lambda_R / dt
+                    let voltage = self.applied.v_dq.d - c.referred_rotor_resistance * m.i_dq.d
+                        + N::gain(c.inv_rotor_time_constant, e.rotor_flux);
+                    i_sd = self.inverter.update(
+                        &c.inverter_test,
+                        m.i_dq.d,
+                        voltage,
+                        self.applied.inv_dc_bus,
+                    );
+                }
+            }
+            if e.flux_settled
+                && rs_done
+                && self.search.done(&mag.search)
+                && !self.inverter.running()
+            {
                 self.sup.magnetized();
                 self.est.observer.start_running(m.i_dq.q);
                 r.speed_ctl.reset();
@@ -1020,7 +1071,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 r.flying = false;
             }
             return Ok(Dq {
-                d: c.i_sd_ref,
+                d: i_sd,
                 q: N::ZERO,
             });
         }
@@ -1347,9 +1398,18 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // from the current reference at the same (advanced) angle, which is noise-free and
         // not 1.5 periods old like the samples
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
+        // the inverter error the start test found beyond the configured compensation
+        // (issue 13, item 2) is compensated on top, with the same current signs; the
+        // estimators keep the command v, which the two compensations make the machine see
+        let duty = self.inverter.correction_duty;
+        let v_out = if duty != N::ZERO {
+            inverter_correction(c, v_ab, duty * m.dc_bus, i_ref_abc)
+        } else {
+            v_ab
+        };
         let out = self
             .modulator
-            .modulate(c, v_ab, m.dc_bus, inv_dc_bus, i_ref_abc);
+            .modulate(c, v_out, m.dc_bus, inv_dc_bus, i_ref_abc);
         if M::OVERMODULATES && out.saturated {
             // the estimators model the voltage of each period: the limited one (the
             // command's fundamental with overmodulation, not this period's vector)

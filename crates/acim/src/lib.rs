@@ -46,6 +46,7 @@
 // control blocks
 pub mod flux;
 pub mod frames;
+pub mod inverter_test;
 pub mod math;
 pub mod num;
 pub mod observer;

@@ -12,8 +12,8 @@ use super::q::{to_q24, Gain, Q24};
 use super::trig::COUNTS_PER_RAD;
 use super::PerUnitBases;
 use crate::design::{
-    ConfigError, DriveCoeffs, DriveDesign, FieldWeakeningDesign, MagnetizingDesign,
-    OrientationDesign, SupervisionLimits, VfDesign,
+    ConfigError, DriveCoeffs, DriveDesign, FieldWeakeningDesign, InverterTestDesign,
+    MagnetizingDesign, OrientationDesign, SupervisionLimits, VfDesign,
 };
 use crate::flux::FluxModelConfig;
 use crate::math::is_finite;
@@ -333,6 +333,34 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             d.regen_current_per_frequency * b.frequency / b.current,
             "regen_min_frequency",
         )?,
+        inverter_test: InverterTestDesign {
+            level_steps: d.inverter_test.level_steps,
+            settle_steps: d.inverter_test.settle_steps,
+            levels: [
+                pu(d.inverter_test.levels[0], b.current, "flux_current")?,
+                pu(d.inverter_test.levels[1], b.current, "flux_current")?,
+                pu(d.inverter_test.levels[2], b.current, "flux_current")?,
+            ],
+            tolerances: [
+                pu(d.inverter_test.tolerances[0], b.current, "flux_current")?,
+                pu(d.inverter_test.tolerances[1], b.current, "flux_current")?,
+                pu(d.inverter_test.tolerances[2], b.current, "flux_current")?,
+            ],
+            filter: gain(d.inverter_test.filter, "control_period")?,
+            // dimensionless: voltage in, voltage out
+            error_weights: [
+                gain(d.inverter_test.error_weights[0], "inverter_identification")?,
+                gain(d.inverter_test.error_weights[1], "inverter_identification")?,
+                gain(d.inverter_test.error_weights[2], "inverter_identification")?,
+            ],
+            // 1/A: V_base y w / R_base = y (w I_base) in resistance per unit
+            slope_weights: [
+                gain(d.inverter_test.slope_weights[0] * b.current, "flux_current")?,
+                gain(d.inverter_test.slope_weights[1] * b.current, "flux_current")?,
+                gain(d.inverter_test.slope_weights[2] * b.current, "flux_current")?,
+            ],
+            max_duty: Q24(to_q24(d.inverter_test.max_duty)),
+        },
     })
 }
 

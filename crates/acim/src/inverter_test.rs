@@ -1,0 +1,218 @@
+//! The inverter test at start (issue 13, item 2): the voltage error the configured
+//! dead-time and device-drop compensation leaves, identified in the first 0.45 s of
+//! magnetizing from three d-axis current levels (the analysis is on
+//! [`crate::design::InverterTestDesign`]), then compensated on top of the configured part.
+//!
+//! The state lives in the drive and is kept across stops: each start's test measures what
+//! the previous correction still leaves and adds it, so the correction follows a drifting
+//! inverter from start to start. While the motor runs the split between the stator
+//! resistance and the inverter error is not observable at a steady operating point (both
+//! give a voltage along the current, Rs |i| + (4/pi) V_e, see docs/robustness.md): the
+//! running Rs estimator then carries what is left as an apparent resistance, which is the
+//! part the speed estimate needs.
+
+use crate::design::InverterTestDesign;
+use crate::num::Num;
+
+/// Where the test is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum InverterTestOutcome {
+    /// No test since power-up (or the test is off).
+    #[default]
+    NotRun,
+    /// Measuring.
+    Running,
+    /// Fitted and applied.
+    Identified,
+    /// The rotor turned (flying start): no measurement, the correction kept.
+    Skipped,
+    /// The levels' spread was too small or the fit out of range or not finite: the
+    /// correction kept.
+    Rejected,
+}
+
+/// The test's state and its result.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct InverterTest<N: Num = f32> {
+    step: u32,
+    mean_current: N,
+    mean_voltage: N,
+    points: [(N, N); 3],
+    /// The voltage error per leg beyond the configured compensation, as a duty (V / V_dc):
+    /// added to the configured dead-time duty (0 until a test identified one).
+    pub correction_duty: N,
+    /// The last fit's slope, the stator resistance the test saw, ohm (0 before a fit).
+    pub stator_resistance: N,
+    /// The last test's outcome.
+    pub outcome: InverterTestOutcome,
+}
+
+impl<N: Num> InverterTest<N> {
+    /// Arms the test for a start (the correction is kept).
+    pub fn restart(&mut self, d: &InverterTestDesign<N>) {
+        self.step = 0;
+        if d.level_steps > 0 {
+            self.outcome = InverterTestOutcome::Running;
+        }
+    }
+
+    /// Whether the test is measuring (magnetizing waits for it).
+    #[inline(always)]
+    pub fn running(&self) -> bool {
+        self.outcome == InverterTestOutcome::Running
+    }
+
+    /// The rotor turns: the test does not apply.
+    pub fn skip(&mut self) {
+        if self.running() {
+            self.outcome = InverterTestOutcome::Skipped;
+        }
+    }
+
+    /// One magnetizing step while [`InverterTest::running`]: `current` the measured d-axis
+    /// current (A), `voltage` the d-axis voltage applied over the last period less the
+    /// flux model's d lambda_R/dt (V), `inv_dc_bus` 1/V_dc. Returns the d-axis current
+    /// reference for the next step (A).
+    pub fn update(
+        &mut self,
+        d: &InverterTestDesign<N>,
+        current: N,
+        voltage: N,
+        inv_dc_bus: N,
+    ) -> N {
+        let level = (self.step / d.level_steps.max(1)) as usize;
+        let within = self.step % d.level_steps.max(1);
+        self.step = self.step.saturating_add(1);
+        if within == d.settle_steps {
+            self.mean_current = current;
+            self.mean_voltage = voltage;
+        } else if within > d.settle_steps {
+            self.mean_current = self.mean_current + N::gain(d.filter, current - self.mean_current);
+            self.mean_voltage = self.mean_voltage + N::gain(d.filter, voltage - self.mean_voltage);
+        }
+        if within + 1 == d.level_steps {
+            if let Some(p) = self.points.get_mut(level) {
+                *p = (self.mean_current, self.mean_voltage);
+            }
+            if level + 1 >= self.points.len() {
+                self.fit(d, inv_dc_bus);
+            }
+        }
+        let next = (self.step / d.level_steps.max(1)) as usize;
+        match d.levels.get(next) {
+            Some(&i) if self.running() => i,
+            _ => d.levels[2],
+        }
+    }
+
+    /// The straight line y = Rs i + (4/3) dV through the three levels (least squares with
+    /// the design's weights, no division here); dV as a duty of the bus.
+    fn fit(&mut self, d: &InverterTestDesign<N>, inv_dc_bus: N) {
+        let followed = self
+            .points
+            .iter()
+            .zip(d.levels.iter().zip(d.tolerances.iter()))
+            .all(|(&(i, _), (&level, &tol))| (i - level).abs() <= tol);
+        if !followed {
+            self.outcome = InverterTestOutcome::Rejected;
+            return;
+        }
+        let [(_, y0), (_, y1), (_, y2)] = self.points;
+        let [e0, e1, e2] = d.error_weights;
+        let [s0, s1, s2] = d.slope_weights;
+        let error = N::gain(e0, y0) + N::gain(e1, y1) + N::gain(e2, y2);
+        let slope = N::gain(s0, y0) + N::gain(s1, y1) + N::gain(s2, y2);
+        let duty = self.correction_duty + error * inv_dc_bus;
+        if duty.is_finite() && slope.is_finite() && duty.abs() <= d.max_duty {
+            self.correction_duty = duty;
+            self.stator_resistance = slope;
+            self.outcome = InverterTestOutcome::Identified;
+        } else {
+            self.outcome = InverterTestOutcome::Rejected;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(rs: f32, dv: f32, vdc: f32, noise: f32) -> InverterTest {
+        let d = InverterTestDesign::new(true, 2e-4, 1.5);
+        let mut t = InverterTest::default();
+        t.restart(&d);
+        let mut i_ref = d.levels[0];
+        let mut k = 0u32;
+        while t.running() && k < 10_000 {
+            // a deterministic +/- noise on the current
+            let n = if k.is_multiple_of(2) { noise } else { -noise };
+            let i = i_ref + n;
+            let y = rs * i_ref + 4.0 / 3.0 * dv;
+            i_ref = t.update(&d, i, y, 1.0 / vdc);
+            k += 1;
+        }
+        assert_eq!(k, 3 * d.level_steps, "the test takes its three levels");
+        t
+    }
+
+    #[test]
+    fn the_intercept_is_the_uncompensated_error() {
+        // dead time 0.7 us short at 5 kHz on 325 V: 1.14 V per leg
+        let dv = 0.7e-6 / 2e-4 * 325.0;
+        let t = run(10.5, dv, 325.0, 0.0);
+        assert_eq!(t.outcome, InverterTestOutcome::Identified);
+        assert!(
+            (t.correction_duty * 325.0 - dv).abs() < 1e-3 * dv + 1e-4,
+            "{t:?}"
+        );
+        assert!((t.stator_resistance - 10.5).abs() < 1e-3);
+        // current noise does not enter (the loop holds the references)
+        let t = run(10.5, -dv, 325.0, 0.01);
+        assert!((t.correction_duty * 325.0 + dv).abs() < 0.02 * dv, "{t:?}");
+    }
+
+    #[test]
+    fn a_flat_current_or_a_wild_fit_keeps_the_correction() {
+        let d = InverterTestDesign::new(true, 2e-4, 1.5);
+        let mut t = InverterTest::<f32> {
+            correction_duty: 0.001,
+            ..Default::default()
+        };
+        t.restart(&d);
+        while t.running() {
+            // the current loop does not follow: the same current at every level
+            t.update(&d, 0.9, 10.0, 1.0 / 325.0);
+        }
+        assert_eq!(t.outcome, InverterTestOutcome::Rejected);
+        assert_eq!(t.correction_duty, 0.001);
+        let mut t = InverterTest::<f32>::default();
+        t.restart(&d);
+        let mut i = d.levels[0];
+        while t.running() {
+            i = t.update(&d, i, 300.0, 1.0 / 325.0);
+        }
+        assert_eq!(
+            t.outcome,
+            InverterTestOutcome::Rejected,
+            "an error of 0.7 V_dc"
+        );
+        let mut t = InverterTest::<f32>::default();
+        t.restart(&d);
+        let mut i = d.levels[0];
+        while t.running() {
+            i = t.update(&d, i, f32::NAN, 1.0 / 325.0);
+        }
+        assert_eq!(t.outcome, InverterTestOutcome::Rejected);
+        assert_eq!(t.correction_duty, 0.0);
+    }
+
+    #[test]
+    fn off_means_never_running() {
+        let d = InverterTestDesign::new(false, 2e-4, 1.5);
+        let mut t = InverterTest::<f32>::default();
+        t.restart(&d);
+        assert!(!t.running());
+        assert_eq!(t.outcome, InverterTestOutcome::NotRun);
+    }
+}
