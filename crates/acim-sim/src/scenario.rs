@@ -325,6 +325,9 @@ pub struct DriveSpec {
     /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
     /// `acim::DriveConfig::inverter_identification`; off by default).
     pub inverter_identification: bool,
+    /// With the running Rs mode: identify Rs at standstill too (default true); false: Rs
+    /// converges only while turning (`acim::DriveConfig::rs_standstill_identification`).
+    pub rs_standstill_identification: bool,
 }
 
 impl Default for DriveSpec {
@@ -363,6 +366,7 @@ impl Default for DriveSpec {
             zero_speed_dwell_s: d.zero_speed_dwell,
             regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
             inverter_identification: d.inverter_identification,
+            rs_standstill_identification: d.rs_standstill_identification,
         }
     }
 }
@@ -1121,6 +1125,7 @@ impl Scenario {
         drive.zero_speed_dwell = d.zero_speed_dwell_s;
         drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
         drive.inverter_identification = d.inverter_identification;
+        drive.rs_standstill_identification = d.rs_standstill_identification;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,

@@ -105,6 +105,11 @@ pub struct DriveConfig {
     /// When Rs adapts (with `rs_estimation`): standstill only (default) or also while
     /// running (issue 13).
     pub rs_estimation_mode: RsEstimationMode,
+    /// With `rs_estimation` in the running mode: whether Rs is also identified at standstill
+    /// while magnetizing (default true; magnetizing then waits for it). False: Rs converges
+    /// only while turning, from `rs_initial` (issue 13's fig 9 variant). The standstill
+    /// mode has no other law and needs it.
+    pub rs_standstill_identification: bool,
     /// Initial stator-resistance estimate R0, ohm (eq. 19).
     pub rs_initial: f32,
     /// Convergence time constant of the Rs estimator, s.
@@ -226,6 +231,7 @@ impl DriveConfig {
             observer_poles: ObserverPoles::DEFAULT,
             rs_estimation: false,
             rs_estimation_mode: RsEstimationMode::Standstill,
+            rs_standstill_identification: true,
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
             rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
@@ -1045,6 +1051,13 @@ impl DriveDesign {
         positive(cfg.rs_max_frequency, "rs_max_frequency")?;
         positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
         check(
+            cfg.rs_standstill_identification
+                || cfg.rs_estimation_mode == RsEstimationMode::Running,
+            "rs_standstill_identification",
+            "may be off only with rs_estimation_mode Running (the standstill mode has no \
+             other law)",
+        )?;
+        check(
             is_finite(cfg.orientation_gain)
                 && (0.0..=MAX_ORIENTATION_GAIN).contains(&cfg.orientation_gain),
             "orientation_gain",
@@ -1111,6 +1124,7 @@ impl DriveDesign {
         rs.max_stator_frequency = cfg.rs_max_frequency;
         let mut rs_running = RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d);
         rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
+        rs_running.standstill = cfg.rs_standstill_identification;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
@@ -1188,7 +1202,7 @@ impl DriveDesign {
                 limit: ORIENTATION_LIMIT_FRACTION * cfg.max_speed * pp,
             },
             magnetizing: MagnetizingDesign {
-                identify_rs: cfg.rs_estimation,
+                identify_rs: cfg.rs_estimation && cfg.rs_standstill_identification,
                 rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
                 rs_settle_steps: (RS_SETTLE_TIME / ts) as u32,
                 rs_settled_error: RS_SETTLED_FRACTION * i_d,

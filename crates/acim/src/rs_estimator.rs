@@ -138,6 +138,10 @@ pub struct RsRunningConfig<N: Num = f32> {
     /// runs only with the frame held (standstill identification). False: the eq. (19)
     /// law below `max_stator_frequency` only (the behaviour before issue 13).
     pub enabled: bool,
+    /// With `enabled`: whether the eq. (19) law identifies Rs at standstill (the frame
+    /// held, before the ramp) too. False: Rs converges only while turning (issue 13's
+    /// fig 9 variant, `DriveConfig::rs_standstill_identification`).
+    pub standstill: bool,
     /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
     pub alpha_ts: N::Gain,
     /// Adapt with |w_s| at least this, rad/s electrical.
@@ -156,6 +160,7 @@ impl RsRunningConfig<f32> {
     pub fn new(ts: f32, tau: f32, flux_current: f32) -> Self {
         Self {
             enabled: false,
+            standstill: true,
             alpha_ts: ts / (2.0 * tau.max(ts) * flux_current.abs().max(1e-3)),
             min_frequency: 2.0 * core::f32::consts::PI * RUNNING_MIN_FREQUENCY_HZ,
             min_torque_current: RUNNING_MIN_TORQUE_FRACTION * flux_current.abs(),
@@ -325,6 +330,7 @@ impl<N: Num> RsEstimator<N> {
         self.q_current_error = eq.finite_or(N::ZERO);
         let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
         let standstill = flux_ok
+            && run.standstill
             && x.frame_held
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;

@@ -153,6 +153,7 @@ pub fn rs_estimator(cfg: &RsEstimatorConfig, b: &PerUnitBases) -> Option<RsEstim
 pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningConfig<Q24>> {
     Some(RsRunningConfig {
         enabled: cfg.enabled,
+        standstill: cfg.standstill,
         alpha_ts: Gain::from_f32(cfg.alpha_ts * b.voltage / b.resistance() * RS_EXTRA)?,
         min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
         min_torque_current: Q24(to_q24(cfg.min_torque_current / b.current)),
