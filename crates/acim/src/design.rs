@@ -39,7 +39,6 @@ pub enum RsEstimationMode {
     /// The standstill identification, then adaptation while running, motoring and
     /// regenerating, from the q-axis and d-axis residuals together
     /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
-    /// Needs the crate feature `robust`.
     Running,
 }
 
@@ -56,8 +55,7 @@ pub enum ZeroSpeedPolicy {
     #[default]
     Hold,
     /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
-    /// `zero_speed_dwell`: no operation on the unobservable line. Needs the crate feature
-    /// `robust`.
+    /// `zero_speed_dwell`: no operation on the unobservable line.
     Stop,
 }
 
@@ -1071,17 +1069,6 @@ impl DriveDesign {
         )?;
         positive(cfg.stall_time, "stall_time")?;
         positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
-        let robust = cfg!(feature = "robust");
-        check(
-            robust || cfg.rs_estimation_mode == RsEstimationMode::Standstill,
-            "rs_estimation_mode",
-            "Running needs the acim feature `robust`",
-        )?;
-        check(
-            robust || cfg.zero_speed_policy == ZeroSpeedPolicy::Hold,
-            "zero_speed_policy",
-            "Stop needs the acim feature `robust`",
-        )?;
         check(
             is_finite(cfg.regen_min_frequency)
                 && cfg.regen_min_frequency >= 0.0
@@ -1324,21 +1311,22 @@ mod tests {
         DriveDesign::new(cfg).err().map(|e| e.field())
     }
 
-    /// Issue 13's Rs-while-running and zero-speed stop need the feature `robust`; without
-    /// it they are refused by name (the firmware's build), with it accepted.
+    /// Issue 13's Rs-while-running and zero-speed stop are in every build (the feature
+    /// `robust` that once kept them out of the firmware is gone), and so is the
+    /// regeneration limit.
     #[test]
-    fn robust_settings_follow_the_feature() {
+    fn robust_settings_are_in_every_build() {
         let mut c = DriveConfig::paper_defaults();
         c.rs_estimation_mode = RsEstimationMode::Running;
+        assert_eq!(field(c), None);
         let mut z = DriveConfig::paper_defaults();
         z.zero_speed_policy = ZeroSpeedPolicy::Stop;
-        if cfg!(feature = "robust") {
-            assert_eq!(field(c), None);
-            assert_eq!(field(z), None);
-        } else {
-            assert_eq!(field(c), Some("rs_estimation_mode"));
-            assert_eq!(field(z), Some("zero_speed_policy"));
-        }
+        assert_eq!(field(z), None);
+        c.rs_standstill_identification = false;
+        assert_eq!(field(c), None);
+        let mut s = DriveConfig::paper_defaults();
+        s.rs_standstill_identification = false;
+        assert_eq!(field(s), Some("rs_standstill_identification"));
         // the regeneration limit is in every build (a protection, issue 12)
         let mut r = DriveConfig::paper_defaults();
         assert_eq!(field(r), None);

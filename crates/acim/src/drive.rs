@@ -727,9 +727,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if cfg!(feature = "robust")
-            && self.coeffs.zero_stop_steps != 0
-            && self.zero_speed_stop(magnetizing)
+        if self.coeffs.zero_stop_steps != 0 && self.zero_speed_stop(magnetizing)
         {
             return PwmOutput::OFF;
         }
@@ -926,7 +924,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             self.applied.v_dq.d
         };
-        if cfg!(feature = "robust") && c.rs_running.enabled {
+        if c.rs_running.enabled {
             // issue 13: Rs also while running (out of line, off the default path)
             rs_running_step(
                 &mut est.rs,
