@@ -5,6 +5,7 @@ pub mod builtins;
 pub mod capability;
 pub mod commission;
 pub mod faults;
+pub mod linear;
 pub mod machines;
 pub mod metrics;
 pub mod observers;

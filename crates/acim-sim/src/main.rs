@@ -11,6 +11,7 @@
 //! acim-sim overhauling [FILE] [OPTIONS]    overhauling-load sweep
 //! acim-sim robustness [FILE]               issue 13's robustness matrix
 //! acim-sim robust-stability [FILE]         growth rates with parameter errors
+//! acim-sim linear-stability [FILE]         eigenvalues of the linearised closed loop
 //! ```
 
 use acim_sim::builtins;
@@ -53,6 +54,9 @@ const USAGE: &str = "usage:
   acim-sim robust-stability [FILE]          orientation growth rates over the torque-speed plane
                                             with parameter and inverter errors (table to FILE,
                                             default docs/robust-stability.md)
+  acim-sim linear-stability [FILE]          eigenvalues of the linearised closed loop over the
+                                            same plane and errors (table to FILE, default
+                                            docs/linear-stability.md)
   acim-sim robustness [FILE]                issue 13's robustness matrix, Rs estimation in the
                                             standstill and running modes (table to FILE,
                                             default docs/robustness-matrix.md)
@@ -685,6 +689,20 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 .map_err(|e| format!("{}: {e}", png.display()))?;
             output::write_file(&file, md.as_bytes()).map_err(|e| e.to_string())?;
             println!("\nwrote {} and {}", file.display(), png.display());
+        }
+        Some("linear-stability") => {
+            o.at_most_positional("linear-stability", 1, "at most one table file")?;
+            o.reject(
+                "linear-stability",
+                Some("its points and errors are defined in crates/acim-sim/src/stability.rs"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "linear-stability.md");
+            let (md, unstable) = acim_sim::linear::map_markdown().map_err(|e| e.to_string())?;
+            write_table(&file, &md, &o.out())?;
+            if !o.quiet {
+                println!("{unstable} unstable points with |f_s| >= 1 Hz (all errors)");
+            }
         }
         Some("robust-stability") => {
             o.at_most_positional("robust-stability", 1, "at most one table file")?;

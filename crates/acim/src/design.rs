@@ -1049,8 +1049,7 @@ impl DriveDesign {
         positive(cfg.rs_max_frequency, "rs_max_frequency")?;
         positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
         check(
-            cfg.rs_standstill_identification
-                || cfg.rs_estimation_mode == RsEstimationMode::Running,
+            cfg.rs_standstill_identification || cfg.rs_estimation_mode == RsEstimationMode::Running,
             "rs_standstill_identification",
             "may be off only with rs_estimation_mode Running (the standstill mode has no \
              other law)",

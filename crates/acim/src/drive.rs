@@ -727,8 +727,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if self.coeffs.zero_stop_steps != 0 && self.zero_speed_stop(magnetizing)
-        {
+        if self.coeffs.zero_stop_steps != 0 && self.zero_speed_stop(magnetizing) {
             return PwmOutput::OFF;
         }
         // 6. current control, within the voltage limit
