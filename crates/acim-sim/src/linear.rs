@@ -446,6 +446,24 @@ mod tests {
         assert!(point(0.0, 250.0, 1.5).max_real() < -5.0);
     }
 
+    /// With the drive's defaults the linearisation and the measured growth rate (sampled
+    /// loop, plant model, `stability::measure`, without the regeneration limit) agree in
+    /// sign and within 1.5/s at points either side of the stability boundary in
+    /// regeneration: 120 rpm at -4.5 N m (f_s just below 1 Hz, unstable) and 250 / 500 rpm
+    /// (stable).
+    #[test]
+    fn agrees_with_the_measured_growth_rates() {
+        let k = acim::DriveConfig::paper_defaults().orientation_gain;
+        for (rpm, load) in [(120.0, -4.5), (250.0, -3.0), (500.0, -4.5)] {
+            let lin = point(k, rpm, load).max_real();
+            let measured = f64::from(crate::stability::measure(rpm, load, k).unwrap().growth_rate);
+            assert!(
+                (lin > 0.0) == (measured > 0.0) && (lin - measured).abs() < 1.5,
+                "{rpm} rpm {load} N m: linearised {lin}/s, measured {measured}/s"
+            );
+        }
+    }
+
     /// The equilibrium is the operating point: the true speed at the reference, the
     /// observer's load estimate at the load.
     #[test]
