@@ -5,22 +5,13 @@
 use acim::math::RPM_TO_RAD_S;
 use acim::{Drive, DriveInputs, DriveState};
 use acim_plant::{LoadTorque, PwmPreload};
-use acim_sim::scenario::{LoadKind, LoadPoint, RsMode, Scenario, SpeedPoint};
+use acim_sim::scenario::{LoadKind, LoadPoint, RsMode, SpeedPoint};
 
 fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
     let (rpm, load): (f32, f32) = (a[0].parse().unwrap(), a[1].parse().unwrap());
-    let mut sc = Scenario {
-        name: "step".into(),
-        duration_s: 10.0,
-        ..Scenario::default()
-    };
-    sc.plant.friction_nms = 0.0;
-    sc.controller.friction_nms = 0.0;
-    sc.inverter.dead_time_s = 0.0;
-    sc.inverter.device_drop_v = 0.0;
-    sc.drive.dead_time_comp_s = 0.0;
-    sc.drive.device_drop_comp_v = 0.0;
+    let mut sc = acim_sim::stability::ideal_scenario("step");
+    sc.duration_s = 10.0;
     sc.sensors.adc_bits = 16;
     sc.drive.speed_ramp_rpm_s = 2000.0;
     if a[2] == "running" {

@@ -297,20 +297,10 @@ pub fn linearise(
     Ok(Model::new(sc, speed_rpm, load_nm)?.linearise())
 }
 
-/// The base of the map: the paper machine and the drive's defaults with the measured map's
-/// conventions (`crate::stability::measure_with`): zero friction, no inverter error, the
-/// Rs estimate held at the controller's value.
+/// The base of the map: [`crate::stability::ideal_scenario`] (the measured map's
+/// conventions) with the Rs estimate held at the controller's value.
 pub fn base_scenario() -> Scenario {
-    let mut sc = Scenario {
-        name: "linear".into(),
-        ..Scenario::default()
-    };
-    sc.plant.friction_nms = 0.0;
-    sc.controller.friction_nms = 0.0;
-    sc.inverter.dead_time_s = 0.0;
-    sc.inverter.device_drop_v = 0.0;
-    sc.drive.dead_time_comp_s = 0.0;
-    sc.drive.device_drop_comp_v = 0.0;
+    let mut sc = crate::stability::ideal_scenario("linear");
     sc.drive.rs_estimation = false;
     sc
 }
@@ -354,17 +344,7 @@ pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
          (orientation gain 2, load-scheduled), zero friction, the Rs estimate held at the \
          controller's value.\n\n",
     );
-    let header = |md: &mut String| {
-        md.push_str("| speed (rpm) |");
-        for l in ROBUST_LOADS_NM {
-            md.push_str(&format!(" {l} N m |"));
-        }
-        md.push_str("\n|---|");
-        for _ in ROBUST_LOADS_NM {
-            md.push_str("---|");
-        }
-        md.push('\n');
-    };
+    let header = crate::stability::map_header;
     let mut summary = String::from(
         "## Summary\n\n| error | unstable with \\|f_s\\| >= 1 Hz | unstable below 1 Hz | no equilibrium | least damped with \\|f_s\\| >= 1 Hz (1/s) |\n|---|---|---|---|---|\n",
     );

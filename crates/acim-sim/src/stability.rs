@@ -72,17 +72,11 @@ pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, Scen
     measure_with(speed_rpm, load_nm, k, &|_| {})
 }
 
-/// [`measure`] with the scenario changed by `setup` before it is built (parameter errors,
-/// inverter, Rs estimation mode; issue 13).
-pub fn measure_with(
-    speed_rpm: f32,
-    load_nm: f32,
-    k: f32,
-    setup: &dyn Fn(&mut Scenario),
-) -> Result<GrowthPoint, ScenarioError> {
+/// The paper machine and the drive's defaults with what the stability maps leave out:
+/// zero friction, no inverter error (none in the plant, none compensated).
+pub fn ideal_scenario(name: &str) -> Scenario {
     let mut sc = Scenario {
-        name: "stability".into(),
-        duration_s: 10.0,
+        name: name.into(),
         ..Scenario::default()
     };
     sc.plant.friction_nms = 0.0;
@@ -91,6 +85,32 @@ pub fn measure_with(
     sc.inverter.device_drop_v = 0.0;
     sc.drive.dead_time_comp_s = 0.0;
     sc.drive.device_drop_comp_v = 0.0;
+    sc
+}
+
+/// The header of a map over [`ROBUST_LOADS_NM`] (columns) by speed (rows).
+pub fn map_header(md: &mut String) {
+    md.push_str("| speed (rpm) |");
+    for l in ROBUST_LOADS_NM {
+        md.push_str(&format!(" {l} N m |"));
+    }
+    md.push_str("\n|---|");
+    for _ in ROBUST_LOADS_NM {
+        md.push_str("---|");
+    }
+    md.push('\n');
+}
+
+/// [`measure`] with the scenario changed by `setup` before it is built (parameter errors,
+/// inverter, Rs estimation mode; issue 13).
+pub fn measure_with(
+    speed_rpm: f32,
+    load_nm: f32,
+    k: f32,
+    setup: &dyn Fn(&mut Scenario),
+) -> Result<GrowthPoint, ScenarioError> {
+    let mut sc = ideal_scenario("stability");
+    sc.duration_s = 10.0;
     sc.sensors.adc_bits = 16;
     sc.drive.speed_ramp_rpm_s = 2000.0;
     // the map measures the estimators at the labelled operating point: without the
@@ -352,17 +372,7 @@ pub fn robust_map_markdown(progress: &mut dyn FnMut(&str)) -> Result<String, Sce
          (ideal model); cells with |f_s| < 1 Hz are marked `*`. These are measured growth rates \
          of one perturbation, not eigenvalues of the linearised loop.\n\n",
     );
-    let header = |md: &mut String| {
-        md.push_str("| speed (rpm) |");
-        for l in ROBUST_LOADS_NM {
-            md.push_str(&format!(" {l} N m |"));
-        }
-        md.push_str("\n|---|");
-        for _ in ROBUST_LOADS_NM {
-            md.push_str("---|");
-        }
-        md.push('\n');
-    };
+    let header = map_header;
     md.push_str(&gain_margin_markdown());
     md.push_str("## Stator frequency (Hz)\n\n");
     header(&mut md);

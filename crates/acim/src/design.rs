@@ -1348,6 +1348,10 @@ mod tests {
             assert_eq!(field(z), Some("zero_speed_policy"));
             assert_eq!(field(i), Some("inverter_identification"));
         }
+        // the standstill mode has no other Rs law: it cannot be switched off there
+        let mut s = DriveConfig::paper_defaults();
+        s.rs_standstill_identification = false;
+        assert_eq!(field(s), Some("rs_standstill_identification"));
         // the regeneration limit is in every build (a protection, issue 12)
         let mut r = DriveConfig::paper_defaults();
         assert_eq!(field(r), None);

@@ -35,7 +35,9 @@ pub enum InverterTestOutcome {
 /// The test's state and its result.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct InverterTest<N: Num = f32> {
-    step: u32,
+    /// The level being measured (0..3) and the step within it.
+    level: usize,
+    within: u32,
     mean_current: N,
     mean_voltage: N,
     points: [(N, N); 3],
@@ -51,7 +53,8 @@ pub struct InverterTest<N: Num = f32> {
 impl<N: Num> InverterTest<N> {
     /// Arms the test for a start (the correction is kept).
     pub fn restart(&mut self, d: &InverterTestDesign<N>) {
-        self.step = 0;
+        self.level = 0;
+        self.within = 0;
         if d.level_steps > 0 {
             self.outcome = InverterTestOutcome::Running;
         }
@@ -81,9 +84,7 @@ impl<N: Num> InverterTest<N> {
         voltage: N,
         inv_dc_bus: N,
     ) -> N {
-        let level = (self.step / d.level_steps.max(1)) as usize;
-        let within = self.step % d.level_steps.max(1);
-        self.step = self.step.saturating_add(1);
+        let (level, within) = (self.level, self.within);
         if within == d.settle_steps {
             self.mean_current = current;
             self.mean_voltage = voltage;
@@ -91,16 +92,19 @@ impl<N: Num> InverterTest<N> {
             self.mean_current = self.mean_current + N::gain(d.filter, current - self.mean_current);
             self.mean_voltage = self.mean_voltage + N::gain(d.filter, voltage - self.mean_voltage);
         }
-        if within + 1 == d.level_steps {
+        self.within = within.saturating_add(1);
+        if self.within >= d.level_steps {
+            // the level's mean is its point; the last level's ends the test
             if let Some(p) = self.points.get_mut(level) {
                 *p = (self.mean_current, self.mean_voltage);
             }
-            if level + 1 >= self.points.len() {
+            self.level = level.saturating_add(1);
+            self.within = 0;
+            if self.level >= self.points.len() {
                 self.fit(d, inv_dc_bus);
             }
         }
-        let next = (self.step / d.level_steps.max(1)) as usize;
-        match d.levels.get(next) {
+        match d.levels.get(self.level) {
             Some(&i) if self.running() => i,
             _ => d.levels[2],
         }
