@@ -39,7 +39,6 @@ pub enum RsEstimationMode {
     /// The standstill identification, then adaptation while running, motoring and
     /// regenerating, from the q-axis and d-axis residuals together
     /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
-    /// Needs the crate feature `robust`.
     Running,
 }
 
@@ -56,8 +55,7 @@ pub enum ZeroSpeedPolicy {
     #[default]
     Hold,
     /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
-    /// `zero_speed_dwell`: no operation on the unobservable line. Needs the crate feature
-    /// `robust`.
+    /// `zero_speed_dwell`: no operation on the unobservable line.
     Stop,
 }
 
@@ -200,8 +198,7 @@ pub struct DriveConfig {
     /// voltage error the configured `dead_time` and `device_drop` leave uncompensated (the
     /// intercept; see [`InverterTestDesign`]). It is then compensated with the configured
     /// part. Needs a rotor at rest (skipped on a flying start), `flux_current` of at
-    /// least [`INVERTER_TEST_MIN_BANDS`] times `dead_time_current_band`, and the crate
-    /// feature `robust` (like issue 13's other additions to the step).
+    /// least [`INVERTER_TEST_MIN_BANDS`] times `dead_time_current_band`.
     pub inverter_identification: bool,
     /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
     pub zero_speed_policy: ZeroSpeedPolicy,
@@ -1071,22 +1068,6 @@ impl DriveDesign {
         )?;
         positive(cfg.stall_time, "stall_time")?;
         positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
-        let robust = cfg!(feature = "robust");
-        check(
-            robust || cfg.rs_estimation_mode == RsEstimationMode::Standstill,
-            "rs_estimation_mode",
-            "Running needs the acim feature `robust`",
-        )?;
-        check(
-            robust || cfg.zero_speed_policy == ZeroSpeedPolicy::Hold,
-            "zero_speed_policy",
-            "Stop needs the acim feature `robust`",
-        )?;
-        check(
-            robust || !cfg.inverter_identification,
-            "inverter_identification",
-            "needs the acim feature `robust`",
-        )?;
         check(
             is_finite(cfg.regen_min_frequency)
                 && cfg.regen_min_frequency >= 0.0
@@ -1329,25 +1310,19 @@ mod tests {
         DriveDesign::new(cfg).err().map(|e| e.field())
     }
 
-    /// Issue 13's Rs-while-running and zero-speed stop need the feature `robust`; without
-    /// it they are refused by name (the firmware's build), with it accepted.
+    /// Issue 13's Rs-while-running, zero-speed stop and inverter test are accepted in every
+    /// build (the firmware compiles the same step as the simulator).
     #[test]
-    fn robust_settings_follow_the_feature() {
+    fn robust_settings_are_accepted_in_every_build() {
         let mut c = DriveConfig::paper_defaults();
         c.rs_estimation_mode = RsEstimationMode::Running;
         let mut z = DriveConfig::paper_defaults();
         z.zero_speed_policy = ZeroSpeedPolicy::Stop;
         let mut i = DriveConfig::paper_defaults();
         i.inverter_identification = true;
-        if cfg!(feature = "robust") {
-            assert_eq!(field(c), None);
-            assert_eq!(field(z), None);
-            assert_eq!(field(i), None);
-        } else {
-            assert_eq!(field(c), Some("rs_estimation_mode"));
-            assert_eq!(field(z), Some("zero_speed_policy"));
-            assert_eq!(field(i), Some("inverter_identification"));
-        }
+        assert_eq!(field(c), None);
+        assert_eq!(field(z), None);
+        assert_eq!(field(i), None);
         // the standstill mode has no other Rs law: it cannot be switched off there
         let mut s = DriveConfig::paper_defaults();
         s.rs_standstill_identification = false;

@@ -170,7 +170,8 @@ fn rs_running_step<N: Num>(
 
 /// `v` (V, stationary) plus the leg error `error` (V) along each predicted phase current's
 /// linearised sign (the modulator's, [`crate::svpwm`]), Clarke-transformed: the inverter
-/// test's correction (issue 13, item 2). Out of line: off the default path.
+/// test's correction (issue 13, item 2). Out of line and cold: off the default path.
+#[cold]
 #[inline(never)]
 fn inverter_correction<N: Num>(
     c: &DriveCoeffs<N>,
@@ -727,8 +728,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if cfg!(feature = "robust")
-            && self.coeffs.zero_stop_steps != 0
+        if self.coeffs.zero_stop_steps != 0
             && self.zero_speed_stop(magnetizing)
         {
             return PwmOutput::OFF;
@@ -926,7 +926,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             self.applied.v_dq.d
         };
-        if cfg!(feature = "robust") && c.rs_running.enabled {
+        if c.rs_running.enabled {
             // issue 13: Rs also while running (out of line, off the default path)
             rs_running_step(
                 &mut est.rs,
@@ -1043,7 +1043,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // the inverter test (issue 13, item 2) holds the d-axis current at its levels
             // for its first 0.45 s; on a flying start it does not apply
             let mut i_sd = c.i_sd_ref;
-            if cfg!(feature = "robust") && self.inverter.running() {
+            if self.inverter.running() {
                 if r.flying {
                     self.inverter.skip();
                 } else {
@@ -1061,7 +1061,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             if e.flux_settled
                 && rs_done
                 && self.search.done(&mag.search)
-                && !(cfg!(feature = "robust") && self.inverter.running())
+                && !self.inverter.running()
             {
                 self.sup.magnetized();
                 self.est.observer.start_running(m.i_dq.q);
@@ -1402,7 +1402,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // (issue 13, item 2) is compensated on top, with the same current signs; the
         // estimators keep the command v, which the two compensations make the machine see
         let duty = self.inverter.correction_duty;
-        let v_out = if cfg!(feature = "robust") && duty != N::ZERO {
+        let v_out = if duty != N::ZERO {
             inverter_correction(c, v_ab, duty * m.dc_bus, i_ref_abc)
         } else {
             v_ab

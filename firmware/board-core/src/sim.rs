@@ -64,7 +64,9 @@ impl SimulatedStage {
     }
 
     /// What the ADC would convert at this sampling instant (true phase currents and bus
-    /// through the board's gains, rounded and clamped to 12 bits).
+    /// through the board's gains, rounded and clamped to 12 bits). Never inlined, like
+    /// [`SimulatedStage::run_period`].
+    #[inline(never)]
     pub fn sample(&self) -> RawSample {
         let i = self.plant.phase_currents();
         RawSample {
@@ -80,6 +82,11 @@ impl SimulatedStage {
     /// Runs the present period with the command written one step earlier (all off at
     /// once if `next` switches off), then preloads `next` (what the compare registers and
     /// MOE would hold from the next update event).
+    ///
+    /// Never inlined: the self-test's motor model is not control code, and out of line it
+    /// stays in flash with the plant (`firmware/ccmram.x`), leaving the CCM SRAM to the
+    /// control step.
+    #[inline(never)]
     pub fn run_period(&mut self, next: PwmOutput) {
         let applied = self.pwm.advance(next);
         self.plant.run_pwm_period(applied, self.load);
