@@ -90,8 +90,8 @@ fn zero_speed_scenario(policy: ZeroSpeed) -> Scenario {
 }
 
 /// Item 6: with `stop` the drive switches off 0.5 s after the reference reached a held
-/// zero (no fault); the reversal before still passes through zero. With `hold` (the
-/// default) it keeps running.
+/// zero (no fault; `stop` is the default); the reversal before still passes through
+/// zero. With `hold` it keeps running.
 #[test]
 fn zero_speed_policy() {
     let stop = acim_sim::sim::run(&zero_speed_scenario(ZeroSpeed::Stop)).unwrap();
@@ -169,7 +169,11 @@ fn zero_hold_scenario() {
     assert!(max_after(&r) < 5.0, "{}", max_after(&r));
     let last = r.rows.last().unwrap().speed_rpm.abs();
     assert!(last < 0.1, "{last}");
-    let r = acim_sim::sim::run(&sc).unwrap();
+    // the file leaves the policy at the default, `stop`
+    assert_eq!(sc.drive.zero_speed_policy, ZeroSpeed::Stop);
+    let mut hold = sc.clone();
+    hold.drive.zero_speed_policy = ZeroSpeed::Hold;
+    let r = acim_sim::sim::run(&hold).unwrap();
     assert_eq!(r.final_state, acim::DriveState::Running);
     assert_eq!(r.fault, None);
     // the drift documented in docs/robustness.md (19.1 rpm): present, and not a runaway

@@ -7,7 +7,9 @@
 //! 12-bit current sensors with 10 mA rms noise, the paper's load as a passive brake.
 //! Figs. 10-12 (the paper's experiments) add sensor gain and offset errors.
 
-use crate::scenario::{ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, StartSpec, Window};
+use crate::scenario::{
+    ControlMode, LoadKind, LoadPoint, Scenario, SpeedPoint, StartSpec, Window, ZeroSpeed,
+};
 
 fn sp(t_s: f32, rpm: f32) -> SpeedPoint {
     SpeedPoint { t_s, rpm }
@@ -52,6 +54,9 @@ fn trapezoid(name: &str, description: &str, rpm: f32) -> Scenario {
     let mut s = base(name, description, 10.0);
     realistic_sensors(&mut s);
     s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm), sp(8.0, 0.0)];
+    // the paper's trapezoids hold zero speed for their last 2 s with the flux on: `hold`,
+    // not the drive's default `stop` (which would switch off 0.5 s after reaching zero)
+    s.drive.zero_speed_policy = ZeroSpeed::Hold;
     // steady windows start 1 s after the ramp ends (500 rpm/s)
     let ramp = 2.0 * rpm.abs() / s.drive.speed_ramp_rpm_s;
     s.windows = vec![
@@ -426,6 +431,9 @@ pub fn all() -> Vec<Scenario> {
     // braking torque to the losses and the reference is held with the speed (stopped
     // at about 13.3 s)
     s.drive.speed_ramp_rpm_s = 2000.0;
+    // the "stopped" window measures the drive holding zero with the flux on after the
+    // braking: `hold`, not the default `stop` (which switches off 0.5 s after zero)
+    s.drive.zero_speed_policy = ZeroSpeed::Hold;
     s.windows = vec![win("top", 6.5, 8.0), win("stopped", 14.0, 15.0)];
     v.push(s);
 
@@ -448,6 +456,8 @@ pub fn all() -> Vec<Scenario> {
     s.dc_link.capacitance_f = 470e-6;
     s.drive.overvoltage_control = true;
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
+    // held at zero after the braking as published (the default `stop` would switch off)
+    s.drive.zero_speed_policy = ZeroSpeed::Hold;
     s.windows = vec![win("top", 7.0, 8.0)];
     v.push(s);
 

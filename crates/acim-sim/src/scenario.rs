@@ -243,10 +243,10 @@ impl RsMode {
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum ZeroSpeed {
-    /// Keep the flux, control zero speed (the default).
-    #[default]
+    /// Keep the flux, control zero speed (the paper's trapezoids, figs. 10-12).
     Hold,
-    /// Switch off after the dwell.
+    /// Switch off after the dwell (the default).
+    #[default]
     Stop,
 }
 
@@ -362,7 +362,10 @@ impl Default for DriveSpec {
             field_weakening: d.field_weakening,
             overvoltage_control: d.overvoltage_control,
             flux_optimisation: d.flux_optimisation,
-            zero_speed_policy: ZeroSpeed::Hold,
+            zero_speed_policy: match d.zero_speed_policy {
+                acim::ZeroSpeedPolicy::Hold => ZeroSpeed::Hold,
+                acim::ZeroSpeedPolicy::Stop => ZeroSpeed::Stop,
+            },
             zero_speed_dwell_s: d.zero_speed_dwell,
             regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
             inverter_identification: d.inverter_identification,

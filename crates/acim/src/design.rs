@@ -48,14 +48,14 @@ pub enum RsEstimationMode {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ZeroSpeedPolicy {
-    /// Keep the flux and control zero speed (the behaviour before issue 13, the default
-    /// so that the paper's figures stay as they are). At zero stator frequency speed and
+    /// Keep the flux and control zero speed (the behaviour before issue 13; the paper's
+    /// trapezoids, figs. 10-12, hold zero this way). At zero stator frequency speed and
     /// orientation are unobservable (design notes, section 10): the rotor may creep under
     /// sensor offsets and load while the estimate reads 0.
-    #[default]
     Hold,
     /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
-    /// `zero_speed_dwell`: no operation on the unobservable line.
+    /// `zero_speed_dwell`: no operation on the unobservable line (the default).
+    #[default]
     Stop,
 }
 
@@ -200,7 +200,7 @@ pub struct DriveConfig {
     /// part. Needs a rotor at rest (skipped on a flying start), `flux_current` of at
     /// least [`INVERTER_TEST_MIN_BANDS`] times `dead_time_current_band`.
     pub inverter_identification: bool,
-    /// Held zero speed target: keep the flux (`Hold`, default) or switch off (`Stop`).
+    /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
     /// switches turn off, s.
@@ -252,7 +252,7 @@ impl DriveConfig {
             overvoltage_control: false,
             flux_optimisation: false,
             inverter_identification: false,
-            zero_speed_policy: ZeroSpeedPolicy::Hold,
+            zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)
             regen_min_frequency: 2.0 * core::f32::consts::PI * 1.5,
