@@ -880,9 +880,12 @@ pub struct DriveCoeffs<N: Num = f32> {
     // issue 13's additions last, so that the default path's field offsets stay as they were
     /// The running Rs law ([`crate::rs_estimator`], "While running").
     pub rs_running: RsRunningConfig<N>,
-    /// [`ZeroSpeedPolicy::Stop`]: switch off after this many steps at a zero reference
-    /// (0: the `Hold` policy, never).
-    pub zero_stop_steps: u32,
+    /// Steps a zero speed target and reference last before the zero-speed policy acts
+    /// (`zero_speed_dwell`, >= 1).
+    pub zero_dwell_steps: u32,
+    /// [`ZeroSpeedPolicy::Stop`]: switch off after the dwell (false: `Hold`, which keeps
+    /// the flux and reports the hold, [`crate::DriveTelemetry::zero_speed_held`]).
+    pub zero_speed_stop: bool,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: N,
     /// Steps the current loops may spend beyond the sustained voltage limit in a row
@@ -943,8 +946,10 @@ pub struct DriveDesign {
     pub torque_factor: f32,
     /// Speed reference change per step, rad/s.
     pub ramp_step: f32,
-    /// Steps at a zero reference before [`ZeroSpeedPolicy::Stop`] switches off (0: hold).
-    pub zero_stop_steps: u32,
+    /// Steps at a zero target and reference before the zero-speed policy acts (>= 1).
+    pub zero_dwell_steps: u32,
+    /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
+    pub zero_speed_stop: bool,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: f32,
     /// [`OVERMODULATION_RESERVE_TIME`] in steps.
@@ -1165,10 +1170,8 @@ impl DriveDesign {
             pole_pairs: pp,
             torque_factor: 1.5 * pp,
             ramp_step: cfg.speed_ramp * ts,
-            zero_stop_steps: match cfg.zero_speed_policy {
-                ZeroSpeedPolicy::Hold => 0,
-                ZeroSpeedPolicy::Stop => ((cfg.zero_speed_dwell / ts) as u32).max(1),
-            },
+            zero_dwell_steps: ((cfg.zero_speed_dwell / ts) as u32).max(1),
+            zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
             regen_min_frequency: cfg.regen_min_frequency,
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
@@ -1279,7 +1282,8 @@ impl DriveCoeffs<f32> {
             back_emf: d.pole_pairs,
             torque_factor: d.torque_factor,
             ramp_step: d.ramp_step,
-            zero_stop_steps: d.zero_stop_steps,
+            zero_dwell_steps: d.zero_dwell_steps,
+            zero_speed_stop: d.zero_speed_stop,
             regen_min_frequency: d.regen_min_frequency,
             overmodulation_reserve_steps: d.overmodulation_reserve_steps,
             regen_current_per_frequency: d.regen_current_per_frequency,

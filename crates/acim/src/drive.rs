@@ -130,6 +130,12 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// The flying start's measured rotor speed, rad/s mechanical (0 until the speed
     /// search decides, [`crate::speed_search`]).
     pub search_speed: N,
+    /// With [`crate::ZeroSpeedPolicy::Hold`]: a zero speed target has been held for the
+    /// dwell with the flux on. Speed and orientation are then unobservable (zero stator
+    /// frequency): the rotor may creep under sensor offsets or load while the estimate
+    /// reads about 0 (docs/robustness.md measures 19 rpm with 5 mA offsets), which this
+    /// flag reports (issue 13, item 6). Never true with `Stop`, which switches off instead.
+    pub zero_speed_held: bool,
 }
 
 /// The running Rs law's step ([`RsEstimator::update_running`]), out of line so that the
@@ -727,10 +733,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             Err(reason) => return self.enter_fault(reason),
         };
         probe.end(StepRegion::SpeedPi);
-        // 5b. zero-speed policy `Stop`: a zero reference held for the dwell switches off
-        if self.coeffs.zero_stop_steps != 0
-            && self.zero_speed_stop(magnetizing)
-        {
+        // 5b. zero-speed policy: a zero target and reference held for the dwell switch off
+        // (`Stop`) or are reported (`Hold`)
+        let zero_held = self.zero_speed_held(magnetizing);
+        if zero_held && self.coeffs.zero_speed_stop {
+            self.sup.stop();
+            self.applied = Applied::default();
             return PwmOutput::OFF;
         }
         // 6. current control, within the voltage limit
@@ -751,37 +759,28 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             dc_bus: m.dc_bus,
             inv_dc_bus,
         };
-        self.record(&m, &e, i_ref, v, modulation.saturated);
+        self.record(&m, &e, i_ref, v, modulation.saturated, zero_held);
         PwmOutput {
             duties: modulation.duties,
             enabled: true,
         }
     }
 
-    /// [`crate::ZeroSpeedPolicy::Stop`]: counts the steps with the speed target and the
-    /// ramped reference both at zero while running; true once the dwell has passed (never
-    /// with `Hold`, whose step count is 0). A reversal passes through zero with a nonzero
-    /// target and does not count.
-    /// Switches off (to `Idle`) when it returns true. Out of line: off the default path.
-    #[cold]
-    #[inline(never)]
-    fn zero_speed_stop(&mut self, magnetizing: bool) -> bool {
-        let n = self.coeffs.zero_stop_steps;
-        if n == 0 || magnetizing {
-            return false;
-        }
+    /// The zero-speed policy's count ([`crate::ZeroSpeedPolicy`]): the steps with the
+    /// speed target and the ramped reference both at zero while running (a reversal passes
+    /// through zero with a nonzero target and does not count); true once the dwell has
+    /// passed. `Stop` then switches off; `Hold` keeps the flux and reports it in the
+    /// telemetry ([`DriveTelemetry::zero_speed_held`]). Inline: it runs every step.
+    #[inline(always)]
+    fn zero_speed_held(&mut self, magnetizing: bool) -> bool {
         let r = &mut self.refs;
-        r.zero_steps = if r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
-            r.zero_steps.saturating_add(1)
-        } else {
-            0
-        };
-        if r.zero_steps >= n {
-            self.sup.stop();
-            self.applied = Applied::default();
-            return true;
-        }
-        false
+        r.zero_steps =
+            if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
+                r.zero_steps.saturating_add(1)
+            } else {
+                0
+            };
+        r.zero_steps >= self.coeffs.zero_dwell_steps
     }
 
     /// The supervisor's plausibility check of this step's estimates.
@@ -1427,6 +1426,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         i_ref: Dq<N>,
         v: Dq<N>,
         saturated: bool,
+        zero_held: bool,
     ) {
         self.telemetry = DriveTelemetry {
             speed_reference: self.refs.speed_reference,
@@ -1445,6 +1445,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
             search_speed: self.search.measured_speed,
+            zero_speed_held: zero_held,
         };
     }
 
@@ -1587,6 +1588,54 @@ mod tests {
         // about ln(1/0.02) = 3.9 rotor time constants of 66.7 ms
         let t = steps as f32 * 200e-6;
         assert!((0.2..0.35).contains(&t), "magnetizing took {t} s");
+    }
+
+    /// Issue 13, item 6: a zero target held for the dwell (0.5 s) after the magnetizing
+    /// switches the drive off with `Stop` (the default) and is reported with `Hold`,
+    /// which keeps running; before the dwell neither acts.
+    #[test]
+    fn a_held_zero_target_stops_or_is_reported() {
+        use crate::ZeroSpeedPolicy;
+        for policy in [ZeroSpeedPolicy::Stop, ZeroSpeedPolicy::Hold] {
+            let mut cfg = DriveConfig::paper_defaults();
+            cfg.zero_speed_policy = policy;
+            let mut d = Drive::new(cfg).unwrap();
+            d.start().unwrap();
+            let inp = DriveInputs {
+                phase_currents: [1.5, -0.75, -0.75],
+                dc_bus: 325.0,
+            };
+            let mut steps = 0;
+            while d.state() == DriveState::Magnetizing && steps < 20_000 {
+                d.step(&inp);
+                steps += 1;
+            }
+            assert_eq!(d.state(), DriveState::Running);
+            let dwell = (0.5 / 200e-6) as u32;
+            for _ in 0..dwell - 2 {
+                d.step(&inp);
+            }
+            assert_eq!(d.state(), DriveState::Running, "{policy:?}");
+            assert!(!d.telemetry().zero_speed_held, "{policy:?}");
+            for _ in 0..4 {
+                d.step(&inp);
+            }
+            match policy {
+                ZeroSpeedPolicy::Stop => {
+                    assert_eq!(d.state(), DriveState::Idle);
+                    assert_eq!(d.fault(), None);
+                    assert!(!d.step(&inp).enabled);
+                }
+                ZeroSpeedPolicy::Hold => {
+                    assert_eq!(d.state(), DriveState::Running);
+                    assert!(d.telemetry().zero_speed_held);
+                    // a nonzero target ends the hold at once
+                    d.set_speed_target(1.0).unwrap();
+                    d.step(&inp);
+                    assert!(!d.telemetry().zero_speed_held);
+                }
+            }
+        }
     }
 
     #[test]

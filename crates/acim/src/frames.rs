@@ -106,7 +106,7 @@ impl SinCos for FastSinCos {
 
 /// Clarke transform from two measured phase currents, assuming i_a + i_b + i_c = 0:
 /// i_alpha = i_a, i_beta = (i_a + 2 i_b)/sqrt(3).
-#[inline]
+#[inline(always)]
 pub fn clarke_two<N: Num>(i_a: N, i_b: N) -> AlphaBeta<N> {
     AlphaBeta {
         alpha: i_a,
@@ -116,7 +116,7 @@ pub fn clarke_two<N: Num>(i_a: N, i_b: N) -> AlphaBeta<N> {
 
 /// Clarke transform of three phase quantities (zero sequence rejected):
 /// alpha = (2a - b - c)/3, beta = (b - c)/sqrt(3).
-#[inline]
+#[inline(always)]
 pub fn clarke_three<N: Num>(a: N, b: N, c: N) -> AlphaBeta<N> {
     AlphaBeta {
         alpha: (a.twice() - b - c) * N::ONE_THIRD,
@@ -125,7 +125,7 @@ pub fn clarke_three<N: Num>(a: N, b: N, c: N) -> AlphaBeta<N> {
 }
 
 /// Inverse amplitude-invariant Clarke (no zero sequence): phase values a, b, c.
-#[inline]
+#[inline(always)]
 pub fn inverse_clarke<N: Num>(v: AlphaBeta<N>) -> [N; 3] {
     let half_alpha = v.alpha.half();
     let k = N::SQRT3_2 * v.beta;
@@ -134,7 +134,7 @@ pub fn inverse_clarke<N: Num>(v: AlphaBeta<N>) -> [N; 3] {
 
 /// Park transform: stationary to the dq frame at angle theta (given by its sin/cos):
 /// d = alpha cos + beta sin, q = beta cos - alpha sin.
-#[inline]
+#[inline(always)]
 pub fn park<N: Num>(v: AlphaBeta<N>, sc: SinCosValue<N>) -> Dq<N> {
     Dq {
         d: v.alpha * sc.cos + v.beta * sc.sin,
@@ -143,7 +143,7 @@ pub fn park<N: Num>(v: AlphaBeta<N>, sc: SinCosValue<N>) -> Dq<N> {
 }
 
 /// Inverse Park transform: dq frame at angle theta back to stationary.
-#[inline]
+#[inline(always)]
 pub fn inverse_park<N: Num>(v: Dq<N>, sc: SinCosValue<N>) -> AlphaBeta<N> {
     AlphaBeta {
         alpha: v.d * sc.cos - v.q * sc.sin,

@@ -327,7 +327,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         },
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
-        zero_stop_steps: d.zero_stop_steps,
+        zero_dwell_steps: d.zero_dwell_steps,
+        zero_speed_stop: d.zero_speed_stop,
         overmodulation_reserve_steps: d.overmodulation_reserve_steps,
         regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
         regen_current_per_frequency: gain(

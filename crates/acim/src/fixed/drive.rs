@@ -171,6 +171,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
             current_error: t.current_error.to_pu() * b.current,
             model_residual: t.model_residual.to_pu() * b.voltage,
             search_speed: t.search_speed.to_pu() * b.speed,
+            zero_speed_held: t.zero_speed_held,
         }
     }
 

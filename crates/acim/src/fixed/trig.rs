@@ -104,7 +104,7 @@ pub fn sin(a: Angle) -> i32 {
 }
 
 /// sin and cos of `a` (Q7.24) from the table.
-#[inline]
+#[inline(always)]
 pub fn sin_cos(a: Angle) -> SinCosValue<Q24> {
     SinCosValue {
         sin: Q24(sin(a)),
