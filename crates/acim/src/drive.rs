@@ -174,24 +174,6 @@ fn rs_running_step<N: Num>(
     );
 }
 
-/// `v` (V, stationary) plus the leg error `error` (V) along each predicted phase current's
-/// linearised sign (the modulator's, [`crate::svpwm`]), Clarke-transformed: the inverter
-/// test's correction (issue 13, item 2). Out of line and cold: off the default path.
-#[cold]
-#[inline(never)]
-fn inverter_correction<N: Num>(
-    c: &DriveCoeffs<N>,
-    v: AlphaBeta<N>,
-    error: N,
-    currents: [N; 3],
-) -> AlphaBeta<N> {
-    let [a, b, cc] = currents.map(|i| N::gain(c.pwm.inv_current_band, i).clamp(-N::ONE, N::ONE));
-    AlphaBeta {
-        alpha: v.alpha + error * ((a.twice() - b - cc) * N::ONE_THIRD),
-        beta: v.beta + error * ((b - cc) * N::INV_SQRT3),
-    }
-}
-
 /// The torque-current limits with the low-frequency regeneration limit
 /// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed target has the
 /// sign of the speed estimate (holding a speed; a zero or opposite target is a transit,
@@ -1398,17 +1380,17 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // not 1.5 periods old like the samples
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
         // the inverter error the start test found beyond the configured compensation
-        // (issue 13, item 2) is compensated on top, with the same current signs; the
-        // estimators keep the command v, which the two compensations make the machine see
-        let duty = self.inverter.correction_duty;
-        let v_out = if duty != N::ZERO {
-            inverter_correction(c, v_ab, duty * m.dc_bus, i_ref_abc)
-        } else {
-            v_ab
-        };
-        let out = self
-            .modulator
-            .modulate(c, v_out, m.dc_bus, inv_dc_bus, i_ref_abc);
+        // (issue 13, item 2) is compensated with it, as more dead-time duty per leg with
+        // the same current signs; the estimators keep the command v, which the two
+        // compensations make the machine see
+        let out = self.modulator.modulate(
+            c,
+            v_ab,
+            m.dc_bus,
+            inv_dc_bus,
+            i_ref_abc,
+            self.inverter.correction_duty,
+        );
         if M::OVERMODULATES && out.saturated {
             // the estimators model the voltage of each period: the limited one (the
             // command's fundamental with overmodulation, not this period's vector)

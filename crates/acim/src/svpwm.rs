@@ -117,6 +117,20 @@ pub fn modulate_with_inverse<N: Num>(
     inv_dc_bus: N,
     phase_currents: [N; 3],
 ) -> Modulation<N> {
+    modulate_corrected(cfg, v, dc_bus, inv_dc_bus, phase_currents, N::ZERO)
+}
+
+/// [`modulate_with_inverse`] with `dead_time_correction` (duty) added to the configured
+/// dead-time duty of every leg (the inverter test's correction, issue 13 item 2).
+#[inline(always)]
+pub fn modulate_corrected<N: Num>(
+    cfg: &SvpwmConfig<N>,
+    v: AlphaBeta<N>,
+    dc_bus: N,
+    inv_dc_bus: N,
+    phase_currents: [N; 3],
+    dead_time_correction: N,
+) -> Modulation<N> {
     let vdc = dc_bus;
     let inv_vdc = inv_dc_bus;
     let [mut a, mut b, mut c] = inverse_clarke(v);
@@ -138,7 +152,7 @@ pub fn modulate_with_inverse<N: Num>(
         out.beta = out.beta * k;
         saturated = true;
     }
-    let dt = cfg.dead_time_duty + cfg.device_drop * inv_vdc;
+    let dt = (cfg.dead_time_duty + dead_time_correction) + cfg.device_drop * inv_vdc;
     let s = cfg.inv_current_band;
     let base = N::HALF + offset * inv_vdc;
     Modulation {
@@ -199,7 +213,9 @@ pub trait Modulator<N: Num = f32> {
     /// with `inv_dc_bus` = 1/`dc_bus`.
     fn voltage_limit(&self, coeffs: &DriveCoeffs<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
     /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
-    /// with `phase_currents` (A) predicted for the dead-time compensation.
+    /// with `phase_currents` (A) predicted for the dead-time compensation, whose duty
+    /// per leg is the configured one plus `dead_time_correction` (the inverter test's,
+    /// issue 13 item 2; 0 leaves the configured compensation bit for bit).
     fn modulate(
         &self,
         coeffs: &DriveCoeffs<N>,
@@ -207,6 +223,7 @@ pub trait Modulator<N: Num = f32> {
         dc_bus: N,
         inv_dc_bus: N,
         phase_currents: [N; 3],
+        dead_time_correction: N,
     ) -> Modulation<N>;
 }
 
@@ -237,8 +254,16 @@ impl Modulator<f32> for Svpwm {
         dc_bus: f32,
         inv_dc_bus: f32,
         phase_currents: [f32; 3],
+        dead_time_correction: f32,
     ) -> Modulation {
-        modulate_with_inverse(&coeffs.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+        modulate_corrected(
+            &coeffs.pwm,
+            v,
+            dc_bus,
+            inv_dc_bus,
+            phase_currents,
+            dead_time_correction,
+        )
     }
 }
 
@@ -327,8 +352,16 @@ impl Modulator<f32> for Overmodulation {
         dc_bus: f32,
         inv_dc_bus: f32,
         phase_currents: [f32; 3],
+        dead_time_correction: f32,
     ) -> Modulation {
-        overmodulate(&coeffs.pwm, v, dc_bus, inv_dc_bus, phase_currents)
+        overmodulate_corrected(
+            &coeffs.pwm,
+            v,
+            dc_bus,
+            inv_dc_bus,
+            phase_currents,
+            dead_time_correction,
+        )
     }
 }
 
@@ -346,10 +379,31 @@ pub fn overmodulate(
     inv_dc_bus: f32,
     phase_currents: [f32; 3],
 ) -> Modulation {
+    overmodulate_corrected(cfg, v, dc_bus, inv_dc_bus, phase_currents, 0.0)
+}
+
+/// [`overmodulate`] with `dead_time_correction` (duty) added to the configured dead-time
+/// duty of every switching leg, as [`modulate_corrected`].
+#[inline(always)]
+pub fn overmodulate_corrected(
+    cfg: &SvpwmConfig,
+    v: AlphaBeta,
+    dc_bus: f32,
+    inv_dc_bus: f32,
+    phase_currents: [f32; 3],
+    dead_time_correction: f32,
+) -> Modulation {
     let m2 = (v.alpha * v.alpha + v.beta * v.beta) * (inv_dc_bus * inv_dc_bus);
     // (a NaN command takes the linear path, which keeps the duties in range)
     if m2.is_nan() || m2 <= INV_SQRT3 * INV_SQRT3 {
-        return modulate_with_inverse(cfg, v, dc_bus, inv_dc_bus, phase_currents);
+        return modulate_corrected(
+            cfg,
+            v,
+            dc_bus,
+            inv_dc_bus,
+            phase_currents,
+            dead_time_correction,
+        );
     }
     // m >= 1/sqrt 3 (up to rounding): the ratio's divisor cannot vanish
     let m = sqrt(m2).max(INV_SQRT3);
@@ -370,7 +424,7 @@ pub fn overmodulate(
         alpha: (d[0] - 0.5 * (d[1] + d[2])) * (2.0 / 3.0) * dc_bus,
         beta: (d[1] - d[2]) * INV_SQRT3 * dc_bus,
     };
-    let dt = cfg.dead_time_duty + cfg.device_drop * inv_dc_bus;
+    let dt = (cfg.dead_time_duty + dead_time_correction) + cfg.device_drop * inv_dc_bus;
     let comp = |d: f32, i: f32| {
         if d > 0.0 && d < 1.0 {
             let sign = clamp(i * cfg.inv_current_band, -1.0, 1.0);
