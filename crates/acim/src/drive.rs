@@ -756,12 +756,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     #[inline(always)]
     fn zero_speed_held(&mut self, magnetizing: bool) -> bool {
         let r = &mut self.refs;
-        r.zero_steps =
-            if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
-                r.zero_steps.saturating_add(1)
-            } else {
-                0
-            };
+        r.zero_steps = if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO
+        {
+            r.zero_steps.saturating_add(1)
+        } else {
+            0
+        };
         r.zero_steps >= self.coeffs.zero_dwell_steps
     }
 
