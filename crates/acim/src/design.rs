@@ -54,7 +54,9 @@ pub enum ZeroSpeedPolicy {
     /// sensor offsets and load while the estimate reads 0.
     Hold,
     /// Ramp down, then switch off (to `Idle`) once the reference has been zero for
-    /// `zero_speed_dwell`: no operation on the unobservable line (the default).
+    /// `zero_speed_dwell`: no operation on the unobservable line (the default). Only
+    /// after the drive was commanded to turn since its start: started with a zero
+    /// target, it waits magnetized for one (and reports the hold, as `Hold` does).
     #[default]
     Stop,
 }

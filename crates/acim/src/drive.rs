@@ -321,6 +321,9 @@ struct References<N> {
     flying: bool,
     /// Steps the speed target and reference have been zero ([`crate::ZeroSpeedPolicy`]).
     zero_steps: u32,
+    /// A nonzero speed target or reference since the start: `Stop` ramps down and then
+    /// switches off; a drive started with a zero target waits for one.
+    commanded: bool,
     /// Steps left of the overmodulation reserve (`DriveCoeffs::
     /// overmodulation_reserve_steps` when full; see [`Drive::transient_limit`]).
     overmodulation_reserve: u32,
@@ -437,6 +440,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 fw_active: false,
                 flying: false,
                 zero_steps: 0,
+                commanded: false,
                 overmodulation_reserve: 0,
             },
             cur: CurrentControl {
@@ -626,6 +630,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
         self.refs.zero_steps = 0;
+        self.refs.commanded = false;
         self.refs.overmodulation_reserve = 0;
         self.cur.d.reset();
         self.cur.q.reset();
@@ -718,7 +723,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // 5b. zero-speed policy: a zero target and reference held for the dwell switch off
         // (`Stop`) or are reported (`Hold`)
         let zero_held = self.zero_speed_held(magnetizing);
-        if zero_held && self.coeffs.zero_speed_stop {
+        if zero_held && self.coeffs.zero_speed_stop && self.refs.commanded {
             self.sup.stop();
             self.applied = Applied::default();
             return PwmOutput::OFF;
@@ -751,17 +756,19 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// The zero-speed policy's count ([`crate::ZeroSpeedPolicy`]): the steps with the
     /// speed target and the ramped reference both at zero while running (a reversal passes
     /// through zero with a nonzero target and does not count); true once the dwell has
-    /// passed. `Stop` then switches off; `Hold` keeps the flux and reports it in the
-    /// telemetry ([`DriveTelemetry::zero_speed_held`]). Inline: it runs every step.
+    /// passed. `Stop` then switches off if the drive was commanded to turn since its start
+    /// (ramp down, then off; started with a zero target it waits for one); otherwise the
+    /// flux stays and the telemetry reports the hold ([`DriveTelemetry::zero_speed_held`]).
+    /// Inline: it runs every step.
     #[inline(always)]
     fn zero_speed_held(&mut self, magnetizing: bool) -> bool {
         let r = &mut self.refs;
-        r.zero_steps = if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO
-        {
-            r.zero_steps.saturating_add(1)
+        if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
+            r.zero_steps = r.zero_steps.saturating_add(1);
         } else {
-            0
-        };
+            r.zero_steps = 0;
+            r.commanded = r.commanded || !magnetizing;
+        }
         r.zero_steps >= self.coeffs.zero_dwell_steps
     }
 
@@ -1594,6 +1601,18 @@ mod tests {
             }
             assert_eq!(d.state(), DriveState::Running);
             let dwell = (0.5 / 200e-6) as u32;
+            // started with a zero target, the drive waits for one with either policy,
+            // the hold reported once the dwell has passed
+            for _ in 0..dwell + 2 {
+                d.step(&inp);
+            }
+            assert_eq!(d.state(), DriveState::Running, "{policy:?}");
+            assert!(d.telemetry().zero_speed_held, "{policy:?}");
+            // commanded to turn, then back to zero: the ramp reaches it in a few steps
+            d.set_speed_target(0.05).unwrap();
+            d.step(&inp);
+            assert!(!d.telemetry().zero_speed_held, "{policy:?}");
+            d.set_speed_target(0.0).unwrap();
             for _ in 0..dwell - 2 {
                 d.step(&inp);
             }
