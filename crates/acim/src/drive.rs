@@ -134,7 +134,8 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// dwell with the flux on. Speed and orientation are then unobservable (zero stator
     /// frequency): the rotor may creep under sensor offsets or load while the estimate
     /// reads about 0 (docs/robustness.md measures 19 rpm with 5 mA offsets), which this
-    /// flag reports (issue 13, item 6). Never true with `Stop`, which switches off instead.
+    /// flag reports (issue 13, item 6). With `Stop` only while a drive started with a zero
+    /// target waits for one (after turning, `Stop` switches off instead).
     pub zero_speed_held: bool,
 }
 
@@ -1579,8 +1580,9 @@ mod tests {
         assert!((0.2..0.35).contains(&t), "magnetizing took {t} s");
     }
 
-    /// Issue 13, item 6: a zero target held for the dwell (0.5 s) after the magnetizing
-    /// switches the drive off with `Stop` (the default) and is reported with `Hold`,
+    /// Issue 13, item 6: started with a zero target, the drive waits for one with either
+    /// policy and reports the hold; after turning, a zero target held for the dwell
+    /// (0.5 s) switches it off with `Stop` (the default) and is reported with `Hold`,
     /// which keeps running; before the dwell neither acts.
     #[test]
     fn a_held_zero_target_stops_or_is_reported() {

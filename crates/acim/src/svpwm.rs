@@ -105,25 +105,14 @@ pub fn modulate<N: Num>(
     } else {
         cfg.min_bus_voltage
     };
-    modulate_with_inverse(cfg, v, vdc, vdc.recip(), phase_currents)
+    modulate_with_inverse(cfg, v, vdc, vdc.recip(), phase_currents, N::ZERO)
 }
 
-/// [`modulate`] with the bus already checked (> 0) and its reciprocal `inv_dc_bus` given.
+/// [`modulate`] with the bus already checked (> 0) and its reciprocal `inv_dc_bus` given,
+/// and `dead_time_correction` (duty; 0 for none) added to the configured dead-time duty of
+/// every leg (the inverter test's correction, issue 13 item 2).
 #[inline(always)]
 pub fn modulate_with_inverse<N: Num>(
-    cfg: &SvpwmConfig<N>,
-    v: AlphaBeta<N>,
-    dc_bus: N,
-    inv_dc_bus: N,
-    phase_currents: [N; 3],
-) -> Modulation<N> {
-    modulate_corrected(cfg, v, dc_bus, inv_dc_bus, phase_currents, N::ZERO)
-}
-
-/// [`modulate_with_inverse`] with `dead_time_correction` (duty) added to the configured
-/// dead-time duty of every leg (the inverter test's correction, issue 13 item 2).
-#[inline(always)]
-pub fn modulate_corrected<N: Num>(
     cfg: &SvpwmConfig<N>,
     v: AlphaBeta<N>,
     dc_bus: N,
@@ -256,7 +245,7 @@ impl Modulator<f32> for Svpwm {
         phase_currents: [f32; 3],
         dead_time_correction: f32,
     ) -> Modulation {
-        modulate_corrected(
+        modulate_with_inverse(
             &coeffs.pwm,
             v,
             dc_bus,
@@ -383,7 +372,7 @@ pub fn overmodulate(
 }
 
 /// [`overmodulate`] with `dead_time_correction` (duty) added to the configured dead-time
-/// duty of every switching leg, as [`modulate_corrected`].
+/// duty of every switching leg, as [`modulate_with_inverse`].
 #[inline(always)]
 pub fn overmodulate_corrected(
     cfg: &SvpwmConfig,
@@ -396,7 +385,7 @@ pub fn overmodulate_corrected(
     let m2 = (v.alpha * v.alpha + v.beta * v.beta) * (inv_dc_bus * inv_dc_bus);
     // (a NaN command takes the linear path, which keeps the duties in range)
     if m2.is_nan() || m2 <= INV_SQRT3 * INV_SQRT3 {
-        return modulate_corrected(
+        return modulate_with_inverse(
             cfg,
             v,
             dc_bus,
@@ -619,7 +608,7 @@ mod tests {
             prop_assert!(o.duties.iter().all(|d| (0.0..=1.0).contains(d)));
             prop_assert!(o.voltage.alpha.is_finite() && o.voltage.beta.is_finite());
             if mag < 0.999 {
-                prop_assert_eq!(o, modulate_with_inverse(&cfg, v, vdc, 1.0 / vdc, i));
+                prop_assert_eq!(o, modulate_with_inverse(&cfg, v, vdc, 1.0 / vdc, i, 0.0));
             } else if mag > 1.001 {
                 prop_assert!(o.saturated);
             }

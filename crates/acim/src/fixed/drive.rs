@@ -21,7 +21,7 @@ use crate::math::is_finite;
 use crate::num::Num;
 use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
-use crate::svpwm::{modulate_corrected, Modulation, Modulator, Svpwm, VoltageLimit};
+use crate::svpwm::{modulate_with_inverse, Modulation, Modulator, Svpwm, VoltageLimit};
 
 /// The fixed-point sensorless IFOC drive (the paper's observer, SVPWM, table sin/cos).
 pub type FixedDrive = Drive<TableSinCos, Q24, ReducedOrderObserver<Q24>, Svpwm>;
@@ -65,7 +65,7 @@ impl Modulator<Q24> for Svpwm {
         phase_currents: [Q24; 3],
         dead_time_correction: Q24,
     ) -> Modulation<Q24> {
-        modulate_corrected(
+        modulate_with_inverse(
             &c.pwm,
             v,
             dc_bus,

@@ -324,7 +324,7 @@ proptest! {
         let vq = AlphaBeta { alpha: q(v.alpha, B.voltage), beta: q(v.beta, B.voltage) };
         let bus = q(vdc, B.voltage);
         let x = svpwm::modulate_with_inverse(&cq, vq, bus, bus.recip(),
-            [q(cur[0], B.current), q(cur[1], B.current), q(cur[2], B.current)]);
+            [q(cur[0], B.current), q(cur[1], B.current), q(cur[2], B.current)], Q24(0));
         prop_assert_eq!(f.saturated, x.saturated);
         for k in 0..3 {
             prop_assert!((f.duties[k] - pu(x.duties[k])).abs() < 2e-5,
