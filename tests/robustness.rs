@@ -116,8 +116,10 @@ fn zero_speed_policy() {
 }
 
 /// Item 5: 120 rpm regenerating at 4.5 N m sits at f_s = 0.96 Hz. Without the
-/// regeneration limit the drive loses the point and trips (the active load then drives
-/// the coasting rotor away); with `regen_min_frequency_hz = 1.5` it holds the reachable
+/// regeneration limit the drive loses the point: it trips (the active load then drives
+/// the coasting rotor away), loses the speed, or (with the running Rs law's steadiness
+/// gate, measured) drifts towards the line with the estimate 66 rpm off; with
+/// `regen_min_frequency_hz = 1.5` it holds the reachable
 /// speed instead, about 15 rpm above the target at f_s = 1.5 Hz, without a fault, and
 /// estimates it within 2 rpm.
 #[test]
@@ -126,7 +128,10 @@ fn regeneration_limit_keeps_off_the_unobservable_line() {
     let c = case(Variant::Nominal, 120.0, true, 4.5);
     assert!(c.stator_frequency_hz().abs() < 1.0);
     let off = run(&c, RsMode::Running).unwrap();
-    assert!(off.faulted || off.lost, "{off:?}");
+    assert!(
+        off.faulted || off.lost || off.speed_est_error_rpm.abs() > 20.0,
+        "{off:?}"
+    );
     let sc = c.scenario_with(&Setup {
         mode: RsMode::Running,
         regen_min_frequency_hz: 1.5,

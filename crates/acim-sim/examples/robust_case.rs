@@ -42,7 +42,7 @@ fn main() {
         let mut f = String::from(acim_sim::sim::CSV_HEADER);
         f.push('\n');
         for (i, row) in r.rows.iter().enumerate() {
-            if i % 50 == 0 {
+            if i % std::env::var("CSV_EVERY").map_or(50, |v| v.parse().unwrap()) == 0 {
                 f.push_str(&row.csv());
                 f.push('\n');
             }

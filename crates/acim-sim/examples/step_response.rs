@@ -1,7 +1,7 @@
 //! Orientation-step response over 3 s (development aid for docs/robustness.md): the
 //! `stability` measurement with a longer record, printing the rms deviation of the
 //! orientation error in 0.25 s windows after a 2 degree step of the plant's rotor flux.
-//! `cargo run --release -p acim-sim --example step_response -- <rpm> <load N m> <off|running>`
+//! `cargo run --release -p acim-sim --example step_response -- <rpm> <load N m> <off|running> [controller Rs factor]`
 use acim::math::RPM_TO_RAD_S;
 use acim::{Drive, DriveInputs, DriveState};
 use acim_plant::{LoadTorque, PwmPreload};
@@ -17,6 +17,9 @@ fn main() {
     if a[2] == "running" {
         sc.drive.rs_estimation = true;
         sc.drive.rs_estimation_mode = RsMode::Running;
+    }
+    if let Some(f) = a.get(3) {
+        sc.controller.rs_ohm = f.parse::<f32>().unwrap() * sc.plant.rs_ohm;
     }
     sc.speed_profile = vec![SpeedPoint { t_s: 0.0, rpm }];
     sc.load_profile = vec![LoadPoint {
@@ -90,4 +93,9 @@ fn main() {
         })
         .collect();
     println!("rms deviation (deg) per 0.25 s: {}", rms.join(" "));
+    println!(
+        "Rs estimate {:.3} ohm (machine {:.3})",
+        drive.telemetry().stator_resistance_estimate,
+        sc.plant.rs_ohm
+    );
 }

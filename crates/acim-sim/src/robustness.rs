@@ -81,9 +81,9 @@ pub struct Setup {
 }
 
 /// The setups the report compares: before issue 13 (the standstill Rs mode, no regeneration
-/// limit), Rs while running, Rs while running with a 1.5 Hz regeneration limit, and the
-/// defaults (standstill Rs mode with the 1.5 Hz regeneration limit, on by default since
-/// issue 12's overhauling-load sweep).
+/// limit), Rs while running, Rs while running with the 1.5 Hz regeneration limit (the
+/// drive's defaults), and the standstill Rs mode with the limit (the defaults from issue
+/// 12's overhauling-load sweep until Rs tracking became the default).
 pub const SETUPS: [(Setup, &str); 4] = [
     (
         Setup {
@@ -104,14 +104,14 @@ pub const SETUPS: [(Setup, &str); 4] = [
             mode: RsMode::Running,
             regen_min_frequency_hz: 1.5,
         },
-        "Rs mode running, regeneration limit 1.5 Hz (regen_min_frequency_hz = 1.5)",
+        "Rs mode running, regeneration limit 1.5 Hz (the drive's defaults)",
     ),
     (
         Setup {
             mode: RsMode::Standstill,
             regen_min_frequency_hz: 1.5,
         },
-        "Rs mode standstill, regeneration limit 1.5 Hz (the defaults, with the Rs estimator on)",
+        "Rs mode standstill, regeneration limit 1.5 Hz (the defaults before Rs tracking while running)",
     ),
 ];
 
@@ -399,7 +399,7 @@ pub fn tracking_cases() -> Vec<Case> {
 }
 
 /// `acim-sim robustness`: the Rs-tracking cases and the whole matrix, with the Rs
-/// estimator in the standstill mode (the default, before issue 13) and the running mode,
+/// estimator in the standstill mode (before issue 13) and the running mode (the default),
 /// as Markdown. `progress` is called with each case's one-line summary.
 pub fn report(progress: &mut dyn FnMut(&str)) -> Result<String, crate::scenario::ScenarioError> {
     let mut md = String::from(

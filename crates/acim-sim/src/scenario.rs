@@ -223,10 +223,10 @@ pub enum ModulationKind {
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum RsMode {
-    /// Standstill identification only (the default).
-    #[default]
+    /// Standstill identification only.
     Standstill,
-    /// Also while running (issue 13).
+    /// Also while running (issue 13; the default).
+    #[default]
     Running,
 }
 
@@ -276,10 +276,11 @@ pub struct DriveSpec {
     pub speed_bandwidth_rad_s: f32,
     /// Observer pole rates, rad/s.
     pub observer_poles_rad_s: [f32; 3],
-    /// Stator-resistance estimator on.
+    /// Stator-resistance estimator on (the drive's default; the paper's figs. 6-8 and
+    /// 10-12 set it off).
     pub rs_estimation: bool,
-    /// When Rs adapts: "standstill" (the default: identification before the ramp) or
-    /// "running" (also while turning, issue 13).
+    /// When Rs adapts: "standstill" (identification before the ramp only) or "running"
+    /// (the default: also while turning, issue 13).
     pub rs_estimation_mode: RsMode,
     /// Initial Rs estimate, ohm (the controller model's Rs when absent).
     pub rs_initial_ohm: Option<f32>,
@@ -346,8 +347,11 @@ impl Default for DriveSpec {
             current_bandwidth_rad_s: d.current_bandwidth,
             speed_bandwidth_rad_s: d.speed_bandwidth,
             observer_poles_rad_s: [p.p1, p.p2, p.p3],
-            rs_estimation: false,
-            rs_estimation_mode: RsMode::Standstill,
+            rs_estimation: d.rs_estimation,
+            rs_estimation_mode: match d.rs_estimation_mode {
+                acim::RsEstimationMode::Standstill => RsMode::Standstill,
+                acim::RsEstimationMode::Running => RsMode::Running,
+            },
             rs_initial_ohm: None,
             rs_convergence_time_s: d.rs_convergence_time,
             rs_identification_timeout_s: None,

@@ -32,11 +32,16 @@ fn kept_lost_and_faulted() {
     assert!(m.zero_hold.is_none());
     assert!(m.modulation_index_max > 0.1 && m.modulation_index_max < 1.2);
 
-    // the paper's scheme (no orientation correction, no regeneration limit) regenerating
-    // at 120 rpm: the speed error passes 100 rpm without a trip
+    // the paper's scheme (no orientation correction, no regeneration limit, no Rs
+    // tracking while running) regenerating at 120 rpm: the speed error passes 100 rpm
+    // without a trip
     let m = run(
         "regen-120",
-        &["drive.orientation_gain=0", "drive.regen_min_frequency_hz=0"],
+        &[
+            "drive.orientation_gain=0",
+            "drive.regen_min_frequency_hz=0",
+            "drive.rs_estimation=false",
+        ],
     );
     assert_eq!(m.verdict, Verdict::Lost, "{m:#?}");
 

@@ -33,12 +33,14 @@ pub enum CurrentSensing {
 pub enum RsEstimationMode {
     /// The eq. (19) law below `rs_max_frequency` only, where the orientation part of the
     /// d-axis residual vanishes: in practice the standstill identification before the
-    /// speed ramp (the behaviour before issue 13, the default).
-    #[default]
+    /// speed ramp (the behaviour before issue 13).
     Standstill,
     /// The standstill identification, then adaptation while running, motoring and
     /// regenerating, from the q-axis and d-axis residuals together
-    /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current.
+    /// ([`crate::rs_estimator`], "While running"): from 1 Hz with torque current (the
+    /// default: a motor's Rs rises 30-40 % from cold to hot, and the standstill value
+    /// alone then leaves the speed estimate tens of rpm off, docs/robustness.md).
+    #[default]
     Running,
 }
 
@@ -100,10 +102,11 @@ pub struct DriveConfig {
     pub speed_bandwidth: f32,
     /// Observer poles (rates, rad/s).
     pub observer_poles: ObserverPoles,
-    /// Whether the stator-resistance estimator adapts.
+    /// Whether the stator-resistance estimator adapts (default on; the paper's figs. 6-8
+    /// and 10-12 run without it).
     pub rs_estimation: bool,
-    /// When Rs adapts (with `rs_estimation`): standstill only (default) or also while
-    /// running (issue 13).
+    /// When Rs adapts (with `rs_estimation`): standstill only, or also while running
+    /// (issue 13; the default).
     pub rs_estimation_mode: RsEstimationMode,
     /// With `rs_estimation` in the running mode: whether Rs is also identified at standstill
     /// while magnetizing (default true; magnetizing then waits for it). False: Rs converges
@@ -229,8 +232,8 @@ impl DriveConfig {
             current_bandwidth: 1000.0,
             speed_bandwidth: 25.0,
             observer_poles: ObserverPoles::DEFAULT,
-            rs_estimation: false,
-            rs_estimation_mode: RsEstimationMode::Standstill,
+            rs_estimation: true,
+            rs_estimation_mode: RsEstimationMode::Running,
             rs_standstill_identification: true,
             rs_initial: machine.stator_resistance(),
             rs_convergence_time: 0.2,
@@ -1115,7 +1118,8 @@ impl DriveDesign {
         let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
         rs.adapt = cfg.rs_estimation;
         rs.max_stator_frequency = cfg.rs_max_frequency;
-        let mut rs_running = RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d);
+        let mut rs_running =
+            RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d, m.rotor_time_constant());
         rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
         rs_running.standstill = cfg.rs_standstill_identification;
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
@@ -1317,11 +1321,12 @@ mod tests {
     }
 
     /// Issue 13's Rs-while-running, zero-speed stop and inverter test are accepted in every
-    /// build (the firmware compiles the same step as the simulator).
+    /// build (the firmware compiles the same step as the simulator); Rs tracked while
+    /// running is the default.
     #[test]
     fn robust_settings_are_accepted_in_every_build() {
-        let mut c = DriveConfig::paper_defaults();
-        c.rs_estimation_mode = RsEstimationMode::Running;
+        let c = DriveConfig::paper_defaults();
+        assert!(c.rs_estimation && c.rs_estimation_mode == RsEstimationMode::Running);
         let mut z = DriveConfig::paper_defaults();
         z.zero_speed_policy = ZeroSpeedPolicy::Stop;
         let mut i = DriveConfig::paper_defaults();
@@ -1331,6 +1336,7 @@ mod tests {
         assert_eq!(field(i), None);
         // the standstill mode has no other Rs law: it cannot be switched off there
         let mut s = DriveConfig::paper_defaults();
+        s.rs_estimation_mode = RsEstimationMode::Standstill;
         s.rs_standstill_identification = false;
         assert_eq!(field(s), Some("rs_standstill_identification"));
         // the regeneration limit is in every build (a protection, issue 12)

@@ -139,11 +139,11 @@ pub struct DriveTelemetry<N: Num = f32> {
     pub zero_speed_held: bool,
 }
 
-/// The running Rs law's step ([`RsEstimator::update_running`]), out of line so that the
-/// default path's code is unchanged: currents `i` (A), the d-axis voltage `v_sd` the
-/// estimator uses (V), the last stator frequency `ws` (rad/s), the last applied `v_sq`
-/// (V) and the model flux `rotor_flux` (Wb).
-#[cold]
+/// The running Rs law's step ([`RsEstimator::update_running`], the default mode since
+/// issue 13), out of line: currents `i` (A), the d-axis voltage `v_sd` the estimator uses
+/// (V), the last stator frequency `ws` (rad/s), the last applied `v_sq` (V), the model
+/// flux `rotor_flux` (Wb) and the last torque-current reference `i_sq_ref` (A, the law's
+/// steadiness gate).
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn rs_running_step<N: Num>(
@@ -156,6 +156,7 @@ fn rs_running_step<N: Num>(
     v_sq: N,
     rotor_flux: N,
     frame_held: bool,
+    i_sq_ref: N,
 ) {
     rs.update_running(
         &c.rs,
@@ -171,6 +172,7 @@ fn rs_running_step<N: Num>(
             v_sq,
             rotor_flux,
             frame_held,
+            i_sq_ref,
         },
     );
 }
@@ -916,7 +918,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             self.applied.v_dq.d
         };
         if c.rs_running.enabled {
-            // issue 13: Rs also while running (out of line, off the default path)
+            // issue 13: Rs also while running (the default mode; out of line)
             rs_running_step(
                 &mut est.rs,
                 c,
@@ -927,6 +929,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 self.applied.v_dq.q,
                 est.flux.rotor_flux,
                 frame_held,
+                self.refs.i_sq_ref,
             );
         } else {
             est.rs.update(
@@ -1561,23 +1564,36 @@ mod tests {
     }
 
     /// Synthetic inputs: feed back the commanded d current as if the machine followed it;
-    /// the flux model settles and the state machine moves to Running.
+    /// the flux model settles and the state machine moves to Running. Without the Rs
+    /// estimator that takes the flux alone; with it (the default) magnetizing also waits
+    /// for the standstill identification to settle, within its timeout.
     #[test]
     fn magnetizing_ends_when_flux_is_settled() {
-        let mut d = drive();
-        d.start().unwrap();
-        let mut steps = 0;
-        while d.state() == DriveState::Magnetizing && steps < 20_000 {
-            d.step(&DriveInputs {
-                phase_currents: [1.5, -0.75, -0.75],
-                dc_bus: 325.0,
-            });
-            steps += 1;
-        }
-        assert_eq!(d.state(), DriveState::Running);
+        let magnetize = |cfg: DriveConfig| {
+            let mut d = Drive::new(cfg).unwrap();
+            d.start().unwrap();
+            let mut steps = 0;
+            while d.state() == DriveState::Magnetizing && steps < 20_000 {
+                d.step(&DriveInputs {
+                    phase_currents: [1.5, -0.75, -0.75],
+                    dc_bus: 325.0,
+                });
+                steps += 1;
+            }
+            assert_eq!(d.state(), DriveState::Running);
+            steps as f32 * 200e-6
+        };
+        let mut flux_only = DriveConfig::paper_defaults();
+        flux_only.rs_estimation = false;
         // about ln(1/0.02) = 3.9 rotor time constants of 66.7 ms
-        let t = steps as f32 * 200e-6;
+        let t = magnetize(flux_only);
         assert!((0.2..0.35).contains(&t), "magnetizing took {t} s");
+        let d = DriveConfig::paper_defaults();
+        let t_rs = magnetize(d);
+        assert!(
+            t_rs > t && t_rs < t + d.rs_identification_timeout,
+            "magnetizing with the Rs identification took {t_rs} s"
+        );
     }
 
     /// Issue 13, item 6: started with a zero target, the drive waits for one with either

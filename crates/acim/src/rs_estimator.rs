@@ -90,6 +90,21 @@
 //! assumes: the rotor model (R_R, L_M) right; an R_R error biases the estimate (the slip
 //! law's error enters eps and, through the flux, r_q), and so does an uncompensated
 //! inverter voltage error (it looks like a resistance, V_e/|i_s|).
+//!
+//! ## Only in steady state
+//!
+//! The combination cancels y only where the rotor-flux errors sit on their steady
+//! relation x = a y, which the rotor equation reaches with the rotor time constant
+//! tau_r after the torque current moves. During a torque transient the combination
+//! carries the transient of x and y instead: a -8 N m overhauling load step at 120 rpm
+//! pulled Rs_hat 2 % low within 50 ms, and the drive, then held by the regeneration
+//! limit at f_s = 1.5 Hz and 4 A, lost the orientation (5 degrees) and the rotor ran
+//! 80 rpm ahead of its estimate until the overload trip, where the standstill mode held
+//! the reachable speed (`acim-sim overhauling`, 60 and 120 rpm, 6-9 N m). So the law
+//! adapts only with the torque-current reference steady: within
+//! [`RUNNING_STEADY_TORQUE_FRACTION`] of the flux current of its own low-pass image over
+//! tau_r. A step of `d` amperes closes the gate for tau_r ln(d / band), about 3.3 tau_r
+//! for a rated step; a slow change (a ramp, a thermal drift) never closes it.
 
 use crate::num::Num;
 use crate::params::MachineParams;
@@ -100,6 +115,11 @@ pub const RUNNING_MIN_FREQUENCY_HZ: f32 = 1.0;
 /// information is 2 dR i_sd i_sq: none at zero torque); 0.2 x 1.5 A is 0.7 N m on the
 /// paper machine.
 pub const RUNNING_MIN_TORQUE_FRACTION: f32 = 0.2;
+/// The running law adapts only with a steady torque current: the torque-current reference
+/// within this fraction of the flux current of its own low-pass image over one rotor time
+/// constant (module docs, "Only in steady state"). 0.1 x 1.5 A is 0.35 N m on the paper
+/// machine; a rated load step closes the gate for about 3.3 tau_r (220 ms).
+pub const RUNNING_STEADY_TORQUE_FRACTION: f32 = 0.1;
 
 /// Configuration of the stator-resistance estimator (designed in f32 SI; in fixed point
 /// the gains carry the per-unit base conversions and the clamps are in the finer
@@ -150,14 +170,20 @@ pub struct RsRunningConfig<N: Num = f32> {
     pub min_torque_current: N,
     /// Frequency times flux to voltage (1 in SI), for w_s lambda_hat of the q model.
     pub flux_voltage: N::Gain,
+    /// Ts / tau_r: the low-pass image of the torque-current reference the steadiness gate
+    /// compares it with.
+    pub steady_filter: N::Gain,
+    /// Adapt only with |i_sq* - its low-pass image| at most this, A.
+    pub steady_band: N,
 }
 
 impl RsRunningConfig<f32> {
     /// Period `ts` (s), convergence time constant `tau` (s) at flux current
-    /// `flux_current` (A): alpha_r = 1/(2 tau |i_sd*|); gates at
-    /// [`RUNNING_MIN_FREQUENCY_HZ`] and [`RUNNING_MIN_TORQUE_FRACTION`] of the flux
+    /// `flux_current` (A), the controller's rotor time constant `tau_r` (s): alpha_r =
+    /// 1/(2 tau |i_sd*|); gates at [`RUNNING_MIN_FREQUENCY_HZ`],
+    /// [`RUNNING_MIN_TORQUE_FRACTION`] and [`RUNNING_STEADY_TORQUE_FRACTION`] of the flux
     /// current. Disabled until `enabled` is set.
-    pub fn new(ts: f32, tau: f32, flux_current: f32) -> Self {
+    pub fn new(ts: f32, tau: f32, flux_current: f32, tau_r: f32) -> Self {
         Self {
             enabled: false,
             standstill: true,
@@ -165,6 +191,8 @@ impl RsRunningConfig<f32> {
             min_frequency: 2.0 * core::f32::consts::PI * RUNNING_MIN_FREQUENCY_HZ,
             min_torque_current: RUNNING_MIN_TORQUE_FRACTION * flux_current.abs(),
             flux_voltage: 1.0,
+            steady_filter: (ts / tau_r.max(ts)).min(1.0),
+            steady_band: RUNNING_STEADY_TORQUE_FRACTION * flux_current.abs(),
         }
     }
 }
@@ -222,6 +250,8 @@ pub struct RsRunningInputs<N = f32> {
     pub rotor_flux: N,
     /// The frame is held (magnetizing at rest): the eq. (19) law runs only then.
     pub frame_held: bool,
+    /// The torque-current reference i_sq* of the last step, A (the steadiness gate).
+    pub i_sq_ref: N,
 }
 
 /// State of the stator-resistance estimator.
@@ -245,6 +275,9 @@ pub struct RsEstimator<N: Num = f32> {
     pub q_current_estimate: N,
     /// i_sq_hat - i_sq at the last step, A: in steady state r_q / Rs_hat.
     pub q_current_error: N,
+    /// The low-pass image of the torque-current reference over tau_r, A (the running
+    /// law's steadiness gate).
+    pub torque_reference_slow: N,
 }
 
 impl<N: Num> RsEstimator<N> {
@@ -260,6 +293,7 @@ impl<N: Num> RsEstimator<N> {
             at_bound: false,
             q_current_estimate: N::ZERO,
             q_current_error: N::ZERO,
+            torque_reference_slow: N::ZERO,
         }
     }
 
@@ -334,8 +368,15 @@ impl<N: Num> RsEstimator<N> {
             && x.frame_held
             && u.i_sq.abs() <= cfg.max_torque_current
             && u.stator_frequency.abs() <= cfg.max_stator_frequency;
+        // the torque current steady over the rotor time constant (module docs, "Only in
+        // steady state")
+        let slow = self.torque_reference_slow
+            + N::gain(run.steady_filter, x.i_sq_ref - self.torque_reference_slow);
+        self.torque_reference_slow = slow.finite_or(N::ZERO);
+        let steady = (x.i_sq_ref - self.torque_reference_slow).abs() <= run.steady_band;
         let turning = flux_ok
             && !x.frame_held
+            && steady
             && u.stator_frequency.abs() >= run.min_frequency
             && u.i_sq.abs() >= run.min_torque_current;
         self.adapting = cfg.adapt && (standstill || turning);
@@ -506,6 +547,7 @@ mod tests {
                 v_sq: rs * i_sq + l * ws * i_sd + ws * (lambda + a * y),
                 rotor_flux: lambda,
                 frame_held: false,
+                i_sq_ref: i_sq,
             },
         )
     }
@@ -518,7 +560,7 @@ mod tests {
         let m = MachineParams::paper_table1();
         let ts = 200e-6;
         let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
-        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5, m.rotor_time_constant());
         run.enabled = true;
         for (i_sq, ws) in [
             (0.64, 60.0),
@@ -566,6 +608,40 @@ mod tests {
         );
     }
 
+    /// While the torque-current reference moves the running law holds the estimate (module
+    /// docs, "Only in steady state"): a step from 0.64 to 1.9 A closes the gate for
+    /// tau_r ln(1.26 / 0.15) = 2.1 tau_r (142 ms); then it adapts and converges.
+    #[test]
+    fn running_law_waits_for_a_steady_torque_current() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5, m.rotor_time_constant());
+        run.enabled = true;
+        let (u, x) = running_inputs(13.65, 1.5, 1.9, 60.0, 0.0);
+        let mut est = RsEstimator::new(10.5);
+        // the gate's image at the torque current before the step
+        est.torque_reference_slow = 0.64;
+        let hold = m.rotor_time_constant() * (1.26f32 / 0.15).ln();
+        let mut t = 0.0;
+        while t < 0.95 * hold {
+            est.update_running(&cfg, &run, &u, &x);
+            assert!(!est.adapting, "adapting at {t} s");
+            t += ts;
+        }
+        assert_eq!(est.stator_resistance_estimate, 10.5);
+        while t < 1.05 * hold {
+            est.update_running(&cfg, &run, &u, &x);
+            t += ts;
+        }
+        assert!(est.adapting);
+        for _ in 0..(1.0 / ts) as usize {
+            est.update_running(&cfg, &run, &u, &x);
+        }
+        let r = est.stator_resistance_estimate;
+        assert!((r - 13.65).abs() < 0.03 * 13.65, "{r}");
+    }
+
     /// At zero torque (no information) and below 1 Hz the running law holds the estimate;
     /// with the frame held (standstill identification) the eq. (19) law runs.
     #[test]
@@ -573,7 +649,7 @@ mod tests {
         let m = MachineParams::paper_table1();
         let ts = 200e-6;
         let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
-        let mut run = RsRunningConfig::new(ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5, m.rotor_time_constant());
         run.enabled = true;
         for (i_sq, ws) in [(0.0, 60.0), (0.1, 60.0), (0.64, 5.0)] {
             let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, 0.01);

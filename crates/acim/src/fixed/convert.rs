@@ -158,6 +158,8 @@ pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningCo
         min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
         min_torque_current: Q24(to_q24(cfg.min_torque_current / b.current)),
         flux_voltage: Gain::from_f32(cfg.flux_voltage * b.frequency * b.flux / b.voltage)?,
+        steady_filter: Gain::from_f32(cfg.steady_filter)?,
+        steady_band: Q24(to_q24(cfg.steady_band / b.current)),
     })
 }
 

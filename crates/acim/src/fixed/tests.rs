@@ -341,7 +341,7 @@ fn rs_running_law_matches_f32() {
     let m = m();
     let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
     let cq = convert::rs_estimator(&c, &B).unwrap();
-    let mut run = RsRunningConfig::new(TS, 0.2, 1.5);
+    let mut run = RsRunningConfig::new(TS, 0.2, 1.5, m.rotor_time_constant());
     run.enabled = true;
     let runq = convert::rs_running(&run, &B).unwrap();
     let l = m.transient_inductance();
@@ -361,6 +361,7 @@ fn rs_running_law_matches_f32() {
             v_sq,
             rotor_flux: lambda,
             frame_held: false,
+            i_sq_ref: i_sq,
         };
         let uq = RsEstimatorInputs {
             i_sd: q(i_sd, B.current),
@@ -373,6 +374,7 @@ fn rs_running_law_matches_f32() {
             v_sq: q(v_sq, B.voltage),
             rotor_flux: q(lambda, B.flux),
             frame_held: false,
+            i_sq_ref: q(i_sq, B.current),
         };
         let (mut f, mut x) = (
             RsEstimator::new(10.5f32),
