@@ -6,8 +6,9 @@
 //!
 //! Continuous time, the real machine in the inverse-Gamma form (design notes, section 2)
 //! written in the controller's frame (the angle of the flux model, eq. 13, turning at w_s),
-//! with the currents regulated (the current loops, 1000 rad/s, are taken as ideal: i_sd is
-//! its reference, i_sq the speed PI's output). Nine states:
+//! with the currents regulated (i_sd at its reference; i_sq follows the speed PI's output,
+//! or the regeneration limit's bound where it binds, with the current loops' first-order
+//! response). Up to twelve states:
 //!
 //! | state | meaning | equation |
 //! |---|---|---|
@@ -17,16 +18,27 @@
 //! | i_d_hat | the eq. (20) current model of the Rs estimator | sigma Ls^ di/dt = v_sd* - Rs^ i_d_hat + sigma Ls^ w_s i_sq |
 //! | i_q_hat, Omega_hat, T_hat | the reduced-order observer (eq. 12) | as `acim::observer`, its gains from the drive's design |
 //! | I | the speed PI's integral | dI/dt = K_i (Omega* - Omega_hat) |
+//! | Rs_hat, i_q_hat | the running Rs law and its q-axis current model (issue 13), where the drive runs it and it adapts | `acim::rs_estimator`, "While running" |
+//! | i_sq | the regulated torque current | di_sq/dt = w_c (i_sq* - i_sq), w_c the current loops' bandwidth |
 //!
 //! The frame turns at w_s = p Omega_hat + R_R^ i_sq / lambda_hat + dw (eq. 8 with the
 //! orientation correction dw of `acim::orientation`, its fade and load scheduling), and the
 //! voltage the controller sees is the machine's, v = Rs i + j w_s L_sigma i + d lambda/dt +
 //! j w_s lambda, plus the inverter error the compensation leaves: a leg error dV gives the
-//! fundamental (4/pi) dV along the current. The Rs estimate is held at the controller's
-//! value (the standstill mode's law is gated off above 1.5 Hz; the map is of the fixed
-//! errors). Every coefficient of the controller's side comes from `acim::Drive::coeffs`
-//! (the per-step coefficients over Ts), so the model is the drive's, not a copy of its
-//! design rules.
+//! fundamental (4/pi) dV along the current. With the drive's Rs estimator off (or in the
+//! standstill mode, whose law is gated off above 1.5 Hz) the Rs estimate is held at the
+//! controller's value; in the running mode (the default) Rs_hat and the law's q-axis
+//! model are states where the law's gate is open at the operating point (|w_s| >= 1 Hz,
+//! |i_sq| >= 0.2 i_sd*; the steadiness gate is open at any equilibrium) and held where it
+//! is shut. Where the regeneration limit binds (a braking point whose torque current is
+//! beyond (p |Omega_hat| - w_min) lambda_ref / R_R_hat), the torque-current reference is
+//! that bound at the estimated speed and the speed PI's integral is held: the drive holds
+//! the reachable speed, which is where the equilibrium is found. (The drive's PI reaches
+//! the bound from above through its integrator and holds its reference a band from the
+//! speed, so in the sampled loop the bound acts one-sidedly; the model takes it as a
+//! speed feedback of gain p lambda_ref / R_R_hat, the stronger case.) Every coefficient
+//! of the controller's side comes from `acim::Drive::coeffs` (the per-step coefficients
+//! over Ts), so the model is the drive's, not a copy of its design rules.
 //!
 //! The equilibrium is found by Newton's method on f(x) = 0 from the ideal operating point
 //! (it exists and is found for unstable points too); the Jacobian by central differences;
@@ -34,15 +46,25 @@
 //!
 //! What it leaves out, so what the measured growth rates (`crate::stability`) still check:
 //! the sampling, the 1.5-period voltage delay and the discretisation (at most 0.04 Ts p of
-//! the observer's poles), the current loops, saturation of any limit, the PWM ripple, the
-//! sensors, and the inverter error's harmonics and its shape near a current's zero
-//! crossing.
+//! the observer's poles), the current loops' cross-coupling and voltage limit, saturation
+//! of any limit but the regeneration limit, the PWM ripple, the sensors, and the inverter
+//! error's harmonics and its shape near a current's zero crossing.
 
 use crate::scenario::{Scenario, ScenarioError};
 use nalgebra::{DMatrix, DVector};
 
-/// Number of states.
-pub const STATES: usize = 9;
+/// Number of states, in the order of the table above (the running law's two are left out
+/// of the linearisation where the law does not adapt, the integral where the
+/// regeneration limit binds).
+pub const STATES: usize = 12;
+/// Index of the speed PI's integral.
+const INTEGRAL: usize = 8;
+/// Index of the Rs estimate.
+const RS_HAT: usize = 9;
+/// Index of the running law's q-axis current model.
+const IQ_MODEL: usize = 10;
+/// Index of the regulated torque current.
+const IQ: usize = 11;
 
 /// One operating point's linearisation.
 #[derive(Clone, Debug)]
@@ -53,6 +75,11 @@ pub struct Linearisation {
     pub stator_frequency: f64,
     /// Eigenvalues (re, im), 1/s, sorted by decreasing real part.
     pub eigenvalues: Vec<(f64, f64)>,
+    /// The regeneration limit holds the torque current there: the equilibrium is at the
+    /// reachable speed `state[2]`, not at the reference.
+    pub limited: bool,
+    /// The running Rs law adapts there (its two states are in the linearisation).
+    pub rs_adapting: bool,
 }
 
 impl Linearisation {
@@ -60,6 +87,17 @@ impl Linearisation {
     pub fn max_real(&self) -> f64 {
         self.eigenvalues.first().map_or(f64::NAN, |&(re, _)| re)
     }
+}
+
+/// The running Rs law's coefficients (`acim::rs_estimator`, "While running").
+#[derive(Clone, Copy, Debug)]
+struct RunningLaw {
+    /// alpha_r, ohm per V per s.
+    alpha: f64,
+    /// The gate: |w_s| at least this, rad/s.
+    min_frequency: f64,
+    /// The gate: |i_sq| at least this, A.
+    min_torque_current: f64,
 }
 
 /// The model of a scenario's machine, controller and inverter at one operating point.
@@ -97,17 +135,31 @@ pub struct Model {
     fade_start: f64,
     inv_fade_width: f64,
     correction_limit: f64,
+    /// The current loops' bandwidth, rad/s: the torque current follows its reference
+    /// as a first-order lag (the PI design's closed loop with the decoupling).
+    current_bandwidth: f64,
+    /// The running Rs law, when the scenario's drive runs it.
+    running: Option<RunningLaw>,
+    /// The regeneration limit's w_min, rad/s (0: off).
+    regen_min_frequency: f64,
+    /// lambda_ref / R_R_hat, A per rad/s.
+    regen_current_per_frequency: f64,
     /// The leg error the compensation leaves, V (its fundamental is 4/pi of it).
     inverter_error: f64,
     // the operating point
     speed_ref: f64,
     load: f64,
+    /// The regeneration limit binds at this point (decided from the ideal operating
+    /// point): the torque current is the limit's, the speed PI's integral is held.
+    limited: bool,
 }
 
 impl Model {
     /// The model of `sc` (its machine, controller model, drive settings and inverter) at
     /// speed `speed_rpm` with the active load `load_nm` (N m, positive opposing positive
-    /// rotation).
+    /// rotation). With the scenario's Rs estimator on in the running mode the running
+    /// law's dynamics are in the model; with its regeneration limit on, a point beyond
+    /// the limit is linearised where the drive holds it (the reachable speed).
     pub fn new(sc: &Scenario, speed_rpm: f32, load_nm: f32) -> Result<Self, ScenarioError> {
         let v = sc.validate()?;
         let drive = acim::Drive::new(v.drive).map_err(|e| ScenarioError {
@@ -125,7 +177,13 @@ impl Model {
         let inverter_error =
             leg(inv.dead_time_s, inv.device_drop_v) - leg(v.drive.dead_time, v.drive.device_drop);
         let o = &c.observer;
-        Ok(Self {
+        let run = &c.rs_running;
+        let running = (c.rs.adapt && run.enabled).then(|| RunningLaw {
+            alpha: f64::from(run.alpha_ts) / ts,
+            min_frequency: f64::from(run.min_frequency),
+            min_torque_current: f64::from(run.min_torque_current),
+        });
+        let mut model = Self {
             rs: f64::from(m.stator_resistance()),
             rr: f64::from(m.referred_rotor_resistance()),
             lm: f64::from(m.magnetizing_inductance()),
@@ -156,19 +214,62 @@ impl Model {
             fade_start: f64::from(c.orientation.fade_start),
             inv_fade_width: f64::from(c.orientation.inv_fade_width),
             correction_limit: f64::from(c.orientation.limit),
+            current_bandwidth: f64::from(v.drive.current_bandwidth),
+            running,
+            regen_min_frequency: f64::from(c.regen_min_frequency),
+            regen_current_per_frequency: f64::from(c.regen_current_per_frequency),
             inverter_error,
             speed_ref: f64::from(speed_rpm) * f64::from(acim::math::RPM_TO_RAD_S),
             load: f64::from(load_nm),
-        })
+            limited: false,
+        };
+        // the limit binds where the braking torque current the point needs is beyond it
+        // (`acim::drive`'s regen_limit, holding a target of the rotor's sign)
+        if model.regen_min_frequency > 0.0 {
+            let i_need = model.ideal_torque_current(model.speed_ref);
+            let bound = model.regen_bound(model.speed_ref);
+            model.limited = model.speed_ref.signum() * i_need < -bound;
+        }
+        Ok(model)
     }
 
-    /// The stator frequency and the torque current of state `x`.
+    /// The torque current that carries the load at speed `w` (the flux at its reference).
+    fn ideal_torque_current(&self, w: f64) -> f64 {
+        (self.load + self.b * w) / (1.5 * self.p * self.lm_hat * self.i_sd)
+    }
+
+    /// The regeneration limit's bound on the braking torque current at estimated speed
+    /// `wh`, A (>= 0).
+    fn regen_bound(&self, wh: f64) -> f64 {
+        self.regen_current_per_frequency * (self.p * wh.abs() - self.regen_min_frequency).max(0.0)
+    }
+
+    /// The Rs estimate of state `x`.
+    fn rs_estimate(&self, x: &[f64; STATES]) -> f64 {
+        if self.running.is_some() {
+            x[RS_HAT]
+        } else {
+            self.rs_hat
+        }
+    }
+
+    /// The torque-current reference of state `x`: the speed PI's, or where the
+    /// regeneration limit binds the limit's, at the estimated speed.
+    fn torque_reference(&self, x: &[f64; STATES]) -> f64 {
+        let wh = x[6];
+        if self.limited {
+            -wh.signum() * self.regen_bound(wh)
+        } else {
+            self.kp * (self.speed_ref - wh) + x[INTEGRAL]
+        }
+    }
+
+    /// The stator frequency and the (regulated) torque current of state `x`.
     fn frame(&self, x: &[f64; STATES]) -> (f64, f64) {
-        let [_, _, _, lh, id_hat, _, wh, _, integral] = *x;
-        let i_sq = self.kp * (self.speed_ref - wh) + integral;
+        let (lh, id_hat, wh, i_sq) = (x[3], x[4], x[6], x[IQ]);
         let inv_flux = 1.0 / lh.max(self.min_flux);
         let slip = self.slip_gain * i_sq * inv_flux;
-        let r_d = self.rs_hat * (id_hat - self.i_sd);
+        let r_d = self.rs_estimate(x) * (id_hat - self.i_sd);
         let load_scale = (self.load_factor * i_sq.abs()).max(1.0);
         // the correction's fade and sign follow w_s itself (the drive uses last step's):
         // a few fixed-point passes (the correction is small against w_s)
@@ -185,8 +286,9 @@ impl Model {
 
     /// dx/dt.
     pub fn derivative(&self, x: &[f64; STATES]) -> [f64; STATES] {
-        let [ld, lq, w, lh, id_hat, iq_hat, wh, th, _] = *x;
+        let [ld, lq, w, lh, id_hat, iq_hat, wh, th, _, _, iq_model, _] = *x;
         let (ws, i_sq) = self.frame(x);
+        let rs_hat = self.rs_estimate(x);
         let i_sd = self.i_sd;
         let slip_true = ws - self.p * w;
         let dld = self.rr * i_sd - self.rr / self.lm * ld + slip_true * lq;
@@ -198,10 +300,10 @@ impl Model {
         let v_q = self.rs * i_sq + ws * self.ls * i_sd + dlq + ws * ld + u * i_sq;
         let dw = (1.5 * self.p * (ld * i_sq - lq * i_sd) - self.b * w - self.load) / self.j;
         let dlh = self.blend * (self.lm_hat * i_sd - lh);
-        let did = self.rs_model * (v_d - self.rs_hat * id_hat) + ws * i_sq;
+        let did = self.rs_model * (v_d - rs_hat * id_hat) + ws * i_sq;
         let inv_flux = 1.0 / lh.max(self.min_flux);
         let e = iq_hat - i_sq;
-        let rseq = self.rs_hat + self.rr_hat;
+        let rseq = rs_hat + self.rr_hat;
         let diq = self.obs_a * e + self.obs_inv_l * (v_q - rseq * i_sq)
             - self.obs_p_inv_l * lh * wh
             - ws * i_sd;
@@ -209,71 +311,152 @@ impl Model {
             + self.obs_g2 * e * inv_flux;
         let dth = self.obs_g3 * e * inv_flux;
         let di = self.ki * (self.speed_ref - wh);
-        [dld, dlq, dw, dlh, did, diq, dwh, dth, di]
+        // the running law: d Rs_hat/dt = alpha_r sign(i_sd) Rs_hat (i_sq e_d + i_sd e_q) /
+        // i_sq, and its q-axis current model (`acim::rs_estimator::update_running`)
+        let (drs, diq_model) = match self.running {
+            Some(law) => {
+                let (e_d, e_q) = (id_hat - i_sd, iq_model - i_sq);
+                let drs = law.alpha * i_sd.signum() * rs_hat * (i_sq * e_d + i_sd * e_q)
+                    / if i_sq.abs() > 1e-9 { i_sq } else { 1e-9 };
+                let dq = self.rs_model * (v_q - rs_hat * iq_model - ws * lh) - ws * i_sd;
+                (drs, dq)
+            }
+            None => (0.0, 0.0),
+        };
+        let dq = self.current_bandwidth * (self.torque_reference(x) - i_sq);
+        [
+            dld, dlq, dw, dlh, did, diq, dwh, dth, di, drs, diq_model, dq,
+        ]
     }
 
-    /// The Jacobian of [`Model::derivative`] at `x` (central differences).
-    pub fn jacobian(&self, x: &[f64; STATES]) -> DMatrix<f64> {
-        let mut jm = DMatrix::zeros(STATES, STATES);
-        for k in 0..STATES {
+    /// The states that move at this point: the integral is held where the regeneration
+    /// limit binds, the running law's two where it does not adapt (or does not run).
+    fn active(&self, rs_adapting: bool) -> Vec<usize> {
+        (0..STATES)
+            .filter(|&k| match k {
+                INTEGRAL => !self.limited,
+                RS_HAT | IQ_MODEL => rs_adapting,
+                _ => true,
+            })
+            .collect()
+    }
+
+    /// The Jacobian of [`Model::derivative`] over the states `active` at `x` (central
+    /// differences).
+    fn jacobian_of(&self, x: &[f64; STATES], active: &[usize]) -> DMatrix<f64> {
+        let n = active.len();
+        let mut jm = DMatrix::zeros(n, n);
+        for (c, &k) in active.iter().enumerate() {
             let h = 1e-6 * x[k].abs().max(1e-3);
             let (mut a, mut b) = (*x, *x);
             a[k] += h;
             b[k] -= h;
             let (fa, fb) = (self.derivative(&a), self.derivative(&b));
-            for r in 0..STATES {
-                jm[(r, k)] = (fa[r] - fb[r]) / (2.0 * h);
+            for (r, &row) in active.iter().enumerate() {
+                jm[(r, c)] = (fa[row] - fb[row]) / (2.0 * h);
             }
         }
         jm
     }
 
-    /// The ideal operating point: the flux at its reference, the speeds at the reference,
-    /// the torque current that carries the load.
+    /// The Jacobian of [`Model::derivative`] at `x` over every state (central
+    /// differences).
+    pub fn jacobian(&self, x: &[f64; STATES]) -> DMatrix<f64> {
+        let all: Vec<usize> = (0..STATES).collect();
+        self.jacobian_of(x, &all)
+    }
+
+    /// The ideal operating point: the flux at its reference, the speeds at the reference
+    /// (where the regeneration limit binds: at the speed where the limit's torque current
+    /// carries the load), the torque current that carries the load.
     fn guess(&self) -> [f64; STATES] {
         let lambda = self.lm_hat * self.i_sd;
-        let i_sq = (self.load + self.b * self.speed_ref) / (1.5 * self.p * lambda);
+        let speed = if self.limited {
+            // 1.5 p lambda (-g (p w - w_min)) = load (+ B w), w > 0
+            let kt = 1.5 * self.p * lambda;
+            let g = self.regen_current_per_frequency;
+            (kt * g * self.regen_min_frequency - self.load) / (kt * g * self.p + self.b)
+                * self.speed_ref.signum()
+        } else {
+            self.speed_ref
+        };
+        let i_sq = self.ideal_torque_current(speed);
         let load_hat =
-            (self.obs_torque * lambda * i_sq - self.obs_friction * self.speed_ref) / self.obs_inv_j;
+            (self.obs_torque * lambda * i_sq - self.obs_friction * speed) / self.obs_inv_j;
+        // the integral: the PI's output at zero error (held where the limit binds)
+        let integral = if self.limited { 0.0 } else { i_sq };
+        let rs_hat = self.rs_hat;
         [
-            lambda,
-            0.0,
-            self.speed_ref,
-            lambda,
-            self.i_sd,
-            i_sq,
-            self.speed_ref,
-            load_hat,
+            lambda, 0.0, speed, lambda, self.i_sd, i_sq, speed, load_hat, integral, rs_hat, i_sq,
             i_sq,
         ]
     }
 
-    /// The equilibrium near the ideal operating point and the eigenvalues there; `None`
-    /// when Newton's method does not converge (no equilibrium near it).
-    pub fn linearise(&self) -> Option<Linearisation> {
-        let mut x = self.guess();
-        let mut converged = false;
-        for _ in 0..60 {
-            let f = self.derivative(&x);
-            let norm: f64 = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+    /// Whether the running law adapts at state `x` (its gate: |w_s| and |i_sq|).
+    fn rs_adapting(&self, x: &[f64; STATES]) -> bool {
+        self.running.is_some_and(|law| {
+            let (ws, i_sq) = self.frame(x);
+            ws.abs() >= law.min_frequency && i_sq.abs() >= law.min_torque_current
+        })
+    }
+
+    /// Newton's method on the `active` states from `x`; `damped`: each step halved until
+    /// the residual falls. `None` when it does not converge.
+    fn newton(
+        &self,
+        mut x: [f64; STATES],
+        active: &[usize],
+        damped: bool,
+    ) -> Option<[f64; STATES]> {
+        let residual = |x: &[f64; STATES]| -> (Vec<f64>, f64) {
+            let f = self.derivative(x);
+            let fa: Vec<f64> = active.iter().map(|&k| f[k]).collect();
+            let norm = fa.iter().map(|v| v * v).sum::<f64>().sqrt();
+            (fa, norm)
+        };
+        let (mut fa, mut norm) = residual(&x);
+        for _ in 0..100 {
             if !norm.is_finite() {
                 return None;
             }
             if norm < 1e-9 {
-                converged = true;
-                break;
+                return Some(x);
             }
-            let jm = self.jacobian(&x);
-            let step = jm.lu().solve(&DVector::from_row_slice(&f))?;
-            for (xi, s) in x.iter_mut().zip(step.iter()) {
-                *xi -= s;
+            let jm = self.jacobian_of(&x, active);
+            let step = jm.lu().solve(&DVector::from_row_slice(&fa))?;
+            let mut scale = 1.0;
+            loop {
+                let mut next = x;
+                for (&k, s) in active.iter().zip(step.iter()) {
+                    next[k] -= scale * s;
+                }
+                let (f_next, n_next) = residual(&next);
+                if !damped || n_next < norm || scale < 1e-6 {
+                    x = next;
+                    fa = f_next;
+                    norm = n_next;
+                    break;
+                }
+                scale *= 0.5;
             }
         }
-        if !converged {
-            return None;
-        }
+        None
+    }
+
+    /// The equilibrium near the ideal operating point and the eigenvalues there; `None`
+    /// when Newton's method does not converge from it, with full or with damped steps (no
+    /// equilibrium near it).
+    pub fn linearise(&self) -> Option<Linearisation> {
+        let guess = self.guess();
+        let rs_adapting = self.rs_adapting(&guess);
+        let active = self.active(rs_adapting);
+        // Newton's method from the ideal point; where the full steps do not converge,
+        // once more with steps halved until the residual falls
+        let x = self
+            .newton(guess, &active, false)
+            .or_else(|| self.newton(guess, &active, true))?;
         let mut eigenvalues: Vec<(f64, f64)> = self
-            .jacobian(&x)
+            .jacobian_of(&x, &active)
             .complex_eigenvalues()
             .iter()
             .map(|z| (z.re, z.im))
@@ -284,6 +467,8 @@ impl Model {
             state: x,
             stator_frequency: ws,
             eigenvalues,
+            limited: self.limited,
+            rs_adapting,
         })
     }
 }
@@ -297,24 +482,43 @@ pub fn linearise(
     Ok(Model::new(sc, speed_rpm, load_nm)?.linearise())
 }
 
-/// The base of the map: [`crate::stability::ideal_scenario`] (the measured map's
-/// conventions) with the Rs estimate held at the controller's value.
+/// The base of the first map: [`crate::stability::ideal_scenario`] (the measured map's
+/// conventions) with the Rs estimate held at the controller's value and without the
+/// regeneration limit: every labelled point is linearised where it is labelled.
 pub fn base_scenario() -> Scenario {
     let mut sc = crate::stability::ideal_scenario("linear");
-    sc.drive.rs_estimation = false;
+    sc.drive.regen_min_frequency_hz = 0.0;
     sc
 }
 
+/// The base of the second map, the drive as it ships: [`crate::stability::ideal_scenario`]
+/// with the drive's defaults for what it left out, Rs tracked while running (the
+/// estimator on, the running mode) and the regeneration limit (1.5 Hz).
+pub fn default_drive_scenario() -> Scenario {
+    let mut sc = crate::stability::ideal_scenario("linear-default");
+    let defaults = Scenario::default();
+    sc.drive.rs_estimation = defaults.drive.rs_estimation;
+    sc.drive.rs_estimation_mode = defaults.drive.rs_estimation_mode;
+    sc.drive.regen_min_frequency_hz = defaults.drive.regen_min_frequency_hz;
+    sc
+}
+
+/// One cell's text, whether it is unstable (`None`: no equilibrium) and its stator
+/// frequency, Hz.
 fn cell(l: &Option<Linearisation>) -> (String, Option<bool>, f64) {
     match l {
         None => ("no equilibrium".into(), None, f64::NAN),
         Some(l) => {
             let (re, im) = l.eigenvalues[0];
-            let text = if im.abs() > 1e-6 {
+            let mut text = if im.abs() > 1e-6 {
                 format!("{re:.2} ±{:.1}j", im.abs())
             } else {
                 format!("{re:.2}")
             };
+            if l.limited {
+                let rpm = l.state[2] * f64::from(acim::math::RAD_S_TO_RPM);
+                text = format!("held at {rpm:.0} rpm: {text}");
+            }
             (
                 text,
                 Some(re > 0.0),
@@ -324,38 +528,29 @@ fn cell(l: &Option<Linearisation>) -> (String, Option<bool>, f64) {
     }
 }
 
-/// The eigenvalue map of issue 13 item 4 as Markdown: for each error of
-/// [`crate::stability::robust_errors`], the largest real part of the linearised closed
-/// loop's eigenvalues over [`crate::stability::ROBUST_SPEEDS_RPM`] x
-/// [`crate::stability::ROBUST_LOADS_NM`], with a summary. Also returns the number of
-/// unstable points with |f_s| >= 1 Hz.
-pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
+/// Counts of one map.
+#[derive(Clone, Copy, Debug, Default)]
+struct Counts {
+    unstable_observable: usize,
+    unstable_low: usize,
+    no_equilibrium: usize,
+    limited: usize,
+}
+
+/// One map per error of [`crate::stability::robust_errors`] on `base`, as Markdown
+/// tables, and a summary row per error.
+fn maps(base: fn() -> Scenario, section: &str) -> Result<(String, String, usize), ScenarioError> {
     use crate::stability::{robust_errors, ROBUST_LOADS_NM, ROBUST_SPEEDS_RPM};
-    let mut md = String::from(
-        "<!-- generated by `cargo run --release -p acim-sim -- linear-stability`; do not edit -->\n\n\
-         Eigenvalues of the linearised closed loop (`acim_sim::linear`: the machine in the \
-         controller's frame with regulated currents, the flux model, the eq. (20) current \
-         model, the reduced-order observer and the speed PI, every controller coefficient \
-         from the drive's design; docs/robustness.md derives it). Each cell: the eigenvalue \
-         with the largest real part, 1/s (`±...j`: a complex pair, its imaginary part in \
-         rad/s); positive is unstable. Rows: speed; columns: active load torque (positive \
-         motoring, negative regenerating). `*`: the point's stator frequency (at the \
-         equilibrium, with the error) is below 1 Hz. Paper machine, drive defaults \
-         (orientation gain 2, load-scheduled), zero friction, the Rs estimate held at the \
-         controller's value.\n\n",
-    );
     let header = crate::stability::map_header;
-    let mut summary = String::from(
-        "## Summary\n\n| error | unstable with \\|f_s\\| >= 1 Hz | unstable below 1 Hz | no equilibrium | least damped with \\|f_s\\| >= 1 Hz (1/s) |\n|---|---|---|---|---|\n",
-    );
+    let mut summary = String::new();
     let mut tables = String::new();
     let mut unstable_observable = 0;
     for (name, err) in robust_errors() {
-        let mut sc = base_scenario();
+        let mut sc = base();
         err(&mut sc);
-        tables.push_str(&format!("## {name}\n\n"));
+        tables.push_str(&format!("### {section}: {name}\n\n"));
         header(&mut tables);
-        let (mut bad_obs, mut bad_low, mut none) = (0, 0, 0);
+        let mut n = Counts::default();
         let mut worst = f64::NEG_INFINITY;
         for s in ROBUST_SPEEDS_RPM {
             tables.push_str(&format!("| {s} |"));
@@ -364,10 +559,13 @@ pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
                 let (text, unstable, fs) = cell(&lin);
                 let low = fs.abs() < 1.0;
                 match unstable {
-                    None => none += 1,
-                    Some(true) if low => bad_low += 1,
-                    Some(true) => bad_obs += 1,
+                    None => n.no_equilibrium += 1,
+                    Some(true) if low => n.unstable_low += 1,
+                    Some(true) => n.unstable_observable += 1,
                     Some(false) => {}
+                }
+                if lin.as_ref().is_some_and(|l| l.limited) {
+                    n.limited += 1;
                 }
                 if let (Some(l), false) = (&lin, low) {
                     worst = worst.max(l.max_real());
@@ -377,15 +575,58 @@ pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
             tables.push('\n');
         }
         tables.push('\n');
-        unstable_observable += bad_obs;
+        unstable_observable += n.unstable_observable;
         summary.push_str(&format!(
-            "| {name} | {bad_obs} | {bad_low} | {none} | {worst:.2} |\n"
+            "| {name} | {} | {} | {} | {} | {worst:.2} |\n",
+            n.unstable_observable, n.unstable_low, n.no_equilibrium, n.limited
         ));
     }
-    md.push_str(&summary);
-    md.push('\n');
-    md.push_str(&tables);
-    Ok((md, unstable_observable))
+    Ok((summary, tables, unstable_observable))
+}
+
+/// The eigenvalue maps of issue 13 item 4 as Markdown: for each error of
+/// [`crate::stability::robust_errors`], the largest real part of the linearised closed
+/// loop's eigenvalues over [`crate::stability::ROBUST_SPEEDS_RPM`] x
+/// [`crate::stability::ROBUST_LOADS_NM`], first with the Rs estimate held and no
+/// regeneration limit (every labelled point), then for the drive as it ships (Rs tracked
+/// while running, the regeneration limit), with a summary. Also returns the number of
+/// unstable points with |f_s| >= 1 Hz of the drive as it ships.
+pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
+    let mut md = String::from(
+        "<!-- generated by `cargo run --release -p acim-sim -- linear-stability`; do not edit -->\n\n\
+         Eigenvalues of the linearised closed loop (`acim_sim::linear`: the machine in the \
+         controller's frame with regulated currents, the flux model, the eq. (20) current \
+         model, the reduced-order observer and the speed PI, with the running Rs law and \
+         the regeneration limit where the drive has them, every controller coefficient \
+         from the drive's design; docs/robustness.md derives it). Each cell: the eigenvalue \
+         with the largest real part, 1/s (`±...j`: a complex pair, its imaginary part in \
+         rad/s); positive is unstable. Rows: speed; columns: active load torque (positive \
+         motoring, negative regenerating). `*`: the point's stator frequency (at the \
+         equilibrium, with the error) is below 1 Hz. `held at N rpm`: the regeneration \
+         limit binds there and the drive holds the reachable speed N (reported), where the \
+         cell's eigenvalue is. Paper machine, drive defaults (orientation gain 2, \
+         load-scheduled), zero friction, no inverter error unless the row says so.\n\n\
+         Two maps: **the drive as it ships** (the Rs estimator on in the running mode: \
+         its estimate and q-axis model are states where the law adapts, |f_s| >= 1 Hz and \
+         |i_sq| >= 0.2 i_sd*, and held at the controller's value elsewhere; the 1.5 Hz \
+         regeneration limit), and **the labelled points** (the Rs estimate held at the \
+         controller's value, no regeneration limit: every point linearised where it is \
+         labelled, as the measured map of robust-stability.md does).\n\n",
+    );
+    let head = "| error | unstable with \\|f_s\\| >= 1 Hz | unstable below 1 Hz | no equilibrium | held by the regeneration limit | least damped with \\|f_s\\| >= 1 Hz (1/s) |\n|---|---|---|---|---|---|\n";
+    let (s_ship, t_ship, unstable) = maps(default_drive_scenario, "As it ships")?;
+    let (s_fixed, t_fixed, _) = maps(base_scenario, "Labelled points, Rs held")?;
+    md.push_str("## Summary: the drive as it ships\n\n");
+    md.push_str(head);
+    md.push_str(&s_ship);
+    md.push_str("\n## Summary: the labelled points, Rs held, no regeneration limit\n\n");
+    md.push_str(head);
+    md.push_str(&s_fixed);
+    md.push_str("\n## The drive as it ships\n\n");
+    md.push_str(&t_ship);
+    md.push_str("## The labelled points, Rs held, no regeneration limit\n\n");
+    md.push_str(&t_fixed);
+    Ok((md, unstable))
 }
 
 #[cfg(test)]
@@ -442,6 +683,46 @@ mod tests {
                 "{rpm} rpm {load} N m: linearised {lin}/s, measured {measured}/s"
             );
         }
+    }
+
+    /// With Rs tracked while running (the drive as it ships) the estimate is a state: at a
+    /// regenerating point where the held -20 % Rs error is unstable (250 rpm, -3 N m),
+    /// the equilibrium has the estimate at the machine's Rs and the point is stable.
+    #[test]
+    fn the_running_law_removes_the_rs_error() {
+        let mut held = base_scenario();
+        held.controller.rs_ohm = 0.8 * held.plant.rs_ohm;
+        assert!(linearise(&held, 250.0, -3.0).unwrap().unwrap().max_real() > 0.0);
+        let mut ships = default_drive_scenario();
+        ships.controller.rs_ohm = 0.8 * ships.plant.rs_ohm;
+        let l = linearise(&ships, 250.0, -3.0).unwrap().unwrap();
+        assert!(l.rs_adapting && !l.limited);
+        let rs = l.state[RS_HAT];
+        assert!((rs - 10.5).abs() < 0.01 * 10.5, "{rs}");
+        assert!(l.max_real() < -1.0, "{:?}", l.eigenvalues);
+        // at zero torque the law has no information: the estimate stays held
+        let l = linearise(&ships, 250.0, 0.0).unwrap().unwrap();
+        assert!(!l.rs_adapting);
+    }
+
+    /// Where the regeneration limit binds (60 rpm at -4.5 N m would sit at f_s = -1.05
+    /// Hz) the drive holds the reachable speed, where the stator frequency is the limit's
+    /// 1.5 Hz; the overhauling sweep holds 126 rpm at 4 N m and 147 rpm at 5 N m there
+    /// (docs/overhauling.md), and the point is stable.
+    #[test]
+    fn the_regeneration_limit_holds_the_reachable_speed() {
+        let l = linearise(&default_drive_scenario(), 60.0, -4.5)
+            .unwrap()
+            .unwrap();
+        assert!(l.limited);
+        let fs = l.stator_frequency / core::f64::consts::TAU;
+        assert!((fs - 1.5).abs() < 0.05, "{fs}");
+        let rpm = l.state[2] * f64::from(acim::math::RAD_S_TO_RPM);
+        assert!((126.0..147.0).contains(&rpm), "{rpm}");
+        assert!(l.max_real() < 0.0, "{:?}", l.eigenvalues);
+        // without the limit the same point is linearised where it is labelled
+        let l = linearise(&base_scenario(), 60.0, -4.5).unwrap().unwrap();
+        assert!(!l.limited && (l.state[2] - 2.0 * core::f64::consts::PI).abs() < 0.1);
     }
 
     /// The equilibrium is the operating point: the true speed at the reference, the
