@@ -233,10 +233,13 @@ class Protection(unittest.TestCase):
                         "the guard must be on before the first interrupt is unmasked")
         self.assertTrue(m.moe())
         # the main stack pushed down to 16 bytes above the guard: the next interrupt's
-        # frame and pushes land in it
+        # frame and pushes land in it. The control interrupt is taken at once (moving SP
+        # under the main loop and running on made the test depend on where in its loop
+        # the main program was: with a different interrupt length it read a local from
+        # the moved stack first and crashed on an unmapped address instead)
         base, size = m.mpu_guard
         m.uc.reg_write(fil.UC_ARM_REG_SP, base + size + 16)
-        m.run(2)
+        m.run_exception(16 + fil.ADC1_2_IRQ)
         self.assertIsNotNone(m.mpu_violation)
         self.assertTrue(base <= m.mpu_violation < base + size)
         self.assertFalse(m.moe(), "outputs must switch off")
@@ -391,7 +394,9 @@ class Logs(unittest.TestCase):
         phases = {}
         for phase in ("magnetizing", "running"):
             if phase == "running":
-                for _ in range(40):
+                # magnetizing, then the standstill Rs identification (the drive's
+                # default; at most its 1.5 s timeout)
+                for _ in range(100):
                     if state_fault(m)[0] == 2:
                         break
                     m.run(100)

@@ -349,7 +349,8 @@ impl<N: Num> RsEstimator<N> {
     /// One step of the running mode ([`RsRunningConfig`]; the caller uses it when
     /// `run.enabled`): eq. (19) with the frame held (standstill identification), the
     /// running law (module docs) while turning, the q-axis and d-axis current models.
-    #[inline(never)]
+    /// Inlined into the step (the default mode since issue 13).
+    #[inline(always)]
     pub fn update_running(
         &mut self,
         cfg: &RsEstimatorConfig<N>,
