@@ -104,7 +104,8 @@
 //! adapts only with the torque-current reference steady: within
 //! [`RUNNING_STEADY_TORQUE_FRACTION`] of the flux current of its own low-pass image over
 //! tau_r. A step of `d` amperes closes the gate for tau_r ln(d / band), about 3.3 tau_r
-//! for a rated step; a slow change (a ramp, a thermal drift) never closes it.
+//! for a rated step; a torque current moving slower than band / tau_r (2.25 A/s on the
+//! paper machine, about 5 N m/s) or a thermal drift never closes it.
 
 use crate::num::Num;
 use crate::params::MachineParams;
