@@ -149,9 +149,9 @@ pub struct RsEstimatorConfig<N: Num = f32> {
     pub adapt: bool,
 }
 
-/// The running law's configuration (module docs, "While running"; issue 13). A struct of
-/// its own, kept apart from [`RsEstimatorConfig`], so that the default path's coefficient
-/// layout (and cycle count) does not change.
+/// The running law's configuration (module docs, "While running"; issue 13; the drive's
+/// default mode). A struct of its own, kept apart from [`RsEstimatorConfig`], which the
+/// standstill mode uses alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RsRunningConfig<N: Num = f32> {
