@@ -34,6 +34,15 @@ pub struct FaultPlan {
     pub current_sensors_zero_at_s: Option<f32>,
     /// Offset drift of channel a from the start, A/s (thermal drift of the amplifier).
     pub current_sensor_offset_drift_a_per_s: f32,
+    /// Offsets added to the three current channels after the start's offset measurement,
+    /// A: zero until [`FaultPlan::current_sensor_offset_change_at_s`], then reached
+    /// linearly over [`FaultPlan::current_sensor_offset_change_ramp_s`] and held (an
+    /// amplifier's drift while the motor runs).
+    pub current_sensor_offset_change_a: [f32; 3],
+    /// When the offset change starts, s (`None`: never).
+    pub current_sensor_offset_change_at_s: Option<f32>,
+    /// How long the offset change takes to reach its value, s (0: a step).
+    pub current_sensor_offset_change_ramp_s: f32,
 }
 
 /// Applies a [`FaultPlan`] to a plant, its DC link, its samples and its inverter command.
@@ -87,6 +96,17 @@ impl FaultInjector {
         let p = &self.plan;
         if p.current_sensor_offset_drift_a_per_s != 0.0 {
             m.phase_currents[0] += p.current_sensor_offset_drift_a_per_s * t;
+        }
+        if let Some(t0) = p.current_sensor_offset_change_at_s.filter(|&t0| t >= t0) {
+            let ramp = p.current_sensor_offset_change_ramp_s;
+            let k = if t - t0 >= ramp { 1.0 } else { (t - t0) / ramp };
+            for (i, o) in m
+                .phase_currents
+                .iter_mut()
+                .zip(p.current_sensor_offset_change_a)
+            {
+                *i += k * o;
+            }
         }
         if p.current_sensor_stuck_at_s.is_some_and(|ta| t >= ta) {
             let ch = p.current_sensor_stuck_channel.min(2);

@@ -329,6 +329,9 @@ pub struct DriveSpec {
     /// With the running Rs mode: identify Rs at standstill too (default true); false: Rs
     /// converges only while turning (`acim::DriveConfig::rs_standstill_identification`).
     pub rs_standstill_identification: bool,
+    /// Track the current-sensor offsets' drift while turning (default true;
+    /// `acim::DriveConfig::offset_tracking`; the paper's scheme sets it off).
+    pub offset_tracking: bool,
 }
 
 impl Default for DriveSpec {
@@ -374,6 +377,7 @@ impl Default for DriveSpec {
             regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
             inverter_identification: d.inverter_identification,
             rs_standstill_identification: d.rs_standstill_identification,
+            offset_tracking: d.offset_tracking,
         }
     }
 }
@@ -589,6 +593,14 @@ pub struct FaultSpec {
     pub current_sensors_zero_at_s: Option<f32>,
     /// Offset drift of channel a from the start, A/s.
     pub current_sensor_offset_drift_a_per_s: f32,
+    /// Offsets added to the current channels from `current_sensor_offset_change_at_s`
+    /// (after the start's offset measurement), reached linearly over
+    /// `current_sensor_offset_change_ramp_s`, A.
+    pub current_sensor_offset_change_a: [f32; 3],
+    /// When the offset change starts, s.
+    pub current_sensor_offset_change_at_s: Option<f32>,
+    /// The offset change's ramp, s (0: a step).
+    pub current_sensor_offset_change_ramp_s: f32,
 }
 
 /// When the drive is started, and how the machine turns before it (a flying start when
@@ -1047,6 +1059,10 @@ impl Scenario {
                 "faults.current_sensors_zero_at_s",
                 f.current_sensors_zero_at_s,
             ),
+            (
+                "faults.current_sensor_offset_change_at_s",
+                f.current_sensor_offset_change_at_s,
+            ),
         ] {
             if let Some(t) = t {
                 check_range(name, t, 0.0, self.duration_s)?;
@@ -1075,6 +1091,20 @@ impl Scenario {
             f.current_sensor_offset_drift_a_per_s,
             -100.0,
             100.0,
+        )?;
+        for (i, o) in f.current_sensor_offset_change_a.iter().enumerate() {
+            check_range(
+                &format!("faults.current_sensor_offset_change_a[{i}]"),
+                *o,
+                -1000.0,
+                1000.0,
+            )?;
+        }
+        check_range(
+            "faults.current_sensor_offset_change_ramp_s",
+            f.current_sensor_offset_change_ramp_s,
+            0.0,
+            1.0e4,
         )?;
         for (i, w) in self.windows.iter().enumerate() {
             check_range(
@@ -1133,6 +1163,7 @@ impl Scenario {
         drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
         drive.inverter_identification = d.inverter_identification;
         drive.rs_standstill_identification = d.rs_standstill_identification;
+        drive.offset_tracking = d.offset_tracking;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,

@@ -287,6 +287,9 @@ pub(crate) fn fault_plan(sc: &Scenario) -> FaultPlan {
         current_sensor_stuck_value_a: f.current_sensor_stuck_value_a,
         current_sensors_zero_at_s: f.current_sensors_zero_at_s,
         current_sensor_offset_drift_a_per_s: f.current_sensor_offset_drift_a_per_s,
+        current_sensor_offset_change_a: f.current_sensor_offset_change_a,
+        current_sensor_offset_change_at_s: f.current_sensor_offset_change_at_s,
+        current_sensor_offset_change_ramp_s: f.current_sensor_offset_change_ramp_s,
     }
 }
 
