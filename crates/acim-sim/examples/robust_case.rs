@@ -1,5 +1,5 @@
 //! One case of the robustness matrix (development aid):
-//! `cargo run --release -p acim-sim --example robust_case -- <variant 0..9> <rpm> <motor|regen> <load> <standstill|running>`
+//! `cargo run --release -p acim-sim --example robust_case -- <variant 0..10> <rpm> <motor|regen> <load> <standstill|running>`
 use acim_sim::robustness::{Case, Variant};
 use acim_sim::scenario::RsMode;
 
@@ -16,6 +16,7 @@ fn main() {
         Variant::Offset20mA,
         Variant::DeadTime1_0Identified,
         Variant::DeadTime2_2Identified,
+        Variant::OffsetDrift20mA,
     ];
     let case = Case {
         variant: all[a[0].parse::<usize>().unwrap()],

@@ -49,6 +49,7 @@ fn base(name: &str, description: &str, duration_s: f32) -> Scenario {
 fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) -> Scenario {
     let mut s = base(name, description, duration_s);
     s.drive.rs_estimation = false;
+    s.drive.offset_tracking = false;
     s
 }
 
@@ -308,6 +309,17 @@ pub fn all() -> Vec<Scenario> {
     );
     s.duration_s = 10.0;
     s.faults.current_sensor_offset_drift_a_per_s = 0.5;
+    v.push(s);
+
+    let mut s = fault(
+        "fault-offset-drift-running",
+        "channel a's offset drifts by 0.3 A over 10 s from 2 s while running at 500 rpm \
+         (the limit is 0.16 A): found by the running offset tracker",
+    );
+    s.duration_s = 12.0;
+    s.faults.current_sensor_offset_change_a = [0.3, 0.0, 0.0];
+    s.faults.current_sensor_offset_change_at_s = Some(2.0);
+    s.faults.current_sensor_offset_change_ramp_s = 10.0;
     v.push(s);
 
     for (rpm, nm) in [

@@ -31,8 +31,14 @@ pub enum Variant {
     DeadTime1_0,
     /// The inverter's dead time is 2.2 us; the drive compensates 1.5 us.
     DeadTime2_2,
-    /// 20 mA offsets on phases a and b after the drive measured them (drift).
+    /// 20 mA offsets on phases a and b from t = 0, before the drive could measure them:
+    /// uncompensated through the standstill Rs identification and the run (what a failed
+    /// or skipped switches-off measurement leaves).
     Offset20mA,
+    /// 20 mA offsets on phases a and b drifting in after the start's measurement, over
+    /// 1 s from the change time while the motor turns (an amplifier's drift; issue 13,
+    /// item 3).
+    OffsetDrift20mA,
     /// The inverter's dead time is 1.0 us, the drive is configured for 1.5 us and
     /// identifies the error at start (`drive.inverter_identification`, issue 13 item 2).
     DeadTime1_0Identified,
@@ -42,7 +48,7 @@ pub enum Variant {
 
 impl Variant {
     /// Every variant of the acceptance matrix (issue 13), in table order.
-    pub const MATRIX: [Variant; 9] = [
+    pub const MATRIX: [Variant; 10] = [
         Variant::Nominal,
         Variant::ControllerRsPlus20,
         Variant::ControllerRsMinus20,
@@ -52,6 +58,7 @@ impl Variant {
         Variant::DeadTime1_0Identified,
         Variant::DeadTime2_2Identified,
         Variant::Offset20mA,
+        Variant::OffsetDrift20mA,
     ];
 
     /// Short name for the table.
@@ -64,7 +71,8 @@ impl Variant {
             Variant::PlantRsStep20 => "plant Rs +20 % step",
             Variant::DeadTime1_0 => "dead time 1.0 us",
             Variant::DeadTime2_2 => "dead time 2.2 us",
-            Variant::Offset20mA => "offsets 20 mA",
+            Variant::Offset20mA => "offsets 20 mA, unmeasured",
+            Variant::OffsetDrift20mA => "offsets 20 mA, drifting in",
             Variant::DeadTime1_0Identified => "dead time 1.0 us, identified at start",
             Variant::DeadTime2_2Identified => "dead time 2.2 us, identified at start",
         }
@@ -134,6 +142,8 @@ const LOAD_AT: f32 = 2.5;
 const CHANGE_AT: f32 = 4.0;
 /// Length of the steady window at the end, s.
 const WINDOW: f32 = 2.0;
+/// The offset drift's ramp, s ([`Variant::OffsetDrift20mA`]).
+const OFFSET_DRIFT_RAMP: f32 = 1.0;
 
 impl Case {
     /// The stator frequency of the case's steady operating point, Hz: w_s = p Omega +
@@ -227,9 +237,17 @@ impl Case {
                 s.drive.inverter_identification = true;
             }
             // the start comes at t = 0, before the drive has measured the offsets with
-            // the switches off: they stay uncompensated, as an offset that drifted in
-            // after the start would
+            // the switches off: they stay uncompensated, through the standstill Rs
+            // identification too
             Variant::Offset20mA => s.sensors.offset_a = [0.020, -0.020, 0.0],
+            // on top of the paper sensors' 5 mA (unmeasured too), 20 mA more drift in
+            // while the motor turns
+            Variant::OffsetDrift20mA => {
+                s.faults.current_sensor_offset_change_a = [0.020, -0.020, 0.0];
+                s.faults.current_sensor_offset_change_at_s = Some(CHANGE_AT);
+                s.faults.current_sensor_offset_change_ramp_s = OFFSET_DRIFT_RAMP;
+                end = CHANGE_AT + OFFSET_DRIFT_RAMP;
+            }
         }
         let from = end + 2.0;
         s.duration_s = from + WINDOW;

@@ -11,6 +11,7 @@ use crate::flux::FluxModelConfig;
 use crate::math::{is_finite, sqrt};
 use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
+use crate::offset_tracker::OffsetTrackerConfig;
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
@@ -205,6 +206,12 @@ pub struct DriveConfig {
     /// part. Needs a rotor at rest (skipped on a flying start), `flux_current` of at
     /// least [`INVERTER_TEST_MIN_BANDS`] times `dead_time_current_band`.
     pub inverter_identification: bool,
+    /// Running current-sensor offset tracking (issue 13, item 3; on by default): the
+    /// offsets' drift after the start's switches-off measurement, estimated from the DC
+    /// part of the stator voltage while |w_s| >= 1 Hz and subtracted
+    /// ([`crate::offset_tracker`]); an estimate at `offset_limit` is a current-sensor
+    /// fault.
+    pub offset_tracking: bool,
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -257,6 +264,7 @@ impl DriveConfig {
             overvoltage_control: false,
             flux_optimisation: false,
             inverter_identification: false,
+            offset_tracking: true,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)
@@ -901,6 +909,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub regen_current_per_frequency: N::Gain,
     /// The inverter test at start ([`DriveConfig::inverter_identification`]).
     pub inverter_test: InverterTestDesign<N>,
+    /// The running offset tracker ([`DriveConfig::offset_tracking`]).
+    pub offset_tracker: OffsetTrackerConfig<N>,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -963,6 +973,8 @@ pub struct DriveDesign {
     pub regen_current_per_frequency: f32,
     /// The inverter test at start (issue 13, item 2).
     pub inverter_test: InverterTestDesign,
+    /// The running current-sensor offset tracker (issue 13, item 3).
+    pub offset_tracker: OffsetTrackerConfig,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -1182,6 +1194,14 @@ impl DriveDesign {
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
             inverter_test: InverterTestDesign::new(cfg.inverter_identification, ts, i_d),
+            offset_tracker: OffsetTrackerConfig::new(
+                cfg.offset_tracking,
+                ts,
+                m.stator_resistance(),
+                OFFSET_FRACTION * cfg.overcurrent_trip,
+                i_d,
+                m.rotor_time_constant(),
+            ),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -1307,6 +1327,7 @@ impl DriveCoeffs<f32> {
             fw: d.field_weakening,
             rs_running: d.rs_running,
             inverter_test: d.inverter_test,
+            offset_tracker: d.offset_tracker,
         }
     }
 }

@@ -53,6 +53,7 @@ use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
+use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
 use crate::pi::PiController;
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
@@ -389,6 +390,8 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     search: SpeedSearch<N>,
     /// The inverter test at start and its correction (issue 13, item 2).
     inverter: InverterTest<N>,
+    /// The offsets' drift since the start, tracked while turning (issue 13, item 3).
+    offset_tracker: OffsetTracker<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -468,6 +471,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             bases,
             search: SpeedSearch::new(),
             inverter: InverterTest::default(),
+            offset_tracker: OffsetTracker::default(),
         })
     }
 
@@ -498,6 +502,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Quantities computed by the last step.
     pub fn telemetry(&self) -> &DriveTelemetry<N> {
         &self.telemetry
+    }
+    /// The current-sensor offsets' drift since the start as the running tracker estimates
+    /// it (stationary frame, A; subtracted from the samples on top of the offsets measured
+    /// with the switches off; [`crate::offset_tracker`]).
+    pub fn offset_drift(&self) -> AlphaBeta<N> {
+        self.offset_tracker.offset
     }
     /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
     pub fn torque_current_limit(&self) -> f32 {
@@ -562,6 +572,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             return Err(CommandError::SensorOffset);
         }
         self.offset_compensation = self.offsets.compensation(limits);
+        // the measurement includes any drift so far: the tracker starts from zero
+        self.offset_tracker = OffsetTracker::default();
         Ok(())
     }
 
@@ -699,7 +711,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let magnetizing = mode == DriveState::Magnetizing;
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
-        let m = self.sense(inp);
+        let m = self.sense(inp, !magnetizing);
         probe.end(StepRegion::ClarkePark);
         // 3. estimate
         // the frame is held while magnetizing at rest and turns with the rotor on a
@@ -817,6 +829,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             voltage_limited,
         );
         match found {
+            // the tracked drift at offset_limit: as beyond it at the start
+            None if self.offset_tracker.at_bound => Some(FaultReason::CurrentSensor),
             None => {
                 self.monitor
                     .check_offset_drift(&self.coeffs.limits, m.i_ab, e.stator_frequency)
@@ -825,9 +839,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
     }
 
-    /// Sense stage: Clarke (two or three phases) and Park at the frame angle.
+    /// Sense stage: Clarke (two or three phases), the tracked offset drift subtracted
+    /// while `running` ([`crate::offset_tracker`]), and Park at the frame angle.
     #[inline(always)]
-    fn sense(&mut self, inp: &DriveInputs<N>) -> Measured<N> {
+    fn sense(&mut self, inp: &DriveInputs<N>, running: bool) -> Measured<N> {
         // the last step's duties were made for the bus measured then; they act over the
         // period this sample opens, at the bus measured now: a rippling or sagging bus
         // scales the voltage they apply (duty x bus), and the estimators use that voltage
@@ -852,6 +867,26 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         let angle = self.est.flux.angle;
         let sc = self.sincos.sin_cos(angle);
+        // the tracked drift (last step's estimate) out of the current; the tracker reads
+        // the voltage less Rs_hat times that current (its DC part: the drift's)
+        let o = self.offset_tracker.offset;
+        let i_ab = AlphaBeta {
+            alpha: i_ab.alpha - o.alpha,
+            beta: i_ab.beta - o.beta,
+        };
+        let rs = self.est.rs.stator_resistance_estimate;
+        let v = self.applied.v_ab;
+        self.offset_tracker.update(
+            &self.coeffs.offset_tracker,
+            AlphaBeta {
+                alpha: v.alpha - rs * i_ab.alpha,
+                beta: v.beta - rs * i_ab.beta,
+            },
+            self.est.flux.stator_frequency,
+            running,
+            self.refs.speed_reference != self.refs.speed_target,
+            self.refs.i_sq_ref,
+        );
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
         let i = park(i_ab, sc);
@@ -1837,10 +1872,13 @@ mod tests {
         idle(&mut d, 0.05, 1000);
         assert_eq!(d.start(), Ok(()));
         assert!((d.offset_compensation[0] - 0.05).abs() < 1e-3);
-        let m = d.sense(&DriveInputs {
-            phase_currents: [0.05, 0.0, 0.0],
-            dc_bus: 325.0,
-        });
+        let m = d.sense(
+            &DriveInputs {
+                phase_currents: [0.05, 0.0, 0.0],
+                dc_bus: 325.0,
+            },
+            false,
+        );
         assert!(
             m.i_ab.alpha.abs() < 1e-3 && m.i_ab.beta.abs() < 1e-3,
             "{m:?}"

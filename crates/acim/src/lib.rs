@@ -50,6 +50,7 @@ pub mod inverter_test;
 pub mod math;
 pub mod num;
 pub mod observer;
+pub mod offset_tracker;
 pub mod orientation;
 pub mod params;
 pub mod pi;

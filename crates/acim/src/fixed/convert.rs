@@ -18,6 +18,7 @@ use crate::design::{
 use crate::flux::FluxModelConfig;
 use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
+use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::svpwm::SvpwmConfig;
@@ -160,6 +161,29 @@ pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningCo
         flux_voltage: Gain::from_f32(cfg.flux_voltage * b.frequency * b.flux / b.voltage)?,
         steady_filter: Gain::from_f32(cfg.steady_filter)?,
         steady_band: Q24(to_q24(cfg.steady_band / b.current)),
+    })
+}
+
+/// The running offset tracker: its offset gain takes a voltage into the finer integrator
+/// format of a current.
+pub fn offset_tracker(
+    cfg: &OffsetTrackerConfig,
+    b: &PerUnitBases,
+) -> Option<OffsetTrackerConfig<Q24>> {
+    let limit = <Q24 as crate::num::Num>::to_fine(Q24(to_q24(cfg.bounds.1 / b.current)));
+    Some(OffsetTrackerConfig {
+        enabled: cfg.enabled,
+        fundamental_gain: Gain::from_f32(cfg.fundamental_gain)?,
+        offset_gain: Gain::from_f32(cfg.offset_gain * b.voltage / b.current * RS_EXTRA)?,
+        frequency_filter: Gain::from_f32(cfg.frequency_filter)?,
+        ts: Gain::from_f32(cfg.ts * b.frequency)?,
+        one_sixth: Gain::from_f32(cfg.one_sixth)?,
+        min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
+        holdoff_steps: cfg.holdoff_steps,
+        steady_filter: Gain::from_f32(cfg.steady_filter)?,
+        steady_band: Q24(to_q24(cfg.steady_band / b.current)),
+        residual_limit: Q24(to_q24(cfg.residual_limit / b.voltage)),
+        bounds: (-limit, limit),
     })
 }
 
@@ -329,6 +353,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         },
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
+        offset_tracker: offset_tracker(&d.offset_tracker, b).ok_or(missing("overcurrent_trip"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
         overmodulation_reserve_steps: d.overmodulation_reserve_steps,

@@ -1,0 +1,371 @@
+//! Running current-sensor offset tracker (issue 13, item 3): the drift of the current
+//! channels' offsets after the start's switches-off measurement, estimated from the DC
+//! part of the stator voltage while the motor turns.
+//!
+//! ## Why the voltage's DC part is the offset
+//!
+//! A sensor offset `o` (stationary frame, A) that the drive does not subtract makes the
+//! current loops regulate the measured current `i + o` to the references. Those are
+//! constant in the rotating frame, so at any stator frequency `w_s != 0` the measured
+//! current has no DC part in the stationary frame and the true one has `-o`. The stator
+//! voltage equation in the stationary frame, `v = Rs i + d psi_s/dt` (design notes,
+//! section 1), has no DC part from `d psi_s/dt` in a steady state (the flux is bounded),
+//! so the voltage's DC part is `-Rs o`: the offset is observable wherever the stator field
+//! turns. (A stationary DC current drags the rotor like DC-injection braking; its rotor
+//! currents make a stator flux that is itself stationary, so it adds nothing to the DC
+//! voltage.) With an estimate `o_hat` subtracted, the DC voltage is `Rs (o_hat - o)`, zero
+//! exactly at `o_hat = o`; the inverter's dead-time error has no DC part for a current
+//! with none, so it changes the loop's gain a little, never its fixed point. At
+//! `w_s = 0` the offset's DC voltage is the same as a resistance error's and no stator
+//! quantity separates them: the tracker holds its estimate below
+//! [`OffsetTrackerConfig::min_frequency`].
+//!
+//! At standstill (the Rs identification with the frame held) the offset's d-axis part
+//! reads as a resistance, `Rs_hat = Rs (1 - o_d / i_sd)`: what the start's switches-off
+//! measurement is for. The tracker is for the drift after it.
+//!
+//! ## The estimator: the fundamental and the DC part separated adaptively
+//!
+//! With the applied voltage `v` (stationary frame, the period before this sample) and the
+//! frame angle `theta`, the tracker models `v = e^{j theta} V_hat + DC`, `V_hat` the
+//! fundamental in the rotating frame:
+//!
+//! ```text
+//! eps    = v - e^{j theta} V_hat                      (stationary frame, V)
+//! V_hat += mu_f Ts e^{-j theta} eps                   (the fundamental, rotating frame)
+//! o_hat -= (mu_o Ts / Rs) eps                         (the offset, stationary frame)
+//! ```
+//!
+//! With `D = Rs (o_hat - o)` the DC voltage the offset error leaves and `e_f` the
+//! fundamental's error in the stationary frame, the errors obey (constant `w_s`)
+//!
+//! ```text
+//! d e_f/dt = j w_s e_f - mu_f (e_f + D)
+//! d D/dt   = -mu_o (e_f + D)
+//! ```
+//!
+//! whose characteristic polynomial is `s^2 + (mu_f + mu_o - j w_s) s - j w_s mu_o`. For
+//! `mu_o << mu_f` its roots are `s_1 = -mu_f + j w_s` (the fundamental's tracking) and
+//! `s_2 = -mu_o w_s^2 / (mu_f^2 + w_s^2) + j(...)`: the offset converges with the rate
+//! `mu_o w_s^2 / (mu_f^2 + w_s^2)`, half of `mu_o` at `w_s = mu_f` and `mu_o` well above
+//! it, in every quadrant (only `w_s^2` enters). [`OFFSET_TRACKER_FUNDAMENTAL_RATE`] is
+//! `2 pi` rad/s (1 Hz, the running Rs law's lowest frequency too) and
+//! [`OFFSET_TRACKER_TIME`] is `1 / mu_o`.
+//!
+//! ## Gates, bound and what it reports
+//!
+//! The offset adapts only while running (not magnetizing), with `|w_s|` at least
+//! [`OffsetTrackerConfig::min_frequency`] and the residual `|eps_d| + |eps_q|` within
+//! [`OffsetTrackerConfig::residual_limit`], twice the DC voltage the largest tolerated
+//! offset (`offset_limit`) makes: a larger residual is the fundamental moving (a speed
+//! ramp, a load step), which the tracker must not integrate. The estimate is clamped to
+//! `offset_limit` on each axis; reaching it is a current-sensor fault (the drive's
+//! supervision), as an idle offset beyond it is at the start. `V_hat` follows the
+//! fundamental on every running step, so the gate opens with it settled.
+
+use crate::frames::AlphaBeta;
+use crate::num::Num;
+
+/// The fundamental tracker's rate `mu_f`, rad/s: 1 Hz (module docs).
+pub const OFFSET_TRACKER_FUNDAMENTAL_RATE: f32 = 2.0 * core::f32::consts::PI;
+/// The offset's time constant `1 / mu_o` well above 1 Hz, s (module docs).
+pub const OFFSET_TRACKER_TIME: f32 = 1.0;
+/// After a speed ramp the offset waits this many time constants of the fundamental's
+/// model (its lag behind a ramping fundamental is a residual at the fundamental).
+pub const OFFSET_TRACKER_HOLDOFF: f32 = 3.0;
+/// The residual gate: this many times the DC voltage of the largest tolerated offset.
+pub const OFFSET_TRACKER_RESIDUAL_FACTOR: f32 = 2.0;
+/// The model frequency's low-pass time constant, s: the stator frequency's wobble at
+/// f_s (the sensorless loop's own ripple) must not turn the model's phase.
+pub const OFFSET_TRACKER_FREQUENCY_FILTER: f32 = 0.1;
+
+/// The tracker's design (immutable; [`crate::design::DriveDesign`] builds it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OffsetTrackerConfig<N: Num = f32> {
+    /// Track at all ([`crate::design::DriveConfig::offset_tracking`]).
+    pub enabled: bool,
+    /// `mu_f Ts`, per step.
+    pub fundamental_gain: N::Gain,
+    /// `mu_o Ts / Rs`, A per V per step (fixed point: into the finer integrator format).
+    pub offset_gain: N::Gain,
+    /// The model frequency's low-pass gain, `Ts / OFFSET_TRACKER_FREQUENCY_FILTER`.
+    pub frequency_filter: N::Gain,
+    /// `Ts`, s (rad per step from rad/s).
+    pub ts: N::Gain,
+    /// 1/6 (the sine's cubic term).
+    pub one_sixth: N::Gain,
+    /// Adapts from this |w_s|, rad/s electrical.
+    pub min_frequency: N,
+    /// Adapts this many steps after the references became steady: three time constants
+    /// of the fundamental's model ([`OFFSET_TRACKER_HOLDOFF`]).
+    pub holdoff_steps: u32,
+    /// The torque-current reference's low-pass gain over tau_r, `Ts / tau_r` (as the
+    /// running Rs law's steadiness gate, [`crate::rs_estimator`]).
+    pub steady_filter: N::Gain,
+    /// The torque-current reference counts as steady within this of its low-pass, A.
+    pub steady_band: N,
+    /// The residual's mean magnitude `|eps_alpha| + |eps_beta|` must be at most this, V:
+    /// [`OFFSET_TRACKER_RESIDUAL_FACTOR`] times the DC voltage of the largest tolerated
+    /// offset, `Rs offset_limit` (a larger residual is the fundamental moving, or noise
+    /// and harmonics the offset's signature does not stand above).
+    pub residual_limit: N,
+    /// The estimate's bounds on each axis, -offset_limit and offset_limit, A (in the
+    /// integrator format).
+    pub bounds: (N::Fine, N::Fine),
+}
+
+impl OffsetTrackerConfig<f32> {
+    /// The design for period `ts` (s), the nominal stator resistance `rs` (ohm), the
+    /// largest tolerated offset `offset_limit` (A), the flux current (A) and the rotor
+    /// time constant `tau_r` (s).
+    pub fn new(
+        enabled: bool,
+        ts: f32,
+        rs: f32,
+        offset_limit: f32,
+        flux_current: f32,
+        tau_r: f32,
+    ) -> Self {
+        Self {
+            enabled,
+            fundamental_gain: (OFFSET_TRACKER_FUNDAMENTAL_RATE * ts).min(1.0),
+            offset_gain: ts / (OFFSET_TRACKER_TIME * rs),
+            frequency_filter: (ts / OFFSET_TRACKER_FREQUENCY_FILTER).min(1.0),
+            ts,
+            one_sixth: 1.0 / 6.0,
+            min_frequency: 2.0
+                * core::f32::consts::PI
+                * crate::rs_estimator::RUNNING_MIN_FREQUENCY_HZ,
+            holdoff_steps: (OFFSET_TRACKER_HOLDOFF / (OFFSET_TRACKER_FUNDAMENTAL_RATE * ts)) as u32,
+            steady_filter: (ts / tau_r).min(1.0),
+            steady_band: crate::rs_estimator::RUNNING_STEADY_TORQUE_FRACTION * flux_current.abs(),
+            residual_limit: OFFSET_TRACKER_RESIDUAL_FACTOR * rs * offset_limit,
+            bounds: (-offset_limit, offset_limit),
+        }
+    }
+}
+
+/// The tracker's state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OffsetTracker<N: Num = f32> {
+    /// The fundamental's model, stationary frame, V.
+    fundamental: AlphaBeta<N>,
+    /// Its frequency, the stator frequency low-passed, rad/s.
+    frequency: N,
+    alpha: N::Fine,
+    beta: N::Fine,
+    /// Steps since the references were last unsteady (saturating).
+    steady_steps: u32,
+    /// The torque-current reference low-passed over tau_r, A.
+    torque_reference_slow: N,
+    /// The residual's magnitude low-passed over 1 / mu_f, V.
+    pub residual: N,
+    /// The offset estimate `o_hat` the drive subtracts from the measured current, A.
+    pub offset: AlphaBeta<N>,
+    /// The estimate sits at its bound (a current-sensor fault).
+    pub at_bound: bool,
+    /// The last step adapted the offset.
+    pub adapting: bool,
+}
+
+impl<N: Num> Default for OffsetTracker<N> {
+    fn default() -> Self {
+        Self {
+            fundamental: AlphaBeta {
+                alpha: N::ZERO,
+                beta: N::ZERO,
+            },
+            frequency: N::ZERO,
+            alpha: N::to_fine(N::ZERO),
+            beta: N::to_fine(N::ZERO),
+            steady_steps: 0,
+            torque_reference_slow: N::ZERO,
+            residual: N::ZERO,
+            offset: AlphaBeta {
+                alpha: N::ZERO,
+                beta: N::ZERO,
+            },
+            at_bound: false,
+            adapting: false,
+        }
+    }
+}
+
+impl<N: Num> OffsetTracker<N> {
+    /// One step: `u_ab` the voltage applied over the last period less Rs_hat times the
+    /// corrected current (V, stationary frame), `stator_frequency` w_s (rad/s), `running`
+    /// false while magnetizing, `ramping` true while the speed reference ramps,
+    /// `i_sq_ref` the last torque-current reference (A).
+    #[inline(always)]
+    pub fn update(
+        &mut self,
+        cfg: &OffsetTrackerConfig<N>,
+        u_ab: AlphaBeta<N>,
+        stator_frequency: N,
+        running: bool,
+        ramping: bool,
+        i_sq_ref: N,
+    ) {
+        self.adapting = false;
+        if !(cfg.enabled && running) {
+            return;
+        }
+        let w = self.frequency + N::gain(cfg.frequency_filter, stator_frequency - self.frequency);
+        self.frequency = w.finite_or(N::ZERO);
+        // the model turns by phi = w Ts: cos ~ 1 - phi^2/2, sin ~ phi (1 - phi^2/6), whose
+        // angle is phi + O(phi^5) (a phase error would be a residual at the fundamental)
+        let phi = N::gain(cfg.ts, self.frequency);
+        let phi2 = phi * phi;
+        let c = N::ONE - phi2.half();
+        let s = phi - phi * N::gain(cfg.one_sixth, phi2);
+        let x = self.fundamental;
+        let x = AlphaBeta {
+            alpha: x.alpha * c - x.beta * s,
+            beta: x.beta * c + x.alpha * s,
+        };
+        let eps = AlphaBeta {
+            alpha: u_ab.alpha - x.alpha,
+            beta: u_ab.beta - x.beta,
+        };
+        if !(eps.alpha.is_finite() && eps.beta.is_finite()) {
+            self.fundamental = AlphaBeta {
+                alpha: N::ZERO,
+                beta: N::ZERO,
+            };
+            return;
+        }
+        self.fundamental = AlphaBeta {
+            alpha: x.alpha + N::gain(cfg.fundamental_gain, eps.alpha),
+            beta: x.beta + N::gain(cfg.fundamental_gain, eps.beta),
+        };
+        let r = eps.alpha.abs() + eps.beta.abs();
+        self.residual = self.residual + N::gain(cfg.fundamental_gain, r - self.residual);
+        let slow = self.torque_reference_slow
+            + N::gain(cfg.steady_filter, i_sq_ref - self.torque_reference_slow);
+        self.torque_reference_slow = slow.finite_or(N::ZERO);
+        let steady = !ramping && (i_sq_ref - self.torque_reference_slow).abs() <= cfg.steady_band;
+        self.steady_steps = if steady {
+            self.steady_steps.saturating_add(1)
+        } else {
+            0
+        };
+        if self.steady_steps >= cfg.holdoff_steps
+            && self.frequency.abs() >= cfg.min_frequency
+            && self.residual <= cfg.residual_limit
+        {
+            let (lo, hi) = cfg.bounds;
+            let (a, at_a) = N::fine_step(self.alpha, cfg.offset_gain, eps.alpha, false, lo, hi);
+            let (b, at_b) = N::fine_step(self.beta, cfg.offset_gain, eps.beta, false, lo, hi);
+            self.alpha = a;
+            self.beta = b;
+            self.at_bound = at_a || at_b;
+            self.adapting = true;
+            self.offset = AlphaBeta {
+                alpha: N::from_fine(a),
+                beta: N::from_fine(b),
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TS: f32 = 2.0e-4;
+    const RS: f32 = 10.5;
+    const LIMIT: f32 = 0.16;
+
+    /// A synthetic closed loop: the voltage the tracker reads is a fundamental of
+    /// `amplitude` V at `w` rad/s plus Rs (o_hat - o) (module docs), for `seconds`.
+    fn run(w: f32, amplitude: f32, o: (f32, f32), seconds: f32) -> OffsetTracker {
+        run_ramped(w, amplitude, o, seconds, 0.0)
+    }
+
+    /// [`run`] with the offset reaching `o` linearly over `ramp` seconds.
+    fn run_ramped(w: f32, amplitude: f32, o: (f32, f32), seconds: f32, ramp: f32) -> OffsetTracker {
+        let cfg = OffsetTrackerConfig::new(true, TS, RS, LIMIT, 1.5, 0.067);
+        let mut t = OffsetTracker::default();
+        let mut theta = 0.0f32;
+        for k in 0..(seconds / TS) as usize {
+            let f = if ramp > 0.0 {
+                (k as f32 * TS / ramp).min(1.0)
+            } else {
+                1.0
+            };
+            let o = (f * o.0, f * o.1);
+            // wrapped: an f32 angle in the thousands of radians would round its steps
+            theta = (theta + w * TS) % (2.0 * core::f32::consts::PI);
+            let (s, c) = theta.sin_cos();
+            let u = AlphaBeta {
+                alpha: amplitude * c + RS * (t.offset.alpha - o.0),
+                beta: amplitude * s + RS * (t.offset.beta - o.1),
+            };
+            t.update(&cfg, u, w, true, false, 0.0);
+        }
+        t
+    }
+
+    #[test]
+    fn converges_in_both_directions_from_one_hertz_up() {
+        for hz in [-50.0, -1.5, 1.5, 5.0, 50.0] {
+            let w = 2.0 * core::f32::consts::PI * hz;
+            let t = run(w, 20.0 + 3.0 * hz.abs(), (0.02, -0.0115), 8.0);
+            assert!(
+                (t.offset.alpha - 0.02).abs() < 1e-3,
+                "{hz} Hz: {:?}",
+                t.offset
+            );
+            assert!(
+                (t.offset.beta + 0.0115).abs() < 1e-3,
+                "{hz} Hz: {:?}",
+                t.offset
+            );
+            assert!(!t.at_bound);
+        }
+    }
+
+    #[test]
+    fn holds_below_one_hertz_and_while_magnetizing() {
+        let t = run(2.0 * core::f32::consts::PI * 0.5, 5.0, (0.02, 0.0), 5.0);
+        assert_eq!(t.offset.alpha, 0.0);
+        let cfg = OffsetTrackerConfig::new(true, TS, RS, LIMIT, 1.5, 0.067);
+        let mut t = OffsetTracker::default();
+        let u = AlphaBeta {
+            alpha: 1.0,
+            beta: 1.0,
+        };
+        for _ in 0..1000 {
+            t.update(&cfg, u, 100.0, false, false, 0.0);
+            t.update(&cfg, u, 100.0, true, true, 0.0);
+        }
+        assert_eq!(t.offset.alpha, 0.0);
+        assert!(!t.adapting);
+    }
+
+    #[test]
+    fn a_drift_beyond_the_limit_sits_at_the_bound_and_nan_is_survived() {
+        // a drift the tracker follows (its residual stays within the gate) until the bound;
+        // a step that large would hold the residual above the gate instead
+        let t = run_ramped(
+            2.0 * core::f32::consts::PI * 10.0,
+            50.0,
+            (0.5, 0.0),
+            20.0,
+            20.0,
+        );
+        assert!(t.at_bound);
+        assert!((t.offset.alpha - LIMIT).abs() < 1e-6);
+        let cfg = OffsetTrackerConfig::new(true, TS, RS, LIMIT, 1.5, 0.067);
+        let mut t = t;
+        let nan = AlphaBeta {
+            alpha: f32::NAN,
+            beta: 0.0,
+        };
+        t.update(&cfg, nan, f32::NAN, true, false, 0.0);
+        t.update(&cfg, nan, 60.0, true, false, 0.0);
+        assert!(t.offset.alpha.is_finite() && t.offset.beta.is_finite());
+        assert!(t.frequency.is_finite());
+    }
+}
