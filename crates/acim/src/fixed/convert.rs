@@ -183,6 +183,7 @@ pub fn offset_tracker(
         steady_filter: Gain::from_f32(cfg.steady_filter)?,
         steady_band: Q24(to_q24(cfg.steady_band / b.current)),
         residual_limit: Q24(to_q24(cfg.residual_limit / b.voltage)),
+        floor_rise: Q24(to_q24(cfg.floor_rise / b.voltage)),
         bounds: (-limit, limit),
     })
 }
