@@ -29,6 +29,7 @@ RULES = [
     ("supervision: stall, blind", ["Supervisor::stall", "Supervisor::blind"]),
     ("feature: field weakening", ["field_weakening", "flux_optimum"]),
     ("feature: regeneration limit", ["regen_limit"]),
+    ("feature: running offset tracker", ["OffsetTracker"]),
     ("core: sin/cos", ["sin_cos"]),
     ("core: Clarke, Park, offsets, sample ripple, bus scaling", ["::sense"]),
     ("core: observer (eq. 12)", ["ReducedOrderObserver"]),
