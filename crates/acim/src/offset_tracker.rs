@@ -112,8 +112,9 @@ use crate::num::Num;
 pub const OFFSET_TRACKER_FUNDAMENTAL_RATE: f32 = 2.0 * core::f32::consts::PI;
 /// The offset's time constant `1 / mu_o` well above 1 Hz, s (module docs).
 pub const OFFSET_TRACKER_TIME: f32 = 1.0;
-/// After a speed ramp the offset waits this many time constants of the fundamental's
-/// model (its lag behind a ramping fundamental is a residual at the fundamental).
+/// Once the references are steady again (no speed ramp, the torque-current reference
+/// within its band) the offset waits this many time constants of the fundamental's model
+/// (its lag behind a moving fundamental is a residual at the fundamental).
 pub const OFFSET_TRACKER_HOLDOFF: f32 = 3.0;
 /// The residual gate: this many times the DC voltage of the largest tolerated offset.
 pub const OFFSET_TRACKER_RESIDUAL_FACTOR: f32 = 2.0;
