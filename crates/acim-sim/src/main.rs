@@ -354,6 +354,20 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
             100.0 * (t.dead_time_us - t.true_dead_time_us) / t.true_dead_time_us.max(1e-3),
         ));
     }
+    if let Some(r) = &m.rotor_resistance {
+        out.push(format!(
+            "{:<26} rotor resistance R_R: estimate {:.3} ohm (configured {:.3}, true {:.3}: {:+.1} %); {} windows used, {} rejected; last fit: J model error {:+.2} %, residual {:.3} rpm rms",
+            "",
+            r.estimate_ohm,
+            r.configured_ohm,
+            r.true_ohm,
+            100.0 * (r.estimate_ohm - r.true_ohm) / r.true_ohm.max(1e-3),
+            r.updates,
+            r.rejected,
+            r.last_model_error_pct,
+            r.last_fit_rms_rpm,
+        ));
+    }
     out
 }
 

@@ -281,6 +281,9 @@ pub struct Metrics {
     /// The inverter test at start (only when the drive runs it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub inverter_test: Option<crate::sim::InverterTestRecord>,
+    /// The rotor-resistance adaptation at the end (only when the drive runs it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotor_resistance: Option<crate::sim::RotorResistanceRecord>,
     /// Wall-clock time of the simulation, s.
     pub wall_time_s: f64,
     /// Simulated seconds per wall-clock second.
@@ -551,6 +554,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         speed_err_max_running_rpm: max_running,
         speed_search: r.search,
         inverter_test: r.inverter_test.clone(),
+        rotor_resistance: r.rotor_resistance.clone(),
         peak_current_a,
         peak_speed_rpm,
         peak_speed_switching_rpm,

@@ -181,6 +181,28 @@ pub struct RunResult {
     /// The inverter test at start, when the drive runs it
     /// (`drive.inverter_identification`).
     pub inverter_test: Option<InverterTestRecord>,
+    /// The rotor-resistance adaptation at the end, when the drive runs it
+    /// (`drive.rr_adaptation`).
+    pub rotor_resistance: Option<RotorResistanceRecord>,
+}
+
+/// The rotor-resistance adaptation (issue 13, item 7) at the end of a run.
+#[derive(Serialize, Clone, Debug, PartialEq)]
+pub struct RotorResistanceRecord {
+    /// R_R_hat, the referred rotor resistance the drive uses at the end, ohm.
+    pub estimate_ohm: f32,
+    /// The plant's referred rotor resistance at the end, ohm.
+    pub true_ohm: f32,
+    /// The controller's configured R_R, ohm.
+    pub configured_ohm: f32,
+    /// Windows that updated the estimate.
+    pub updates: u32,
+    /// Windows whose fit was rejected.
+    pub rejected: u32,
+    /// The last solved window's torque-per-inertia model error gamma, %.
+    pub last_model_error_pct: f32,
+    /// The last solved window's fit residual, RMS, rpm.
+    pub last_fit_rms_rpm: f32,
 }
 
 /// The inverter test at start (issue 13, item 2): what the drive identified.
@@ -541,5 +563,24 @@ pub fn run_with_progress(
                 configured_dead_time_us: v.drive.dead_time * 1e6,
             }
         }),
+        rotor_resistance: v.drive.rr_adaptation.then(|| {
+            let r = drive.rotor_resistance();
+            RotorResistanceRecord {
+                estimate_ohm: r.estimate,
+                true_ohm: plant_referred_rotor_resistance_at_end(sc),
+                configured_ohm: v.drive.machine.referred_rotor_resistance(),
+                updates: r.updates,
+                rejected: r.rejected,
+                last_model_error_pct: 100.0 * r.last_model_error,
+                last_fit_rms_rpm: r.last_fit_rms * 30.0 / core::f32::consts::PI,
+            }
+        }),
     })
+}
+
+/// The plant's referred rotor resistance `(Lm/Lr)^2 Rr` at the scenario's end, ohm.
+fn plant_referred_rotor_resistance_at_end(sc: &Scenario) -> f32 {
+    let p = &sc.plant;
+    let (_, rr) = crate::scenario::plant_factors(&sc.plant_changes, sc.duration_s);
+    (p.lm_h / p.lr_h) * (p.lm_h / p.lr_h) * p.rr_ohm * rr
 }

@@ -8,6 +8,7 @@ use crate::fixed::Q24;
 use crate::frames::SinCos;
 use crate::inverter_test::InverterTestOutcome;
 use crate::observer::SpeedObserver;
+use crate::rr_estimator::RrReport;
 use crate::supervisor::{CommandError, DriveState, FaultReason};
 use crate::svpwm::Modulator;
 
@@ -40,6 +41,8 @@ pub trait Controller {
     /// compensates, s (the configured one plus the test's correction; the configured
     /// device drop counted as known).
     fn inverter_test(&self) -> (InverterTestOutcome, f32);
+    /// The rotor-resistance adaptation in SI ([`crate::rr_estimator`]).
+    fn rotor_resistance(&self) -> RrReport;
 }
 
 impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, M> {
@@ -84,6 +87,10 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, 
             c.dead_time + t.correction_duty * c.control_period,
         )
     }
+    fn rotor_resistance(&self) -> RrReport {
+        self.rotor_resistance_estimator()
+            .report(self.design().referred_rotor_resistance, 1.0)
+    }
 }
 
 impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Drive<S, Q24, O, M> {
@@ -127,6 +134,12 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Dr
         (
             t.outcome,
             c.dead_time + crate::fixed::q::from_q24(t.correction_duty.0) * c.control_period,
+        )
+    }
+    fn rotor_resistance(&self) -> RrReport {
+        self.rotor_resistance_estimator().report(
+            self.design().referred_rotor_resistance,
+            self.bases().resistance(),
         )
     }
 }

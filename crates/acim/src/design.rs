@@ -14,6 +14,7 @@ use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, Obser
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
+use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
@@ -212,6 +213,12 @@ pub struct DriveConfig {
     /// ([`crate::offset_tracker`]); an estimate at `offset_limit` is a current-sensor
     /// fault.
     pub offset_tracking: bool,
+    /// Rotor-resistance adaptation from speed transients (issue 13, item 7; off by
+    /// default): at the start of each speed ramp from a steady point, the speed the
+    /// observer moved beyond what the mechanical model with the known J integrates is the
+    /// slip law's R_R error times the torque-current change ([`crate::rr_estimator`]).
+    /// Assumes the load torque holds over the 0.3 s window.
+    pub rr_adaptation: bool,
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -265,6 +272,7 @@ impl DriveConfig {
             flux_optimisation: false,
             inverter_identification: false,
             offset_tracking: true,
+            rr_adaptation: false,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)
@@ -911,6 +919,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
     pub offset_tracker: OffsetTrackerConfig<N>,
+    /// The rotor-resistance adaptation ([`DriveConfig::rr_adaptation`]).
+    pub rr: RrEstimatorConfig<N>,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -975,6 +985,8 @@ pub struct DriveDesign {
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker (issue 13, item 3).
     pub offset_tracker: OffsetTrackerConfig,
+    /// The rotor-resistance adaptation (issue 13, item 7).
+    pub rr_estimator: RrEstimatorConfig,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -1202,6 +1214,13 @@ impl DriveDesign {
                 i_d,
                 m.rotor_time_constant(),
             ),
+            rr_estimator: RrEstimatorConfig::new(
+                cfg.rr_adaptation,
+                ts,
+                m.pole_pairs_f32(),
+                m.referred_rotor_resistance(),
+                i_d,
+            ),
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -1328,6 +1347,7 @@ impl DriveCoeffs<f32> {
             rs_running: d.rs_running,
             inverter_test: d.inverter_test,
             offset_tracker: d.offset_tracker,
+            rr: d.rr_estimator,
         }
     }
 }

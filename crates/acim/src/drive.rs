@@ -56,6 +56,7 @@ use crate::observer::{
 use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
 use crate::pi::PiController;
+use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::speed_search::{SearchOutcome, SpeedSearch};
 pub use crate::supervisor::{
@@ -298,6 +299,8 @@ struct Estimator<N: Num, O> {
     rs: RsEstimator<N>,
     flux: FluxModel<N>,
     filtered_residual: N,
+    /// The rotor-resistance adaptation (issue 13, item 7).
+    rr: RrEstimator<N>,
 }
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
@@ -432,6 +435,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rs: RsEstimator::new(rs_initial),
                 flux: FluxModel::new(),
                 filtered_residual: N::ZERO,
+                rr: RrEstimator::default(),
             },
             refs: References {
                 speed_target: N::ZERO,
@@ -508,6 +512,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// with the switches off; [`crate::offset_tracker`]).
     pub fn offset_drift(&self) -> AlphaBeta<N> {
         self.offset_tracker.offset
+    }
+    /// The rotor-resistance adaptation's state ([`crate::rr_estimator`]; its estimate
+    /// stays at the configured R_R with [`crate::DriveConfig::rr_adaptation`] off).
+    pub fn rotor_resistance_estimator(&self) -> &RrEstimator<N> {
+        &self.est.rr
     }
     /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
     pub fn torque_current_limit(&self) -> f32 {
@@ -653,6 +662,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.est.flux = FluxModel::new();
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
+        self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
         self.search = SpeedSearch::new();
         self.refs.flying = false;
@@ -932,7 +942,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rotor_flux: est.flux.rotor_flux,
                 inv_rotor_flux: est.flux.inv_rotor_flux,
                 equivalent_resistance: est.rs.stator_resistance_estimate
-                    + c.referred_rotor_resistance,
+                    + c.referred_rotor_resistance
+                    + est.rr.resistance_error,
                 magnetizing,
             },
         );
@@ -1002,13 +1013,30 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             N::ZERO
         };
+        // rotor resistance (issue 13, item 7): adapts at the start of speed ramps; its
+        // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (0 when off)
+        if c.rr.enabled {
+            est.rr.update(
+                &c.rr,
+                &c.observer,
+                &RrInputs {
+                    speed: observer.speed,
+                    i_sq: i.q,
+                    rotor_flux: est.flux.rotor_flux,
+                    stator_frequency: ws_prev,
+                    ramping: self.refs.speed_reference != self.refs.speed_target,
+                    usable: !frame_held && !magnetizing && flux_settled && !weakened,
+                },
+            );
+        }
+        let extra_slip = est.rr.extra_slip(&c.rr, i.q, est.flux.inv_rotor_flux);
         // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat; the frame is
         // held while magnetizing at rest and turns with the rotor on a flying start
         est.flux.update(
             &c.flux,
             i.d,
             i.q,
-            N::gain(c.pole_pairs, observer.speed) + correction,
+            N::gain(c.pole_pairs, observer.speed) + correction + extra_slip,
             frame_held,
         );
         probe.end(StepRegion::FluxSlip);

@@ -54,6 +54,7 @@ pub mod offset_tracker;
 pub mod orientation;
 pub mod params;
 pub mod pi;
+pub mod rr_estimator;
 pub mod rs_estimator;
 pub mod speed_search;
 pub mod svpwm;

@@ -121,6 +121,12 @@ pub trait Num:
     ) -> crate::frames::SinCosValue<Self>;
     /// The angle in radians (telemetry).
     fn angle_to_rad(a: Self::Angle) -> f32;
+    /// The value as an f32 in this arithmetic's units (SI in f32, per unit in fixed
+    /// point): for the rare per-event arithmetic that needs a range no signal format has
+    /// (the rotor-resistance adaptation's least-squares solve, [`crate::rr_estimator`]).
+    fn to_f32(self) -> f32;
+    /// The signal holding `x` (in this arithmetic's units; rounded and saturated).
+    fn from_f32(x: f32) -> Self;
 
     /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
     /// fixed point checks that every value fits its per-unit range.
@@ -233,6 +239,14 @@ impl Num for f32 {
     #[inline(always)]
     fn angle_to_rad(a: f32) -> f32 {
         a
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> f32 {
+        x
     }
     fn coeffs(
         design: &crate::design::DriveDesign,

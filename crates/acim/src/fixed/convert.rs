@@ -20,6 +20,7 @@ use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
+use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::svpwm::SvpwmConfig;
 
@@ -185,6 +186,34 @@ pub fn offset_tracker(
         residual_limit: Q24(to_q24(cfg.residual_limit / b.voltage)),
         floor_rise: Q24(to_q24(cfg.floor_rise / b.voltage)),
         bounds: (-limit, limit),
+    })
+}
+
+/// The rotor-resistance adaptation: its slip term takes `resistance pu x current pu /
+/// flux pu` to a frequency in pu; its once-per-window solve converts the per-unit sums
+/// to SI with the bases.
+pub fn rr_estimator(cfg: &RrEstimatorConfig, b: &PerUnitBases) -> Option<RrEstimatorConfig<Q24>> {
+    let r = b.resistance();
+    Some(RrEstimatorConfig {
+        enabled: cfg.enabled,
+        quiet_steps: cfg.quiet_steps,
+        settle_steps: cfg.settle_steps,
+        window_steps: cfg.window_steps,
+        min_window_steps: cfg.min_window_steps,
+        current_filter: Gain::from_f32(cfg.current_filter)?,
+        steady_filter: Gain::from_f32(cfg.steady_filter)?,
+        steady_band: Q24(to_q24(cfg.steady_band / b.current)),
+        min_current_change: Q24(to_q24(cfg.min_current_change / b.current)),
+        min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
+        slip_gain: Gain::from_f32(cfg.slip_gain * r * b.current / (b.flux * b.frequency))?,
+        bounds: (Q24(to_q24(cfg.bounds.0 / r)), Q24(to_q24(cfg.bounds.1 / r))),
+        pole_pairs: cfg.pole_pairs,
+        current_unit: b.current,
+        speed_unit: b.speed,
+        flux_unit: b.flux,
+        resistance_unit: r,
+        // Q7.24 saturates at 128 pu
+        sum_limit: 100.0,
     })
 }
 
@@ -355,6 +384,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
         offset_tracker: offset_tracker(&d.offset_tracker, b).ok_or(missing("overcurrent_trip"))?,
+        rr: rr_estimator(&d.rr_estimator, b).ok_or(missing("machine.rotor_resistance"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
         overmodulation_reserve_steps: d.overmodulation_reserve_steps,

@@ -479,6 +479,12 @@ impl crate::num::Num for Q24 {
     fn angle_to_rad(a: u32) -> f32 {
         super::trig::angle_to_rad(a)
     }
+    fn to_f32(self) -> f32 {
+        from_q24(self.0)
+    }
+    fn from_f32(x: f32) -> Q24 {
+        Q24(to_q24(x))
+    }
     fn coeffs(
         design: &crate::design::DriveDesign,
         bases: &PerUnitBases,
