@@ -435,7 +435,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rs: RsEstimator::new(rs_initial),
                 flux: FluxModel::new(),
                 filtered_residual: N::ZERO,
-                rr: RrEstimator::default(),
+                rr: RrEstimator::new(&coeffs.rr),
             },
             refs: References {
                 speed_target: N::ZERO,
@@ -942,8 +942,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rotor_flux: est.flux.rotor_flux,
                 inv_rotor_flux: est.flux.inv_rotor_flux,
                 equivalent_resistance: est.rs.stator_resistance_estimate
-                    + c.referred_rotor_resistance
-                    + est.rr.resistance_error,
+                    + est.rr.referred_resistance,
                 magnetizing,
             },
         );
@@ -1013,8 +1012,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             N::ZERO
         };
+        // the rotor's electrical speed the frame turns with (sensorless: p Omega_hat)
+        let mut rotor_speed = N::gain(c.pole_pairs, observer.speed) + correction;
         // rotor resistance (issue 13, item 7): adapts at the start of speed ramps; its
-        // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (0 when off)
+        // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (skipped when off, so
+        // the default step neither pays for it nor changes by a rounding)
         if c.rr.enabled {
             est.rr.update(
                 &c.rr,
@@ -1028,17 +1030,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                     usable: !frame_held && !magnetizing && flux_settled && !weakened,
                 },
             );
+            rotor_speed = rotor_speed + est.rr.extra_slip(&c.rr, i.q, est.flux.inv_rotor_flux);
         }
-        let extra_slip = est.rr.extra_slip(&c.rr, i.q, est.flux.inv_rotor_flux);
-        // flux model, slip and angle (eq. 13, 8), sensorless: p Omega_hat; the frame is
-        // held while magnetizing at rest and turns with the rotor on a flying start
-        est.flux.update(
-            &c.flux,
-            i.d,
-            i.q,
-            N::gain(c.pole_pairs, observer.speed) + correction + extra_slip,
-            frame_held,
-        );
+        // flux model, slip and angle (eq. 13, 8); the frame is held while magnetizing at
+        // rest and turns with the rotor on a flying start
+        est.flux.update(&c.flux, i.d, i.q, rotor_speed, frame_held);
         probe.end(StepRegion::FluxSlip);
         Estimate {
             observer,

@@ -144,6 +144,8 @@ pub struct RrEstimatorConfig<N: Num = f32> {
     pub slip_gain: N::Gain,
     /// The bounds of `dR = R_R_hat - R_R`, ohm.
     pub bounds: (N, N),
+    /// The configured R_R, ohm.
+    pub referred_rotor_resistance: N,
     /// Pole pairs p.
     pub pole_pairs: f32,
     /// SI per unit of this arithmetic's current (1 in f32; the current base in Q7.24), A.
@@ -185,6 +187,7 @@ impl RrEstimatorConfig<f32> {
                 (RR_BOUNDS.0 - 1.0) * referred_rotor_resistance,
                 (RR_BOUNDS.1 - 1.0) * referred_rotor_resistance,
             ),
+            referred_rotor_resistance,
             pole_pairs: p,
             current_unit: 1.0,
             speed_unit: 1.0,
@@ -211,8 +214,11 @@ struct Sums<N> {
 /// estimate); the window does not.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RrEstimator<N: Num = f32> {
-    /// `dR = R_R_hat - R_R` (configured), ohm: added to the slip law and the observer's Rseq.
+    /// `dR = R_R_hat - R_R` (configured), ohm: its slip is added to the slip law's.
     pub resistance_error: N,
+    /// `R_R_hat`, ohm: the observer's Rseq is `Rs_hat + R_R_hat` (kept as a sum so that
+    /// the observer reads one value, the configured R_R while nothing was adapted).
+    pub referred_resistance: N,
     /// Windows that updated the estimate since power-up.
     pub updates: u32,
     /// Windows whose fit was rejected (module docs, "When it measures").
@@ -298,10 +304,19 @@ pub struct RrInputs<N> {
 }
 
 impl<N: Num> RrEstimator<N> {
+    /// No adaptation yet: `R_R_hat` the configured `cfg.referred_rotor_resistance`.
+    pub fn new(cfg: &RrEstimatorConfig<N>) -> Self {
+        Self {
+            referred_resistance: cfg.referred_rotor_resistance,
+            ..Self::default()
+        }
+    }
+
     /// Back to no open window, keeping the estimate (a start).
     pub fn restart(&mut self) {
         *self = Self {
             resistance_error: self.resistance_error,
+            referred_resistance: self.referred_resistance,
             updates: self.updates,
             rejected: self.rejected,
             last_model_error: self.last_model_error,
@@ -396,7 +411,9 @@ impl<N: Num> RrEstimator<N> {
     }
 
     /// The window's end: the least-squares fit of `D = u di + v M` (module docs), solved
-    /// once in f32; a fraction of the resistance error it finds is taken off.
+    /// once in f32; a fraction of the resistance error it finds is taken off. Inlined:
+    /// the firmware's interrupt calls nothing outside CCM SRAM (firmware/check.sh).
+    #[inline(always)]
     fn close(&mut self, cfg: &RrEstimatorConfig<N>, rotor_flux: N) {
         let (cu, su) = (cfg.current_unit, cfg.speed_unit);
         let s = self.sums;
@@ -442,6 +459,7 @@ impl<N: Num> RrEstimator<N> {
         let fraction = (1.0 / (self.updates as f32 + 1.0)).max(RR_STEP_FRACTION);
         let step = N::from_f32(fraction * error / cfg.resistance_unit);
         self.resistance_error = (self.resistance_error - step).clamp(lo, hi);
+        self.referred_resistance = cfg.referred_rotor_resistance + self.resistance_error;
         self.updates = self.updates.saturating_add(1);
     }
 }
@@ -487,7 +505,7 @@ mod tests {
         let mut w = 500.0 * crate::math::RPM_TO_RAD_S;
         let i0 = (1.5 + b * w) / kt;
         let mut i_lag = i0;
-        let mut est = RrEstimator::<N>::default();
+        let mut est = RrEstimator::<N>::new(cfg);
         let res_unit = cfg.resistance_unit;
         for k in 0..(1.8 / TS) as usize {
             let t = k as f32 * TS;

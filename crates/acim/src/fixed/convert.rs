@@ -207,6 +207,7 @@ pub fn rr_estimator(cfg: &RrEstimatorConfig, b: &PerUnitBases) -> Option<RrEstim
         min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
         slip_gain: Gain::from_f32(cfg.slip_gain * r * b.current / (b.flux * b.frequency))?,
         bounds: (Q24(to_q24(cfg.bounds.0 / r)), Q24(to_q24(cfg.bounds.1 / r))),
+        referred_rotor_resistance: Q24(to_q24(cfg.referred_rotor_resistance / r)),
         pole_pairs: cfg.pole_pairs,
         current_unit: b.current,
         speed_unit: b.speed,
