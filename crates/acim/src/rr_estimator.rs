@@ -99,7 +99,7 @@ pub const RR_MAX_MODEL_ERROR: f32 = 0.25;
 /// A window whose fit leaves a residual above this (RMS, rad/s mechanical; 1.9 rpm) is
 /// dropped: something the two regressors do not explain moved the speed. Measured on the
 /// paper's machine: the paper scenarios' 10 mA rms sensor noise leaves 0.4-0.9 rpm, a load
-/// step of 0.3 N m inside a window 6-50 rpm.
+/// step of 0.3 N m inside a window 6-52 rpm (measured without noise).
 pub const RR_MAX_FIT_RMS: f32 = 0.2;
 /// The smallest fraction of a window's estimate applied: the n-th window since power-up
 /// applies `max(1/n, RR_STEP_FRACTION)` of what it found (the running mean of the windows,
