@@ -214,10 +214,11 @@ pub struct DriveConfig {
     /// fault.
     pub offset_tracking: bool,
     /// Rotor-resistance adaptation from speed transients (issue 13, item 7; off by
-    /// default): at the start of each speed ramp from a steady point, the speed the
-    /// observer moved beyond what the mechanical model with the known J integrates is the
-    /// slip law's R_R error times the torque-current change ([`crate::rr_estimator`]).
-    /// Assumes the load torque holds over the 0.3 s window.
+    /// default): over each speed ramp from a steady point (its start, its run and 0.25 s
+    /// beyond its end, at most 0.8 s), the speed the observer moved beyond what the
+    /// mechanical model integrates is fitted as the slip law's R_R error times the
+    /// torque-current change plus a torque-per-inertia error times the model's speed
+    /// change ([`crate::rr_estimator`]). Assumes the load torque holds over the window.
     pub rr_adaptation: bool,
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
