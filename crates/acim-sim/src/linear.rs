@@ -654,16 +654,12 @@ mod tests {
         assert!(l.eigenvalues[1].0 < 0.0);
         let theory = crate::stability::theory(250.0, -1.5, 0.0);
         assert!((re - f64::from(theory)).abs() < 1.0, "{re} vs {theory}");
-        // and the closed loop, sampled, with the plant model, grows at nearly that rate:
-        // +13.4/s against the model's +10.5/s, 22 % of the measurement (17 % before the
-        // machine's voltage carried L_sigma di_sq/dt; the gap does not move with the
-        // sampling period, the current or speed loops' bandwidths or the kick's size, and
-        // shrinks to 7 % with four times the inertia: it is in the mechanical coupling,
-        // and its cause is not found)
-        let measured = crate::stability::measure(250.0, -1.5, 0.0).unwrap();
-        let g = f64::from(measured.growth_rate);
+        // and the closed loop, sampled, with the plant model, grows at that rate while the
+        // error is small: +11.5/s against the model's +10.5/s. (`measure`'s map figure,
+        // +13.4/s, fits up to a 30 degree error, where the growth is faster.)
+        let g = f64::from(crate::stability::linear_growth_rate(250.0, -1.5, 0.0).unwrap());
         assert!(
-            g > re && (g - re).abs() < 0.25 * g,
+            (g - re).abs() < 0.1 * g,
             "measured {g}/s, linearised {re}/s"
         );
     }
