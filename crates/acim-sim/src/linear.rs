@@ -666,9 +666,8 @@ mod tests {
 
     /// The regeneration limit's held points with the controller's R_R 30 % low (15 rpm /
     /// -1.5 N m, 30 / -3, 60 / -4.5, held at the reachable speed): the sampled loop holds
-    /// 60 rpm / -4.5 N m steadily (the
-    /// bound at the estimated speed, no oscillation), and so does the model now that the
-    /// observer sees the voltage the current loops apply to change the torque current,
+    /// 60 rpm / -4.5 N m steadily (the bound at the estimated speed, no oscillation), and
+    /// so does the model now that the observer sees the voltage the current loops apply to change the torque current,
     /// L_sigma di_sq/dt included. Without that term the model found a 44 Hz pair growing
     /// at +35/s there: the observer's current model saw the lagged current change with
     /// no voltage driving it, and read the difference as speed.

@@ -150,8 +150,8 @@ pub fn measure_with(
 
 /// The growth rate of an unstable point while its orientation error is still small, 1/s:
 /// a 0.1 degree kick, and the rms of the deviation 0.10-0.15 s and 0.20-0.25 s after it
-/// (the faster modes the kick excites have died out by then, and an error growing at up
-/// to about 20/s is still below 2 degrees). [`measure`]'s 2 degree kick and fit to the end
+/// (the faster modes the kick excites have mostly died out by then, and an error growing
+/// at 11.5/s is still below 2 degrees at 0.25 s). [`measure`]'s 2 degree kick and fit to the end
 /// of the record (up to 30 degrees, where a diverging point is stopped) include the
 /// error's nonlinear growth: at the paper scheme's 250 rpm / -1.5 N m it gives +13.4/s
 /// where this gives +11.5/s. For comparing with the linearisation (`crate::linear`).
