@@ -657,7 +657,7 @@ mod tests {
         // and the closed loop, sampled, with the plant model, grows at that rate while the
         // error is small: +11.5/s against the model's +10.5/s. (`measure`'s map figure,
         // +13.4/s, fits up to a 30 degree error, where the growth is faster.)
-        let g = f64::from(crate::stability::linear_growth_rate(250.0, -1.5, 0.0).unwrap());
+        let g = f64::from(crate::stability::linear_growth_rate(250.0, -1.5, 0.0, &|_| {}).unwrap());
         assert!(
             (g - re).abs() < 0.1 * g,
             "measured {g}/s, linearised {re}/s"

@@ -155,8 +155,14 @@ pub fn measure_with(
 /// of the record (up to 30 degrees, where a diverging point is stopped) include the
 /// error's nonlinear growth: at the paper scheme's 250 rpm / -1.5 N m it gives +13.4/s
 /// where this gives +11.5/s. For comparing with the linearisation (`crate::linear`).
-pub fn linear_growth_rate(speed_rpm: f32, load_nm: f32, k: f32) -> Result<f32, ScenarioError> {
-    let (dev, lost, ts) = kicked(speed_rpm, load_nm, k, &|_| {}, 0.1)?;
+/// `setup` changes the scenario before it is built, as in [`measure_with`].
+pub fn linear_growth_rate(
+    speed_rpm: f32,
+    load_nm: f32,
+    k: f32,
+    setup: &dyn Fn(&mut Scenario),
+) -> Result<f32, ScenarioError> {
+    let (dev, lost, ts) = kicked(speed_rpm, load_nm, k, setup, 0.1)?;
     let w = |a: f32, b: f32| {
         let (i, j) = ((a / ts) as usize, (b / ts) as usize);
         rms(&dev[i.min(dev.len())..j.min(dev.len())])
