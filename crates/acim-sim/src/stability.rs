@@ -212,6 +212,7 @@ fn kicked(
         allowed: format!("{e}"),
     })?;
     let ts = sc.drive.control_period_s;
+    crate::sim::power_up(&mut plant, &mut drive, &crate::sim::build_dc_link(&sc), ts);
     let _ = drive.set_speed_target(speed_rpm * RPM_TO_RAD_S);
     let _ = drive.start();
     let mut pwm = PwmPreload::new();

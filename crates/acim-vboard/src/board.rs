@@ -102,7 +102,7 @@ impl Board {
             Ok(d) => d,
             Err(e) => panic!("the firmware's default drive configuration is refused: {e:?}"),
         };
-        Self {
+        let mut board = Self {
             ctl: ControlLoop::new(drive, conv, TELEMETRY_DECIMATION),
             stage: SimulatedStage::new(conv),
             settings,
@@ -113,6 +113,20 @@ impl Board {
             nameplate: None,
             commissioned: None,
             commission_started: None,
+        };
+        board.power_up();
+        board
+    }
+
+    /// The board's power-up before it answers: the drive's switches-off offset
+    /// measurement (0.1 s, which every start waits for) on the idle stage's samples, as
+    /// the firmware's interrupt runs it while the main loop boots. Not counted as
+    /// periods, no telemetry.
+    fn power_up(&mut self) {
+        for _ in 0..self.ctl.drive().coeffs().limits.offset_settle_steps {
+            let raw = self.stage.sample();
+            let out = self.ctl.step(&raw);
+            self.stage.run_period(out);
         }
     }
 

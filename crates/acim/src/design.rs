@@ -1269,7 +1269,9 @@ impl DriveDesign {
                     + RESIDUAL_VOLTAGE_FRACTION * v_static,
                 demagnetize_steps: (DEMAGNETIZE_TAU_R * m.rotor_time_constant() / ts) as u32,
                 offset_filter: (ts / OFFSET_FILTER_TIME).min(1.0),
-                offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts) as u32,
+                // rounded: 0.1 s / 0.2 ms is 499.99.. in f32
+                offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts + 0.5)
+                    as u32,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
                 running_offset_min_frequency: 4.0 * i_max

@@ -395,6 +395,10 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     inverter: InverterTest<N>,
     /// The offsets' drift since the start, tracked while turning (issue 13, item 3).
     offset_tracker: OffsetTracker<N>,
+    /// A start asked for before the switches-off offset measurement had settled: the idle
+    /// step performs it once the measurement has (issue 13, item 3: offsets measured
+    /// before every start).
+    pending_start: Option<DriveState>,
 }
 
 impl Drive<FastSinCos> {
@@ -476,6 +480,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             search: SpeedSearch::new(),
             inverter: InverterTest::default(),
             offset_tracker: OffsetTracker::default(),
+            pending_start: None,
         })
     }
 
@@ -554,43 +559,69 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     }
 
     /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
+    ///
+    /// The current-sensor offsets are measured with the switches off before every start
+    /// ([`OffsetMonitor`], [`crate::design::OFFSET_SETTLE_FILTER_TIMES`] x
+    /// [`crate::design::OFFSET_FILTER_TIME`] = 0.1 s of idle steps). A start asked for
+    /// sooner, e.g. right after power-up, is accepted and waits: the drive stays `Idle`
+    /// with the switches off ([`Drive::start_pending`]) and the step that completes the
+    /// measurement performs the start, or faults the drive (`CurrentSensor`) if an offset
+    /// is beyond its limit. [`Drive::stop`] cancels a waiting start; a later start
+    /// command replaces it.
     pub fn start(&mut self) -> Result<(), CommandError> {
-        self.check_sensors_before_start()?;
-        self.sup.start(DriveState::Magnetizing)?;
-        self.reset_dynamic_state();
-        self.inverter.restart(&self.coeffs.inverter_test);
-        self.off_steps = 0;
-        Ok(())
+        self.request_start(DriveState::Magnetizing)
     }
 
-    /// Idle only: a start sooner than [`crate::design::DEMAGNETIZE_TAU_R`] rotor time
-    /// constants after the last switch-off is refused (`Demagnetizing`, nothing changes);
-    /// a current channel whose offset, measured with the switches off, is beyond its
-    /// limit refuses the start and faults the drive (`CurrentSensor`); otherwise the
-    /// settled offsets are subtracted from the samples until the next stop.
-    fn check_sensors_before_start(&mut self) -> Result<(), CommandError> {
-        if self.sup.state() != DriveState::Idle {
-            return Ok(()); // the state machine refuses the start
+    /// Idle -> OpenLoop: V/f at the electrical frequency p * speed target. Waits for the
+    /// offset measurement as [`Drive::start`] does.
+    pub fn start_open_loop(&mut self) -> Result<(), CommandError> {
+        self.request_start(DriveState::OpenLoop)
+    }
+
+    /// Whether a start is waiting for the switches-off offset measurement to settle.
+    pub fn start_pending(&self) -> bool {
+        self.pending_start.is_some()
+    }
+
+    /// Idle only (the state machine refuses a start elsewhere): a start sooner than
+    /// [`crate::design::DEMAGNETIZE_TAU_R`] rotor time constants after the last switch-off
+    /// is refused (`Demagnetizing`, nothing changes); before the offsets have settled the
+    /// start waits; otherwise it is performed now.
+    fn request_start(&mut self, to: DriveState) -> Result<(), CommandError> {
+        let state = self.sup.state();
+        if state != DriveState::Idle {
+            return Err(CommandError::WrongState(state));
         }
         let limits = &self.coeffs.limits;
         if self.off_steps < limits.demagnetize_steps {
             return Err(CommandError::Demagnetizing);
         }
+        if !self.offsets.settled(limits) {
+            self.pending_start = Some(to);
+            return Ok(());
+        }
+        self.begin_start(to)
+    }
+
+    /// Performs a start from `Idle` with settled offsets: a current channel whose offset
+    /// is beyond its limit refuses it and faults the drive (`CurrentSensor`); otherwise the
+    /// offsets are subtracted from the samples until the next stop, and every controller
+    /// and estimator is reset.
+    fn begin_start(&mut self, to: DriveState) -> Result<(), CommandError> {
+        self.pending_start = None;
+        let limits = &self.coeffs.limits;
         if let Some(reason) = self.sup.check_offsets(limits, &self.offsets) {
             self.sup.trip(reason);
             return Err(CommandError::SensorOffset);
         }
+        self.sup.start(to)?;
         self.offset_compensation = self.offsets.compensation(limits);
         // the measurement includes any drift so far: the tracker starts from zero
         self.offset_tracker = OffsetTracker::default();
-        Ok(())
-    }
-
-    /// Idle -> OpenLoop: V/f at the electrical frequency p * speed target.
-    pub fn start_open_loop(&mut self) -> Result<(), CommandError> {
-        self.check_sensors_before_start()?;
-        self.sup.start(DriveState::OpenLoop)?;
         self.reset_dynamic_state();
+        if to == DriveState::Magnetizing {
+            self.inverter.restart(&self.coeffs.inverter_test);
+        }
         self.off_steps = 0;
         Ok(())
     }
@@ -598,6 +629,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Any active state -> Idle, switches off at once (the machine coasts). A faulted drive
     /// stays faulted.
     pub fn stop(&mut self) {
+        self.pending_start = None;
         self.sup.stop();
     }
 
@@ -674,6 +706,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Trips the supervisor and switches off. The speed target is cleared: a restart
     /// after a fault needs a new speed command.
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
+        self.pending_start = None;
         self.sup.trip(reason);
         self.applied = Applied::default();
         self.refs.speed_target = N::ZERO;
@@ -710,6 +743,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                     // switches off: measure the current channels' zero offsets
                     self.offsets
                         .idle_sample(&self.coeffs.limits, inp.phase_currents);
+                    // a start that waited for them: performed now (switching from the
+                    // next step), or refused with a CurrentSensor fault
+                    if let Some(to) = self.pending_start {
+                        if self.offsets.settled(&self.coeffs.limits) {
+                            let _ = self.begin_start(to);
+                        }
+                    }
                 }
                 return PwmOutput::OFF;
             }
@@ -1547,8 +1587,17 @@ mod tests {
     use crate::observer::ObserverDesignError;
     use proptest::prelude::*;
 
+    /// A drive powered long enough (switches off, zero currents) for its offset
+    /// measurement to have settled: a start switches at the next step.
+    fn powered(mut d: Drive) -> Drive {
+        for _ in 0..d.coeffs.limits.offset_settle_steps {
+            d.step(&idle_inputs());
+        }
+        d
+    }
+
     fn drive() -> Drive {
-        Drive::new(DriveConfig::paper_defaults()).unwrap()
+        powered(Drive::new(DriveConfig::paper_defaults()).unwrap())
     }
 
     fn idle_inputs() -> DriveInputs {
@@ -1630,7 +1679,7 @@ mod tests {
     #[test]
     fn magnetizing_ends_when_flux_is_settled() {
         let magnetize = |cfg: DriveConfig| {
-            let mut d = Drive::new(cfg).unwrap();
+            let mut d = powered(Drive::new(cfg).unwrap());
             d.start().unwrap();
             let mut steps = 0;
             while d.state() == DriveState::Magnetizing && steps < 20_000 {
@@ -1666,7 +1715,7 @@ mod tests {
         for policy in [ZeroSpeedPolicy::Stop, ZeroSpeedPolicy::Hold] {
             let mut cfg = DriveConfig::paper_defaults();
             cfg.zero_speed_policy = policy;
-            let mut d = Drive::new(cfg).unwrap();
+            let mut d = powered(Drive::new(cfg).unwrap());
             d.start().unwrap();
             let inp = DriveInputs {
                 phase_currents: [1.5, -0.75, -0.75],
@@ -1801,7 +1850,7 @@ mod tests {
     fn unreachable_speed_targets_are_limited_and_reported() {
         let mut cfg = DriveConfig::paper_defaults();
         cfg.field_weakening = false;
-        let mut d = Drive::new(cfg).unwrap();
+        let mut d = powered(Drive::new(cfg).unwrap());
         let i = 1.5;
         let magnetizing = DriveInputs {
             phase_currents: [i, -0.5 * i, -0.5 * i],
@@ -1869,7 +1918,8 @@ mod tests {
     }
 
     /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
-    /// the start and faults the drive; a small offset is measured and subtracted.
+    /// the start and faults the drive; a small offset is measured and subtracted; a start
+    /// asked for before the measurement has settled waits for it (issue 13, item 3).
     #[test]
     fn idle_offsets_are_checked_at_start_and_compensated() {
         let idle = |d: &mut Drive, a: f32, n: usize| {
@@ -1880,13 +1930,49 @@ mod tests {
                 });
             }
         };
-        // too few idle samples: nothing judged, nothing compensated
-        let mut d = drive();
-        idle(&mut d, 0.5, 10);
+        let fresh = || Drive::new(DriveConfig::paper_defaults()).unwrap();
+        // a start at power-up waits, switches off, for the offsets' measurement (0.1 s)
+        // and then magnetizes with the measured offset subtracted
+        let mut d = fresh();
+        let settle = d.coeffs.limits.offset_settle_steps as usize;
+        assert_eq!(settle, 500);
+        idle(&mut d, 0.05, 10);
         assert_eq!(d.start(), Ok(()));
-        assert_eq!(d.offset_compensation, [0.0; 3]);
+        assert!(d.start_pending());
+        assert_eq!(d.state(), DriveState::Idle);
+        for _ in 10..settle - 1 {
+            let out = d.step(&DriveInputs {
+                phase_currents: [0.05, 0.0, 0.0],
+                dc_bus: 325.0,
+            });
+            assert_eq!(out, PwmOutput::OFF);
+            assert_eq!(d.state(), DriveState::Idle);
+        }
+        idle(&mut d, 0.05, 1); // the step that completes the measurement starts
+        assert!(!d.start_pending());
+        assert_eq!(d.state(), DriveState::Magnetizing);
+        assert!(
+            (d.offset_compensation[0] - 0.05).abs() < 0.01,
+            "{:?}",
+            d.offset_compensation
+        );
+        assert!(d.step(&idle_inputs()).enabled);
+        // a stop cancels a waiting start
+        let mut d = fresh();
+        assert_eq!(d.start(), Ok(()));
+        d.stop();
+        assert!(!d.start_pending());
+        idle(&mut d, 0.0, 2 * settle);
+        assert_eq!(d.state(), DriveState::Idle);
+        // a waiting start that meets an offset beyond the limit faults the drive
+        let mut d = fresh();
+        assert_eq!(d.start_open_loop(), Ok(()));
+        idle(&mut d, 0.5, settle);
+        assert_eq!(d.state(), DriveState::Fault);
+        assert_eq!(d.fault(), Some(FaultReason::CurrentSensor));
+        assert!(!d.start_pending());
         // 0.2 s idle with 0.5 A on channel a: refused, CurrentSensor fault
-        let mut d = drive();
+        let mut d = fresh();
         idle(&mut d, 0.5, 1000);
         assert_eq!(d.start(), Err(CommandError::SensorOffset));
         assert_eq!(d.state(), DriveState::Fault);
@@ -1981,7 +2067,7 @@ mod tests {
             c.current_limit = flux_current + extra;
             c.overcurrent_trip = crate::design::MAX_TRIP_OVER_LIMIT * c.current_limit;
             c.speed_ramp = 1e6; // a step: a large target saturates the speed PI at once
-            let mut d = Drive::new(c).unwrap();
+            let mut d = powered(Drive::new(c).unwrap());
             d.set_speed_target(target).unwrap();
             d.start().unwrap();
             // magnetize (frame held at 0: i_a = i_d, i_b = -i_d/2) until speed control runs

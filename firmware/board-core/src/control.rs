@@ -231,7 +231,8 @@ impl<S: SinCos> ControlLoop<S> {
 
     fn start_commissioning(&mut self, args: &NameplateArgs) -> Result<(), CommandError> {
         let state = self.drive.state();
-        if state != DriveState::Idle {
+        // a start waiting for the offset measurement has the motor claimed already
+        if state != DriveState::Idle || self.drive.start_pending() {
             return Err(CommandError::WrongState(state));
         }
         let board = commission::board(self.inputs.dc_bus);
@@ -260,12 +261,13 @@ impl<S: SinCos> ControlLoop<S> {
     }
 
     /// Swaps in a drive rebuilt from new settings ([`crate::settings`]), only while Idle
-    /// and not commissioning: otherwise the state that refused it (the machine model of a
+    /// with no start waiting and not commissioning: otherwise the state that refused it (the machine model of a
     /// running drive never changes under it). The new drive starts Idle, with fresh
     /// estimator state.
     pub fn replace_drive(&mut self, drive: Drive<S>) -> Result<(), DriveState> {
         let state = self.drive.state();
-        if state != DriveState::Idle || self.commissioning.is_some() {
+        // a start waiting for the offset measurement is not dropped under the user
+        if state != DriveState::Idle || self.commissioning.is_some() || self.drive.start_pending() {
             return Err(state);
         }
         self.drive = drive;
@@ -374,16 +376,26 @@ impl<S: SinCos> ControlLoop<S> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::board::{drive_config, POWER_STAGE};
 
+    /// A drive powered long enough, switches off and no current, for its offset
+    /// measurement to have settled: a start switches at the next step (at power-up a
+    /// start waits up to 0.1 s for the measurement, `Drive::start_pending`).
+    pub(crate) fn powered() -> Drive<acim::frames::FastSinCos> {
+        let mut d = Drive::new(drive_config()).unwrap();
+        for _ in 0..d.coeffs().limits.offset_settle_steps {
+            d.step(&acim::DriveInputs {
+                phase_currents: [0.0; 3],
+                dc_bus: 325.0,
+            });
+        }
+        d
+    }
+
     fn looped() -> ControlLoop<acim::frames::FastSinCos> {
-        ControlLoop::new(
-            Drive::new(drive_config()).unwrap(),
-            Converter::new(&POWER_STAGE),
-            10,
-        )
+        ControlLoop::new(powered(), Converter::new(&POWER_STAGE), 10)
     }
 
     fn raw_at_bus(c: &Converter, v: f32) -> RawSample {

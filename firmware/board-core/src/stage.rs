@@ -113,10 +113,10 @@ fn write<P: PowerStageIo>(io: &mut P, out: &PwmOutput) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::board::{drive_config, POWER_STAGE};
+    use crate::board::POWER_STAGE;
     use crate::control::ControlLoop;
     use crate::convert::Converter;
-    use acim::{Drive, DriveState};
+    use acim::DriveState;
 
     /// A register model of TIM1 and ADC1/2 as the reference manual describes them:
     /// acknowledging clears both end flags, a break clears MOE and sets BIF, MOE can be
@@ -177,7 +177,7 @@ mod tests {
 
     fn setup() -> (ControlLoop<acim::frames::FastSinCos>, Regs) {
         let conv = Converter::new(&POWER_STAGE);
-        let ctl = ControlLoop::new(Drive::new(drive_config()).unwrap(), conv, 500);
+        let ctl = ControlLoop::new(crate::control::tests::powered(), conv, 500);
         let bias = POWER_STAGE.bias_counts() as u16;
         let bus = (325.0 / POWER_STAGE.volts_per_count()) as u16;
         let regs = Regs {
