@@ -8,12 +8,12 @@
 //! Bounds. The blocks agree within 1e-5 to 1e-4 pu (`acim::fixed` tests); in the closed
 //! loop each drive's differences feed back through the plant, which keeps them bounded.
 //! The worst per-step differences while running, as measured (printed by
-//! `cargo test -p acim-tests --test lockstep -- --nocapture`): speed estimate 0.22-0.37 rpm,
-//! true speed 0.06-0.23 rpm, i_sq* 2.5 mA, rotor flux 34 uWb in the scenarios with the
+//! `cargo test -p acim-tests --test lockstep -- --nocapture`): speed estimate 0.23-0.39 rpm,
+//! true speed 0.10-0.23 rpm, i_sq* 3.5 mA, rotor flux 40 uWb in the scenarios with the
 //! default sensors; in fig 12 (realistic sensors: ADC steps of 4.9 mA and a switching
 //! inverter, estimate jitter of +/-3.6 rpm raw) the two runs' jitter differs sample by
-//! sample: speed estimate 1.85 rpm, true speed 0.52 rpm, i_sq* 23 mA. The bounds are
-//! about twice those. Since every start waits for the switches-off offset measurement
+//! sample: speed estimate 2.56 rpm, true speed 0.79 rpm, i_sq* 32 mA. The bounds are
+//! about twice the default-sensor figures and 1.3-1.6 times fig 12's. Since every start waits for the switches-off offset measurement
 //! (the simulator powers the drive 0.1 s before t = 0), regen-120's two runs reach
 //! `Running` a step apart and their speed estimates' handover transients differ by
 //! 0.90 rpm and their i_sq* by 10 mA: its bounds are 1.5 rpm and 20 mA. A switch of i_sq* at a threshold (the regeneration

@@ -135,9 +135,10 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// With [`crate::ZeroSpeedPolicy::Hold`]: a zero speed target has been held for the
     /// dwell with the flux on. Speed and orientation are then unobservable (zero stator
     /// frequency): the rotor may creep under sensor offsets or load while the estimate
-    /// reads about 0 (docs/robustness.md measures 19 rpm with 5 mA offsets), which this
-    /// flag reports (issue 13, item 6). With `Stop` only while a drive started with a zero
-    /// target waits for one (after turning, `Stop` switches off instead).
+    /// reads about 0 (docs/robustness.md measures 17 rpm over 30 s with the paper
+    /// sensors), which this flag reports (issue 13, item 6). With `Stop` only while a drive
+    /// started with a zero target waits for one (after turning, `Stop` switches off
+    /// instead).
     pub zero_speed_held: bool,
 }
 
