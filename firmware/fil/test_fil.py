@@ -19,7 +19,9 @@ import svd  # noqa: E402
 READ_ONLY_WRITE_BACK = {"RCC.CR", "RCC.CFGR"}
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-CALIBRATION_PERIODS = 1100      # 1024 offset samples plus start-up
+# 1024 offset samples plus start-up, then the drive's own switches-off offset measurement
+# (500 periods, which every start waits for) before the ready line
+CALIBRATION_PERIODS = 1600
 # a start is refused for 5 rotor time constants after a switch-off (acim::design::
 # DEMAGNETIZE_TAU_R; the paper machine's tau_r = Lr / Rr = 0.56 / 8.4 s): 1667 periods
 DEMAGNETIZE_PERIODS = 1667
@@ -446,7 +448,8 @@ class Settings(unittest.TestCase):
 
     def boot(self, page=None):
         m = fil.Machine(fil.default_elf("selftest"), settings_page=page)
-        m.run_until(lambda m: "ready" in m.output(), 100)
+        # ready after the drive's switches-off offset measurement (500 periods)
+        m.run_until(lambda m: "ready" in m.output(), 600)
         m.run(5)
         self.assertIsNone(m.halted)
         return m
@@ -635,7 +638,8 @@ class SelfTest(unittest.TestCase):
         acceptance 2 rpm on 10 ms averages; these are single 10 Hz samples) and the load
         estimate within 0.1 N m."""
         m = fil.Machine(fil.default_elf("selftest"))
-        m.run(20)
+        # ready after the drive's switches-off offset measurement (500 periods)
+        m.run_until(lambda m: "ready" in m.output(), 600)
         self.assertIn("ready", m.output())
         command(m, "speed 500", 5)
         command(m, "start", 5)

@@ -291,6 +291,9 @@ fn main() -> ! {
         (pac::Interrupt::TIM6_DACUNDER, t)
     };
 
+    // every start waits for the drive's own switches-off offset measurement (0.1 s of
+    // idle periods, `acim::Drive::start_pending`): "ready" is said once it has run
+    let settle_periods = drive.coeffs().limits.offset_settle_steps;
     control_isr::install(IsrState {
         ctl: ControlLoop::new(drive, conv, board::TELEMETRY_DECIMATION),
         tel: tel_p,
@@ -304,6 +307,15 @@ fn main() -> ! {
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
     let mut last_beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
+    let first_beat = last_beat;
+    while last_beat.wrapping_sub(first_beat) < settle_periods {
+        // the watchdog as in the main loop: fed only while the control interrupt is alive
+        let beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
+        if beat != last_beat {
+            last_beat = beat;
+            watchdog.feed();
+        }
+    }
 
     let mut line = RequestAssembler::new();
     let mut out = Uart::new();

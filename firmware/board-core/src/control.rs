@@ -334,11 +334,17 @@ impl<S: SinCos> ControlLoop<S> {
             .is_some_and(|c| !matches!(c.stage(), Stage::Done | Stage::Failed(_)))
     }
 
-    /// The published state code: the drive's ([`DriveState::code`]), or
+    /// The published state code: the drive's ([`DriveState::code`]), Magnetizing while a
+    /// start waits for the offset measurement ([`Drive::start_pending`]), or
     /// [`STATE_COMMISSIONING`].
     pub fn state_code(&self) -> u8 {
         if self.commissioning.is_some() {
             STATE_COMMISSIONING
+        } else if self.drive.start_pending() {
+            // a start waiting for the offset measurement (switches off, at most 0.1 s) is
+            // reported as the start it is: nothing that needs an idle drive (set, save,
+            // defaults, commissioning) may run under it
+            DriveState::Magnetizing.code()
         } else {
             self.drive.state().code()
         }
