@@ -12,7 +12,8 @@
 //! // a bad configuration is a `ConfigError` naming the field and the rule
 //! let mut drive = Drive::new(DriveConfig::paper_defaults()).expect("valid configuration");
 //! let (mut plant, mut pwm) = (Plant::paper_default(1), PwmPreload::new());
-//! drive.start().expect("an idle drive starts"); // magnetize, then run
+//! // measure the current offsets (0.1 s, switches off), magnetize, then run
+//! drive.start().expect("an idle drive starts");
 //! drive.set_speed_target(300.0 * RPM_TO_RAD_S).expect("a finite target");
 //! for _ in 0..10_000 {
 //!     // 2 s at 5 kHz
