@@ -67,6 +67,13 @@ fn rms(x: &[f32]) -> f32 {
     (x.iter().map(|v| v * v).sum::<f32>() / x.len() as f32).sqrt()
 }
 
+/// The rms of the deviation `dev` (one sample per step of `ts` s after the kick) between
+/// `a` and `b` s, clipped to what was recorded.
+fn window_rms(dev: &[f32], ts: f32, a: f32, b: f32) -> f32 {
+    let (i, j) = ((a / ts) as usize, (b / ts) as usize);
+    rms(&dev[i.min(dev.len())..j.min(dev.len())])
+}
+
 /// Measures the growth rate at one operating point with gain `k`.
 pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, ScenarioError> {
     measure_with(speed_rpm, load_nm, k, &|_| {})
@@ -116,10 +123,7 @@ pub fn measure_with(
     setup: &dyn Fn(&mut Scenario),
 ) -> Result<GrowthPoint, ScenarioError> {
     let (dev, lost, ts) = kicked(speed_rpm, load_nm, k, setup, 2.0)?;
-    let w = |a: f32, b: f32| {
-        let (i, j) = ((a / ts) as usize, (b / ts) as usize);
-        rms(&dev[i.min(dev.len())..j.min(dev.len())])
-    };
+    let w = |a: f32, b: f32| window_rms(&dev, ts, a, b);
     let growth_rate = if lost || dev.len() < (0.5 / ts) as usize {
         // diverged: from the first window to the end of what was recorded
         let t_end = dev.len() as f32 * ts;
@@ -163,10 +167,7 @@ pub fn linear_growth_rate(
     setup: &dyn Fn(&mut Scenario),
 ) -> Result<f32, ScenarioError> {
     let (dev, lost, ts) = kicked(speed_rpm, load_nm, k, setup, 0.1)?;
-    let w = |a: f32, b: f32| {
-        let (i, j) = ((a / ts) as usize, (b / ts) as usize);
-        rms(&dev[i.min(dev.len())..j.min(dev.len())])
-    };
+    let w = |a: f32, b: f32| window_rms(&dev, ts, a, b);
     let (r1, r2) = (w(0.10, 0.15), w(0.20, 0.25));
     // a diverging point is stopped at 30 degrees, after the windows
     let recorded = dev.len() as f32 * ts >= 0.25;
