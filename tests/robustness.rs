@@ -276,8 +276,10 @@ fn fig9_rs_converges_while_running_without_standstill_identification() {
 
 /// Item 3: 20 mA offsets drifting in after the start's switches-off measurement, at
 /// 60 rpm regenerating (0.5 N m, f_s = 1.67 Hz): with the running offset tracker the
-/// speed estimate holds within 2 rpm; without it the drift pulls the running Rs law and
-/// the estimate is off by more (docs/robustness.md, item 3).
+/// speed estimate holds within 2 rpm (0.28 rpm); without it the drift pulls the running
+/// Rs law and the estimate is off by more (1.51 rpm; 2.17 rpm before the sensors' gain
+/// mismatch was calibrated at start, whose ripple added to it): at least three times the
+/// tracked error and beyond 1 rpm (docs/robustness.md, item 3).
 #[test]
 fn offset_drift_after_the_start_is_tracked() {
     let c = case(Variant::OffsetDrift20mA, 60.0, true, 0.5);
@@ -292,7 +294,8 @@ fn offset_drift_after_the_start_is_tracked() {
     assert!(o.speed_est_error_rpm.abs() <= 2.0, "{o:?}");
     s.drive.offset_tracking = false;
     let off = acim_sim::robustness::run_scenario(&c, &s).unwrap();
-    assert!(off.speed_est_error_rpm.abs() > 2.0, "{off:?}");
+    let (on, off_err) = (o.speed_est_error_rpm.abs(), off.speed_est_error_rpm.abs());
+    assert!(off_err > 1.0 && off_err > 3.0 * on, "{o:?} vs {off:?}");
 }
 
 const RR_SCENARIO: &str = include_str!("../crates/acim-sim/scenarios/rr-adaptation.toml");
@@ -334,4 +337,42 @@ fn rotor_resistance_adapts_at_speed_steps() {
         let off_err = m_off.windows.get("adapted").unwrap().speed_est_err_mean_rpm;
         assert!(off_err.abs() > 5.0, "{overrides:?}: {off_err}");
     }
+}
+
+/// The current sensors' gain mismatch (the paper scenarios' +0.3 % / -0.3 %) identified
+/// while magnetizing at rest, in both arithmetics: the ratio g_a / g_b within 0.15 % (the
+/// idle offset measurement's noise, 0.45 mA on 1.5 A, scatters it by about 0.05 %), the
+/// two arithmetics within 0.02 % of each other; and its effect on the far side of the
+/// unobservable line (60 rpm, 4.5 N m regenerating, f_s = -1.05 Hz, no regeneration
+/// limit), where the negative-sequence ripple the mismatch makes is in the observer's
+/// band: held within 2 rpm with the calibration, beyond without
+/// (docs/robustness.md, the far side).
+#[test]
+fn current_gain_mismatch_is_calibrated_at_start() {
+    let c = case(Variant::Nominal, 60.0, true, 4.5);
+    assert!(c.stator_frequency_hz() <= -1.0);
+    let setup = acim_sim::robustness::Setup {
+        mode: RsMode::Running,
+        regen_min_frequency_hz: 0.0,
+    };
+    let s = c.scenario_with(&setup);
+    let g = s.sensors.gain_error;
+    let ratio = (1.0 + g[0]) / (1.0 + g[1]);
+    let mut ks = Vec::new();
+    for arithmetic in ["f32", "fixed"] {
+        let sc = s
+            .with_overrides(&[format!("drive.arithmetic=\"{arithmetic}\"")])
+            .unwrap();
+        let r = acim_sim::sim::run(&sc).unwrap();
+        let k = r.current_gain_correction;
+        assert!((k / ratio - 1.0).abs() < 1.5e-3, "{arithmetic}: k {k}, true {ratio}");
+        ks.push(k);
+        let o = acim_sim::robustness::run_scenario(&c, &sc).unwrap();
+        assert!(o.pass(), "{arithmetic}: {o:?}");
+    }
+    assert!((ks[0] / ks[1] - 1.0).abs() < 2e-4, "{ks:?}");
+    let mut off = s.clone();
+    off.drive.current_gain_calibration = false;
+    let o = acim_sim::robustness::run_scenario(&c, &off).unwrap();
+    assert!(o.speed_est_error_rpm.abs() > 2.0, "{o:?}");
 }

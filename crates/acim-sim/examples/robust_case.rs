@@ -38,8 +38,9 @@ fn main() {
         sc = sc.with_overrides(std::slice::from_ref(kv)).unwrap();
     }
     let o = acim_sim::robustness::run_scenario(&case, &sc).unwrap();
+    let r = acim_sim::sim::run(&sc).unwrap();
+    eprintln!("current gain correction {:.5}", r.current_gain_correction);
     if let Ok(p) = std::env::var("CSV") {
-        let r = acim_sim::sim::run(&sc).unwrap();
         let mut f = String::from(acim_sim::sim::CSV_HEADER);
         f.push('\n');
         for (i, row) in r.rows.iter().enumerate() {

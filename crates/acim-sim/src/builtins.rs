@@ -50,6 +50,7 @@ fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) ->
     let mut s = base(name, description, duration_s);
     s.drive.rs_estimation = false;
     s.drive.offset_tracking = false;
+    s.drive.current_gain_calibration = false;
     s
 }
 

@@ -332,6 +332,9 @@ pub struct DriveSpec {
     /// Track the current-sensor offsets' drift while turning (default true;
     /// `acim::DriveConfig::offset_tracking`; the paper's scheme sets it off).
     pub offset_tracking: bool,
+    /// Calibrate the current sensors' relative gain at every start from rest (default true;
+    /// `acim::DriveConfig::current_gain_calibration`; the paper's scheme sets it off).
+    pub current_gain_calibration: bool,
     /// Rotor-resistance adaptation at the start of speed ramps (issue 13, item 7;
     /// `acim::DriveConfig::rr_adaptation`, off by default: it assumes the load holds).
     pub rr_adaptation: bool,
@@ -381,6 +384,7 @@ impl Default for DriveSpec {
             inverter_identification: d.inverter_identification,
             rs_standstill_identification: d.rs_standstill_identification,
             offset_tracking: d.offset_tracking,
+            current_gain_calibration: d.current_gain_calibration,
             rr_adaptation: d.rr_adaptation,
         }
     }
@@ -1168,6 +1172,7 @@ impl Scenario {
         drive.inverter_identification = d.inverter_identification;
         drive.rs_standstill_identification = d.rs_standstill_identification;
         drive.offset_tracking = d.offset_tracking;
+        drive.current_gain_calibration = d.current_gain_calibration;
         drive.rr_adaptation = d.rr_adaptation;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,

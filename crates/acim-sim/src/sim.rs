@@ -184,6 +184,9 @@ pub struct RunResult {
     /// The rotor-resistance adaptation at the end, when the drive runs it
     /// (`drive.rr_adaptation`).
     pub rotor_resistance: Option<RotorResistanceRecord>,
+    /// The current sensors' gain correction at the end, g_a / g_b as the drive calibrated
+    /// it (1: not calibrated; `drive.current_gain_calibration`).
+    pub current_gain_correction: f32,
 }
 
 /// The rotor-resistance adaptation (issue 13, item 7) at the end of a run.
@@ -380,12 +383,11 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
 }
 
 /// The time the drive is powered, switches off, before a scenario's t = 0, s: the
-/// library's switches-off offset measurement ([`acim::design::OFFSET_SETTLE_FILTER_TIMES`]
-/// x [`acim::design::OFFSET_FILTER_TIME`]), which every start waits for. A real drive is
+/// library's switches-off offset measurement ([`acim::design::OFFSET_MEASUREMENT_TIME`]),
+/// which every start waits for. A real drive is
 /// powered before its start command; with it a start at t = 0 switches at once, as the
 /// scenarios' timelines (and the paper's figures) assume.
-pub const POWER_UP_S: f32 =
-    acim::design::OFFSET_SETTLE_FILTER_TIMES * acim::design::OFFSET_FILTER_TIME;
+pub const POWER_UP_S: f32 = acim::design::OFFSET_MEASUREMENT_TIME;
 
 /// The power-up before t = 0 ([`POWER_UP_S`]): the drive steps with the switches off on
 /// the sensors' readings of the plant, which stands still in time (its rotor at the
@@ -593,6 +595,7 @@ pub fn run_with_progress(
                 configured_dead_time_us: v.drive.dead_time * 1e6,
             }
         }),
+        current_gain_correction: drive.current_gain_correction(),
         rotor_resistance: v.drive.rr_adaptation.then(|| {
             let r = drive.rotor_resistance();
             RotorResistanceRecord {

@@ -43,6 +43,9 @@ pub trait Controller {
     fn inverter_test(&self) -> (InverterTestOutcome, f32);
     /// The rotor-resistance adaptation in SI ([`crate::rr_estimator`]).
     fn rotor_resistance(&self) -> RrReport;
+    /// The current channels' gain ratio g_a / g_b as calibrated
+    /// ([`crate::gain_calibration`]; 1 before any calibration).
+    fn current_gain_correction(&self) -> f32;
 }
 
 impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, M> {
@@ -90,6 +93,9 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, 
     fn rotor_resistance(&self) -> RrReport {
         self.rotor_resistance_estimator()
             .report(self.design().referred_rotor_resistance, 1.0)
+    }
+    fn current_gain_correction(&self) -> f32 {
+        Drive::current_gain_correction(self)
     }
 }
 
@@ -141,5 +147,8 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Dr
             self.design().referred_rotor_resistance,
             self.bases().resistance(),
         )
+    }
+    fn current_gain_correction(&self) -> f32 {
+        crate::fixed::q::from_q24(Drive::current_gain_correction(self).0)
     }
 }

@@ -11,6 +11,7 @@ use crate::flux::FluxModelConfig;
 use crate::math::{is_finite, sqrt};
 use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
+use crate::gain_calibration::GainCalibrationConfig;
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
@@ -213,6 +214,11 @@ pub struct DriveConfig {
     /// ([`crate::offset_tracker`]); an estimate at `offset_limit` is a current-sensor
     /// fault.
     pub offset_tracking: bool,
+    /// Current-sensor gain calibration at every start from rest (on by default; two-phase
+    /// sensing only): the b channel's gain relative to a's, identified from the beta
+    /// voltage while magnetizing with the frame held, scales the b samples from the
+    /// handover ([`crate::gain_calibration`]).
+    pub current_gain_calibration: bool,
     /// Rotor-resistance adaptation from speed transients (issue 13, item 7; off by
     /// default): over each speed ramp from a steady point (its start, its run and 0.25 s
     /// beyond its end, at most 0.8 s), the speed the observer moved beyond what the
@@ -273,6 +279,7 @@ impl DriveConfig {
             flux_optimisation: false,
             inverter_identification: false,
             offset_tracking: true,
+            current_gain_calibration: true,
             rr_adaptation: false,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
@@ -473,13 +480,20 @@ pub const RESIDUAL_RS_TOLERANCE: f32 = 0.5;
 /// ... plus this fraction of the linear voltage limit at the highest bus (inverter
 /// non-linearity, flux and inductance errors).
 pub const RESIDUAL_VOLTAGE_FRACTION: f32 = 0.05;
-/// The idle offset means are leaky means over this time, s.
-pub const OFFSET_FILTER_TIME: f32 = 0.02;
+/// The idle offset measurement: the first samples with the switches off over this time
+/// are averaged with equal weights (the mean, the best estimate of a constant offset
+/// under white noise: 10 mA of noise leaves 0.45 mA); the offsets count as settled
+/// then, s.
+pub const OFFSET_MEASUREMENT_TIME: f32 = 0.1;
+/// After the measurement, the idle means follow a drift as leaky means over this time, s
+/// (10 mA of noise leaves 0.32 mA).
+pub const OFFSET_FILTER_TIME: f32 = 0.1;
+/// Idle samples within this time of a switch-off are not taken: the stator current
+/// decays through the free-wheeling diodes first (within a millisecond), s.
+pub const OFFSET_SWITCH_OFF_SKIP_TIME: f32 = 0.002;
 /// Time constant of the running offset check's leaky mean of the alpha-beta current, s:
 /// long against the electrical period, so that the AC current averages out.
 pub const RUNNING_OFFSET_FILTER_TIME: f32 = 2.0;
-/// They count as settled after this many filter times of idle samples.
-pub const OFFSET_SETTLE_FILTER_TIMES: f32 = 5.0;
 /// A channel whose idle offset exceeds this fraction of the over-current trip is a
 /// sensor fault (2 % of an 8 A trip: 0.16 A, some 30 LSB of a 12-bit +/-10 A channel).
 pub const OFFSET_FRACTION: f32 = 0.02;
@@ -548,10 +562,15 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub magnetizing_timeout_steps: u32,
     /// Periods after a switch-off before a start is accepted: [`DEMAGNETIZE_TAU_R`] tau_r.
     pub demagnetize_steps: u32,
-    /// Idle offset means: leaky-mean gain Ts / [`OFFSET_FILTER_TIME`].
+    /// Idle offset means after the measurement: leaky-mean gain Ts /
+    /// [`OFFSET_FILTER_TIME`].
     pub offset_filter: N::Gain,
-    /// Idle samples before the offset means are trusted.
+    /// Idle samples averaged with equal weights, after which the offset means are trusted
+    /// ([`OFFSET_MEASUREMENT_TIME`]).
     pub offset_settle_steps: u32,
+    /// Idle periods after a switch-off whose samples are not taken
+    /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`], >= 1).
+    pub offset_skip_steps: u32,
     /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`] of the trip (also the
     /// largest DC component of the running alpha-beta current).
     pub offset_limit: N,
@@ -920,6 +939,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
     pub offset_tracker: OffsetTrackerConfig<N>,
+    /// The current-sensor gain calibration ([`DriveConfig::current_gain_calibration`]).
+    pub gain_calibration: GainCalibrationConfig<N>,
     /// The rotor-resistance adaptation ([`DriveConfig::rr_adaptation`]).
     pub rr: RrEstimatorConfig<N>,
 }
@@ -986,6 +1007,8 @@ pub struct DriveDesign {
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker (issue 13, item 3).
     pub offset_tracker: OffsetTrackerConfig,
+    /// The current-sensor gain calibration at start.
+    pub gain_calibration: GainCalibrationConfig,
     /// The rotor-resistance adaptation (issue 13, item 7).
     pub rr_estimator: RrEstimatorConfig,
     /// Largest |speed target|, rad/s.
@@ -1215,6 +1238,12 @@ impl DriveDesign {
                 i_d,
                 m.rotor_time_constant(),
             ),
+            gain_calibration: GainCalibrationConfig::new(
+                cfg.current_gain_calibration && cfg.current_sensing == CurrentSensing::TwoPhase,
+                ts,
+                m.stator_resistance(),
+                i_d,
+            ),
             rr_estimator: RrEstimatorConfig::new(
                 cfg.rr_adaptation,
                 ts,
@@ -1270,8 +1299,8 @@ impl DriveDesign {
                 demagnetize_steps: (DEMAGNETIZE_TAU_R * m.rotor_time_constant() / ts) as u32,
                 offset_filter: (ts / OFFSET_FILTER_TIME).min(1.0),
                 // rounded: 0.1 s / 0.2 ms is 499.99.. in f32
-                offset_settle_steps: (OFFSET_SETTLE_FILTER_TIMES * OFFSET_FILTER_TIME / ts + 0.5)
-                    as u32,
+                offset_settle_steps: ((OFFSET_MEASUREMENT_TIME / ts + 0.5) as u32).max(1),
+                offset_skip_steps: ((OFFSET_SWITCH_OFF_SKIP_TIME / ts + 0.5) as u32).max(1),
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
                 running_offset_min_frequency: 4.0 * i_max
@@ -1350,6 +1379,7 @@ impl DriveCoeffs<f32> {
             rs_running: d.rs_running,
             inverter_test: d.inverter_test,
             offset_tracker: d.offset_tracker,
+            gain_calibration: d.gain_calibration,
             rr: d.rr_estimator,
         }
     }

@@ -53,6 +53,7 @@ use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
+use crate::gain_calibration::GainCalibration;
 use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
 use crate::pi::PiController;
@@ -396,6 +397,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     inverter: InverterTest<N>,
     /// The offsets' drift since the start, tracked while turning (issue 13, item 3).
     offset_tracker: OffsetTracker<N>,
+    /// The current sensors' relative gain, calibrated while magnetizing at rest
+    /// ([`crate::gain_calibration`]).
+    gain_cal: GainCalibration<N>,
     /// A start asked for before the switches-off offset measurement had settled: the idle
     /// step performs it once the measurement has (issue 13, item 3: offsets measured
     /// before every start).
@@ -481,6 +485,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             search: SpeedSearch::new(),
             inverter: InverterTest::default(),
             offset_tracker: OffsetTracker::default(),
+            gain_cal: GainCalibration::default(),
             pending_start: None,
         })
     }
@@ -513,6 +518,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     pub fn telemetry(&self) -> &DriveTelemetry<N> {
         &self.telemetry
     }
+
+    /// The current channels' gain ratio g_a / g_b as the last calibration at a start from
+    /// rest measured it (1 before any; [`crate::gain_calibration`]).
+    pub fn current_gain_correction(&self) -> N {
+        self.gain_cal.ratio
+    }
+
     /// The current-sensor offsets' drift since the start as the running tracker estimates
     /// it (stationary frame, A; subtracted from the samples on top of the offsets measured
     /// with the switches off; [`crate::offset_tracker`]).
@@ -562,8 +574,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Idle -> Magnetizing: resets every controller and estimator and starts building flux.
     ///
     /// The current-sensor offsets are measured with the switches off before every start
-    /// ([`OffsetMonitor`], [`crate::design::OFFSET_SETTLE_FILTER_TIMES`] x
-    /// [`crate::design::OFFSET_FILTER_TIME`] = 0.1 s of idle steps). A start asked for
+    /// ([`OffsetMonitor`], the mean of [`crate::design::OFFSET_MEASUREMENT_TIME`] = 0.1 s
+    /// of idle steps). A start asked for
     /// sooner, e.g. right after power-up, is accepted and waits: the drive stays `Idle`
     /// with the switches off ([`Drive::start_pending`]) and the step that completes the
     /// measurement performs the start, or faults the drive (`CurrentSensor`) if an offset
@@ -622,6 +634,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         self.reset_dynamic_state();
         if to == DriveState::Magnetizing {
             self.inverter.restart(&self.coeffs.inverter_test);
+            self.gain_cal.restart(&self.coeffs.gain_calibration);
         }
         self.off_steps = 0;
         Ok(())
@@ -741,9 +754,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             Gate::Off(None) => {
                 self.off_steps = self.off_steps.saturating_add(1);
                 if self.sup.state() == DriveState::Idle {
-                    // switches off: measure the current channels' zero offsets
-                    self.offsets
-                        .idle_sample(&self.coeffs.limits, inp.phase_currents);
+                    // switches off: measure the current channels' zero offsets (once the
+                    // current of the last switching has decayed)
+                    if self.off_steps > self.coeffs.limits.offset_skip_steps {
+                        self.offsets
+                            .idle_sample(&self.coeffs.limits, inp.phase_currents);
+                    }
                     // a start that waited for them: performed now (switching from the
                     // next step), or refused with a CurrentSensor fault
                     if let Some(to) = self.pending_start {
@@ -911,7 +927,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
         let [oa, ob, oc] = self.offset_compensation;
         let [a, b, c] = inp.phase_currents;
-        let (a, b, c) = (a - oa, b - ob, c - oc);
+        // the a and b channels' gains equalized (1 until calibrated; two-phase sensing)
+        let [fa, fb] = self.gain_cal.factors;
+        let (a, b, c) = ((a - oa) * fa, (b - ob) * fb, c - oc);
         let (i_ab, current_sum) = match self.coeffs.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), N::ZERO),
             CurrentSensing::ThreePhase => (clarke_three(a, b, c), a + b + c),
@@ -1116,6 +1134,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                     // slip at zero torque current) and the flux builds again from zero
                     // in that frame (the search's flux decays with tau_r meanwhile)
                     r.flying = true;
+                    self.gain_cal.abandon();
                     self.est.observer.preset_speed(speed);
                     self.est.flux.rotor_flux = N::ZERO;
                 }
@@ -1136,6 +1155,17 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // the inverter test (issue 13, item 2) holds the d-axis current at its levels
             // for its first 0.45 s; on a flying start it does not apply
             let mut i_sd = c.i_sd_ref;
+            // the d-axis voltage the flux model predicts at rest, without the inverter's
+            // error: R_s_hat i_d + R_R i_d - lambda_R / tau_r (referred)
+            let rotor_voltage = c.referred_rotor_resistance * m.i_dq.d
+                - N::gain(c.inv_rotor_time_constant, e.rotor_flux);
+            if !r.flying {
+                self.gain_cal.update(
+                    &c.gain_calibration,
+                    self.applied.v_dq.q - e.rs * m.i_dq.q,
+                    e.rs * m.i_dq.d + rotor_voltage,
+                );
+            }
             if self.inverter.running() {
                 if r.flying {
                     self.inverter.skip();
@@ -1157,6 +1187,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 && !self.inverter.running()
             {
                 self.sup.magnetized();
+                self.gain_cal.finish(&c.gain_calibration);
                 self.est.observer.start_running(m.i_dq.q);
                 r.speed_ctl.reset();
                 // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
@@ -1978,9 +2009,11 @@ mod tests {
         assert_eq!(d.start(), Err(CommandError::SensorOffset));
         assert_eq!(d.state(), DriveState::Fault);
         assert_eq!(d.fault(), Some(FaultReason::CurrentSensor));
-        // 0.05 A: accepted, and subtracted from the samples
+        // 0.05 A appearing after the measurement (a powered drive): followed by the leaky
+        // mean (OFFSET_FILTER_TIME, 0.1 s) within 1e-3 A after 0.6 s; accepted, and
+        // subtracted from the samples
         let mut d = drive();
-        idle(&mut d, 0.05, 1000);
+        idle(&mut d, 0.05, 3000);
         assert_eq!(d.start(), Ok(()));
         assert!((d.offset_compensation[0] - 0.05).abs() < 1e-3);
         let m = d.sense(

@@ -47,6 +47,7 @@
 // control blocks
 pub mod flux;
 pub mod frames;
+pub mod gain_calibration;
 pub mod inverter_test;
 pub mod math;
 pub mod num;

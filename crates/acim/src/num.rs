@@ -101,6 +101,8 @@ pub trait Num:
     fn recip(self) -> Self;
     /// `num / den` for 0 < num < den (the overmodulation scale).
     fn ratio(num: Self, den: Self) -> Self;
+    /// `x / count` for a count >= 1 (a running mean's step; 0 for a count of 0).
+    fn per_count(x: Self, count: u32) -> Self;
     /// sqrt(x) for x >= 0 (0 for x <= 0): the field-weakening limits of
     /// [`crate::Drive`] (issue 15).
     fn sqrt(self) -> Self;
@@ -217,6 +219,14 @@ impl Num for f32 {
     #[inline(always)]
     fn ratio(num: f32, den: f32) -> f32 {
         num / den
+    }
+    #[inline(always)]
+    fn per_count(x: f32, count: u32) -> f32 {
+        if count == 0 {
+            0.0
+        } else {
+            x / count as f32
+        }
     }
     #[inline(always)]
     fn neg_mean(a: f32, b: f32) -> f32 {

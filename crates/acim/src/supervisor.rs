@@ -495,8 +495,9 @@ impl<N: Num> ControlMonitor<N> {
 }
 
 /// The current channels' zero offsets, measured while the drive is idle with the switches
-/// off (every true phase current is then zero): a leaky mean per channel over
-/// `offset_filter`. Checked at every start against `offset_limit` (a drifting or broken
+/// off (every true phase current is then zero): per channel, the mean of the first
+/// `offset_settle_steps` samples (equal weights), then a leaky mean over `offset_filter`
+/// that follows a drift. Checked at every start against `offset_limit` (a drifting or broken
 /// amplifier) and, when settled, subtracted from the samples while the drive runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OffsetMonitor<N: Num = f32> {
@@ -528,8 +529,14 @@ impl<N: Num> OffsetMonitor<N> {
         if !(currents[0].is_finite() && currents[1].is_finite() && currents[2].is_finite()) {
             return;
         }
+        let n = self.idle_steps;
         for (o, x) in self.offsets.iter_mut().zip(currents) {
-            *o = *o + N::gain(limits.offset_filter, x - *o);
+            *o = if n < limits.offset_settle_steps {
+                // the running mean of the samples so far (n + 1 >= 1)
+                *o + N::per_count(x - *o, n + 1)
+            } else {
+                *o + N::gain(limits.offset_filter, x - *o)
+            };
         }
         self.idle_steps = self.idle_steps.saturating_add(1);
     }

@@ -18,6 +18,7 @@ use crate::design::{
 use crate::flux::FluxModelConfig;
 use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
+use crate::gain_calibration::GainCalibrationConfig;
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
@@ -353,6 +354,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             demagnetize_steps: d.limits.demagnetize_steps,
             offset_filter: gain(d.limits.offset_filter, "control_period")?,
             offset_settle_steps: d.limits.offset_settle_steps,
+            offset_skip_steps: d.limits.offset_skip_steps,
             offset_limit: pu(d.limits.offset_limit, b.current, "overcurrent_trip")?,
             running_offset_filter: gain(d.limits.running_offset_filter, "control_period")?,
             running_offset_min_frequency: pu(
@@ -385,6 +387,26 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
         offset_tracker: offset_tracker(&d.offset_tracker, b).ok_or(missing("overcurrent_trip"))?,
+        gain_calibration: GainCalibrationConfig {
+            enabled: d.gain_calibration.enabled,
+            filter: gain(d.gain_calibration.filter * RS_EXTRA, "control_period")?,
+            // the finer format's whole range, +/-2 pu
+            fine_bounds: (
+                <Q24 as crate::num::Num>::to_fine(Q24(-(1 << 25))),
+                <Q24 as crate::num::Num>::to_fine(Q24((1 << 25) - 1)),
+            ),
+            min_voltage: pu(d.gain_calibration.min_voltage, b.voltage, "flux_current")?,
+            ratio_scale: gain(
+                0.5 * b.voltage / d.gain_calibration.min_voltage,
+                "current_gain_calibration",
+            )?,
+            sqrt3: gain(d.gain_calibration.sqrt3, "current_gain_calibration")?,
+            // dimensionless
+            bounds: (
+                Q24(to_q24(d.gain_calibration.bounds.0)),
+                Q24(to_q24(d.gain_calibration.bounds.1)),
+            ),
+        },
         rr: rr_estimator(&d.rr_estimator, b).ok_or(missing("machine.rotor_resistance"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,

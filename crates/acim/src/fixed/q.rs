@@ -456,6 +456,23 @@ impl crate::num::Num for Q24 {
         Q24(mul(num.0, reciprocal(den.0)))
     }
     #[inline(always)]
+    fn per_count(x: Q24, count: u32) -> Q24 {
+        // an integer division rounded to nearest (a running mean's steps would otherwise
+        // all lean towards zero); a count beyond i32 leaves 0
+        match i32::try_from(count) {
+            Ok(n) if n > 0 => {
+                let half = n / 2;
+                let r = if x.0 >= 0 {
+                    x.0.saturating_add(half)
+                } else {
+                    x.0.saturating_sub(half)
+                };
+                Q24(r / n)
+            }
+            _ => Q24(0),
+        }
+    }
+    #[inline(always)]
     fn neg_mean(a: Q24, b: Q24) -> Q24 {
         // each halved first: no overflow
         Q24(0i32.saturating_sub((a.0 >> 1).saturating_add(b.0 >> 1)))
