@@ -257,6 +257,12 @@ mod fw {
         // comparison keeps the standstill mode (the running law's Q7.24 cost is not in
         // these figures; the f32 bench, closed loop against the motor model, has it)
         c.rs_estimation_mode = acim::RsEstimationMode::Standstill;
+        // nor does the current-sensor gain calibration have one: its q-axis voltage is
+        // the current PI's response to the noise alone (a random walk), which it read as
+        // a mismatch at its 5 % bound, and the two drives then faulted; off here (it runs
+        // only while magnetizing, outside these figures; its two products per step in
+        // the sense stage remain)
+        c.current_gain_calibration = false;
         c
     }
 

@@ -668,6 +668,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
         self.coeffs = N::coeffs(&design, &self.bases).map_err(|_| CommandError::OutOfRange)?;
         self.design = design;
+        // a design without the gain calibration (switched off, or three-phase sensing)
+        // uses the samples as they come
+        if !self.coeffs.gain_calibration.enabled {
+            self.gain_cal = GainCalibration::default();
+        }
         Ok(())
     }
 
@@ -1952,6 +1957,20 @@ mod tests {
     /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
     /// the start and faults the drive; a small offset is measured and subtracted; a start
     /// asked for before the measurement has settled waits for it (issue 13, item 3).
+    /// A calibrated gain ratio is dropped with a design that does not calibrate (the
+    /// samples are then used as they come: three-phase sensing, or switched off).
+    #[test]
+    fn a_design_without_the_gain_calibration_drops_its_correction() {
+        let mut d = drive();
+        d.gain_cal.ratio = 1.01;
+        d.gain_cal.factors = [0.995, 1.005];
+        let mut cfg = *d.config();
+        cfg.current_gain_calibration = false;
+        d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
+        assert_eq!(d.gain_cal.factors, [1.0; 2]);
+        assert_eq!(d.current_gain_correction(), 1.0);
+    }
+
     #[test]
     fn idle_offsets_are_checked_at_start_and_compensated() {
         let idle = |d: &mut Drive, a: f32, n: usize| {

@@ -146,6 +146,7 @@ impl<N: Num> Default for GainCalibration<N> {
 
 impl<N: Num> GainCalibration<N> {
     /// A magnetizing starts: the filters from zero (the flux builds from zero too).
+    #[inline(always)]
     pub fn restart(&mut self, c: &GainCalibrationConfig<N>) {
         self.voltage = N::to_fine(N::ZERO);
         self.model = N::to_fine(N::ZERO);
@@ -153,6 +154,7 @@ impl<N: Num> GainCalibration<N> {
     }
 
     /// The frame stopped being held (a flying start): nothing to take this time.
+    #[inline(always)]
     pub fn abandon(&mut self) {
         self.usable = false;
     }
@@ -173,6 +175,7 @@ impl<N: Num> GainCalibration<N> {
 
     /// The handover to running: the ratio taken into the correction (module docs) if the
     /// magnetizing was usable and long enough. Returns whether it was.
+    #[inline(always)]
     pub fn finish(&mut self, c: &GainCalibrationConfig<N>) -> bool {
         let model = N::from_fine(self.model);
         let used = self.usable && model > c.min_voltage;
