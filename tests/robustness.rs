@@ -365,7 +365,10 @@ fn current_gain_mismatch_is_calibrated_at_start() {
             .unwrap();
         let r = acim_sim::sim::run(&sc).unwrap();
         let k = r.current_gain_correction;
-        assert!((k / ratio - 1.0).abs() < 1.5e-3, "{arithmetic}: k {k}, true {ratio}");
+        assert!(
+            (k / ratio - 1.0).abs() < 1.5e-3,
+            "{arithmetic}: k {k}, true {ratio}"
+        );
         ks.push(k);
         let o = acim_sim::robustness::run_scenario(&c, &sc).unwrap();
         assert!(o.pass(), "{arithmetic}: {o:?}");

@@ -8,10 +8,10 @@
 //! background and swapped in between two steps ([`crate::Drive::set_design`]).
 
 use crate::flux::FluxModelConfig;
+use crate::gain_calibration::GainCalibrationConfig;
 use crate::math::{is_finite, sqrt};
 use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
-use crate::gain_calibration::GainCalibrationConfig;
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;

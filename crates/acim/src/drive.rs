@@ -48,12 +48,12 @@ use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
     SinCos, SinCosValue,
 };
+use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::InverterTest;
 use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
-use crate::gain_calibration::GainCalibration;
 use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
 use crate::pi::PiController;

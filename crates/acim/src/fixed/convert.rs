@@ -16,9 +16,9 @@ use crate::design::{
     MagnetizingDesign, OrientationDesign, SupervisionLimits, VfDesign,
 };
 use crate::flux::FluxModelConfig;
+use crate::gain_calibration::GainCalibrationConfig;
 use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
-use crate::gain_calibration::GainCalibrationConfig;
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
