@@ -29,11 +29,11 @@
 //! c carry the same -I/2, so their voltage errors are equal). So at every step
 //!
 //! ```text
-//! v_beta = eps (R_s i_d + R_R i_d - lambda_R R_R / L_m)
+//! v_beta = eps (R_s i_d + R_R i_d - lambda_R / tau_r)
 //! ```
 //!
-//! with the bracket the d-axis voltage the flux model predicts without the inverter's
-//! error. The drive low-passes v_beta (the q-axis voltage it applied) and the bracket with
+//! (inverse-Gamma model: R_R i_d - lambda_R / tau_r is d lambda_R / dt) with the bracket
+//! the d-axis voltage the flux model predicts without the inverter's error. The drive low-passes v_beta (the q-axis voltage it applied) and the bracket with
 //! one filter, from the first magnetizing step: a linear filter keeps their ratio, so the
 //! ratio is `eps` through the flux build-up and the inverter test's levels alike. At the
 //! handover to running, with the standstill identification's R_s_hat,
@@ -50,6 +50,11 @@
 //! when b alone was scaled). The next start measures what is left and multiplies it
 //! in, so the ratio converges across starts. It is clamped to
 //! [`GAIN_CALIBRATION_LIMIT`].
+//!
+//! Precision: an offset error on b also makes a DC beta current, read as a gain error of
+//! `2 delta_b / i_d`. With the idle offset measurement's 0.45 mA (10 mA of noise averaged
+//! over 0.1 s) and 1.5 A of flux current, k scatters by about 0.06 % over noise
+//! realizations (measured: 1.0044-1.0065 for a true 1.0060, docs/robustness.md).
 //!
 //! Not on a flying start (the frame turns), not with three-phase sensing (one ratio out of
 //! two), and off in the paper's scheme (figs. 6-12).
