@@ -216,8 +216,8 @@ pub struct DriveConfig {
     pub offset_tracking: bool,
     /// Current-sensor gain calibration at every start from rest (on by default; two-phase
     /// sensing only): the b channel's gain relative to a's, identified from the beta
-    /// voltage while magnetizing with the frame held, scales the b samples from the
-    /// handover ([`crate::gain_calibration`]).
+    /// voltage while magnetizing with the frame held, equalizes the a and b samples (their
+    /// mean gain kept) from the handover ([`crate::gain_calibration`]).
     pub current_gain_calibration: bool,
     /// Rotor-resistance adaptation from speed transients (issue 13, item 7; off by
     /// default): over each speed ramp from a steady point (its start, its run and 0.25 s

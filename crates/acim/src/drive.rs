@@ -1164,6 +1164,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // error: R_s_hat i_d + R_R i_d - lambda_R / tau_r (referred)
             let rotor_voltage = c.referred_rotor_resistance * m.i_dq.d
                 - N::gain(c.inv_rotor_time_constant, e.rotor_flux);
+            // the beta voltage less Rs_hat times the measured beta current the loops leave
+            // (near zero): what remains is the drop of the beta current they cannot see
             if !r.flying {
                 self.gain_cal.update(
                     &c.gain_calibration,
@@ -1954,9 +1956,6 @@ mod tests {
         assert_eq!(d.start_open_loop(), Ok(()));
     }
 
-    /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
-    /// the start and faults the drive; a small offset is measured and subtracted; a start
-    /// asked for before the measurement has settled waits for it (issue 13, item 3).
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the
     /// samples are then used as they come: three-phase sensing, or switched off).
     #[test]
@@ -1971,6 +1970,9 @@ mod tests {
         assert_eq!(d.current_gain_correction(), 1.0);
     }
 
+    /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
+    /// the start and faults the drive; a small offset is measured and subtracted; a start
+    /// asked for before the measurement has settled waits for it (issue 13, item 3).
     #[test]
     fn idle_offsets_are_checked_at_start_and_compensated() {
         let idle = |d: &mut Drive, a: f32, n: usize| {

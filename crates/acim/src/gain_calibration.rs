@@ -33,7 +33,9 @@
 //! ```
 //!
 //! (inverse-Gamma model: R_R i_d - lambda_R / tau_r is d lambda_R / dt) with the bracket
-//! the d-axis voltage the flux model predicts without the inverter's error. The drive low-passes v_beta (the q-axis voltage it applied) and the bracket with
+//! the d-axis voltage the flux model predicts without the inverter's error. The drive
+//! low-passes v_beta (the q-axis voltage it applied, less Rs_hat times the measured beta
+//! current, which the loops hold near zero) and the bracket with
 //! one filter, from the first magnetizing step: a linear filter keeps their ratio, so the
 //! ratio is `eps` through the flux build-up and the inverter test's levels alike. At the
 //! handover to running, with the standstill identification's R_s_hat,
@@ -165,7 +167,7 @@ impl<N: Num> GainCalibration<N> {
     }
 
     /// One magnetizing step with the frame held: `v_q` the q-axis (beta) voltage applied
-    /// over the period the samples close, `model` the d-axis voltage of the module docs'
+    /// over the period the samples close less Rs_hat times the measured q current, `model` the d-axis voltage of the module docs'
     /// bracket, V.
     #[inline(always)]
     pub fn update(&mut self, c: &GainCalibrationConfig<N>, v_q: N, model: N) {
