@@ -321,7 +321,7 @@ pub struct DriveSpec {
     /// The dwell at a zero reference before "stop" switches off, s.
     pub zero_speed_dwell_s: f32,
     /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
-    /// zero while holding a regenerating point, Hz electrical (0: off, the default).
+    /// zero while holding a regenerating point, Hz electrical (0: off; 1.5 by default).
     pub regen_min_frequency_hz: f32,
     /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
     /// `acim::DriveConfig::inverter_identification`; off by default).
