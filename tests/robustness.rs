@@ -176,14 +176,22 @@ fn zero_hold_scenario() {
     assert!(last < 0.1, "{last}");
     // the file leaves the policy at the default, `stop`
     assert_eq!(sc.drive.zero_speed_policy, ZeroSpeed::Stop);
-    let mut hold = sc.clone();
-    hold.drive.zero_speed_policy = ZeroSpeed::Hold;
-    let r = acim_sim::sim::run(&hold).unwrap();
-    assert_eq!(r.final_state, acim::DriveState::Running);
-    assert_eq!(r.fault, None);
-    // the drift documented in docs/robustness.md (19.1 rpm): present, and not a runaway
-    let m = max_after(&r);
-    assert!(m > 5.0 && m < 40.0, "{m}");
+    // `hold`: the creep documented in docs/robustness.md is a random walk of the noise
+    // (0-16 rpm over noise seeds, with the inverter test at start as without it): over
+    // three seeds it is present, and never a runaway
+    let mut creep = Vec::new();
+    for seed in 1..=3 {
+        let mut hold = sc.clone();
+        hold.drive.zero_speed_policy = ZeroSpeed::Hold;
+        hold.seed = seed;
+        let r = acim_sim::sim::run(&hold).unwrap();
+        assert_eq!(r.final_state, acim::DriveState::Running);
+        assert_eq!(r.fault, None);
+        let m = max_after(&r);
+        assert!(m < 40.0, "seed {seed}: {m}");
+        creep.push(m);
+    }
+    assert!(creep.iter().any(|&m| m > 5.0), "{creep:?}");
 }
 
 fn builtin(name: &str) -> Scenario {
@@ -237,19 +245,24 @@ fn inverter_test_finds_the_dead_time_within_ten_percent() {
 }
 
 /// Item 2: the matrix's dead-time rows with the drive configured for 1.5 us and the
-/// inverter at 1.0 or 2.2 us hold with the start test in the default (standstill) Rs mode,
-/// where without it 4.5 N m at 500 rpm fails (docs/robustness-matrix.md).
+/// inverter at 1.0 or 2.2 us hold with the start test (on by default) in the standstill Rs
+/// mode, where the Rs identification reads an uncompensated inverter error as resistance;
+/// with the test switched off, 4.5 N m at 500 rpm regenerating fails there
+/// (docs/robustness-matrix.md).
 #[test]
 fn identified_dead_time_rows_hold() {
-    for variant in [
-        Variant::DeadTime1_0Identified,
-        Variant::DeadTime2_2Identified,
+    for (variant, not_identified) in [
+        (Variant::DeadTime1_0, Variant::DeadTime1_0NotIdentified),
+        (Variant::DeadTime2_2, Variant::DeadTime2_2NotIdentified),
     ] {
         for (rpm, regen, load) in [(500.0, false, 4.5), (500.0, true, 4.5), (120.0, true, 1.5)] {
             let c = case(variant, rpm, regen, load);
             let o = run(&c, RsMode::Standstill).unwrap();
             assert!(o.pass(), "{c:?}: {o:?}");
         }
+        let c = case(not_identified, 500.0, true, 4.5);
+        let o = run(&c, RsMode::Standstill).unwrap();
+        assert!(!o.pass(), "{c:?}: {o:?}");
     }
 }
 

@@ -48,11 +48,12 @@ pub const REGIONS: [&str; 13] = [
     "overmodulation",
 ];
 
-/// Steps from `start()` on (magnetising is about 1350 steps), then this many measured
-/// `Running` steps.
+/// Steps from `start()` on (magnetising, with the speed search, the inverter test at
+/// start and the standstill Rs identification, is about 4400 steps), then this many
+/// measured `Running` steps.
 pub const MEASURED_STEPS: u32 = 2000;
 /// Upper bound on the whole run, steps.
-pub const MAX_STEPS: u32 = 6000;
+pub const MAX_STEPS: u32 = 10000;
 /// Speed target, rpm.
 pub const SPEED_TARGET_RPM: f32 = 500.0;
 /// Passive load (paper Fig. 7: 1.5 N m) applied from this measured step on.

@@ -14,8 +14,8 @@ fn main() {
         Variant::DeadTime1_0,
         Variant::DeadTime2_2,
         Variant::Offset20mA,
-        Variant::DeadTime1_0Identified,
-        Variant::DeadTime2_2Identified,
+        Variant::DeadTime1_0NotIdentified,
+        Variant::DeadTime2_2NotIdentified,
         Variant::OffsetDrift20mA,
     ];
     let case = Case {

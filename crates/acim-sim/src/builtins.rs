@@ -51,6 +51,7 @@ fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) ->
     s.drive.rs_estimation = false;
     s.drive.offset_tracking = false;
     s.drive.current_gain_calibration = false;
+    s.drive.inverter_identification = false;
     s
 }
 

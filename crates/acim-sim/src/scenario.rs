@@ -324,7 +324,8 @@ pub struct DriveSpec {
     /// zero while holding a regenerating point, Hz electrical (0: off; 1.5 by default).
     pub regen_min_frequency_hz: f32,
     /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
-    /// `acim::DriveConfig::inverter_identification`; off by default).
+    /// `acim::DriveConfig::inverter_identification`; on by default, off in the paper's
+    /// figs. 6-8 and 10-12).
     pub inverter_identification: bool,
     /// With the running Rs mode: identify Rs at standstill too (default true); false: Rs
     /// converges only while turning (`acim::DriveConfig::rs_standstill_identification`).

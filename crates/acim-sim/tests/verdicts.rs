@@ -45,17 +45,17 @@ fn kept_lost_and_faulted() {
     );
     assert_eq!(m.verdict, Verdict::Lost, "{m:#?}");
 
-    let m = run("fault-short", &[]);
+    let m = run("fault-nan-sample", &[]);
     assert_eq!(m.verdict, Verdict::Faulted);
-    assert_eq!(m.fault.as_deref(), Some("OverCurrent"));
+    assert_eq!(m.fault.as_deref(), Some("NonFiniteInput"));
 }
 
 #[test]
 fn csv_rows_carry_state_saturation_and_fault_reason() {
-    let sc = builtins::get("fault-short").unwrap();
+    let sc = builtins::get("fault-nan-sample").unwrap();
     let r = acim_sim::sim::run(&sc).unwrap();
     let last = r.rows.last().unwrap().csv();
-    assert!(last.ends_with(",fault,OverCurrent,0"), "{last}");
+    assert!(last.ends_with(",fault,NonFiniteInput,0"), "{last}");
     let running = r.rows.iter().find(|x| x.state == 2).unwrap().csv();
     assert!(running.ends_with(",running,,0"), "{running}");
     // dead current sensing: the current loops wind up to the voltage limit before the trip
