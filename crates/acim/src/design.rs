@@ -1187,6 +1187,9 @@ impl DriveDesign {
                        at most a quarter turn per period); switch it off or shorten the period",
             });
         };
+        // the inverter test at start, where the flux current's levels allow it
+        let inverter_test_on = cfg.inverter_identification
+            && cfg.flux_current >= INVERTER_TEST_MIN_BANDS * cfg.dead_time_current_band;
         let search_steps = if cfg.flying_start {
             search.decision_step() as f32
         } else {
@@ -1224,12 +1227,7 @@ impl DriveDesign {
             regen_min_frequency: cfg.regen_min_frequency,
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
-            inverter_test: InverterTestDesign::new(
-                cfg.inverter_identification
-                    && cfg.flux_current >= INVERTER_TEST_MIN_BANDS * cfg.dead_time_current_band,
-                ts,
-                i_d,
-            ),
+            inverter_test: InverterTestDesign::new(inverter_test_on, ts, i_d),
             offset_tracker: OffsetTrackerConfig::new(
                 cfg.offset_tracking,
                 ts,
@@ -1309,8 +1307,14 @@ impl DriveDesign {
                     + m.referred_rotor_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,
+                // the inverter test runs after the search and before the Rs
+                // identification's settle, whose timeout counts from the start
                 magnetizing_timeout_steps: ((if cfg.rs_estimation {
                     cfg.rs_identification_timeout
+                } else {
+                    0.0
+                } + if inverter_test_on {
+                    INVERTER_TEST_TIME
                 } else {
                     0.0
                 } + MAGNETIZING_TIMEOUT_TAU_R

@@ -49,7 +49,7 @@ use crate::frames::{
     SinCos, SinCosValue,
 };
 use crate::gain_calibration::GainCalibration;
-use crate::inverter_test::InverterTest;
+use crate::inverter_test::{InverterTest, InverterTestOutcome};
 use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
@@ -1189,6 +1189,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                         voltage,
                         self.applied.inv_dc_bus,
                     );
+                    // its fit's slope is the stator resistance at rest: with Rs estimation
+                    // on, the standstill identification goes on from it (with a +50 %
+                    // initial error it otherwise reached its timeout, which counts from
+                    // the start, before settling)
+                    if c.rs.adapt && self.inverter.outcome == InverterTestOutcome::Identified {
+                        self.est.rs.preset(&c.rs, self.inverter.stator_resistance);
+                    }
                 }
             }
             if e.flux_settled

@@ -298,6 +298,20 @@ impl<N: Num> RsEstimator<N> {
         }
     }
 
+    /// Starts the estimate again from `r` (ohm), within the estimator's bounds: the stator
+    /// resistance the inverter test at start measured (its fit's slope, which the inverter's
+    /// voltage error does not move), so that the standstill identification after it
+    /// begins near the machine's value ([`crate::inverter_test`]).
+    pub fn preset(&mut self, cfg: &RsEstimatorConfig<N>, r: N) {
+        let r = r.clamp(
+            N::from_fine(cfg.min_resistance),
+            N::from_fine(cfg.max_resistance),
+        );
+        self.resistance = N::to_fine(r);
+        self.stator_resistance_estimate = N::from_fine(self.resistance);
+        self.at_bound = false;
+    }
+
     /// One step of the mode before issue 13: Euler update of eq. (20) and, inside the
     /// gate, of the corrected eq. (19). (The running mode is [`RsEstimator::update_running`].)
     #[inline]
@@ -411,6 +425,22 @@ impl<N: Num> RsEstimator<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A preset (the inverter test's measured resistance) replaces the estimate within
+    /// the estimator's bounds.
+    #[test]
+    fn preset_starts_again_within_the_bounds() {
+        let m = MachineParams::paper_table1();
+        let cfg = RsEstimatorConfig::new(&m, 200e-6, 0.2, 1.5);
+        let mut est = RsEstimator::new(15.75);
+        est.preset(&cfg, 10.4);
+        assert_eq!(est.stator_resistance_estimate, 10.4);
+        est.preset(&cfg, 1.0);
+        assert_eq!(est.stator_resistance_estimate, 0.5 * m.stator_resistance());
+        est.preset(&cfg, 1e6);
+        assert_eq!(est.stator_resistance_estimate, 2.5 * m.stator_resistance());
+        assert!(!est.at_bound);
+    }
 
     /// Steady d-axis with true Rs = 10.5 ohm; the estimator starts at 15.75 ohm (+50 %,
     /// paper Fig. 9) and must reach 2 % of 10.5 within 1 s with tau = 0.2 s.
