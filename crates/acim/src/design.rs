@@ -739,7 +739,9 @@ pub struct OrientationDesign<N: Num = f32> {
 pub struct MagnetizingDesign<N: Num = f32> {
     /// Whether magnetizing waits for the Rs identification.
     pub identify_rs: bool,
-    /// Longest identification, steps.
+    /// Longest identification, steps from the start: `rs_identification_timeout`, plus the
+    /// speed search and the inverter test when the test runs (the identification begins
+    /// after them).
     pub rs_timeout_steps: u32,
     /// Settled-residual time, steps.
     pub rs_settle_steps: u32,
@@ -1265,7 +1267,14 @@ impl DriveDesign {
             },
             magnetizing: MagnetizingDesign {
                 identify_rs: cfg.rs_estimation && cfg.rs_standstill_identification,
-                rs_timeout_steps: (cfg.rs_identification_timeout / ts) as u32,
+                // counted from the start; with the inverter test the identification
+                // begins after the search and the test, and keeps its own time after them
+                rs_timeout_steps: (cfg.rs_identification_timeout / ts
+                    + if inverter_test_on {
+                        INVERTER_TEST_TIME / ts + search_steps
+                    } else {
+                        0.0
+                    }) as u32,
                 rs_settle_steps: (RS_SETTLE_TIME / ts) as u32,
                 rs_settled_error: RS_SETTLED_FRACTION * i_d,
                 residual_filter: (ts / RESIDUAL_FILTER_TIME).min(1.0),
@@ -1307,8 +1316,8 @@ impl DriveDesign {
                     + m.referred_rotor_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,
-                // the inverter test runs after the search and before the Rs
-                // identification's settle, whose timeout counts from the start
+                // the inverter test runs after the search, and the Rs identification
+                // after both with its own timeout
                 magnetizing_timeout_steps: ((if cfg.rs_estimation {
                     cfg.rs_identification_timeout
                 } else {
