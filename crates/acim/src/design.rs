@@ -812,16 +812,23 @@ pub struct InverterTestDesign<N: Num = f32> {
     /// the references stand for the currents (a sensor gain error changes the slope only).
     pub error_weights: [N::Gain; 3],
     /// The slope's weights (L_k - L_mean) / sum (L_j - L_mean)^2, 1/A: sum w_k y_k is the
-    /// stator resistance the test saw, ohm (reported).
+    /// stator resistance the test saw, ohm (reported, and the standstill Rs
+    /// identification's starting value).
     pub slope_weights: [N::Gain; 3],
+    /// The plausible slope: the centre and half-width of the Rs estimator's clamps
+    /// ([`crate::rs_estimator::RS_MIN_FACTOR`] to [`crate::rs_estimator::RS_MAX_FACTOR`]
+    /// times the nominal Rs), ohm. A slope outside is a test that did not see the
+    /// machine (outcome `Rejected`).
+    pub resistance_window: (N, N),
     /// [`INVERTER_TEST_MAX_DUTY`].
     pub max_duty: N,
 }
 
 impl InverterTestDesign {
-    /// The test for control period `ts` (s) and flux current `i_d` (A); off unless
-    /// `enabled`.
-    pub fn new(enabled: bool, ts: f32, i_d: f32) -> Self {
+    /// The test for control period `ts` (s), flux current `i_d` (A) and nominal stator
+    /// resistance `rs` (ohm); off unless `enabled`.
+    pub fn new(enabled: bool, ts: f32, i_d: f32, rs: f32) -> Self {
+        use crate::rs_estimator::{RS_MAX_FACTOR, RS_MIN_FACTOR};
         let levels = INVERTER_TEST_LEVELS.map(|f| f * i_d);
         let mean = (levels[0] + levels[1] + levels[2]) / 3.0;
         let spread: f32 = levels.iter().map(|l| (l - mean) * (l - mean)).sum();
@@ -838,6 +845,10 @@ impl InverterTestDesign {
             filter: (ts / INVERTER_TEST_FILTER_TIME).min(1.0),
             error_weights: slope_weights.map(|w| 0.75 * (1.0 / 3.0 - w * mean)),
             slope_weights,
+            resistance_window: (
+                0.5 * (RS_MIN_FACTOR + RS_MAX_FACTOR) * rs,
+                0.5 * (RS_MAX_FACTOR - RS_MIN_FACTOR) * rs,
+            ),
             max_duty: INVERTER_TEST_MAX_DUTY,
         }
     }
@@ -1229,7 +1240,12 @@ impl DriveDesign {
             regen_min_frequency: cfg.regen_min_frequency,
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
-            inverter_test: InverterTestDesign::new(inverter_test_on, ts, i_d),
+            inverter_test: InverterTestDesign::new(
+                inverter_test_on,
+                ts,
+                i_d,
+                m.stator_resistance(),
+            ),
             offset_tracker: OffsetTrackerConfig::new(
                 cfg.offset_tracking,
                 ts,

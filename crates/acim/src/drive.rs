@@ -1180,9 +1180,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 if r.flying {
                     self.inverter.skip();
                 } else {
-                    // the d-axis voltage less the flux model's d lambda_R / dt
-                    let voltage = self.applied.v_dq.d - c.referred_rotor_resistance * m.i_dq.d
-                        + N::gain(c.inv_rotor_time_constant, e.rotor_flux);
+                    // the d-axis voltage less the flux model's d lambda_R / dt (exact
+                    // in fixed point; in f32 within rounding of the two-term form)
+                    let voltage = self.applied.v_dq.d - rotor_voltage;
                     i_sd = self.inverter.update(
                         &c.inverter_test,
                         m.i_dq.d,
@@ -1194,7 +1194,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                     // initial error it otherwise reached its timeout, which counts from
                     // the start, before settling)
                     if c.rs.adapt && self.inverter.outcome == InverterTestOutcome::Identified {
-                        self.est.rs.preset(&c.rs, self.inverter.stator_resistance);
+                        self.est.rs.preset(self.inverter.stator_resistance);
                     }
                 }
             }

@@ -27,8 +27,8 @@ pub enum InverterTestOutcome {
     Identified,
     /// The rotor turned (flying start): no measurement, the correction kept.
     Skipped,
-    /// The levels' spread was too small or the fit out of range or not finite: the
-    /// correction kept.
+    /// The levels' spread was too small, the fit out of range or not finite, or its slope
+    /// (Rs) outside the Rs estimator's bounds: the correction kept.
     Rejected,
 }
 
@@ -128,7 +128,12 @@ impl<N: Num> InverterTest<N> {
         let error = N::gain(e0, y0) + N::gain(e1, y1) + N::gain(e2, y2);
         let slope = N::gain(s0, y0) + N::gain(s1, y1) + N::gain(s2, y2);
         let duty = self.correction_duty + error * inv_dc_bus;
-        if duty.is_finite() && slope.is_finite() && duty.abs() <= d.max_duty {
+        let (centre, half_width) = d.resistance_window;
+        if duty.is_finite()
+            && slope.is_finite()
+            && duty.abs() <= d.max_duty
+            && (slope - centre).abs() <= half_width
+        {
             self.correction_duty = duty;
             self.stator_resistance = slope;
             self.outcome = InverterTestOutcome::Identified;
@@ -143,7 +148,7 @@ mod tests {
     use super::*;
 
     fn run(rs: f32, dv: f32, vdc: f32, noise: f32) -> InverterTest {
-        let d = InverterTestDesign::new(true, 2e-4, 1.5);
+        let d = InverterTestDesign::new(true, 2e-4, 1.5, 10.5);
         let mut t = InverterTest::default();
         t.restart(&d);
         let mut i_ref = d.levels[0];
@@ -178,7 +183,7 @@ mod tests {
 
     #[test]
     fn a_flat_current_or_a_wild_fit_keeps_the_correction() {
-        let d = InverterTestDesign::new(true, 2e-4, 1.5);
+        let d = InverterTestDesign::new(true, 2e-4, 1.5, 10.5);
         let mut t = InverterTest::<f32> {
             correction_duty: 0.001,
             ..Default::default()
@@ -209,11 +214,17 @@ mod tests {
         }
         assert_eq!(t.outcome, InverterTestOutcome::Rejected);
         assert_eq!(t.correction_duty, 0.0);
+        // a slope outside 0.5-2.5 times the nominal Rs (here 3x, with a plausible
+        // intercept) did not see the machine: rejected, so it cannot preset Rs
+        let t = run(3.0 * 10.5, 0.5, 325.0, 0.0);
+        assert_eq!(t.outcome, InverterTestOutcome::Rejected, "{t:?}");
+        let t = run(2.4 * 10.5, 0.5, 325.0, 0.0);
+        assert_eq!(t.outcome, InverterTestOutcome::Identified, "{t:?}");
     }
 
     #[test]
     fn off_means_never_running() {
-        let d = InverterTestDesign::new(false, 2e-4, 1.5);
+        let d = InverterTestDesign::new(false, 2e-4, 1.5, 10.5);
         let mut t = InverterTest::<f32>::default();
         t.restart(&d);
         assert!(!t.running());

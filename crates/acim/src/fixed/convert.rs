@@ -442,6 +442,18 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
                 gain(d.inverter_test.slope_weights[1] * b.current, "flux_current")?,
                 gain(d.inverter_test.slope_weights[2] * b.current, "flux_current")?,
             ],
+            resistance_window: (
+                pu(
+                    d.inverter_test.resistance_window.0,
+                    b.resistance(),
+                    "inverter_identification",
+                )?,
+                pu(
+                    d.inverter_test.resistance_window.1,
+                    b.resistance(),
+                    "inverter_identification",
+                )?,
+            ),
             max_duty: Q24(to_q24(d.inverter_test.max_duty)),
         },
     })
