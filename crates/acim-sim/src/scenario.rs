@@ -746,8 +746,12 @@ pub struct Scenario {
     /// The motor's nameplate: when present (with `[board]`), the drive's ratings, limits,
     /// bandwidths, observer poles, period and per-unit bases follow from it and the
     /// controller's machine (`acim::nameplate::drive_config`), and `[drive]` only chooses
-    /// `mode`, `arithmetic`, `observer`, `rs_estimation`, `rs_initial_ohm` and
-    /// `orientation_gain`; the plant's sensors take the board's full scales.
+    /// `mode`, `arithmetic`, `observer`, `rs_estimation`, `rs_estimation_mode`,
+    /// `rs_initial_ohm`, `orientation_gain`, `current_sensing`, `field_weakening`,
+    /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
+    /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and issue 13's
+    /// `inverter_identification`, `offset_tracking`, `current_gain_calibration` and
+    /// `rr_adaptation`; the plant's sensors take the board's full scales.
     pub nameplate: Option<NameplateSpec>,
     /// The power board (with `[nameplate]`).
     pub board: Option<BoardSpec>,
@@ -1220,6 +1224,11 @@ impl Scenario {
             cfg.zero_speed_policy = drive.zero_speed_policy;
             cfg.zero_speed_dwell = drive.zero_speed_dwell;
             cfg.regen_min_frequency = drive.regen_min_frequency;
+            // issue 13's switches (before, a `--set` of them was silently ignored here)
+            cfg.inverter_identification = drive.inverter_identification;
+            cfg.offset_tracking = drive.offset_tracking;
+            cfg.current_gain_calibration = drive.current_gain_calibration;
+            cfg.rr_adaptation = drive.rr_adaptation;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }
