@@ -122,7 +122,9 @@ fn regen(name: &str, rpm: f32) -> Scenario {
 fn fault(name: &str, description: &str) -> Scenario {
     let mut s = base(name, description, 5.0);
     s.speed_profile = vec![sp(0.5, 500.0)];
-    s.windows = vec![win("before-fault", 2.0, 3.0)];
+    // steady from 2.5 s: speed control starts at 0.77 s (the speed search, the inverter
+    // test and the Rs identification), the ramp ends at 1.77 s and settles by 2.3 s
+    s.windows = vec![win("before-fault", 2.5, 3.0)];
     s
 }
 
@@ -220,7 +222,8 @@ pub fn all() -> Vec<Scenario> {
         s.controller.friction_nms = 0.0;
         s.csv_decimation = Some(10);
         s.speed_profile = vec![sp(0.5, rpm)];
-        s.windows = vec![win("steady", 2.0, 62.0)];
+        // from 2.5 s: the ramp's settling after the start's 0.77 s of magnetizing
+        s.windows = vec![win("steady", 2.5, 62.0)];
         v.push(s);
     }
 
@@ -248,7 +251,8 @@ pub fn all() -> Vec<Scenario> {
     s.dc_link.capacitance_f = 220e-6;
     s.drive.speed_ramp_rpm_s = 4000.0;
     s.speed_profile = vec![sp(0.5, 1000.0), sp(2.5, 0.0)];
-    s.windows = vec![win("before-fault", 1.5, 2.5)];
+    // from 2.0 s: speed control starts at 0.77 s, the ramp settles by about 1.5 s
+    s.windows = vec![win("before-fault", 2.0, 2.5)];
     v.push(s);
 
     let mut s = fault(
@@ -344,7 +348,8 @@ pub fn all() -> Vec<Scenario> {
         );
         s.speed_profile = vec![sp(0.5, rpm)];
         s.load_profile = vec![load(2.5, LoadKind::Active, -nm)];
-        s.windows = vec![win("before-load", 2.0, 2.5)];
+        // from 2.25 s: the ramp's settling after the start's 0.77 s of magnetizing
+        s.windows = vec![win("before-load", 2.25, 2.5)];
         v.push(s);
     }
 
@@ -469,7 +474,8 @@ pub fn all() -> Vec<Scenario> {
         24.0,
     );
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, -3000.0)];
-    s.windows = vec![win("forward", 7.0, 8.0), win("reverse", 22.0, 24.0)];
+    // the ramp reaches 3000 rpm at 6.95 s (speed control from 0.98 s): forward from 7.5 s
+    s.windows = vec![win("forward", 7.5, 8.0), win("reverse", 22.0, 24.0)];
     v.push(s);
 
     let mut s = fw_2k2(
@@ -482,7 +488,7 @@ pub fn all() -> Vec<Scenario> {
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
     // held at zero after the braking as published (the default `stop` would switch off)
     s.drive.zero_speed_policy = ZeroSpeed::Hold;
-    s.windows = vec![win("top", 7.0, 8.0)];
+    s.windows = vec![win("top", 7.5, 8.0)];
     v.push(s);
 
     v
