@@ -263,6 +263,12 @@ mod fw {
         // only while magnetizing, outside these figures; its two products per step in
         // the sense stage remain)
         c.current_gain_calibration = false;
+        // nor the inverter test at start (on by default since issue 13): its fit would
+        // read the current PI's voltage, and its 0.6 s before speed control moved the
+        // measured steps into the speed ramp (drive_step 2617 -> 2623-2689 instructions
+        // on the M4F, the speed PI 310 -> 323-384); off, the figures stay those of the
+        // same steady running steps
+        c.inverter_identification = false;
         c
     }
 
