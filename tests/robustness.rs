@@ -177,7 +177,8 @@ fn zero_hold_scenario() {
     // the file leaves the policy at the default, `stop`
     assert_eq!(sc.drive.zero_speed_policy, ZeroSpeed::Stop);
     // `hold`: the creep documented in docs/robustness.md is a random walk of the noise
-    // (0-16 rpm over noise seeds, with the inverter test at start as without it): over
+    // (under 5 to 16.5 rpm over noise seeds 1-6, with the inverter test at start as
+    // without it): over
     // three seeds it is present, and never a runaway
     let mut creep = Vec::new();
     for seed in 1..=3 {
