@@ -433,14 +433,10 @@ mod tests {
     /// A preset (the inverter test's measured resistance) replaces the estimate.
     #[test]
     fn preset_starts_again_from_the_value() {
-        let m = MachineParams::paper_table1();
-        let cfg = RsEstimatorConfig::new(&m, 200e-6, 0.2, 1.5);
         let mut est = RsEstimator::new(15.75);
         est.preset(10.4);
         assert_eq!(est.stator_resistance_estimate, 10.4);
         assert!(!est.at_bound);
-        // the next adaptation goes on from it
-        let _ = cfg;
     }
 
     /// Steady d-axis with true Rs = 10.5 ohm; the estimator starts at 15.75 ohm (+50 %,
