@@ -376,7 +376,8 @@ fn offset_drift_after_the_start_is_tracked() {
 /// signature, and with a 1 Hz gate the estimate ran away with no offset drift at all:
 /// 60 rpm at 1.0 N m regenerating (f_s = 1.33 Hz) was lost at 51 mA and 8.2 rpm of
 /// estimation error, and on the far side (60 rpm, 4.5 N m regenerating, -1.05 Hz) the
-/// plant's Rs drift took it to its bound, a fault. With the gate at 1.5 Hz both hold
+/// plant's Rs drift made it walk to 43 mA, and the rotor ran away to an overload trip.
+/// With the gate at 1.5 Hz both hold
 /// (no regeneration limit, running Rs law; `crates/acim/src/offset_tracker.rs`).
 #[test]
 fn offset_tracker_holds_below_its_gate() {

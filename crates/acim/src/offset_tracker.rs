@@ -115,7 +115,7 @@
 //! |---|---|---|---|
 //! | 60 rpm, 1.0 N m regenerating | 1.33 Hz | 51 mA | lost (8.2 rpm of estimation error; 0.39 rpm without the tracker) |
 //! | 75 rpm, 1.5 N m regenerating | 1.49 Hz | 46 mA | lost (7.3 rpm; runs at 1.37 Hz) |
-//! | 60 rpm, 4.5 N m regenerating (far side) | -1.05 Hz | 9.5 mA; with the plant's Rs drifting +30 %, 43 mA | held; with the drift, a fault at the bound |
+//! | 60 rpm, 4.5 N m regenerating (far side) | -1.05 Hz | 9.5 mA; with the plant's Rs drifting +30 %, 43 mA | held; with the drift, lost, then an overload trip |
 //! | 30 rpm, 0.5 N m motoring | 1.34 Hz | 11.6 mA | held |
 //! | 60 rpm, 0.5 and 0.25 N m regenerating | 1.67, 1.84 Hz | 6.9, 7.6 mA | held |
 //! | 45, 54, 66 rpm, no load | 1.5-2.2 Hz | 0.8-1.2 mA | held |
@@ -123,7 +123,7 @@
 //! With the gate at 1.5 Hz the three lost or faulted cases hold (0.34 rpm, 0.12 rpm and
 //! -0.35 rpm of estimation error, the estimates under 1.4 mA), and item 3's points at
 //! 1.67 and 1.84 Hz are tracked as before. Below 1.5 Hz the drift is not followed: 20 mA
-//! drifting in on the far side reads -2.43 rpm (a fault at the bound with the 1 Hz gate).
+//! drifting in on the far side reads -2.43 rpm (with the 1 Hz gate the rotor ran away to an overload trip).
 //! The drive's regeneration limit holds regeneration at 1.5 Hz by default, the same
 //! frequency, so the tracker works at the limited points (it turns on and off there as
 //! the frequency wobbles about the gate, which only pauses the adaptation).
