@@ -89,6 +89,18 @@ pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveSt
     })
 }
 
+/// Hands the commissioning the main loop built (`commission::build`, from flash; `None`
+/// if the library refused the nameplate) to the interrupt for the `Commission` command
+/// that follows; interrupts are masked for the move (about 400 bytes), as for
+/// [`take_finished_commissioning`].
+pub fn stage_commissioning(c: Option<acim::commissioning::Commissioning>) {
+    cortex_m::interrupt::free(|_| {
+        if let Some(st) = state() {
+            st.ctl.stage_commissioning(c);
+        }
+    });
+}
+
 /// Takes a finished commissioning (done or failed: the interrupt already switched off)
 /// for its fits in the main loop. Interrupts are masked for the move (about 400 bytes).
 pub fn take_finished_commissioning() -> Option<acim::commissioning::Commissioning> {
@@ -116,7 +128,7 @@ fn state() -> Option<&'static mut IsrState> {
     }
     // SAFETY: STATE was initialised by `install` (READY is set after the write). After
     // `install` only the control interrupt takes this reference (it does not preempt
-    // itself), and `replace_drive_if_idle` and the two commissioning accessors with all
+    // itself), and `replace_drive_if_idle` and the three commissioning accessors with all
     // interrupts masked: the &mut is unique
     // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })

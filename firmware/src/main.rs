@@ -823,19 +823,24 @@ fn handle(parsed: Parsed, ctx: &mut Ctx) {
             say_commission(ctx);
             None
         }
-        Command::Commission(Some(args)) => match commission::check(
-            &args,
-            f32::from_bits(control_isr::DC_BUS_BITS.load(Ordering::Relaxed)),
-            ctx.settings,
-        ) {
-            Ok(_) => Some(ControlCommand::Commission(args)),
-            Err(e) => {
-                say(ctx.out, b"err");
-                say_setting_error(ctx.out, &e);
-                say(ctx.out, b"\r\n");
-                None
+        Command::Commission(Some(args)) => {
+            let bus = f32::from_bits(control_isr::DC_BUS_BITS.load(Ordering::Relaxed));
+            match commission::check(&args, bus, ctx.settings) {
+                // built here (from flash), started by the interrupt; a nameplate the
+                // library refuses reaches the interrupt with nothing staged, which
+                // refuses it (`err value out of range`)
+                Ok(_) => {
+                    control_isr::stage_commissioning(commission::build(&args, bus));
+                    Some(ControlCommand::Commission(args))
+                }
+                Err(e) => {
+                    say(ctx.out, b"err");
+                    say_setting_error(ctx.out, &e);
+                    say(ctx.out, b"\r\n");
+                    None
+                }
             }
-        },
+        }
         Command::Params => {
             let cfg = &*ctx.cfg;
             let m = &cfg.machine;

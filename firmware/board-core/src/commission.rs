@@ -67,6 +67,15 @@ pub fn board(dc_bus: f32) -> Board {
     }
 }
 
+/// Builds the sequence for `args` on this board with the bus `dc_bus` (V), in the main
+/// loop: the interrupt only starts it ([`crate::control::ControlLoop::stage_commissioning`],
+/// then [`crate::control::ControlCommand::Commission`]), so the construction (a nameplate's
+/// rated point and the sequence's design) runs from flash, not in the control interrupt's
+/// CCM SRAM. `None`: the library refused the nameplate or the board.
+pub fn build(args: &NameplateArgs, dc_bus: f32) -> Option<Commissioning> {
+    Commissioning::new(&nameplate(args), &board(dc_bus)).ok()
+}
+
 fn nameplate_error(e: NameplateError) -> SettingError {
     match e {
         NameplateError::Invalid { field, rule } => SettingError { field, rule },

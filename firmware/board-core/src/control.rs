@@ -5,7 +5,7 @@
 //! the CORDIC on the target, with [`acim::frames::FastSinCos`] in host tests, and against
 //! the motor model in the self-test ([`crate::sim`]).
 
-use crate::commission::{self, Commissioning, NameplateArgs};
+use crate::commission::{Commissioning, NameplateArgs};
 use crate::convert::{Converter, RawSample};
 use crate::telemetry::TelemetrySample;
 use crate::timing::{CycleStats, CycleSummary, Decimator};
@@ -95,7 +95,8 @@ pub enum ControlCommand {
     /// Self-test: the motor model's load torque, N m (the drive itself is unaffected).
     PlantLoad(f32),
     /// Idle -> self-commissioning with this nameplate (checked by the main loop with
-    /// [`commission::check`] first); `Stop` aborts it.
+    /// [`crate::commission::check`] first, and built by it: [`ControlLoop::stage_commissioning`]
+    /// before the command); `Stop` aborts it.
     Commission(NameplateArgs),
     /// Telemetry every this many periods from the next period on (the protocol's `rate`,
     /// 2 ..= 50 000 checked by its parser; any state).
@@ -143,6 +144,8 @@ pub struct ControlLoop<S: SinCos> {
     fw_fault: Option<FirmwareFault>,
     inputs: DriveInputs,
     commissioning: Option<Commissioning>,
+    /// The sequence the main loop built for the next `Commission` command.
+    staged: Option<Commissioning>,
 }
 
 impl<S: SinCos> ControlLoop<S> {
@@ -159,6 +162,7 @@ impl<S: SinCos> ControlLoop<S> {
             fw_fault: None,
             inputs: DriveInputs::default(),
             commissioning: None,
+            staged: None,
         }
     }
 
@@ -202,7 +206,7 @@ impl<S: SinCos> ControlLoop<S> {
             }
             ControlCommand::Start => self.drive.start(),
             ControlCommand::StartOpenLoop => self.drive.start_open_loop(),
-            ControlCommand::Commission(args) => self.start_commissioning(&args),
+            ControlCommand::Commission(_) => self.start_commissioning(),
             ControlCommand::Stop => {
                 self.commissioning = None;
                 self.drive.stop();
@@ -229,20 +233,24 @@ impl<S: SinCos> ControlLoop<S> {
         }
     }
 
-    fn start_commissioning(&mut self, args: &NameplateArgs) -> Result<(), CommandError> {
+    /// Hands over the sequence the main loop built ([`crate::commission::build`]) for the
+    /// next `Commission` command, replacing one not started (`None`: the library refused
+    /// the nameplate, and the command is refused): building it in the interrupt put the
+    /// nameplate's design into CCM SRAM, which the control step needs.
+    pub fn stage_commissioning(&mut self, c: Option<Commissioning>) {
+        self.staged = c;
+    }
+
+    fn start_commissioning(&mut self) -> Result<(), CommandError> {
         let state = self.drive.state();
         // a start waiting for the offset measurement has the motor claimed already
         if state != DriveState::Idle || self.drive.start_pending() {
             return Err(CommandError::WrongState(state));
         }
-        let board = commission::board(self.inputs.dc_bus);
-        match Commissioning::new(&commission::nameplate(args), &board) {
-            Ok(c) => {
-                self.commissioning = Some(c);
-                Ok(())
-            }
-            Err(_) => Err(CommandError::OutOfRange),
-        }
+        // none staged: the main loop refused the nameplate or the board
+        let c = self.staged.take().ok_or(CommandError::OutOfRange)?;
+        self.commissioning = Some(c);
+        Ok(())
     }
 
     /// The running (or finished, not yet taken) commissioning.
@@ -566,10 +574,12 @@ pub(crate) mod tests {
         let paper = [750.0, 230.0, 3.3, 50.0, 1500.0];
         let mut l = looped();
         l.step(&raw_at_bus(&conv, 325.0));
+        l.stage_commissioning(crate::commission::build(&paper, 325.0));
         assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
         assert!(l.switching());
         assert_eq!(l.state_code(), STATE_COMMISSIONING);
         assert!(l.apply(ControlCommand::Start).result.is_err());
+        l.stage_commissioning(crate::commission::build(&paper, 325.0));
         assert!(l.apply(ControlCommand::Commission(paper)).result.is_err());
         let fresh = Drive::new(drive_config()).unwrap();
         assert!(l.replace_drive(fresh).is_err());
@@ -591,10 +601,12 @@ pub(crate) mod tests {
         assert!(!l.switching());
         assert_eq!(l.state_code(), 0);
         // stop aborts
+        l.stage_commissioning(crate::commission::build(&paper, 325.0));
         assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
         assert!(l.apply(ControlCommand::Stop).result.is_ok());
         assert!(l.commissioning().is_none() && !l.switching());
         // a trip abandons it, the fault is the drive's
+        l.stage_commissioning(crate::commission::build(&paper, 325.0));
         assert!(l.apply(ControlCommand::Commission(paper)).result.is_ok());
         l.step(&raw_at_bus(&conv, 325.0));
         let mut raw = raw_at_bus(&conv, 325.0);
@@ -603,7 +615,16 @@ pub(crate) mod tests {
         assert!(l.commissioning().is_none());
         assert_eq!(l.state(), DriveState::Fault);
         assert_eq!(l.state_code(), 4);
+        l.stage_commissioning(crate::commission::build(&paper, 325.0));
         assert!(l.apply(ControlCommand::Commission(paper)).result.is_err());
+        // nothing staged (the main loop could not build it): refused, nothing switches
+        let mut l = looped();
+        l.step(&raw_at_bus(&conv, 325.0));
+        assert_eq!(
+            l.apply(ControlCommand::Commission(paper)).result,
+            Err(CommandError::OutOfRange)
+        );
+        assert!(!l.switching());
     }
 
     #[test]
