@@ -402,6 +402,7 @@ mod fw {
                     rotor_flux: t.rotor_flux,
                     inv_rotor_flux: 1.0 / t.rotor_flux.max(0.05),
                     equivalent_resistance: t.stator_resistance_estimate + 7.81,
+                    far_side_error: 0.0,
                 };
                 st32.begin(10);
                 obs32.update(black_box(&obs_cfg.coeffs), black_box(&u));
@@ -417,6 +418,7 @@ mod fw {
                         rotor_flux: q.rotor_flux,
                         inv_rotor_flux: Q24(acim::fixed::q::reciprocal(q.rotor_flux.0)),
                         equivalent_resistance: q.stator_resistance_estimate + Q24(3_276_000),
+                        far_side_error: Q24(0),
                     };
                     fixed_observer(&mut obsq, c, &uq, &mut stq);
                 }

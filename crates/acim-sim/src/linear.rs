@@ -153,6 +153,12 @@ pub struct Model {
     /// The regeneration limit binds at this point (decided from the ideal operating
     /// point): the torque current is the limit's, the speed PI's integral is held.
     limited: bool,
+    /// The far-side gain c of the observer's speed and load updates.
+    far_side_gain: f64,
+    /// Its load scheduling c(i_sq) = c max(1, a |i_sq|), 1/A.
+    far_side_load_factor: f64,
+    /// The drive's far-side mode at this point (the term on, the regeneration limit off).
+    far_side: bool,
 }
 
 impl Model {
@@ -223,13 +229,29 @@ impl Model {
             speed_ref: f64::from(speed_rpm) * f64::from(acim::math::RPM_TO_RAD_S),
             load: f64::from(load_nm),
             limited: false,
+            far_side_gain: f64::from(c.orientation.far_side_gain),
+            far_side_load_factor: f64::from(c.orientation.far_side_load_factor),
+            far_side: false,
         };
         // the limit binds where the braking torque current the point needs is beyond it
-        // (`acim::drive`'s regen_limit, holding a target of the rotor's sign)
+        // (`acim::drive`'s regen_limit, holding a target of the rotor's sign), unless the
+        // far-side transit releases it: the braking torque the point needs (the load,
+        // which the observer's estimate equals at the equilibrium) puts its stator
+        // frequency `far_side_enter` beyond the line (the drive's test). The drive
+        // transits only after its inverter test at start identified the voltage error,
+        // which leaves none: a row with an inverter error stands for a drive whose test
+        // did not run or was rejected, which keeps the limit
+        let braking = -model.speed_ref.signum() * model.load;
+        let enter = f64::from(c.far_side_enter);
+        model.far_side = enter > 0.0
+            && model.inverter_error == 0.0
+            && braking
+                >= f64::from(c.far_side_torque_per_frequency)
+                    * (model.p * model.speed_ref.abs() + enter);
         if model.regen_min_frequency > 0.0 {
             let i_need = model.ideal_torque_current(model.speed_ref);
             let bound = model.regen_bound(model.speed_ref);
-            model.limited = model.speed_ref.signum() * i_need < -bound;
+            model.limited = !model.far_side && model.speed_ref.signum() * i_need < -bound;
         }
         Ok(model)
     }
@@ -312,6 +334,15 @@ impl Model {
         let diq = self.obs_a * e + self.obs_inv_l * (v_q - rseq * i_sq)
             - self.obs_p_inv_l * lh * wh
             - ws * i_sd;
+        // the far side (w_s against Omega_hat): the speed and load updates see
+        // e - c w e_d, w the orientation correction's fade (`acim::drive`)
+        let e = if self.far_side && ws * wh < 0.0 {
+            let fade = (self.inv_fade_width * (ws.abs() - self.fade_start)).clamp(0.0, 1.0);
+            let sched = (self.far_side_load_factor * i_sq.abs()).max(1.0);
+            e - self.far_side_gain * sched * fade * (id_hat - i_sd)
+        } else {
+            e
+        };
         let dwh = self.obs_torque * lh * i_sq - self.obs_inv_j * th - self.obs_friction * wh
             + self.obs_g2 * e * inv_flux;
         let dth = self.obs_g3 * e * inv_flux;
@@ -732,13 +763,13 @@ mod tests {
         assert!(!l.rs_adapting);
     }
 
-    /// Where the regeneration limit binds (60 rpm at -4.5 N m would sit at f_s = -1.05
-    /// Hz) the drive holds the reachable speed, where the stator frequency is the limit's
-    /// 1.5 Hz; the overhauling sweep holds 126 rpm at 4 N m and 147 rpm at 5 N m there
-    /// (docs/overhauling.md), and the point is stable.
+    /// Where the regeneration limit binds (120 rpm at -4.5 N m would sit at f_s = 0.96
+    /// Hz, inside the far-side transit's 1 Hz) the drive holds the reachable speed, where
+    /// the stator frequency is the limit's 1.5 Hz; the overhauling sweep holds 126 rpm at
+    /// 4 N m and 147 rpm at 5 N m there (docs/overhauling.md), and the point is stable.
     #[test]
     fn the_regeneration_limit_holds_the_reachable_speed() {
-        let l = linearise(&default_drive_scenario(), 60.0, -4.5)
+        let l = linearise(&default_drive_scenario(), 120.0, -4.5)
             .unwrap()
             .unwrap();
         assert!(l.limited);
@@ -750,6 +781,36 @@ mod tests {
         // without the limit the same point is linearised where it is labelled
         let l = linearise(&base_scenario(), 60.0, -4.5).unwrap().unwrap();
         assert!(!l.limited && (l.state[2] - 2.0 * core::f64::consts::PI).abs() < 0.1);
+    }
+
+    /// The far-side transit (issue 13, item 5): 60 rpm at -4.5 N m is 1.05 Hz beyond the
+    /// line, so the drive as it ships releases the limit and holds the point, stable with
+    /// the far-side gain. Without the gain (0: no transit either) the limit holds it at the
+    /// reachable speed, and without the limit it is unstable; with the gain but Rs held (no
+    /// running law) the drive keeps the limit.
+    #[test]
+    fn the_far_side_transit_holds_the_point() {
+        let ships = default_drive_scenario();
+        let l = linearise(&ships, 60.0, -4.5).unwrap().unwrap();
+        assert!(!l.limited);
+        let fs = l.stator_frequency / core::f64::consts::TAU;
+        assert!((fs + 1.05).abs() < 0.05, "{fs}");
+        assert!((l.state[2] - 2.0 * core::f64::consts::PI).abs() < 0.1);
+        assert!(l.max_real() < -1.0, "{:?}", l.eigenvalues);
+        let mut off = default_drive_scenario();
+        off.drive.far_side_gain = 0.0;
+        assert!(linearise(&off, 60.0, -4.5).unwrap().unwrap().limited);
+        // the far-side term is what holds it: without it (and without the limit) the
+        // point is unstable
+        let mut zero = default_drive_scenario();
+        zero.drive.far_side_gain = 0.0;
+        zero.drive.regen_min_frequency_hz = 0.0;
+        let l = linearise(&zero, 60.0, -4.5).unwrap().unwrap();
+        assert!(l.max_real() > 0.0, "{:?}", l.eigenvalues);
+        // Rs held: no transit
+        let mut held = default_drive_scenario();
+        held.drive.rs_estimation = false;
+        assert!(linearise(&held, 60.0, -4.5).unwrap().unwrap().limited);
     }
 
     /// The equilibrium is the operating point: the true speed at the reference, the

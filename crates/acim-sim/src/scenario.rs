@@ -299,6 +299,8 @@ pub struct DriveSpec {
     /// Orientation-correction gain at light load (0: the paper's scheme unchanged); under
     /// load the drive raises it to 1.25 |i_sq| / i_sd*.
     pub orientation_gain: f32,
+    /// Far-side gain of the observer's speed update (0: off), dimensionless.
+    pub far_side_gain: f32,
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
     /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
@@ -369,6 +371,7 @@ impl Default for DriveSpec {
             device_drop_comp_v: d.device_drop,
             stall_time_s: d.stall_time,
             orientation_gain: d.orientation_gain,
+            far_side_gain: d.far_side_gain,
             arithmetic: Arithmetic::F32,
             observer: ObserverKind::Reduced,
             modulation: ModulationKind::Linear,
@@ -750,8 +753,9 @@ pub struct Scenario {
     /// `rs_initial_ohm`, `orientation_gain`, `current_sensing`, `field_weakening`,
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
     /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and issue 13's
-    /// `inverter_identification`, `offset_tracking`, `current_gain_calibration` and
-    /// `rr_adaptation`; the plant's sensors take the board's full scales.
+    /// `inverter_identification`, `offset_tracking`, `current_gain_calibration`,
+    /// `rr_adaptation` and `far_side_gain`; the plant's sensors take the board's full
+    /// scales.
     pub nameplate: Option<NameplateSpec>,
     /// The power board (with `[nameplate]`).
     pub board: Option<BoardSpec>,
@@ -926,6 +930,7 @@ impl Scenario {
         check_range("drive.device_drop_comp_v", d.device_drop_comp_v, 0.0, 20.0)?;
         check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
         check_range("drive.orientation_gain", d.orientation_gain, 0.0, 50.0)?;
+        check_range("drive.far_side_gain", d.far_side_gain, 0.0, 10.0)?;
         check_range(
             "drive.zero_speed_dwell_s",
             d.zero_speed_dwell_s,
@@ -1162,6 +1167,7 @@ impl Scenario {
         drive.device_drop = d.device_drop_comp_v;
         drive.stall_time = d.stall_time_s;
         drive.orientation_gain = d.orientation_gain;
+        drive.far_side_gain = d.far_side_gain;
         if let Some(rpm) = d.max_speed_rpm {
             drive.max_speed = rpm * acim::math::RPM_TO_RAD_S;
         }
@@ -1217,6 +1223,7 @@ impl Scenario {
                 cfg.rs_initial = drive.rs_initial;
             }
             cfg.orientation_gain = drive.orientation_gain;
+            cfg.far_side_gain = drive.far_side_gain;
             cfg.current_sensing = drive.current_sensing;
             cfg.field_weakening = drive.field_weakening;
             cfg.overvoltage_control = drive.overvoltage_control;

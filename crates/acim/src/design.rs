@@ -136,6 +136,20 @@ pub struct DriveConfig {
     pub orientation_gain: f32,
     /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
     pub orientation_fade: (f32, f32),
+    /// The far-side mode (issue 13, items 4-5; [`FAR_SIDE_GAIN`] by default, 0 = off): the
+    /// gain c (dimensionless) of a term the observer's speed and load updates (eq. 12) take
+    /// on the far side of the unobservable line, where the stator frequency turns against
+    /// the speed estimate: the q-axis error e minus c max(1, |i_sq| / (2 i_sd*)) times the
+    /// eq. (20) d-axis current-model error, faded in with |w_s| like the orientation
+    /// correction (the rotated adaptation error of Kubota and Hinkkanen's regenerating
+    /// stabilisation, in this observer's terms). The mode is on while the load-torque
+    /// estimate puts the speed target's operating point [`FAR_SIDE_ENTER_HZ`] beyond the
+    /// line (off within [`FAR_SIDE_LEAVE_HZ`]), with the Rs estimator in the running mode
+    /// and after the inverter test identified the voltage error at this start; in it the
+    /// regeneration limit is released, so the drive crosses the line to hold the target
+    /// (the transit). c and the load scheduling come from the linearised loop's maps
+    /// (`acim_sim::linear`; docs/robustness.md, "The far-side mode").
+    pub far_side_gain: f32,
     /// Inverter dead time, s (compensated).
     pub dead_time: f32,
     /// Inverter device on-state drop, V (compensated with the dead time).
@@ -267,6 +281,7 @@ impl DriveConfig {
                 2.0 * core::f32::consts::PI * 0.5,
                 2.0 * core::f32::consts::PI * 1.5,
             ),
+            far_side_gain: FAR_SIDE_GAIN,
             dead_time: 1.5e-6,
             device_drop: 1.0,
             dead_time_current_band: 0.05,
@@ -385,6 +400,24 @@ pub const MAX_ORIENTATION_GAIN: f32 = 50.0;
 pub const OVERLOAD_SPEED_LOOP_CONSTANTS: f32 = 5.0;
 /// Overload: the speed error counts beyond this fraction of the reference.
 pub const OVERLOAD_FRACTION: f32 = 0.5;
+/// The far-side gain's default ([`DriveConfig::far_side_gain`]): the value that leaves the
+/// fewest unstable points in the linearised loop's maps (`acim_sim::linear`, docs/robustness.md).
+pub const FAR_SIDE_GAIN: f32 = 1.5;
+/// The far-side gain rises with the load as c max(1, |i_sq| / (2 i_sd*)), that is with the
+/// slip once tau_r |w_slip| passes 2, as the orientation gain does: without it the
+/// linearised loop is unstable on the far side at 60-120 rpm beyond 8 N m (120 rpm / 9 N m:
+/// +2.2/s; the sampled loop a limit cycle, 70-154 rpm); with it stable up to 10 N m.
+pub const FAR_SIDE_LOAD_FRACTION: f32 = 0.5;
+/// Largest accepted [`DriveConfig::far_side_gain`].
+pub const MAX_FAR_SIDE_GAIN: f32 = 10.0;
+/// The far-side transit (issue 13, item 5): with [`DriveConfig::far_side_gain`] on, the
+/// regeneration limit is released while the load torque estimate puts the speed target's
+/// operating point at least this far beyond the line w_s = 0, Hz (the issue's observable
+/// bound, |f_s| >= 1 Hz).
+pub const FAR_SIDE_ENTER_HZ: f32 = 1.0;
+/// ... and applies again once that point comes within this of the line, Hz (the start of
+/// the orientation correction's fade, where the far-side term is off).
+pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
 /// Under load the orientation gain is at least this multiple of the stability bound
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
 pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
@@ -732,6 +765,11 @@ pub struct OrientationDesign<N: Num = f32> {
     pub inv_fade_width: N::Gain,
     /// Largest |correction|, rad/s electrical.
     pub limit: N,
+    /// The far-side gain c (dimensionless).
+    pub far_side_gain: N::Gain,
+    /// a in its load scheduling c(i_sq) = c max(1, a |i_sq|), 1/A:
+    /// [`FAR_SIDE_LOAD_FRACTION`] / i_sd*.
+    pub far_side_load_factor: N::Gain,
 }
 
 /// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
@@ -950,6 +988,14 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
     pub regen_current_per_frequency: N::Gain,
+    /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical: the torque whose slip is one
+    /// rad/s (the far-side transit; 0 when [`DriveConfig::far_side_gain`] is 0).
+    pub far_side_torque_per_frequency: N::Gain,
+    /// The far-side transit enters beyond this stator frequency, rad/s electrical (0: no
+    /// transit).
+    pub far_side_enter: N,
+    /// ... and leaves within this one, rad/s electrical.
+    pub far_side_leave: N,
     /// The inverter test at start ([`DriveConfig::inverter_identification`]).
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
@@ -1018,6 +1064,12 @@ pub struct DriveDesign {
     pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical.
     pub regen_current_per_frequency: f32,
+    /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical (0: no far-side transit).
+    pub far_side_torque_per_frequency: f32,
+    /// [`FAR_SIDE_ENTER_HZ`], rad/s electrical.
+    pub far_side_enter: f32,
+    /// [`FAR_SIDE_LEAVE_HZ`], rad/s electrical.
+    pub far_side_leave: f32,
     /// The inverter test at start (issue 13, item 2).
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker (issue 13, item 3).
@@ -1095,6 +1147,11 @@ impl DriveDesign {
         )?;
         positive(cfg.rs_initial, "rs_initial")?;
         positive(cfg.rs_convergence_time, "rs_convergence_time")?;
+        check(
+            is_finite(cfg.far_side_gain) && (0.0..=MAX_FAR_SIDE_GAIN).contains(&cfg.far_side_gain),
+            "far_side_gain",
+            "must be in 0 ..= 10 (MAX_FAR_SIDE_GAIN)",
+        )?;
         check(
             is_finite(cfg.dead_time)
                 && cfg.dead_time >= 0.0
@@ -1240,6 +1297,23 @@ impl DriveDesign {
             regen_min_frequency: cfg.regen_min_frequency,
             overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
+            far_side_torque_per_frequency: if cfg.far_side_gain > 0.0 {
+                1.5 * pp * flux_reference * flux_reference / m.referred_rotor_resistance()
+            } else {
+                0.0
+            },
+            // the transit needs the Rs estimate kept while running: with Rs held 20 % high
+            // the far side at 15-30 rpm is unstable with the far-side term
+            // (docs/linear-stability.md, the labelled points)
+            far_side_enter: if cfg.far_side_gain > 0.0
+                && cfg.rs_estimation
+                && cfg.rs_estimation_mode == RsEstimationMode::Running
+            {
+                2.0 * core::f32::consts::PI * FAR_SIDE_ENTER_HZ
+            } else {
+                0.0
+            },
+            far_side_leave: 2.0 * core::f32::consts::PI * FAR_SIDE_LEAVE_HZ,
             inverter_test: InverterTestDesign::new(
                 inverter_test_on,
                 ts,
@@ -1280,6 +1354,8 @@ impl DriveDesign {
                 fade_start: fa,
                 inv_fade_width: 1.0 / (fb - fa),
                 limit: ORIENTATION_LIMIT_FRACTION * cfg.max_speed * pp,
+                far_side_gain: cfg.far_side_gain,
+                far_side_load_factor: FAR_SIDE_LOAD_FRACTION / i_d,
             },
             magnetizing: MagnetizingDesign {
                 identify_rs: cfg.rs_estimation && cfg.rs_standstill_identification,
@@ -1393,6 +1469,9 @@ impl DriveCoeffs<f32> {
             regen_min_frequency: d.regen_min_frequency,
             overmodulation_reserve_steps: d.overmodulation_reserve_steps,
             regen_current_per_frequency: d.regen_current_per_frequency,
+            far_side_torque_per_frequency: d.far_side_torque_per_frequency,
+            far_side_enter: d.far_side_enter,
+            far_side_leave: d.far_side_leave,
             speed_target_limit: d.speed_target_limit,
             speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),

@@ -317,6 +317,8 @@ struct References<N> {
     target_limited: bool,
     /// Steps the target stays reported as limited since the hold last bound.
     limited_hold: u32,
+    /// The far-side transit holds the regeneration limit released (issue 13, item 5).
+    far_side: bool,
     /// The previous step's i_sq*, A (the field-weakening model's load, issue 15).
     i_sq_ref: N,
     /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
@@ -454,6 +456,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 rs_settled_steps: 0,
                 target_limited: false,
                 limited_hold: 0,
+                far_side: false,
                 i_sq_ref: N::ZERO,
                 fw_trim: N::ZERO,
                 flux_optimum: N::ZERO,
@@ -698,6 +701,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     fn reset_dynamic_state(&mut self) {
         self.refs.speed_reference = N::ZERO;
         self.refs.limited_hold = 0;
+        self.refs.far_side = false;
         self.refs.speed_ctl.reset();
         self.refs.i_sq_ref = N::ZERO;
         self.refs.fw_trim = N::ZERO;
@@ -989,12 +993,29 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         frame_held: bool,
         probe: &mut P,
     ) -> Estimate<N> {
+        let far_side_mode = self.refs.far_side;
         let c = &self.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
         // observer, with the voltage applied over the past period and the flux state of
         // the last step
         probe.begin(StepRegion::ObserverReduced);
+        // the far-side term (issue 13, items 4-5): in the far-side mode (the reference
+        // stage's, from the last step) and while w_s is against Omega_hat, the speed and
+        // load updates see e - c(i_sq) w e_d (`DriveConfig::far_side_gain`)
+        let far_side_error = {
+            let ws = est.flux.stator_frequency;
+            let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
+            if far_side_mode && against && !frame_held && est.flux.rotor_flux >= c.settled_flux {
+                let o = &c.orientation;
+                let w = N::gain(o.inv_fade_width, ws.abs() - o.fade_start).clamp(N::ZERO, N::ONE);
+                let load = N::gain(o.far_side_load_factor, m.i_dq.q.abs());
+                let scale = if load > N::ONE { load } else { N::ONE };
+                -N::gain_mul(o.far_side_gain, w, est.rs.current_error) * scale
+            } else {
+                N::ZERO
+            }
+        };
         let observer = est.observer.update(
             c,
             &SpeedObserverInputs {
@@ -1008,6 +1029,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 equivalent_resistance: est.rs.stator_resistance_estimate
                     + est.rr.referred_resistance,
                 magnetizing,
+                far_side_error,
             },
         );
         probe.end(StepRegion::ObserverReduced);
@@ -1240,7 +1262,33 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         let speed = e.observer.speed;
-        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO {
+        // the far-side mode (issue 13, items 4-5): the braking torque the target needs,
+        // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
+        // beyond the line by `far_side_enter` (entering) or within `far_side_leave` of it
+        // (leaving); only after an inverter test identified the voltage error at this
+        // start. In it the regeneration limit is released (the transit) and the observer
+        // takes the far-side term
+        r.far_side = if c.far_side_enter > N::ZERO
+            && r.speed_target != N::ZERO
+            && self.inverter.outcome == InverterTestOutcome::Identified
+        {
+            let braking = if r.speed_target > N::ZERO {
+                -e.observer.load_torque
+            } else {
+                e.observer.load_torque
+            };
+            let line = N::gain(c.pole_pairs, r.speed_target.abs());
+            let margin = if r.far_side {
+                c.far_side_leave
+            } else {
+                c.far_side_enter
+            };
+            braking >= N::gain(c.far_side_torque_per_frequency, line + margin)
+        } else {
+            false
+        };
+        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO && !r.far_side
+        {
             regen_limit(c, r.speed_target, speed, fw)
         } else {
             (fw.i_sq_min, fw.i_sq_max, false)

@@ -275,6 +275,8 @@ pub struct ObserverInputs<N = f32> {
     pub inv_rotor_flux: N,
     /// Rseq = Rs_hat + R_R, ohm.
     pub equivalent_resistance: N,
+    /// Added to the q-axis error in the speed and load updates, A (far side).
+    pub far_side_error: N,
 }
 
 /// Observer state: the estimates.
@@ -314,7 +316,7 @@ impl<N: Num> ReducedOrderObserver<N> {
             + N::gain(cfg.ts_inv_l, u.v_sq - u.equivalent_resistance * u.i_sq)
             - N::gain_mul(cfg.ts_p_inv_l, lambda, w)
             - N::gain_mul(cfg.ts, u.stator_frequency, u.i_sd);
-        let e_per_flux = u.inv_rotor_flux * e;
+        let e_per_flux = u.inv_rotor_flux * (e + u.far_side_error);
         // Ts [(1.5 p lambda i_hat - T_hat - B Omega_hat)/J + K2 e] with
         // K2 = g2/lambda - (1.5 p/J) lambda: the two torque terms combine to
         // (1.5 p lambda/J)(i_hat - e) = (1.5 p lambda/J) i_sq
@@ -354,6 +356,8 @@ pub struct SpeedObserverInputs<N = f32> {
     pub equivalent_resistance: N,
     /// True while the drive builds the flux at standstill (frame held).
     pub magnetizing: bool,
+    /// Added to the q-axis error in the speed and load updates, A (far side).
+    pub far_side_error: N,
 }
 
 /// What a speed observer gives the cascade.
@@ -405,6 +409,7 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
                     rotor_flux: x.rotor_flux,
                     inv_rotor_flux: x.inv_rotor_flux,
                     equivalent_resistance: x.equivalent_resistance,
+                    far_side_error: x.far_side_error,
                 },
             );
         }
@@ -462,6 +467,46 @@ mod tests {
         );
     }
 
+    /// The far-side term (issue 13, items 4-5) enters the speed and load updates as an
+    /// addition to the q-axis error, and not the current model: one step with
+    /// `far_side_error` x moves Omega_hat and T_L_hat as one with the current estimate x
+    /// higher would, and leaves i_sq_hat's update alone.
+    #[test]
+    fn far_side_error_enters_the_speed_and_load_updates_only() {
+        let (m, c) = cfg();
+        let lambda = m.rotor_flux_for(1.5);
+        let u = ObserverInputs {
+            i_sq: 1.0,
+            i_sd: 1.5,
+            stator_frequency: -6.0,
+            v_sq: 20.0,
+            rotor_flux: lambda,
+            inv_rotor_flux: 1.0 / lambda,
+            equivalent_resistance: m.equivalent_resistance(),
+            far_side_error: 0.0,
+        };
+        let start = |i: f32| {
+            let mut o = ReducedOrderObserver::new();
+            o.reset(i, 10.0, -2.0);
+            o
+        };
+        let x = 0.05;
+        let (mut plain, mut far, mut shifted) = (start(1.0), start(1.0), start(1.0 + x));
+        plain.update(&c.coeffs, &u);
+        far.update(
+            &c.coeffs,
+            &ObserverInputs {
+                far_side_error: x,
+                ..u
+            },
+        );
+        shifted.update(&c.coeffs, &u);
+        assert_eq!(far.current_estimate, plain.current_estimate);
+        assert!((far.speed_estimate - shifted.speed_estimate).abs() < 1e-4);
+        assert!((far.load_torque_estimate - shifted.load_torque_estimate).abs() < 1e-5);
+        assert!((far.speed_estimate - plain.speed_estimate).abs() > 1e-3);
+    }
+
     /// The plant (9b)+(10) accelerating under a constant torque current against a load:
     /// with exact parameters the estimates lock onto the moving speed and the load.
     #[test]
@@ -488,6 +533,7 @@ mod tests {
                     rotor_flux: lambda,
                     inv_rotor_flux: 1.0 / lambda,
                     equivalent_resistance,
+                    far_side_error: 0.0,
                 },
             );
             let te = m.torque_constant(lambda) * i_sq;
@@ -582,7 +628,7 @@ mod tests {
             let mut obs = ReducedOrderObserver::new();
             obs.reset(i_sq, speed + e0, load + t0);
             let u = ObserverInputs { i_sq, i_sd, stator_frequency: ws, v_sq: v, rotor_flux: lambda,
-                inv_rotor_flux: 1.0 / lambda, equivalent_resistance };
+                inv_rotor_flux: 1.0 / lambda, equivalent_resistance, far_side_error: 0.0 };
             for _ in 0..1500 { obs.update(&c.coeffs, &u); }
             prop_assert!((obs.speed_estimate - speed).abs() < 0.05 * (1.0 + e0.abs() + t0.abs()));
             prop_assert!((obs.load_torque_estimate - load).abs() < 0.01 * (1.0 + e0.abs() + t0.abs()));

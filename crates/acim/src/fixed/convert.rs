@@ -317,6 +317,11 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
                 "orientation_fade",
             )?,
             limit: pu(d.orientation.limit, b.frequency, "max_speed")?,
+            far_side_gain: gain(d.orientation.far_side_gain, "far_side_gain")?,
+            far_side_load_factor: gain(
+                d.orientation.far_side_load_factor * b.current,
+                "far_side_gain",
+            )?,
         },
         magnetizing: MagnetizingDesign {
             identify_rs: d.magnetizing.identify_rs,
@@ -416,6 +421,12 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             d.regen_current_per_frequency * b.frequency / b.current,
             "regen_min_frequency",
         )?,
+        far_side_torque_per_frequency: gain(
+            d.far_side_torque_per_frequency * b.frequency / b.torque,
+            "far_side_gain",
+        )?,
+        far_side_enter: Q24(to_q24(d.far_side_enter / b.frequency)),
+        far_side_leave: Q24(to_q24(d.far_side_leave / b.frequency)),
         inverter_test: InverterTestDesign {
             level_steps: d.inverter_test.level_steps,
             settle_steps: d.inverter_test.settle_steps,

@@ -266,12 +266,13 @@ proptest! {
         for k in 0..2000usize {
             let i_meas = i_sq + noise[k % 32];
             f.update(&c.coeffs, &ObserverInputs { i_sq: i_meas, i_sd, stator_frequency: ws, v_sq: v,
-                rotor_flux: lambda, inv_rotor_flux: inv, equivalent_resistance: rseq });
+                rotor_flux: lambda, inv_rotor_flux: inv, equivalent_resistance: rseq,
+                far_side_error: 0.0 });
             x.update(&cq, &ObserverInputs {
                 i_sq: q(i_meas, B.current), i_sd: q(i_sd, B.current),
                 stator_frequency: q(ws, B.frequency), v_sq: q(v, B.voltage),
                 rotor_flux: q(lambda, B.flux), inv_rotor_flux: Q24(to_q24(inv * B.flux)),
-                equivalent_resistance: q(rseq, B.resistance()) });
+                equivalent_resistance: q(rseq, B.resistance()), far_side_error: Q24(0) });
             let d = [
                 (f.current_estimate / B.current - pu(x.current_estimate)).abs(),
                 (f.speed_estimate / B.speed - pu(x.speed_estimate)).abs(),
