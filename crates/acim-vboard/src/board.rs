@@ -161,6 +161,12 @@ impl Board {
         if let ControlCommand::PlantLoad(nm) = cmd {
             self.stage.set_brake_nm(nm);
         }
+        // as the firmware's main loop: the sequence is built outside the control step, with
+        // the bus of the last period, and staged for the command that starts it
+        if let ControlCommand::Commission(args) = cmd {
+            self.ctl
+                .stage_commissioning(commission::build(&args, self.ctl.inputs().dc_bus));
+        }
         self.log.push(Logged {
             period: self.period,
             event: Event::Control(cmd),
