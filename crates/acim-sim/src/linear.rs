@@ -37,9 +37,13 @@
 //! the reachable speed, which is where the equilibrium is found. (The sampled loop does
 //! the same: there the PI sits at the bound and the torque-current reference follows the
 //! bound at the estimated speed step by step, a speed feedback of gain p lambda_ref /
-//! R_R_hat.) Every coefficient
-//! of the controller's side comes from `acim::Drive::coeffs` (the per-step coefficients
-//! over Ts), so the model is the drive's, not a copy of its design rules.
+//! R_R_hat.) In the drive's far-side mode (issue 13: `acim::DriveConfig::far_side_gain`
+//! on, the running Rs law, no inverter error left, and a load that puts the target's point
+//! at least `far_side_enter` beyond the line w_s = 0) the limit does not bind and, where
+//! w_s turns against Omega_hat, the observer's speed and load updates take
+//! e - c max(1, a |i_sq|) w e_d instead of e (w the orientation correction's fade). Every
+//! coefficient of the controller's side comes from `acim::Drive::coeffs` (the per-step
+//! coefficients over Ts), so the model is the drive's, not a copy of its design rules.
 //!
 //! The equilibrium is found by Newton's method on f(x) = 0 from the ideal operating point
 //! (it exists and is found for unstable points too); the Jacobian by central differences;
@@ -644,9 +648,13 @@ pub fn map_markdown() -> Result<(String, usize), ScenarioError> {
          Two maps: **the drive as it ships** (the Rs estimator on in the running mode: \
          its estimate and q-axis model are states where the law adapts, |f_s| >= 1 Hz and \
          |i_sq| >= 0.2 i_sd*, and held at the controller's value elsewhere; the 1.5 Hz \
-         regeneration limit), and **the labelled points** (the Rs estimate held at the \
-         controller's value, no regeneration limit: every point linearised where it is \
-         labelled, as the measured map of robust-stability.md does).\n\n",
+         regeneration limit; the far-side mode where the load puts the target's point at \
+         least 1 Hz beyond the line w_s = 0: the observer's far-side term on and the limit \
+         released, except in the inverter-error rows, which stand for a drive whose \
+         inverter test did not run and which keeps the limit), and **the labelled points** \
+         (the Rs estimate held at the controller's value, no regeneration limit, no \
+         far-side mode, which needs the running Rs law: every point linearised where it \
+         is labelled, as the measured map of robust-stability.md does).\n\n",
     );
     let head = "| error | unstable with \\|f_s\\| >= 1 Hz | unstable below 1 Hz | no equilibrium | held by the regeneration limit | least damped with \\|f_s\\| >= 1 Hz (1/s) |\n|---|---|---|---|---|---|\n";
     let (s_ship, t_ship, unstable) = maps(default_drive_scenario, "As it ships")?;
