@@ -1304,7 +1304,7 @@ impl DriveDesign {
             },
             // the transit needs the Rs estimate kept while running: with Rs held 20 % high
             // the far side at 15-30 rpm is unstable with the far-side term
-            // (docs/linear-stability.md, the labelled points)
+            // (docs/robustness.md, "The far-side mode")
             far_side_enter: if cfg.far_side_gain > 0.0
                 && cfg.rs_estimation
                 && cfg.rs_estimation_mode == RsEstimationMode::Running

@@ -317,7 +317,8 @@ struct References<N> {
     target_limited: bool,
     /// Steps the target stays reported as limited since the hold last bound.
     limited_hold: u32,
-    /// The far-side transit holds the regeneration limit released (issue 13, item 5).
+    /// The far-side mode (issue 13, items 4-5): the regeneration limit released and the
+    /// observer's far-side term on.
     far_side: bool,
     /// The previous step's i_sq*, A (the field-weakening model's load, issue 15).
     i_sq_ref: N,
