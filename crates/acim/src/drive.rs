@@ -1009,7 +1009,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
             if far_side_mode && against && !frame_held && est.flux.rotor_flux >= c.settled_flux {
                 let o = &c.orientation;
-                let w = N::gain(o.inv_fade_width, ws.abs() - o.fade_start).clamp(N::ZERO, N::ONE);
+                let w = crate::orientation::fade(o, ws);
                 let load = N::gain(o.far_side_load_factor, m.i_dq.q.abs());
                 let scale = if load > N::ONE { load } else { N::ONE };
                 -N::gain_mul(o.far_side_gain, w, est.rs.current_error) * scale
@@ -1269,7 +1269,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // (leaving); only after an inverter test identified the voltage error at this
         // start. In it the regeneration limit is released (the transit) and the observer
         // takes the far-side term
-        r.far_side = if c.far_side_enter > N::ZERO
+        r.far_side = if O::FAR_SIDE_TERM
+            && c.far_side_enter > N::ZERO
             && r.speed_target != N::ZERO
             && self.inverter.outcome == InverterTestOutcome::Identified
         {

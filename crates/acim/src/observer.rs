@@ -376,6 +376,11 @@ pub struct SpeedEstimate<N = f32> {
 /// ([`crate::full_order::FullOrder`]) both implement it, and [`crate::Drive`] takes one
 /// as a type parameter (zero cost in the interrupt: static dispatch, inlined).
 pub trait SpeedObserver<N: Num = f32> {
+    /// Whether the observer takes the far-side term (`SpeedObserverInputs::far_side_error`).
+    /// The drive enters the far-side mode, which releases the regeneration limit, only
+    /// with an observer that does: without the term nothing would hold the point beyond
+    /// the unobservable line (issue 13, items 4-5).
+    const FAR_SIDE_TERM: bool;
     /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
     /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).
     fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
@@ -393,6 +398,7 @@ pub trait SpeedObserver<N: Num = f32> {
 }
 
 impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
+    const FAR_SIDE_TERM: bool = true;
     /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
     /// section 4).
     #[inline(always)]

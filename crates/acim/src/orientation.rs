@@ -15,6 +15,15 @@
 use crate::design::OrientationDesign;
 use crate::num::Num;
 
+/// The fade in |w_s|: 0 below `orientation_fade`'s start (no orientation information at
+/// w_s = 0), 1 above its end, linear between, from the stator frequency
+/// `stator_frequency` (rad/s electrical). Shared by the correction and the far-side term
+/// of the observer (`DriveConfig::far_side_gain`), so both fade in together.
+#[inline(always)]
+pub fn fade<N: Num>(d: &OrientationDesign<N>, stator_frequency: N) -> N {
+    N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE)
+}
+
 /// The correction dw (rad/s electrical) added to p Omega_hat before the slip law, from
 /// the stator frequency of the last step `stator_frequency` (rad/s electrical), the Rs
 /// estimate `rs_estimate` (ohm) and the d-axis current-model error `current_error` (A,
@@ -32,7 +41,7 @@ pub fn correction<N: Num>(
     current_error: N,
     torque_current: N,
 ) -> N {
-    let w = N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE);
+    let w = fade(d, stator_frequency);
     let r_d = rs_estimate * current_error;
     let signed = if stator_frequency >= N::ZERO {
         -r_d
