@@ -40,6 +40,7 @@ fn main() {
     let o = acim_sim::robustness::run_scenario(&case, &sc).unwrap();
     let r = acim_sim::sim::run(&sc).unwrap();
     eprintln!("current gain correction {:.5}", r.current_gain_correction);
+    eprintln!("inverter {:?}", r.inverter_test);
     if let Ok(p) = std::env::var("CSV") {
         let mut f = String::from(acim_sim::sim::CSV_HEADER);
         f.push('\n');

@@ -52,6 +52,7 @@ fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) ->
     s.drive.offset_tracking = false;
     s.drive.current_gain_calibration = false;
     s.drive.inverter_identification = false;
+    s.drive.inverter_tracking = false;
     s
 }
 

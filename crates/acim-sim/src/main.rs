@@ -345,9 +345,10 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
     }
     if let Some(t) = &m.inverter_test {
         out.push(format!(
-            "{:<26} inverter test at start: {}; dead time compensated {:.3} us (configured {:.3}, true {:.3}: {:+.1} %)",
+            "{:<26} inverter test at start: {}{}; dead time compensated at the end {:.3} us (configured {:.3}, true {:.3}: {:+.1} %)",
             "",
             t.outcome,
+            if t.tracked { ", tracked while running" } else { "" },
             t.dead_time_us,
             t.configured_dead_time_us,
             t.true_dead_time_us,

@@ -335,6 +335,9 @@ pub struct DriveSpec {
     /// Track the current-sensor offsets' drift while turning (default true;
     /// `acim::DriveConfig::offset_tracking`; the paper's scheme sets it off).
     pub offset_tracking: bool,
+    /// Track the inverter's voltage error while turning, from its sixth harmonic
+    /// (`acim::DriveConfig::inverter_tracking`; the paper's scheme sets it off).
+    pub inverter_tracking: bool,
     /// Calibrate the current sensors' relative gain at every start from rest (default true;
     /// `acim::DriveConfig::current_gain_calibration`; the paper's scheme sets it off).
     pub current_gain_calibration: bool,
@@ -388,6 +391,7 @@ impl Default for DriveSpec {
             inverter_identification: d.inverter_identification,
             rs_standstill_identification: d.rs_standstill_identification,
             offset_tracking: d.offset_tracking,
+            inverter_tracking: d.inverter_tracking,
             current_gain_calibration: d.current_gain_calibration,
             rr_adaptation: d.rr_adaptation,
         }
@@ -753,7 +757,7 @@ pub struct Scenario {
     /// `rs_initial_ohm`, `orientation_gain`, `current_sensing`, `field_weakening`,
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
     /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and issue 13's
-    /// `inverter_identification`, `offset_tracking`, `current_gain_calibration`,
+    /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
     /// `rr_adaptation` and `far_side_gain`; the plant's sensors take the board's full
     /// scales.
     pub nameplate: Option<NameplateSpec>,
@@ -1183,6 +1187,7 @@ impl Scenario {
         drive.inverter_identification = d.inverter_identification;
         drive.rs_standstill_identification = d.rs_standstill_identification;
         drive.offset_tracking = d.offset_tracking;
+        drive.inverter_tracking = d.inverter_tracking;
         drive.current_gain_calibration = d.current_gain_calibration;
         drive.rr_adaptation = d.rr_adaptation;
         drive.current_sensing = match channels {
@@ -1234,6 +1239,7 @@ impl Scenario {
             // issue 13's switches (before, a `--set` of them was silently ignored here)
             cfg.inverter_identification = drive.inverter_identification;
             cfg.offset_tracking = drive.offset_tracking;
+            cfg.inverter_tracking = drive.inverter_tracking;
             cfg.current_gain_calibration = drive.current_gain_calibration;
             cfg.rr_adaptation = drive.rr_adaptation;
             if d.max_speed_rpm.is_some() {

@@ -178,8 +178,8 @@ pub struct RunResult {
     pub search: Option<SearchRecord>,
     /// The drive configuration as run.
     pub config: acim::DriveConfig,
-    /// The inverter test at start, when the drive runs it
-    /// (`drive.inverter_identification`).
+    /// The inverter test at start and the running tracker's correction at the end, when
+    /// the drive runs either (`drive.inverter_identification`, `drive.inverter_tracking`).
     pub inverter_test: Option<InverterTestRecord>,
     /// The rotor-resistance adaptation at the end, when the drive runs it
     /// (`drive.rr_adaptation`).
@@ -213,9 +213,13 @@ pub struct RotorResistanceRecord {
 pub struct InverterTestRecord {
     /// The last test's outcome (`Identified`, `Skipped`, `Rejected`, ...).
     pub outcome: String,
-    /// The dead time the drive compensates after it, us (configured plus the correction,
-    /// the configured device drop counted as known).
+    /// The dead time the drive compensates at the end of the run, us (configured plus the
+    /// correction of the test and of the running tracker, the configured device drop
+    /// counted as known).
     pub dead_time_us: f32,
+    /// Whether the running tracker could adapt the correction (`drive.inverter_tracking`
+    /// with the running Rs law).
+    pub tracked: bool,
     /// The plant inverter's dead time, us.
     pub true_dead_time_us: f32,
     /// The dead time the drive was configured with, us.
@@ -586,13 +590,16 @@ pub fn run_with_progress(
         switches_off_at_end: !pwm.preloaded().enabled,
         search,
         config: v.drive,
-        inverter_test: v.drive.inverter_identification.then(|| {
+        inverter_test: (v.drive.inverter_identification || v.drive.inverter_tracking).then(|| {
             let (outcome, dead_time) = drive.inverter_test();
             InverterTestRecord {
                 outcome: format!("{outcome:?}"),
                 dead_time_us: dead_time * 1e6,
                 true_dead_time_us: sc.inverter.dead_time_s * 1e6,
                 configured_dead_time_us: v.drive.dead_time * 1e6,
+                tracked: v.drive.inverter_tracking
+                    && v.drive.rs_estimation
+                    && v.drive.rs_estimation_mode == acim::RsEstimationMode::Running,
             }
         }),
         current_gain_correction: drive.current_gain_correction(),

@@ -92,6 +92,7 @@ pub fn ideal_scenario(name: &str) -> Scenario {
     };
     sc.drive.rs_estimation = false;
     sc.drive.offset_tracking = false;
+    sc.drive.inverter_tracking = false;
     sc.plant.friction_nms = 0.0;
     sc.controller.friction_nms = 0.0;
     sc.inverter.dead_time_s = 0.0;

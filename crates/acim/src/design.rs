@@ -9,6 +9,7 @@
 
 use crate::flux::FluxModelConfig;
 use crate::gain_calibration::GainCalibrationConfig;
+use crate::inverter_tracker::InverterTrackerConfig;
 use crate::math::{is_finite, sqrt};
 use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig, ObserverDesignError, ObserverPoles};
@@ -230,6 +231,12 @@ pub struct DriveConfig {
     /// ([`crate::offset_tracker`]); an estimate at `offset_limit` is a current-sensor
     /// fault.
     pub offset_tracking: bool,
+    /// Inverter voltage-error tracking while running (issue 13, item 2, online part):
+    /// the error the compensation leaves, from the sixth-harmonic pattern it puts into the
+    /// current loops' command across the current, which a resistance error cannot make
+    /// ([`crate::inverter_tracker`]); it adapts the start test's correction while
+    /// 1 Hz <= |f_s| and 6 |w_s| <= `current_bandwidth`.
+    pub inverter_tracking: bool,
     /// Current-sensor gain calibration at every start from rest (on by default; two-phase
     /// sensing only): the b channel's gain relative to a's, identified from the beta
     /// voltage while magnetizing with the frame held, equalizes the a and b samples (their
@@ -296,6 +303,7 @@ impl DriveConfig {
             flux_optimisation: false,
             inverter_identification: true,
             offset_tracking: true,
+            inverter_tracking: true,
             current_gain_calibration: true,
             rr_adaptation: false,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
@@ -1000,6 +1008,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
     pub offset_tracker: OffsetTrackerConfig<N>,
+    /// The running inverter-error tracker ([`DriveConfig::inverter_tracking`]).
+    pub inverter_tracker: InverterTrackerConfig<N>,
     /// The current-sensor gain calibration ([`DriveConfig::current_gain_calibration`]).
     pub gain_calibration: GainCalibrationConfig<N>,
     /// The rotor-resistance adaptation ([`DriveConfig::rr_adaptation`]).
@@ -1074,6 +1084,8 @@ pub struct DriveDesign {
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker (issue 13, item 3).
     pub offset_tracker: OffsetTrackerConfig,
+    /// The running inverter-error tracker (issue 13, item 2).
+    pub inverter_tracker: InverterTrackerConfig,
     /// The current-sensor gain calibration at start.
     pub gain_calibration: GainCalibrationConfig,
     /// The rotor-resistance adaptation (issue 13, item 7).
@@ -1328,6 +1340,17 @@ impl DriveDesign {
                 i_d,
                 m.rotor_time_constant(),
             ),
+            // the tracker moves the voltage error the Rs estimate carries (as an apparent
+            // resistance) into the correction: only with the running Rs law, which takes
+            // it back out of the estimate (crate::inverter_tracker, "Gates")
+            inverter_tracker: InverterTrackerConfig::new(
+                cfg.inverter_tracking
+                    && cfg.rs_estimation
+                    && cfg.rs_estimation_mode == RsEstimationMode::Running,
+                ts,
+                i_d,
+                cfg.current_bandwidth,
+            ),
             gain_calibration: GainCalibrationConfig::new(
                 cfg.current_gain_calibration && cfg.current_sensing == CurrentSensing::TwoPhase,
                 ts,
@@ -1487,6 +1510,7 @@ impl DriveCoeffs<f32> {
             rs_running: d.rs_running,
             inverter_test: d.inverter_test,
             offset_tracker: d.offset_tracker,
+            inverter_tracker: d.inverter_tracker,
             gain_calibration: d.gain_calibration,
             rr: d.rr_estimator,
         }

@@ -50,6 +50,7 @@ use crate::frames::{
 };
 use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::{InverterTest, InverterTestOutcome};
+use crate::inverter_tracker::{sign_vector, InverterTracker};
 use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
@@ -315,6 +316,8 @@ struct References<N> {
     rs_settled_steps: u32,
     /// The target is beyond the reachable speed (reported in the telemetry).
     target_limited: bool,
+    /// The speed reference moved this step (a ramp).
+    ramping: bool,
     /// Steps the target stays reported as limited since the hold last bound.
     limited_hold: u32,
     /// The far-side mode (issue 13, items 4-5): the regeneration limit released and the
@@ -400,6 +403,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     inverter: InverterTest<N>,
     /// The offsets' drift since the start, tracked while turning (issue 13, item 3).
     offset_tracker: OffsetTracker<N>,
+    /// The inverter error tracked while turning (issue 13, item 2): it adapts the
+    /// inverter test's correction.
+    inverter_tracker: InverterTracker<N>,
     /// The current sensors' relative gain, calibrated while magnetizing at rest
     /// ([`crate::gain_calibration`]).
     gain_cal: GainCalibration<N>,
@@ -456,6 +462,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
                 target_limited: false,
+                ramping: false,
                 limited_hold: 0,
                 far_side: false,
                 i_sq_ref: N::ZERO,
@@ -489,6 +496,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             search: SpeedSearch::new(),
             inverter: InverterTest::default(),
             offset_tracker: OffsetTracker::default(),
+            inverter_tracker: InverterTracker::default(),
             gain_cal: GainCalibration::default(),
             pending_start: None,
         })
@@ -831,7 +839,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
         // 7. modulation at the angle the voltage will act at
         probe.begin(StepRegion::Svpwm);
-        let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus);
+        // the inverter tracker's gate: turning, the speed reference not ramping, and the
+        // running Rs law adapting this step (its own gate: a steady torque current), so
+        // that the resistance estimate follows what the correction takes away
+        let track = !magnetizing && !self.refs.ramping && self.est.rs.adapting;
+        let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus, track);
         probe.end(StepRegion::Svpwm);
         self.applied = Applied {
             v_dq,
@@ -1262,6 +1274,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         r.target_limited = target != r.speed_target;
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
+        r.ramping = dv != N::ZERO;
         let speed = e.observer.speed;
         // the far-side mode (issue 13, items 4-5): the braking torque the target needs,
         // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
@@ -1581,6 +1594,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         v: Dq<N>,
         i_ref: Dq<N>,
         inv_dc_bus: N,
+        track: bool,
     ) -> (AlphaBeta<N>, Modulation<N>, Dq<N>) {
         let c = &self.coeffs;
         let rot = N::rotate_ahead(&mut self.sincos, m.sc, m.angle, e.stator_frequency, c.lead);
@@ -1601,6 +1615,22 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             i_ref_abc,
             self.inverter.correction_duty,
         );
+        // the inverter error the correction still leaves, from the sixth-harmonic
+        // pattern across the current in this step's command (issue 13, item 2), for the
+        // next step's modulation
+        if c.inverter_tracker.enabled {
+            let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
+            self.inverter.correction_duty = self.inverter_tracker.update(
+                &c.inverter_tracker,
+                v,
+                i_ref,
+                sigma,
+                inv_dc_bus,
+                e.stator_frequency,
+                track && !out.saturated,
+                self.inverter.correction_duty,
+            );
+        }
         if M::OVERMODULATES && out.saturated {
             // the estimators model the voltage of each period: the limited one (the
             // command's fundamental with overmodulation, not this period's vector)

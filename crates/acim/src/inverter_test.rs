@@ -5,11 +5,12 @@
 //!
 //! The state lives in the drive and is kept across stops: each start's test measures what
 //! the previous correction still leaves and adds it, so the correction follows a drifting
-//! inverter from start to start. While the motor runs the split between the stator
-//! resistance and the inverter error is not observable at a steady operating point (both
-//! give a voltage along the current, Rs |i| + (4/pi) V_e, see docs/robustness.md): the
-//! running Rs estimator then carries what is left as an apparent resistance, which is the
-//! part the speed estimate needs.
+//! inverter from start to start. While the motor runs, the fundamental cannot split the
+//! stator resistance from the inverter error at a steady operating point (both give a
+//! voltage along the current, Rs |i| + (4/pi) V_e, see docs/robustness.md); the error's
+//! sixth harmonic across the current can, and [`crate::inverter_tracker`] adapts the
+//! correction from it (`DriveConfig::inverter_tracking`), with the running Rs estimator
+//! carrying the rest as an apparent resistance.
 
 use crate::design::InverterTestDesign;
 use crate::num::Num;

@@ -49,6 +49,7 @@ pub mod flux;
 pub mod frames;
 pub mod gain_calibration;
 pub mod inverter_test;
+pub mod inverter_tracker;
 pub mod math;
 pub mod num;
 pub mod observer;

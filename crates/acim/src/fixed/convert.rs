@@ -17,6 +17,7 @@ use crate::design::{
 };
 use crate::flux::FluxModelConfig;
 use crate::gain_calibration::GainCalibrationConfig;
+use crate::inverter_tracker::InverterTrackerConfig;
 use crate::math::is_finite;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
@@ -187,6 +188,24 @@ pub fn offset_tracker(
         residual_limit: Q24(to_q24(cfg.residual_limit / b.voltage)),
         floor_rise: Q24(to_q24(cfg.floor_rise / b.voltage)),
         bounds: (-limit, limit),
+    })
+}
+
+/// The running inverter-error tracker: its rate takes `current pu x voltage pu x current
+/// pu / voltage pu` to a duty.
+pub fn inverter_tracker(
+    cfg: &InverterTrackerConfig,
+    b: &PerUnitBases,
+) -> Option<InverterTrackerConfig<Q24>> {
+    Some(InverterTrackerConfig {
+        enabled: cfg.enabled,
+        dc_filter: Gain::from_f32(cfg.dc_filter)?,
+        rate: Gain::from_f32(cfg.rate)?,
+        current_floor: Q24(to_q24(cfg.current_floor / (b.current * b.current))),
+        min_frequency: Q24(to_q24(cfg.min_frequency / b.frequency)),
+        max_frequency: Q24(to_q24(cfg.max_frequency / b.frequency)),
+        limit: Q24(to_q24(cfg.limit)),
+        holdoff_steps: cfg.holdoff_steps,
     })
 }
 
@@ -392,6 +411,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         fw: field_weakening(&d.field_weakening, b)?,
         rs_running: rs_running(&d.rs_running, b).ok_or(missing("rs_convergence_time"))?,
         offset_tracker: offset_tracker(&d.offset_tracker, b).ok_or(missing("overcurrent_trip"))?,
+        inverter_tracker: inverter_tracker(&d.inverter_tracker, b)
+            .ok_or(missing("flux_current"))?,
         gain_calibration: GainCalibrationConfig {
             enabled: d.gain_calibration.enabled,
             filter: gain(d.gain_calibration.filter * RS_EXTRA, "control_period")?,
