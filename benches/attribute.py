@@ -30,6 +30,7 @@ RULES = [
     ("feature: field weakening", ["field_weakening", "flux_optimum"]),
     ("feature: regeneration limit", ["regen_limit"]),
     ("feature: running offset tracker", ["OffsetTracker"]),
+    ("feature: running inverter tracker", ["InverterTracker", "sign_vector"]),
     ("core: sin/cos", ["sin_cos"]),
     ("core: Clarke, Park, offsets, sample ripple, bus scaling", ["::sense"]),
     ("core: observer (eq. 12)", ["ReducedOrderObserver"]),
