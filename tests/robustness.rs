@@ -249,7 +249,7 @@ fn inverter_test_finds_the_dead_time_within_ten_percent() {
 /// running tracker finds the inverter's error from its sixth harmonic across the current
 /// (`acim::inverter_tracker`): the drive configured for 1.5 us, inverters of 0.5, 2.2 and
 /// 3.0 us are compensated within 10 % of their dead time after 16 s of running (measured:
-/// 0.2-1.2 %), in f32 and Q7.24 (without it the compensation would stay at 1.5 us,
+/// 0.2-0.7 %), in f32 and Q7.24 (without it the compensation would stay at 1.5 us,
 /// 47-200 % off).
 #[test]
 fn inverter_error_is_tracked_while_running() {

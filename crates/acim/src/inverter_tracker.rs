@@ -40,6 +40,7 @@
 
 use crate::frames::{clarke_three, park, Dq, SinCosValue};
 use crate::num::Num;
+use crate::svpwm::current_sign;
 
 /// Below this stator frequency the tracker holds, Hz.
 pub const INVERTER_TRACKER_MIN_FREQUENCY_HZ: f32 = 1.0;
@@ -98,7 +99,7 @@ impl InverterTrackerConfig<f32> {
 /// with, `inv_band` its 1/i_band (the modulator's own linearised sign).
 #[inline(always)]
 pub fn sign_vector<N: Num>(i_abc: [N; 3], inv_band: N::Gain, rot: SinCosValue<N>) -> Dq<N> {
-    let sign = |i: N| N::gain(inv_band, i).clamp(-N::ONE, N::ONE);
+    let sign = |i: N| current_sign(inv_band, i);
     park(
         clarke_three(sign(i_abc[0]), sign(i_abc[1]), sign(i_abc[2])),
         rot,

@@ -155,11 +155,19 @@ pub fn modulate_with_inverse<N: Num>(
     }
 }
 
+/// The compensation's current sign, linear within the band: `sat(i / i_band)` from the
+/// phase current `i` (A) and `inv_band` = 1/i_band (the running inverter tracker's sign
+/// vector uses the same, [`crate::inverter_tracker::sign_vector`]).
+#[inline(always)]
+pub fn current_sign<N: Num>(inv_band: N::Gain, i: N) -> N {
+    N::gain(inv_band, i).clamp(-N::ONE, N::ONE)
+}
+
 /// One phase: base duty plus the phase voltage over the bus plus the dead-time and
 /// device-drop compensation times the linearised current sign, clamped to [0, 1].
 #[inline(always)]
 fn phase_duty<N: Num>(base: N, vx: N, inv_vdc: N, comp: N, inv_band: N::Gain, i: N) -> N {
-    let sign = N::gain(inv_band, i).clamp(-N::ONE, N::ONE);
+    let sign = current_sign(inv_band, i);
     (base + vx * inv_vdc + comp * sign).clamp(N::ZERO, N::ONE)
 }
 

@@ -191,8 +191,9 @@ pub fn offset_tracker(
     })
 }
 
-/// The running inverter-error tracker: its rate takes `current pu x voltage pu x current
-/// pu / voltage pu` to a duty.
+/// The running inverter-error tracker: its rate needs no scaling (the per-unit bases of
+/// `x (y - b) / (V_dc |i_ref|^2)` cancel: the step is a duty either way); its current
+/// floor is in current pu squared.
 pub fn inverter_tracker(
     cfg: &InverterTrackerConfig,
     b: &PerUnitBases,
