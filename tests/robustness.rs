@@ -471,7 +471,9 @@ fn far_side_mode_holds_the_far_side_by_default() {
         assert!((o.stator_frequency_hz - 1.5).abs() < 0.1, "{o:?}");
     };
     let c = case(Variant::DeadTime1_0NotIdentified, 60.0, true, 4.5);
-    held(&c, &c.scenario_with(&defaults));
+    let mut blind = c.scenario_with(&defaults);
+    blind.drive.inverter_tracking = false;
+    held(&c, &blind);
     let c = case(Variant::Nominal, 60.0, true, 4.5);
     let mut before = c.scenario_with(&defaults);
     before.drive.far_side_gain = 0.0;
@@ -491,6 +493,40 @@ fn far_side_mode_holds_the_far_side_by_default() {
         o.speed_error_rpm.abs() < 2.0 && o.speed_est_error_rpm.abs() < 2.0,
         "{o:?}"
     );
+}
+
+/// Issue 13, items 2 and 4-5: without the start test the inverter's error is unknown, and
+/// the limit holds the far-side target at f_s = 1.5 Hz; the inverter tracker adapts there
+/// (the limit's hold is not a ramp), and once it has adapted for
+/// `INVERTER_TRACKER_TRUST` (3 s) its correction stands in for the test's: the mode takes
+/// the drive across, and 60 rpm regenerating at 4.5 N m is held within the matrix's
+/// 2 rpm. Measured: across at 7.8 s (1.0 us) and 8.5 s (2.2 us); at 12-14 s speed error
+/// -0.5 / -0.4 rpm, estimation error +0.6 / +0.3 rpm. The matrix's window (6-8 s) is
+/// before the transit, so its two rows still read "not held".
+#[test]
+fn far_side_mode_follows_a_trusted_inverter_tracker() {
+    use acim_sim::robustness::{run_scenario, Setup};
+    let defaults = Setup {
+        mode: RsMode::Running,
+        regen_min_frequency_hz: 1.5,
+    };
+    for variant in [
+        Variant::DeadTime1_0NotIdentified,
+        Variant::DeadTime2_2NotIdentified,
+    ] {
+        let c = case(variant, 60.0, true, 4.5);
+        let mut sc = c.scenario_with(&defaults);
+        sc.duration_s = 14.0;
+        sc.windows[0].from_s = 12.0;
+        sc.windows[0].to_s = 14.0;
+        let o = run_scenario(&c, &sc).unwrap();
+        assert!(!o.faulted && !o.lost, "{o:?}");
+        assert!((o.stator_frequency_hz + 1.05).abs() < 0.05, "{o:?}");
+        assert!(
+            o.speed_error_rpm.abs() < 2.0 && o.speed_est_error_rpm.abs() < 2.0,
+            "{o:?}"
+        );
+    }
 }
 
 const RR_SCENARIO: &str = include_str!("../crates/acim-sim/scenarios/rr-adaptation.toml");

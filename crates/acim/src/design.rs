@@ -146,7 +146,9 @@ pub struct DriveConfig {
     /// stabilisation, in this observer's terms). The mode is on while the load-torque
     /// estimate puts the speed target's operating point [`FAR_SIDE_ENTER_HZ`] beyond the
     /// line (off within [`FAR_SIDE_LEAVE_HZ`]), with the Rs estimator in the running mode
-    /// and after the inverter test identified the voltage error at this start; in it the
+    /// and with the inverter's voltage error known: identified by the start test at this
+    /// start, or tracked while running for [`crate::inverter_tracker::INVERTER_TRACKER_TRUST`]
+    /// ([`DriveConfig::inverter_tracking`]); in it the
     /// regeneration limit is released, so the drive crosses the line to hold the target
     /// (the transit). c and the load scheduling come from the linearised loop's maps
     /// (`acim_sim::linear`; docs/robustness.md, "The far-side mode").

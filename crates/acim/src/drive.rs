@@ -316,7 +316,8 @@ struct References<N> {
     rs_settled_steps: u32,
     /// The target is beyond the reachable speed (reported in the telemetry).
     target_limited: bool,
-    /// The speed reference moved this step (a ramp).
+    /// The speed reference moved this step towards its target (a ramp; not the
+    /// regeneration limit's hold, which moves it with the speed).
     ramping: bool,
     /// Steps the target stays reported as limited since the hold last bound.
     limited_hold: u32,
@@ -1279,13 +1280,15 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // the far-side mode (issue 13, items 4-5): the braking torque the target needs,
         // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
         // beyond the line by `far_side_enter` (entering) or within `far_side_leave` of it
-        // (leaving); only after an inverter test identified the voltage error at this
-        // start. In it the regeneration limit is released (the transit) and the observer
+        // (leaving); only with the inverter's voltage error known (the start test
+        // identified it at this start, or the tracker has adapted it long enough to be
+        // trusted). In it the regeneration limit is released (the transit) and the observer
         // takes the far-side term
         r.far_side = if O::FAR_SIDE_TERM
             && c.far_side_enter > N::ZERO
             && r.speed_target != N::ZERO
-            && self.inverter.outcome == InverterTestOutcome::Identified
+            && (self.inverter.outcome == InverterTestOutcome::Identified
+                || self.inverter_tracker.trusted(&c.inverter_tracker))
         {
             let braking = if r.speed_target > N::ZERO {
                 -e.observer.load_torque
@@ -1328,6 +1331,13 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // torque: the speed then settles above the target, inside the band or not
             if held != r.speed_reference || braking {
                 r.limited_hold = c.fw.report_steps;
+            }
+            // at the regeneration limit the reference follows the speed and the torque
+            // is the limit's, a slow function of the speed: not a ramp (the inverter
+            // tracker's gate; with it shut there, a drive held by the limit never learnt
+            // the inverter error the far-side mode needs)
+            if braking {
+                r.ramping = false;
             }
             r.speed_reference = held;
         }

@@ -32,11 +32,18 @@
 //! running Rs law adapting this step (the resistance estimate carries the error the
 //! correction takes away; without the law, a tracker at no load left Rs_hat 7 % low and the
 //! next load step lost the orientation), the speed reference not ramping (the low-pass
-//! lags a ramp's back-EMF), |w_s| at least [`INVERTER_TRACKER_MIN_FREQUENCY_HZ`] and
+//! lags a ramp's back-EMF; the regeneration limit's hold, which moves the reference with
+//! the speed at a torque that is a slow function of it, is not a ramp), |w_s| at least [`INVERTER_TRACKER_MIN_FREQUENCY_HZ`] and
 //! 6 |w_s| at most the current bandwidth, the modulation linear, and
 //! [`INVERTER_TRACKER_HOLDOFF`] of open gate before it adapts (a load step's recovery moved
 //! the correction by 0.2 us in 0.1 s without it). The correction is bounded as the start
 //! test's (+/- 0.05 duty).
+//!
+//! After [`INVERTER_TRACKER_TRUST`] of adaptation (summed since power-up) the drive takes
+//! the correction as known, as after a start test that identified the error: the far-side
+//! mode's condition. Without the start test, a drive held by the regeneration limit at
+//! 60 rpm regenerating 4.5 N m learns the error there and crosses the line 5-6 s after
+//! the load (docs/robustness.md, "Online: the sixth harmonic").
 
 use crate::frames::{clarke_three, park, Dq, SinCosValue};
 use crate::num::Num;
@@ -51,6 +58,11 @@ pub const INVERTER_TRACKER_TIME: f32 = 1.0;
 /// The gate holds this long before the tracker adapts (the DC filter settles and a
 /// transient's remains pass), s.
 pub const INVERTER_TRACKER_HOLDOFF: f32 = 0.5;
+/// The tracker has adapted this long (summed over the run since power-up, like the
+/// correction it adapts) before the drive trusts its correction as it trusts the start
+/// test's ([`InverterTracker::trusted`]): about 1.5 of its measured 1.7-2.2 s time
+/// constants, s.
+pub const INVERTER_TRACKER_TRUST: f32 = 3.0;
 /// Mean square of the sign vector's component across the current (see the module).
 pub const CROSS_MEAN_SQUARE: f32 = 0.154;
 
@@ -75,6 +87,8 @@ pub struct InverterTrackerConfig<N: Num = f32> {
     pub limit: N,
     /// Steps of open gate before adapting.
     pub holdoff_steps: u32,
+    /// Steps of adaptation before the correction is trusted.
+    pub trust_steps: u32,
 }
 
 impl InverterTrackerConfig<f32> {
@@ -90,6 +104,7 @@ impl InverterTrackerConfig<f32> {
             max_frequency: current_bandwidth / 6.0,
             limit: crate::design::INVERTER_TEST_MAX_DUTY,
             holdoff_steps: (INVERTER_TRACKER_HOLDOFF / ts) as u32,
+            trust_steps: (INVERTER_TRACKER_TRUST / ts) as u32,
         }
     }
 }
@@ -113,11 +128,22 @@ pub struct InverterTracker<N: Num = f32> {
     dc: N,
     /// Steps since the gate opened (saturating).
     open_steps: u32,
+    /// Steps it adapted since power-up (saturating; the correction is kept across
+    /// starts, and so is this).
+    adapted_steps: u32,
     /// Whether the last step adapted.
     pub active: bool,
 }
 
 impl<N: Num> InverterTracker<N> {
+    /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`]: the drive then takes its
+    /// correction as known, as after a start test that identified the error (the
+    /// far-side mode's condition, [`crate::DriveConfig::far_side_gain`]).
+    #[inline(always)]
+    pub fn trusted(&self, cfg: &InverterTrackerConfig<N>) -> bool {
+        cfg.enabled && self.adapted_steps >= cfg.trust_steps
+    }
+
     /// One step: `v` the voltage command and `i_ref` the current reference (dq, the
     /// same frame), `sigma` the sign vector in that frame, `inv_dc_bus` 1/V_dc,
     /// `stator_frequency` w_s (rad/s), `gate` the drive's conditions (running, linear,
@@ -150,6 +176,7 @@ impl<N: Num> InverterTracker<N> {
         if !self.active {
             return correction;
         }
+        self.adapted_steps = self.adapted_steps.saturating_add(1);
         let x = sigma.q * i_ref.d - sigma.d * i_ref.q;
         let i2 = i_ref.d * i_ref.d + i_ref.q * i_ref.q + cfg.current_floor;
         let step = N::gain(cfg.rate, N::ratio(x * (y - self.dc) * inv_dc_bus, i2));
@@ -221,6 +248,34 @@ mod tests {
             run(1.0, 5.0, i, emf, INVERTER_TRACKER_HOLDOFF - 0.01, true),
             0.0
         );
+    }
+
+    #[test]
+    fn trusted_after_its_adaptation_time_summed_over_open_gates() {
+        let cfg = InverterTrackerConfig::new(true, TS, 1.4, 1000.0);
+        let mut t = InverterTracker::default();
+        let (v, i) = (Dq { d: 10.0, q: 40.0 }, Dq { d: 1.4, q: 1.0 });
+        let sigma = Dq { d: 0.5, q: 0.5 };
+        let w = core::f32::consts::TAU * 5.0;
+        let steps = |t: &mut InverterTracker, secs: f32, gate: bool| {
+            for _ in 0..(secs / TS) as usize {
+                t.update(&cfg, v, i, sigma, 1.0 / VDC, w, gate, 0.0);
+            }
+        };
+        // two open spells of 2 s: each adapts 1.5 s after its holdoff
+        steps(&mut t, 2.0, true);
+        steps(&mut t, 1.0, false);
+        assert!(!t.trusted(&cfg));
+        steps(&mut t, 2.0 - 0.01, true);
+        assert!(!t.trusted(&cfg));
+        steps(&mut t, 0.02, true);
+        assert!(t.trusted(&cfg));
+        // a closed gate does not take the trust back (the correction is kept)
+        steps(&mut t, 1.0, false);
+        assert!(t.trusted(&cfg));
+        // and a tracker switched off is never trusted
+        let off = InverterTrackerConfig::new(false, TS, 1.4, 1000.0);
+        assert!(!t.trusted(&off));
     }
 
     #[test]

@@ -207,6 +207,7 @@ pub fn inverter_tracker(
         max_frequency: Q24(to_q24(cfg.max_frequency / b.frequency)),
         limit: Q24(to_q24(cfg.limit)),
         holdoff_steps: cfg.holdoff_steps,
+        trust_steps: cfg.trust_steps,
     })
 }
 
