@@ -669,7 +669,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// [`DriveDesign::new`]). While the drive is active only a retuning is accepted: the
     /// machine model, the period and the current sensing must stay those of the running
     /// design (anything else needs `Idle`). A design whose coefficients do not fit this
-    /// arithmetic is refused and the old one kept.
+    /// arithmetic is refused and the old one kept. A design with another inverter
+    /// compensation (dead time, device drop or current band) drops the correction the
+    /// start test or the running tracker found beyond the old one.
     pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
         let (old, new) = (&self.design.config, &design.config);
         let retune = old.machine == new.machine
@@ -680,6 +682,18 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             return Err(CommandError::WrongState(state));
         }
         self.coeffs = N::coeffs(&design, &self.bases).map_err(|_| CommandError::OutOfRange)?;
+        // the inverter test's and the tracker's correction is the error beyond the
+        // configured compensation: with another compensation (e.g. a commissioned dead
+        // time) it is meaningless, and a trusted tracker's or an identified test's would
+        // let the far-side mode release the regeneration limit on it. Both start again (a
+        // test measuring now ends; the next start's test, if on, measures anew)
+        let inverter_changed = old.dead_time != new.dead_time
+            || old.device_drop != new.device_drop
+            || old.dead_time_current_band != new.dead_time_current_band;
+        if inverter_changed {
+            self.inverter = InverterTest::default();
+            self.inverter_tracker = InverterTracker::default();
+        }
         self.design = design;
         // a design without the gain calibration (switched off, or three-phase sensing)
         // uses the samples as they come
@@ -2066,6 +2080,26 @@ mod tests {
         assert_eq!(d.start_open_loop(), Err(CommandError::Demagnetizing));
         idle(&mut d, wait);
         assert_eq!(d.start_open_loop(), Ok(()));
+    }
+
+    /// A new design with another inverter compensation drops the correction the start
+    /// test or the running tracker found beyond the old one, and the trust in it (the
+    /// far-side mode's condition); a retuning that keeps the compensation keeps them.
+    #[test]
+    fn a_design_with_another_inverter_compensation_drops_its_correction() {
+        let mut d = drive();
+        d.inverter.correction_duty = 0.002;
+        d.inverter.outcome = InverterTestOutcome::Identified;
+        let mut cfg = *d.config();
+        cfg.orientation_gain *= 0.5;
+        d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
+        assert_eq!(d.inverter.correction_duty, 0.002);
+        assert_eq!(d.inverter.outcome, InverterTestOutcome::Identified);
+        cfg.dead_time = 2.0e-6;
+        d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
+        assert_eq!(d.inverter.correction_duty, 0.0);
+        assert_eq!(d.inverter.outcome, InverterTestOutcome::NotRun);
+        assert!(!d.inverter_tracker.trusted(&d.coeffs.inverter_tracker));
     }
 
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the
