@@ -33,8 +33,8 @@
 //! correction takes away; without the law, a tracker at no load left Rs_hat 7 % low and the
 //! next load step lost the orientation), the speed reference not ramping (the low-pass
 //! lags a ramp's back-EMF; the regeneration limit's hold, which moves the reference with
-//! the speed at a torque that is a slow function of it, is not a ramp), |w_s| at least [`INVERTER_TRACKER_MIN_FREQUENCY_HZ`] and
-//! 6 |w_s| at most the current bandwidth, the modulation linear, and
+//! the speed at a torque that is a slow function of it, is not a ramp), |w_s| at least
+//! [`INVERTER_TRACKER_MIN_FREQUENCY_HZ`] and 6 |w_s| at most the current bandwidth, the modulation linear, and
 //! [`INVERTER_TRACKER_HOLDOFF`] of open gate before it adapts (a load step's recovery moved
 //! the correction by 0.2 us in 0.1 s without it). The correction is bounded as the start
 //! test's (+/- 0.05 duty).
@@ -42,8 +42,8 @@
 //! After [`INVERTER_TRACKER_TRUST`] of adaptation (summed since power-up) the drive takes
 //! the correction as known, as after a start test that identified the error: the far-side
 //! mode's condition. Without the start test, a drive held by the regeneration limit at
-//! 60 rpm regenerating 4.5 N m learns the error there and crosses the line 5-6 s after
-//! the load (docs/robustness.md, "Online: the sixth harmonic").
+//! 60 rpm regenerating 4.5 N m learns the error there and crosses the line 5.3-6.2 s
+//! after the load (docs/robustness.md, "A trusted tracker stands in for the start test").
 
 use crate::frames::{clarke_three, park, Dq, SinCosValue};
 use crate::num::Num;
