@@ -1302,7 +1302,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             && c.far_side_enter > N::ZERO
             && r.speed_target != N::ZERO
             && (self.inverter.outcome == InverterTestOutcome::Identified
-                || self.inverter_tracker.trusted(&c.inverter_tracker))
+                || self
+                    .inverter_tracker
+                    .trusted(&c.inverter_tracker, self.inverter.correction_duty))
         {
             let braking = if r.speed_target > N::ZERO {
                 -e.observer.load_torque
@@ -2099,7 +2101,9 @@ mod tests {
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
         assert_eq!(d.inverter.correction_duty, 0.0);
         assert_eq!(d.inverter.outcome, InverterTestOutcome::NotRun);
-        assert!(!d.inverter_tracker.trusted(&d.coeffs.inverter_tracker));
+        assert!(!d
+            .inverter_tracker
+            .trusted(&d.coeffs.inverter_tracker, d.inverter.correction_duty));
     }
 
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the

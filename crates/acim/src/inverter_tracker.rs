@@ -41,7 +41,8 @@
 //!
 //! After [`INVERTER_TRACKER_TRUST`] of adaptation (summed since power-up) the drive takes
 //! the correction as known, as after a start test that identified the error: the far-side
-//! mode's condition. Without the start test, a drive held by the regeneration limit at
+//! mode's condition. A correction at its bound is not taken as known (the bound cut the
+//! error short). Without the start test, a drive held by the regeneration limit at
 //! 60 rpm regenerating 4.5 N m learns the error there and crosses the line 5.3-6.2 s
 //! after the load (docs/robustness.md, "A trusted tracker stands in for the start test").
 
@@ -136,12 +137,14 @@ pub struct InverterTracker<N: Num = f32> {
 }
 
 impl<N: Num> InverterTracker<N> {
-    /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`]: the drive then takes its
-    /// correction as known, as after a start test that identified the error (the
-    /// far-side mode's condition, [`crate::DriveConfig::far_side_gain`]).
+    /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`] and its `correction` (duty)
+    /// is inside the bound: the drive then takes the correction as known, as after a
+    /// start test that identified the error (the far-side mode's condition,
+    /// [`crate::DriveConfig::far_side_gain`]). A correction at the bound is an error the
+    /// bound cut short (an inverter beyond the range, or a tracker misled), not a known one.
     #[inline(always)]
-    pub fn trusted(&self, cfg: &InverterTrackerConfig<N>) -> bool {
-        cfg.enabled && self.adapted_steps >= cfg.trust_steps
+    pub fn trusted(&self, cfg: &InverterTrackerConfig<N>, correction: N) -> bool {
+        cfg.enabled && self.adapted_steps >= cfg.trust_steps && correction.abs() < cfg.limit
     }
 
     /// One step: `v` the voltage command and `i_ref` the current reference (dq, the
@@ -265,17 +268,21 @@ mod tests {
         // two open spells of 2 s: each adapts 1.5 s after its holdoff
         steps(&mut t, 2.0, true);
         steps(&mut t, 1.0, false);
-        assert!(!t.trusted(&cfg));
+        assert!(!t.trusted(&cfg, 0.0));
         steps(&mut t, 2.0 - 0.01, true);
-        assert!(!t.trusted(&cfg));
+        assert!(!t.trusted(&cfg, 0.0));
         steps(&mut t, 0.02, true);
-        assert!(t.trusted(&cfg));
+        assert!(t.trusted(&cfg, 0.0));
         // a closed gate does not take the trust back (the correction is kept)
         steps(&mut t, 1.0, false);
-        assert!(t.trusted(&cfg));
+        assert!(t.trusted(&cfg, 0.0));
+        // a correction at its bound is not trusted, one just inside it is
+        assert!(!t.trusted(&cfg, cfg.limit));
+        assert!(!t.trusted(&cfg, -cfg.limit));
+        assert!(t.trusted(&cfg, 0.99 * cfg.limit));
         // and a tracker switched off is never trusted
         let off = InverterTrackerConfig::new(false, TS, 1.4, 1000.0);
-        assert!(!t.trusted(&off));
+        assert!(!t.trusted(&off, 0.0));
     }
 
     #[test]
