@@ -990,7 +990,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             },
             self.est.flux.stator_frequency,
             running,
-            self.refs.speed_reference != self.refs.speed_target,
+            self.refs.ramping,
             self.refs.i_sq_ref,
         );
         // the fundamental's sample: the staircase ripple at the period boundary,
