@@ -47,7 +47,8 @@ def main():
         m = re.match(r"^(\.\S+)\s+(\d+)\s+(\d+)", line)
         if m:
             secs[m.group(1)] = (int(m.group(2)), int(m.group(3)))
-    flash_secs = [".vector_table", ".ccmram", ".text", ".rodata", ".data", ".gnu.sgstubs"]
+    flash_secs = [".vector_table", ".text.design_in_flash", ".ccmram", ".text", ".rodata", ".data",
+                  ".gnu.sgstubs"]
     ram_secs = [".data", ".bss", ".uninit", ".ccmram_uninit"]
     flash = sum(secs.get(s, (0, 0))[0] for s in flash_secs)
     ram = sum(secs.get(s, (0, 0))[0] for s in ram_secs)
