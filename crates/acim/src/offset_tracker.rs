@@ -128,9 +128,9 @@
 //! drifting in on the far side reads -2.43 rpm (with the 1 Hz gate the rotor ran away to an overload trip).
 //! The drive's regeneration limit holds regeneration at 1.5 Hz by default, the same
 //! frequency, so the tracker works at the limited points (it turns on and off there as
-//! the frequency wobbles about the gate, which only pauses the adaptation). Until the
-//! drive's `ramping` flag stood for "not ramping", the tracker read the hold's moving
-//! reference as a ramp and never adapted there: 20 mA drifting in at 60 rpm regenerating
+//! the frequency wobbles about the gate, which only pauses the adaptation). Until it
+//! read the drive's `ramping` flag, the tracker took the hold's moving reference for a
+//! ramp and never adapted there: 20 mA drifting in at 60 rpm regenerating
 //! 1.5 N m (held at 1.5 Hz) read 1.17 rpm of estimation error, now 0.18 rpm (the
 //! robustness matrix's defaults).
 //!
