@@ -430,6 +430,35 @@ fn offset_drift_is_tracked_at_the_regeneration_limits_hold() {
     offset_drift_tracked(&c, 0.5);
 }
 
+/// Item 3 on the far side (60 rpm, 4.5 N m regenerating, f_s = -1.05 Hz): below the
+/// tracker's 1.5 Hz gate, but in the drive's far-side mode the offset adapts from 0.5 Hz
+/// at a tenth of its rate (`crates/acim/src/offset_tracker.rs`, "On the far side"). The
+/// 20 mA that drift in over 4-5 s are then held within the 2 rpm at 17-19 s,
+/// 12-14 s after the drift ended (measured -0.95 rpm; untracked -4.1 rpm there and -5.4
+/// in the matrix's window at 7-9 s, where the tracked drive still reads -4.2 rpm).
+#[test]
+fn offset_drift_is_tracked_slowly_on_the_far_side() {
+    let c = case(Variant::OffsetDrift20mA, 60.0, true, 4.5);
+    assert!(c.stator_frequency_hz() < -1.0);
+    let setup = acim_sim::robustness::Setup {
+        mode: RsMode::Running,
+        regen_min_frequency_hz: 1.5,
+    };
+    let mut s = c.scenario_with(&setup);
+    const LATER: f32 = 10.0;
+    s.duration_s += LATER;
+    for w in &mut s.windows {
+        w.from_s += LATER;
+        w.to_s += LATER;
+    }
+    let o = acim_sim::robustness::run_scenario(&c, &s).unwrap();
+    assert!(o.pass(), "{o:?}");
+    assert!(o.speed_est_error_rpm.abs() <= 2.0, "{o:?}");
+    s.drive.offset_tracking = false;
+    let off = acim_sim::robustness::run_scenario(&c, &s).unwrap();
+    assert!(off.speed_est_error_rpm.abs() > 3.0, "{off:?}");
+}
+
 /// Item 3's tracker below 1.5 Hz: there a DC current's answer through the sensorless
 /// loop (a torque ripple at f_s, inside the speed loop's band) turns the tracker's
 /// signature, and with a 1 Hz gate the estimate ran away with no offset drift at all:

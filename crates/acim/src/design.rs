@@ -229,9 +229,9 @@ pub struct DriveConfig {
     pub inverter_identification: bool,
     /// Running current-sensor offset tracking (issue 13, item 3; on by default): the
     /// offsets' drift after the start's switches-off measurement, estimated from the DC
-    /// part of the stator voltage while |w_s| >= 1 Hz and subtracted
-    /// ([`crate::offset_tracker`]); an estimate at `offset_limit` is a current-sensor
-    /// fault.
+    /// part of the stator voltage while |w_s| >= 1.5 Hz (in the far-side mode from 0.5 Hz,
+    /// ten times slower) and subtracted ([`crate::offset_tracker`]); an estimate at
+    /// `offset_limit` is a current-sensor fault.
     pub offset_tracking: bool,
     /// Inverter voltage-error tracking while running (issue 13, item 2, online part):
     /// the error the compensation leaves, from the sixth-harmonic pattern it puts into the

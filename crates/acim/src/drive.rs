@@ -544,6 +544,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     pub fn offset_drift(&self) -> AlphaBeta<N> {
         self.offset_tracker.offset
     }
+
     /// The rotor-resistance adaptation's state ([`crate::rr_estimator`]; its estimate
     /// stays at the configured R_R with [`crate::DriveConfig::rr_adaptation`] off).
     pub fn rotor_resistance_estimator(&self) -> &RrEstimator<N> {
@@ -992,6 +993,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             running,
             self.refs.ramping,
             self.refs.i_sq_ref,
+            self.refs.far_side,
         );
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
