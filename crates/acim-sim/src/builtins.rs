@@ -339,7 +339,7 @@ pub fn all() -> Vec<Scenario> {
             &format!("fault-overhauling-{rpm:.0}-{nm:.0}nm"),
             if rpm < 200.0 {
                 "overhauling load at 120 rpm that would pin the stator frequency near zero: \
-                 held at the reachable speed by the regeneration limit"
+                 crossed by the far-side mode, held at the target"
             } else if nm <= 10.0 {
                 "overhauling load at 500 rpm within the torque capability: held"
             } else {

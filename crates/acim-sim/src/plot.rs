@@ -712,8 +712,14 @@ pub fn render_panels_over(
 
     let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    m.title
-        .draw(&root, font, title, (width as i32 / 2, m.title_h / 2))?;
+    // a title wider than the figure is set smaller to fit (it was clipped at both ends)
+    let mut title_txt = m.title;
+    let fit = 0.97 * width as f32;
+    let title_w = title_txt.width(font, title);
+    if title_w > fit {
+        title_txt.size *= fit / title_w;
+    }
+    title_txt.draw(&root, font, title, (width as i32 / 2, m.title_h / 2))?;
 
     // Decimate to at most two points per pixel column (and MAX_POINTS_PER_SERIES).
     let max_points = (2 * plot_w as usize).min(MAX_POINTS_PER_SERIES);
