@@ -5,9 +5,9 @@ usage: python3 benches/attribute.py PROFILE ELF
 
 PROFILE is one of the `results/profile_*_drive_step.txt` files `cargo run -p acim-bench
 --release` writes (per executed instruction: executions and estimated cycles per step),
-ELF the binary it measured (`target/thumbv7em-none-eabihf/release/acim-bench-fw` for the
+ELF the binary it measured (`target/thumbv7em-none-eabihf/firmware/acim-bench-fw` for the
 f32 profile, `.../acim-bench-fixed` for the fixed-point ones; built with debug line
-tables, the release profile's `debug = true`). Every instruction is mapped to its
+tables, the firmware profile's `debug = true`). Every instruction is mapped to its
 inlined call chain with `addr2line -i` (LLVM's or GNU binutils'), and the chain's
 function names decide the block (the first rule that matches, in the order below). The
 table of benches/README.md ("Why the targets are not met") is this script's output for

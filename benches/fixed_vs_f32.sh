@@ -8,10 +8,10 @@ shopt -s inherit_errexit # a failed build inside $(run ...) stops the script
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
 run() { # target machine cpu
-  cargo build -q -p acim-bench --release --target "$1" --bin acim-bench-fixed
+  cargo build -q -p acim-bench --profile firmware --target "$1" --bin acim-bench-fixed
   timeout 300 qemu-system-arm -machine "$2" -cpu "$3" -nographic -monitor none -serial none \
     -semihosting-config enable=on,target=native -icount shift=4 \
-    -kernel "$CARGO_TARGET_DIR/$1/release/acim-bench-fixed"
+    -kernel "$CARGO_TARGET_DIR/$1/firmware/acim-bench-fixed"
 }
 m3=$(run thumbv7m-none-eabi netduino2 cortex-m3)
 m4=$(run thumbv7em-none-eabihf netduinoplus2 cortex-m4)

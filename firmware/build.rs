@@ -12,7 +12,7 @@ fn main() {
         // a stub binary that says how to build the firmware (src/main.rs).
         println!(
             "cargo:warning=acim-firmware is STM32G474 (Cortex-M4F) firmware; built for \
-             `{target}` it is only a stub. Build it with: cargo build --release -p \
+             `{target}` it is only a stub. Build it with: cargo build --profile firmware -p \
              acim-firmware --target thumbv7em-none-eabihf"
         );
         return;

@@ -7,7 +7,7 @@
 //! cargo run -p acim-bench --release -- --weigh-isr ELF DIR [--check|--update-budget]
 //! ```
 //!
-//! Steps: builds the firmware bin `acim-bench-fw` for `thumbv7em-none-eabihf` (release),
+//! Steps: builds the firmware bin `acim-bench-fw` for `thumbv7em-none-eabihf` (the `firmware` profile, as the drive's firmware),
 //! disassembles it with the rustup `llvm-tools` `llvm-objdump`, finds the marker functions
 //! and the static call graph of the measured code, runs QEMU (`netduinoplus2`, Cortex-M4F)
 //! with one guest instruction per translation block and the execution log restricted by
@@ -787,7 +787,8 @@ fn build_bin(target: &str, bin: &str) -> Res<PathBuf> {
     let mut cmd = Command::new(cargo());
     cmd.args([
         "build",
-        "--release",
+        "--profile",
+        "firmware",
         "--target",
         target,
         "-p",
@@ -799,7 +800,7 @@ fn build_bin(target: &str, bin: &str) -> Res<PathBuf> {
     .current_dir(bench_dir())
     .stdout(Stdio::piped())
     .stderr(Stdio::inherit());
-    eprintln!("building {bin} for {target} (release) ...");
+    eprintln!("building {bin} for {target} (profile firmware) ...");
     let out = cmd.output().map_err(|e| format!("cargo: {e}"))?;
     if !out.status.success() {
         return Err(format!(

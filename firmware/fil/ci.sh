@@ -9,13 +9,13 @@ cd "$(dirname "$0")/../.."
 python3 -m pip install --quiet --disable-pip-version-check -r firmware/fil/requirements.txt \
   || python3 -m pip install --quiet --disable-pip-version-check --break-system-packages \
        -r firmware/fil/requirements.txt
-OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/release"
+OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/firmware"
 if [ ! -f "$OUT/acim-firmware-power-stage.elf" ] || [ ! -f "$OUT/acim-firmware-selftest.elf" ]; then
   bash firmware/check.sh
 fi
 # the bit-exactness test's third ELF: the self-test with the software sin/cos (always
 # rebuilt: cargo relinks only if something changed since the last build of these features)
-cargo build --release -p acim-firmware --target thumbv7em-none-eabihf --features selftest,soft-sincos
+cargo build --profile firmware -p acim-firmware --target thumbv7em-none-eabihf --features selftest,soft-sincos
 cp "$OUT/acim-firmware" "$OUT/acim-firmware-selftest-soft.elf"
 mkdir -p "${CARGO_TARGET_DIR:-$PWD/target}"
 cd firmware/fil

@@ -807,7 +807,7 @@ def default_elf(mode):
     import os
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     target = os.environ.get("CARGO_TARGET_DIR", os.path.join(root, "target"))
-    return os.path.join(target, "thumbv7em-none-eabihf", "release", f"acim-firmware-{mode}.elf")
+    return os.path.join(target, "thumbv7em-none-eabihf", "firmware", f"acim-firmware-{mode}.elf")
 
 
 if __name__ == "__main__":

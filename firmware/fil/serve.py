@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The emulated firmware's UART on a local TCP port: the unmodified release ELF on fil.py's
+"""The emulated firmware's UART on a local TCP port: the unmodified firmware-profile ELF on fil.py's
 emulated MCU (the self-test build by default: its motor model turns), with each TCP
 connection as the cable to its UART, so host tools (acim-monitor, a terminal) talk to the
 firmware itself. The emulator runs about 0.2x real time.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Firmware-in-the-loop tests: the unmodified release ELFs (firmware/check.sh builds them)
+"""Firmware-in-the-loop tests: the unmodified firmware-profile ELFs (firmware/check.sh builds them)
 on the emulated MCU of fil.py. Each test names the defect of the firmware review it would
 have caught.
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""acim-monitor against the firmware itself: the self-test release ELF on the emulated
+"""acim-monitor against the firmware itself: the self-test firmware-profile ELF on the emulated
 MCU (serve.py) with its UART on a TCP port, the monitor headless through speed 300 ->
 start -> a refused setting -> an unknown command. The monitor connects after the boot's
 hello: it must ask `version`, learn protocol 1 and send its commands as $C frames, record

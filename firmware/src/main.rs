@@ -15,7 +15,7 @@
 fn main() {
     eprintln!(
         "acim-firmware is STM32G474 (Cortex-M4F) firmware; this host build is a stub.\n  \
-         build it: cargo build --release -p acim-firmware --target thumbv7em-none-eabihf\n  \
+         build it: cargo build --profile firmware -p acim-firmware --target thumbv7em-none-eabihf\n  \
          host tests of its hardware-independent logic: cargo test -p acim-firmware-core"
     );
     std::process::exit(2);

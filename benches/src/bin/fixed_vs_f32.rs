@@ -27,10 +27,10 @@
 //! Run (from the workspace root):
 //!
 //! ```sh
-//! cargo build -p acim-bench --release --target thumbv7m-none-eabi --bin acim-bench-fixed
+//! cargo build -p acim-bench --profile firmware --target thumbv7m-none-eabi --bin acim-bench-fixed
 //! qemu-system-arm -machine netduino2 -cpu cortex-m3 -nographic -monitor none -serial none \
 //!   -semihosting-config enable=on,target=native -icount shift=4 \
-//!   -kernel $CARGO_TARGET_DIR/thumbv7m-none-eabi/release/acim-bench-fixed
+//!   -kernel $CARGO_TARGET_DIR/thumbv7m-none-eabi/firmware/acim-bench-fixed
 //! ```
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
