@@ -146,7 +146,7 @@ pub fn measure_at(
     for &rpm in speeds_rpm {
         let sc = scenario(rpm, 0.0, ModulationKind::Linear);
         let i_max = sc.drive.current_limit_a;
-        let v_max = 0.98 * sc.dc_link.source_v / 3f32.sqrt();
+        let v_max = 0.98 * sc.bus_v() / 3f32.sqrt();
         let envelope = envelope_nm(&sc.plant, i_max, sc.drive.flux_current_a, v_max, rpm);
         let envelope_trim = envelope_nm(
             &sc.plant,
@@ -159,7 +159,7 @@ pub fn measure_at(
             &sc.plant,
             i_max,
             sc.drive.flux_current_a,
-            acim::svpwm::SIX_STEP * sc.dc_link.source_v,
+            acim::svpwm::SIX_STEP * sc.bus_v(),
             rpm,
         );
         let friction = sc.plant.friction_nms * rpm * std::f32::consts::PI / 30.0;

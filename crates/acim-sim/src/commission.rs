@@ -140,7 +140,7 @@ pub fn commission(sc: &Scenario) -> Result<Report, String> {
         if com.stage() == Stage::NoLoad {
             at_rated_flux = plant.machine().effective_params();
         }
-        plant.set_dc_bus(sc.dc_link.source_v);
+        plant.set_dc_bus(sc.bus_v());
         plant.run_pwm_period(pwm.advance(out), LoadTorque::None);
         t += ts;
     }

@@ -181,7 +181,7 @@ impl Model {
         let ts = f64::from(v.drive.control_period);
         let m = v.plant;
         let inv = &sc.inverter;
-        let bus = f64::from(sc.dc_link.source_v);
+        let bus = f64::from(sc.bus_v());
         // the leg error: dead time over the period times the bus, plus the device drop;
         // less what the drive compensates
         let leg = |dead: f32, drop: f32| f64::from(dead) / ts * bus + f64::from(drop);

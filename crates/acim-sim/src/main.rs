@@ -195,7 +195,20 @@ impl Progress {
 fn load(spec: &str) -> Result<Scenario, String> {
     let mut sc = load_plain(spec)?;
     if let Some(f) = sc.controller_file.clone() {
-        let text = std::fs::read_to_string(&f).map_err(|e| format!("{f}: {e}"))?;
+        // relative to the scenario file that names it, as a user reads the file
+        let base = if builtins::get(spec).is_some() {
+            None
+        } else {
+            Path::new(spec).parent()
+        };
+        let path = acim_sim::output::resolve_beside(base, Path::new(&f));
+        let text = acim_sim::output::read_text_file(&path, acim_sim::output::MAX_INPUT_BYTES)
+            .map_err(|e| {
+                format!(
+                    "{spec}: scenario field `controller_file`: {}: {e}",
+                    path.display()
+                )
+            })?;
         sc.apply_identified(&text)
             .map_err(|e| format!("{spec}: {e}"))?;
     }
@@ -207,7 +220,9 @@ fn load_plain(spec: &str) -> Result<Scenario, String> {
         return Ok(s);
     }
     if spec.ends_with(".toml") || Path::new(spec).exists() {
-        let text = std::fs::read_to_string(spec).map_err(|e| format!("{spec}: {e}"))?;
+        let text =
+            acim_sim::output::read_text_file(Path::new(spec), acim_sim::output::MAX_INPUT_BYTES)
+                .map_err(|e| format!("{spec}: {e}"))?;
         return Scenario::from_toml(&acim_sim::scenario::machine_file_as_scenario(&text))
             .map_err(|e| format!("{spec}: {e}"));
     }
@@ -235,30 +250,102 @@ fn run_one(sc: &Scenario, out: &Path, o: &Opts) -> Result<Metrics, String> {
 
 fn summary_header() -> String {
     format!(
-        "{:<26} {:>9} {:>8} {:>8} {:>9} {:>9} {:>9}  {}",
-        "scenario", "window", "est.err", "spd.err", "TL err", "orient", "Rs", "fault / note"
+        "{:<26} {:>9} {:>8} {:>8} {:>9} {:>9} {:>9}  {}\n{:<26} {:>9} {:>8} {:>8} {:>9} {:>9} {:>9}",
+        "scenario",
+        "window",
+        "est.err",
+        "spd.err",
+        "TL err",
+        "orient",
+        "Rs",
+        "verdict / note",
+        "",
+        "",
+        "(rpm)",
+        "(rpm)",
+        "(N m)",
+        "(deg)",
+        "(ohm)"
+    )
+}
+
+/// A load step's line: the thresholds it was judged with and whether the largest speed
+/// deviation was a dip (slower than the reference) or an overshoot (faster).
+fn load_step_text(m: &Metrics, s: &acim_sim::metrics::LoadStepMetrics) -> String {
+    let th = &m.thresholds;
+    format!(
+        "load {:+.2} N m at {:.1} s: estimate within {:.2} N m after {}, speed within {} rpm after {} ({} {:.1} rpm)",
+        s.load_nm,
+        s.t_s,
+        th.load_estimate_nm,
+        s.load_est_settle_s.map_or("never".into(), |x| format!("{x:.3} s")),
+        acim_sim::metrics::rpm_text(th.recovery_rpm),
+        s.speed_recovery_s.map_or("never".into(), |x| format!("{x:.3} s")),
+        if s.overshoot { "overshoot" } else { "dip" },
+        s.speed_dip_rpm
     )
 }
 
 /// How a run ended, in one phrase (console table and metrics.md); the criteria are
 /// [`acim_sim::metrics::Verdict`]'s.
 fn outcome(m: &Metrics) -> String {
-    match (m.verdict, &m.fault) {
+    let verdict = match (m.verdict, &m.fault) {
         (Verdict::Faulted, Some(f)) => format!(
             "{f} at {:.3} s, switches {}",
             m.fault_time_s.unwrap_or(0.0),
             if m.switches_off_at_end { "off" } else { "ON" }
         ),
-        (Verdict::Lost, _) => format!(
-            "control lost (max err {:.0} rpm)",
-            m.speed_err_max_running_rpm
-        ),
+        (Verdict::Lost, _) => {
+            let lost = m
+                .excursions
+                .iter()
+                .find(|x| {
+                    x.recovered_after_s
+                        .is_none_or(|d| d > acim_sim::metrics::LOST_RECOVERY_S)
+                })
+                .copied()
+                .unwrap_or_default();
+            format!(
+                "control lost (max err {:.0} rpm; beyond {} rpm from {:.2} s{})",
+                m.speed_err_max_running_rpm,
+                acim_sim::metrics::rpm_text(m.thresholds.lost_rpm),
+                lost.from_s,
+                lost.recovered_after_s
+                    .map_or(", never recovered".into(), |d| format!(" for {d:.2} s"))
+            )
+        }
         (Verdict::Drifting, _) => format!(
             "drifting: rotor at up to {:.1} rpm with the reference held at 0 from {:.2} s",
             m.zero_hold.as_ref().map_or(0.0, |z| z.speed_max_rpm),
             m.zero_hold.as_ref().map_or(0.0, |z| z.from_s),
         ),
         _ => "control kept".to_string(),
+    };
+    // what the verdict alone would hide: a recovered transient, a clamped target
+    let mut notes = Vec::new();
+    if m.verdict != Verdict::Lost && m.verdict != Verdict::Faulted {
+        for x in &m.excursions {
+            if let Some(d) = x.recovered_after_s {
+                notes.push(format!(
+                    "transient {:.0} rpm off at {:.2} s, back within {} rpm after {:.2} s",
+                    x.peak_rpm,
+                    x.from_s,
+                    acim_sim::metrics::rpm_text(m.thresholds.lost_rpm),
+                    d
+                ));
+            }
+        }
+    }
+    for c in &m.target_clamps {
+        notes.push(format!(
+            "target {:.0} rpm at {:.2} s limited to {:.0} rpm (90 % of drive.max_speed_rpm)",
+            c.target_rpm, c.t_s, c.limited_to_rpm
+        ));
+    }
+    if notes.is_empty() {
+        verdict
+    } else {
+        format!("{verdict}; {}", notes.join("; "))
     }
 }
 
@@ -322,15 +409,7 @@ fn summary_lines(m: &Metrics) -> Vec<String> {
         ));
     }
     for s in &m.load_steps {
-        out.push(format!(
-            "{:<26} load {:+.2} N m at {:.1} s: estimate within 0.05 N m after {}, speed within 5 rpm after {} (dip {:.1} rpm)",
-            "",
-            s.load_nm,
-            s.t_s,
-            s.load_est_settle_s.map_or("never".into(), |x| format!("{x:.3} s")),
-            s.speed_recovery_s.map_or("never".into(), |x| format!("{x:.3} s")),
-            s.speed_dip_rpm
-        ));
+        out.push(format!("{:<26} {}", "", load_step_text(m, s)));
     }
     if m.rs.estimator_on {
         out.push(format!(
@@ -386,8 +465,9 @@ fn run_many(scenarios: &[Scenario], o: &Opts) -> Result<Vec<Metrics>, String> {
         }
         all.push(m);
     }
+    println!("\n{}", verdict_summary(&all));
     println!(
-        "\nerrors in rpm are maxima of 10 ms averages over each steady window (in time order); TL err is the mean |estimate - real|; outputs in {}",
+        "errors in rpm are maxima of 10 ms averages over each steady window (in time order); TL err is the mean |estimate - real|; outputs in {}",
         out.display()
     );
     println!("{}", acim_sim::metrics::verdict_criteria());
@@ -398,6 +478,59 @@ fn run_many(scenarios: &[Scenario], o: &Opts) -> Result<Vec<Metrics>, String> {
         );
     }
     Ok(all)
+}
+
+/// One line over a set of runs: how many of each verdict, the expected ones named as such
+/// (a scenario's `expected_verdict`, e.g. the paper's zero-speed holds, which drift).
+fn verdict_summary(all: &[Metrics]) -> String {
+    let mut parts = Vec::new();
+    for v in [
+        Verdict::Kept,
+        Verdict::Drifting,
+        Verdict::Lost,
+        Verdict::Faulted,
+    ] {
+        let runs: Vec<&Metrics> = all.iter().filter(|m| m.verdict == v).collect();
+        if runs.is_empty() {
+            continue;
+        }
+        let mut p = format!("{} {}", runs.len(), v.as_str());
+        // the expected ones, grouped by their reason
+        let mut whys: Vec<(&str, Vec<&str>)> = Vec::new();
+        for m in &runs {
+            if let Some(e) = m
+                .expected
+                .as_ref()
+                .filter(|e| v != Verdict::Kept && e.verdict == v)
+            {
+                match whys.iter_mut().find(|(w, _)| *w == e.why) {
+                    Some((_, names)) => names.push(&m.name),
+                    None => whys.push((&e.why, vec![&m.name])),
+                }
+            }
+        }
+        for (why, names) in whys {
+            p += &format!(" ({} expected: {why})", names.join(", "));
+        }
+        parts.push(p);
+    }
+    let unexpected = all
+        .iter()
+        .filter(|m| {
+            m.verdict != Verdict::Kept && m.expected.as_ref().map(|e| e.verdict) != Some(m.verdict)
+        })
+        .count();
+    format!(
+        "{} scenario{}: {}{}",
+        all.len(),
+        if all.len() == 1 { "" } else { "s" },
+        parts.join(", "),
+        if unexpected == 0 {
+            String::new()
+        } else {
+            format!("; {unexpected} not as expected")
+        }
+    )
 }
 
 /// The named scenarios with the `--set` overrides applied.
@@ -439,15 +572,7 @@ fn write_metrics_md(path: &Path, all: &[Metrics], sets: &[String]) -> Result<(),
     s += "\nLoad steps and Rs convergence:\n\n";
     for m in all {
         for st in &m.load_steps {
-            s += &format!(
-                "- {}: load {:+.2} N m at {:.1} s: estimate within 0.05 N m after {}; speed within 5 rpm after {} (largest deviation {:.1} rpm)\n",
-                m.name,
-                st.load_nm,
-                st.t_s,
-                st.load_est_settle_s.map_or("never".into(), |x| format!("{x:.3} s")),
-                st.speed_recovery_s.map_or("never".into(), |x| format!("{x:.3} s")),
-                st.speed_dip_rpm
-            );
+            s += &format!("- {}: {}\n", m.name, load_step_text(m, st));
         }
         if m.rs.estimator_on {
             s += &format!(
@@ -461,6 +586,7 @@ fn write_metrics_md(path: &Path, all: &[Metrics], sets: &[String]) -> Result<(),
             );
         }
     }
+    s += &format!("\n{}.\n", verdict_summary(all));
     s += &format!("\n{}.\n", acim_sim::metrics::verdict_criteria());
     output::write_file(path, s.as_bytes())
 }
@@ -501,6 +627,7 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             for l in summary_lines(&m) {
                 println!("{l}");
             }
+            println!("\n{}", verdict_summary(std::slice::from_ref(&m)));
             println!("{}", acim_sim::metrics::verdict_criteria());
             if let Some(n) = decimation_note(&sc, o.write(), true) {
                 println!("{n}");
@@ -622,8 +749,8 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             };
             let mut sc = load(spec)?;
             if let Some(f) = &o.nameplate {
-                let text =
-                    std::fs::read_to_string(f).map_err(|e| format!("{}: {e}", f.display()))?;
+                let text = acim_sim::output::read_text_file(f, acim_sim::output::MAX_INPUT_BYTES)
+                    .map_err(|e| format!("{}: {e}", f.display()))?;
                 let t: toml::Table = acim_sim::scenario::machine_file_as_scenario(&text)
                     .parse()
                     .map_err(|e| format!("{}: {e}", f.display()))?;
@@ -642,6 +769,28 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                         .try_into()
                         .map_err(|e| format!("{}: [board]: {e}", f.display()))?,
                 );
+                // the motor to simulate: the file's own [plant], or the scenario's when the
+                // scenario is a file that describes one; never the paper's machine by default
+                match t.get("plant") {
+                    Some(p) => {
+                        sc.plant = p
+                            .clone()
+                            .try_into()
+                            .map_err(|e| format!("{}: [plant]: {e}", f.display()))?;
+                        sc.controller = sc.plant;
+                    }
+                    None if builtins::get(spec).is_some() => {
+                        return Err(format!(
+                            "{}: no [plant]: commissioning simulates a motor, and `{spec}` \
+                             is a built-in scenario of the paper's 750 W machine, not yours; \
+                             add your motor's equivalent circuit as [plant] to {} \
+                             (docs/guide/your-motor.md)",
+                            f.display(),
+                            f.display()
+                        ));
+                    }
+                    None => {}
+                }
             }
             let sc = sc
                 .with_overrides(&o.sets)

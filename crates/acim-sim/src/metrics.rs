@@ -21,12 +21,112 @@ pub const SMOOTHING_STEPS: usize = 50;
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// A speed-loop error (10 ms average of |speed - reference|) above this while running
-/// means control was lost, rpm.
+/// is an excursion, rpm, at the reference rating ([`REFERENCE_RATED_SPEED_RPM`]); one
+/// that lasts longer than [`LOST_RECOVERY_S`] (or never ends) means control was lost.
+/// Scaled to the machine by [`Thresholds`].
 pub const LOST_ERROR_RPM: f32 = 100.0;
 
+/// An excursion beyond the lost bound that ends within this time is a transient the drive
+/// recovered from (a load step, a reversal), reported with its depth and duration, not a
+/// loss of control, s.
+pub const LOST_RECOVERY_S: f32 = 1.0;
+
 /// With the reference held at zero, a true speed (10 ms average) above this means the
-/// rotor is drifting, rpm.
+/// rotor is drifting, rpm, at the reference rating (scaled by [`Thresholds`]).
 pub const DRIFT_SPEED_RPM: f32 = 5.0;
+
+/// A load change's speed recovery: |speed - ref| (10 ms average) back within this, rpm, at
+/// the reference rating (scaled by [`Thresholds`]).
+pub const RECOVERY_SPEED_RPM: f32 = 5.0;
+
+/// A load change's torque estimate: |estimate - load| (10 ms average) within this, N m,
+/// at the reference rating (scaled by [`Thresholds`]).
+pub const LOAD_ESTIMATE_NM: f32 = 0.05;
+
+/// The rating every absolute threshold above is stated for: the paper's 750 W machine
+/// (Table 1: 1500 rpm, 5 N m), rpm.
+pub const REFERENCE_RATED_SPEED_RPM: f32 = 1500.0;
+/// See [`REFERENCE_RATED_SPEED_RPM`], N m.
+pub const REFERENCE_RATED_TORQUE_NM: f32 = 5.0;
+
+/// The verdict's and the load steps' thresholds for one machine: the constants above
+/// scaled by its rated speed and torque (from `[nameplate]`; a scenario without one is
+/// judged at the reference rating, the paper's machine).
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct Thresholds {
+    /// Rated speed the thresholds scale with, rpm.
+    pub rated_speed_rpm: f32,
+    /// Rated torque the thresholds scale with, N m.
+    pub rated_torque_nm: f32,
+    /// Whether the rating is the scenario's nameplate (false: the reference rating).
+    pub from_nameplate: bool,
+    /// [`LOST_ERROR_RPM`] scaled, rpm.
+    pub lost_rpm: f32,
+    /// [`DRIFT_SPEED_RPM`] scaled, rpm.
+    pub drift_rpm: f32,
+    /// [`RECOVERY_SPEED_RPM`] scaled, rpm.
+    pub recovery_rpm: f32,
+    /// [`LOAD_ESTIMATE_NM`] scaled, N m.
+    pub load_estimate_nm: f32,
+}
+
+impl Thresholds {
+    /// The thresholds for a machine rated `speed_rpm` and `torque_nm`.
+    pub fn for_rating(speed_rpm: f32, torque_nm: f32, from_nameplate: bool) -> Self {
+        let ks = speed_rpm / REFERENCE_RATED_SPEED_RPM;
+        let kt = torque_nm / REFERENCE_RATED_TORQUE_NM;
+        Self {
+            rated_speed_rpm: speed_rpm,
+            rated_torque_nm: torque_nm,
+            from_nameplate,
+            lost_rpm: LOST_ERROR_RPM * ks,
+            drift_rpm: DRIFT_SPEED_RPM * ks,
+            recovery_rpm: RECOVERY_SPEED_RPM * ks,
+            load_estimate_nm: LOAD_ESTIMATE_NM * kt,
+        }
+    }
+
+    /// The scenario's thresholds: its nameplate's rating, else the reference rating.
+    pub fn for_scenario(sc: &crate::scenario::Scenario) -> Self {
+        let rated = sc.nameplate.and_then(|np| {
+            acim::nameplate::Nameplate {
+                power_w: np.power_w,
+                voltage_v: np.voltage_v,
+                current_a: np.current_a,
+                frequency_hz: np.frequency_hz,
+                speed_rpm: np.speed_rpm,
+                power_factor: np.power_factor,
+                pole_pairs: np.pole_pairs,
+            }
+            .rated()
+            .ok()
+        });
+        match rated {
+            Some(r) => Self::for_rating(r.speed * acim::math::RAD_S_TO_RPM, r.torque, true),
+            None => Self::for_rating(REFERENCE_RATED_SPEED_RPM, REFERENCE_RATED_TORQUE_NM, false),
+        }
+    }
+}
+
+/// A speed value for a sentence: whole rpm when it is one, else one decimal.
+pub fn rpm_text(x: f32) -> String {
+    if (x - x.round()).abs() < 1e-3 {
+        format!("{x:.0}")
+    } else {
+        format!("{x:.1}")
+    }
+}
+
+/// A stretch of running time with |speed - ref| (10 ms average) beyond the lost bound.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct Excursion {
+    /// When it began, s.
+    pub from_s: f32,
+    /// Its largest |speed - ref| (10 ms average), rpm.
+    pub peak_rpm: f32,
+    /// How long until the error was back within the bound, s (`None`: it never was).
+    pub recovered_after_s: Option<f32>,
+}
 
 /// The reference counts as held at zero this long after it reached zero (the speed loop
 /// has settled), s.
@@ -41,7 +141,7 @@ pub const DRIFT_SETTLE_S: f32 = 0.5;
 ///   [`DRIFT_SETTLE_S`] or longer the rotor's true speed (10 ms average) exceeded
 ///   [`DRIFT_SPEED_RPM`]: at zero stator frequency the estimator does not see the rotor;
 /// - `kept`: none of the above.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Verdict {
     /// No fault, speed error bounded, no creep at a held zero reference.
@@ -70,9 +170,13 @@ impl Verdict {
 /// One-paragraph statement of the verdict criteria (printed under the console table).
 pub fn verdict_criteria() -> String {
     format!(
-        "verdicts: faulted = the drive tripped; lost = |speed - ref| (10 ms average) above {LOST_ERROR_RPM:.0} rpm while running; \
-         drifting = not lost, but with the reference held at 0 for {DRIFT_SETTLE_S} s or more the true speed (10 ms average) exceeded {DRIFT_SPEED_RPM:.0} rpm; \
-         kept = none of these"
+        "verdicts (thresholds per rated speed: {LOST_ERROR_RPM:.0} and {DRIFT_SPEED_RPM:.0} rpm per {REFERENCE_RATED_SPEED_RPM:.0} rpm, the paper machine's values; \
+         a scenario without a [nameplate] is judged at that rating): faulted = the drive tripped; \
+         lost = |speed - ref| (10 ms average) above {:.2} % of rated speed while running, for longer than {LOST_RECOVERY_S} s or to the end (a shorter excursion is reported with its depth and recovery time); \
+         drifting = not lost, but with the reference held at 0 for {DRIFT_SETTLE_S} s or more the true speed (10 ms average) exceeded {:.2} % of rated speed; \
+         kept = none of these",
+        100.0 * LOST_ERROR_RPM / REFERENCE_RATED_SPEED_RPM,
+        100.0 * DRIFT_SPEED_RPM / REFERENCE_RATED_SPEED_RPM,
     )
 }
 
@@ -185,13 +289,18 @@ pub struct LoadStepMetrics {
     pub t_s: f32,
     /// New load torque, N m.
     pub load_nm: f32,
-    /// Time until |load_est - load| (10 ms average) <= 0.05 N m for good (until the next
-    /// load or speed-target change), s.
+    /// Time until |load_est - load| (10 ms average) is within
+    /// [`Thresholds::load_estimate_nm`] for good (until the next load or speed-target
+    /// change), s.
     pub load_est_settle_s: Option<f32>,
-    /// Time until |speed - ref| <= 5 rpm for good (10 ms average), s.
+    /// Time until |speed - ref| (10 ms average) is within [`Thresholds::recovery_rpm`]
+    /// for good, s.
     pub speed_recovery_s: Option<f32>,
     /// Largest |speed - ref| after the change (10 ms average), rpm.
     pub speed_dip_rpm: f32,
+    /// Whether that largest deviation took the rotor faster than the reference (a load
+    /// removed: an overshoot) rather than slower (a dip).
+    pub overshoot: bool,
 }
 
 /// Rs estimator convergence.
@@ -248,6 +357,16 @@ pub struct Metrics {
     pub control_kept: bool,
     /// The verdict: kept, drifting, lost or faulted ([`Verdict`] states the criteria).
     pub verdict: Verdict,
+    /// The verdict the scenario expects when not kept, and why (`[expected]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub expected: Option<crate::scenario::Expected>,
+    /// The thresholds the verdict and the load steps were judged with.
+    pub thresholds: Thresholds,
+    /// Running stretches with the speed error beyond the lost bound, in time order (a
+    /// recovered one is a transient, reported; [`LOST_RECOVERY_S`]).
+    pub excursions: Vec<Excursion>,
+    /// Speed targets the drive clamped to its speed limit.
+    pub target_clamps: Vec<crate::sim::TargetClamp>,
     /// Rotor creep at a held zero reference, when the reference was held at zero long
     /// enough to judge it.
     pub zero_hold: Option<ZeroHoldMetrics>,
@@ -321,6 +440,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         .collect();
     let load_avg = moving_average(&load_err, SMOOTHING_STEPS);
     let spd_avg = moving_average(&spd_err, SMOOTHING_STEPS);
+    let th = Thresholds::for_scenario(sc);
 
     let mut windows = Windows::default();
     for w in &sc.windows {
@@ -391,14 +511,20 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         let mut last_bad_load = None;
         let mut last_bad_speed = None;
         let mut dip = 0.0f32;
+        let mut overshoot = false;
         for k in a..b {
-            if load_avg[k].abs() > 0.05 {
+            if load_avg[k].abs() > th.load_estimate_nm {
                 last_bad_load = Some(k);
             }
-            if spd_avg[k].abs() > 5.0 {
+            if spd_avg[k].abs() > th.recovery_rpm {
                 last_bad_speed = Some(k);
             }
-            dip = dip.max(spd_avg[k].abs());
+            if spd_avg[k].abs() > dip {
+                dip = spd_avg[k].abs();
+                // faster than the reference in its own direction (at a zero reference:
+                // in the direction the load pushes it, counted as a dip)
+                overshoot = spd_avg[k] * rows[k].speed_ref_rpm > 0.0;
+            }
         }
         let settle = |bad: Option<usize>| match bad {
             None => Some(0.0),
@@ -411,6 +537,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             load_est_settle_s: settle(last_bad_load),
             speed_recovery_s: settle(last_bad_speed),
             speed_dip_rpm: dip,
+            overshoot,
         });
     }
 
@@ -450,14 +577,36 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     // while the rotor may turn: a flying start)
     let mut max_running = 0.0f32;
     let mut running_steps = 0usize;
+    let mut excursions: Vec<Excursion> = Vec::new();
+    let mut open: Option<usize> = None; // index into excursions of the one under way
     for (k, r) in rows.iter().enumerate() {
         if r.state == 2 || r.state == 3 {
             running_steps += 1;
             if running_steps >= SMOOTHING_STEPS {
-                max_running = max_running.max(spd_avg[k].abs());
+                let e = spd_avg[k].abs();
+                max_running = max_running.max(e);
+                match (open, e > th.lost_rpm) {
+                    (None, true) => {
+                        excursions.push(Excursion {
+                            from_s: r.t_s,
+                            peak_rpm: e,
+                            recovered_after_s: None,
+                        });
+                        open = Some(excursions.len() - 1);
+                    }
+                    (Some(i), true) => excursions[i].peak_rpm = excursions[i].peak_rpm.max(e),
+                    (Some(i), false) => {
+                        excursions[i].recovered_after_s = Some(r.t_s - excursions[i].from_s);
+                        open = None;
+                    }
+                    (None, false) => {}
+                }
             }
         } else {
             running_steps = 0;
+            // leaving the running states ends the stretch without a recovery (a stop or a
+            // trip)
+            open = None;
         }
     }
     // creep at a held zero reference: the last stretch (while running) over which the
@@ -502,14 +651,17 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             }
         }
     }
-    let control_kept = r.fault.is_none() && max_running < LOST_ERROR_RPM;
+    let control_kept = r.fault.is_none() && max_running < th.lost_rpm;
+    let lost = excursions
+        .iter()
+        .any(|x| x.recovered_after_s.is_none_or(|d| d > LOST_RECOVERY_S));
     let verdict = if r.fault.is_some() {
         Verdict::Faulted
-    } else if !control_kept {
+    } else if lost {
         Verdict::Lost
     } else if zero_hold
         .as_ref()
-        .is_some_and(|z| z.speed_max_rpm > DRIFT_SPEED_RPM)
+        .is_some_and(|z| z.speed_max_rpm > th.drift_rpm)
     {
         Verdict::Drifting
     } else {
@@ -547,6 +699,10 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         final_state: format!("{:?}", r.final_state),
         control_kept,
         verdict,
+        expected: sc.expected.clone(),
+        thresholds: th,
+        excursions,
+        target_clamps: r.target_clamps.clone(),
         zero_hold,
         voltage_saturated_s,
         modulation_index_max,

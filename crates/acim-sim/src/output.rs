@@ -97,6 +97,43 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     write_atomic(path, |w| w.write_all(bytes))
 }
 
+/// The largest input file (scenario, machine, nameplate or identified model) the
+/// simulator reads, bytes: a scenario is a few kB, and a path to a device such as
+/// `/dev/zero` must end in an error, not in reading until memory runs out.
+pub const MAX_INPUT_BYTES: u64 = 1 << 20;
+
+/// `path` as the user wrote it, relative to `base` (the folder of the file that names it)
+/// when it is relative and a base is given.
+pub fn resolve_beside(base: Option<&Path>, path: &Path) -> PathBuf {
+    match base {
+        Some(b) if path.is_relative() => b.join(path),
+        _ => path.to_path_buf(),
+    }
+}
+
+/// Reads a UTF-8 text file of at most `max` bytes; a folder, a device or a larger file is
+/// an error that says which.
+pub fn read_text_file(path: &Path, max: u64) -> Result<String, String> {
+    use std::io::Read;
+    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+    if meta.is_dir() {
+        return Err("is a folder, not a file".into());
+    }
+    if !meta.is_file() {
+        return Err("is not a regular file (a device or a pipe?)".into());
+    }
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(max + 1).read_to_end(&mut bytes))
+        .map_err(|e| e.to_string())?;
+    if bytes.len() as u64 > max {
+        return Err(format!(
+            "is larger than {max} bytes: not a scenario or machine file"
+        ));
+    }
+    String::from_utf8(bytes).map_err(|_| "is not UTF-8 text".into())
+}
+
 /// Rows longer than this many control steps get a CSV decimation by default.
 pub const CSV_ROWS_DEFAULT_MAX: usize = 100_000;
 

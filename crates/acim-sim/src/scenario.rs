@@ -457,14 +457,27 @@ impl Default for SensorSpec {
     }
 }
 
+/// The plant's DC bus without a `[board]` or `[dc_link] source_v`, V (230 V mains,
+/// rectified: the paper's machine).
+pub const DEFAULT_BUS_V: f32 = 325.0;
+
+/// The board's bus and the plant's supply may differ by this fraction before the
+/// simulator warns (a rounding of the same number is no difference).
+pub const BUS_MISMATCH_FRACTION: f32 = 0.01;
+
 /// DC link: a diode-rectifier source behind a resistance, feeding a capacitor. With
 /// `capacitance_f = 0` the bus is stiff (equal to the source). The rectifier cannot take
 /// energy back, so regeneration charges the capacitor (the over-voltage fault case).
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct DcLinkSpec {
-    /// Source (rectified mains) voltage, V.
-    pub source_v: f32,
+    /// Source (rectified mains) voltage, V. Absent: the board's `dc_bus_v` (one source for
+    /// the bus: the plant runs on the bus the drive was configured for), or
+    /// [`DEFAULT_BUS_V`] without a `[board]`. Set it only to simulate a supply other than
+    /// the board's rating; the simulator then warns of the difference
+    /// ([`Validated::warnings`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub source_v: Option<f32>,
     /// Bus capacitance, F (0: stiff bus).
     pub capacitance_f: f32,
     /// Source resistance, ohm.
@@ -478,7 +491,7 @@ pub struct DcLinkSpec {
 impl Default for DcLinkSpec {
     fn default() -> Self {
         Self {
-            source_v: 325.0,
+            source_v: None,
             capacitance_f: 0.0,
             source_resistance_ohm: 1.0,
             ripple_fraction: 0.0,
@@ -765,8 +778,9 @@ pub struct Scenario {
     pub board: Option<BoardSpec>,
     /// The controller's machine from an `identified.toml` that `acim-sim commission`
     /// wrote (its `[inverse_gamma]`, `[mechanics]` and `[inverter]` replace
-    /// `[controller]` and the dead time the drive compensates); a path relative to the
-    /// working directory. Resolved when the scenario is loaded from a file or by name.
+    /// `[controller]` and the dead time the drive compensates); a relative path is
+    /// resolved against the folder of the scenario file that names it (against the
+    /// working directory for a built-in scenario). Resolved when the scenario is loaded.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub controller_file: Option<String>,
     /// Main-flux saturation of the plant (absent: linear).
@@ -774,6 +788,21 @@ pub struct Scenario {
     pub saturation: Option<SaturationSpec>,
     /// Steady-state metric windows.
     pub windows: Vec<Window>,
+    /// The verdict this scenario is expected to end with when it is not `kept`, and why
+    /// (the summary line names a matching run as expected, e.g. a rotor that drifts at a
+    /// held zero reference, where the stator frequency is zero and unobservable).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub expected: Option<Expected>,
+}
+
+/// An expected verdict and its reason (see [`Scenario::expected`]).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Expected {
+    /// The verdict.
+    pub verdict: crate::metrics::Verdict,
+    /// Why, with a pointer to where it is measured.
+    pub why: String,
 }
 
 impl Default for Scenario {
@@ -800,6 +829,7 @@ impl Default for Scenario {
             controller_file: None,
             saturation: None,
             windows: vec![],
+            expected: None,
         }
     }
 }
@@ -817,6 +847,9 @@ pub struct Validated {
     pub bases: acim::fixed::PerUnitBases,
     /// The board, with `[nameplate]`.
     pub board: Option<acim::nameplate::Board>,
+    /// What the user should know but is not an error (e.g. the plant's supply differs
+    /// from the board's bus): printed before the run and kept in the summary.
+    pub warnings: Vec<String>,
 }
 
 impl Scenario {
@@ -830,6 +863,16 @@ impl Scenario {
                 "(file)",
                 "the scenario file sets no fields (it is empty or only comments); \
                  crates/acim-sim/scenarios/example.toml documents every field",
+            );
+        }
+        if table.contains_key("nameplate") && !table.contains_key("plant") {
+            return err(
+                "plant",
+                "is needed with [nameplate]: the simulator runs the motor that [plant] \
+                 describes (rs_ohm, rr_ohm, ls_h, lr_h, lm_h, pole_pairs, inertia_kgm2, \
+                 friction_nms); without it your nameplate would drive the paper's 750 W \
+                 machine. Give the equivalent circuit from the datasheet or a test report \
+                 (crates/acim-sim/scenarios/example.toml shows every field)",
             );
         }
         // parse the text itself: its errors quote the user's own file, with line numbers
@@ -984,7 +1027,18 @@ impl Scenario {
             3 => CurrentChannels::Three,
             _ => return err("sensors.channels", "must be 2 or 3"),
         };
-        check_range("dc_link.source_v", self.dc_link.source_v, 1.0, 2000.0)?;
+        check_range("dc_link.source_v", self.bus_v(), 1.0, 2000.0)?;
+        let mut warnings = Vec::new();
+        if let (Some(src), Some(b)) = (self.dc_link.source_v, self.board) {
+            if (src - b.dc_bus_v).abs() > BUS_MISMATCH_FRACTION * b.dc_bus_v {
+                warnings.push(format!(
+                    "the plant's supply ([dc_link] source_v = {src} V) differs from the board's \
+                     bus ([board] dc_bus_v = {} V) the drive is configured for; remove \
+                     source_v to run the plant on the board's bus",
+                    b.dc_bus_v
+                ));
+            }
+        }
         check_range(
             "dc_link.capacitance_f",
             self.dc_link.capacitance_f,
@@ -1204,6 +1258,11 @@ impl Scenario {
                     "is needed with [nameplate] (dc_bus_v, current_full_scale_a)",
                 );
             };
+            check_range("board.dc_bus_v", b.dc_bus_v, 1.0, 2000.0)?;
+            if let Some(f) = b.pwm_frequency_hz {
+                // the period's own bounds (20 us .. 10 ms), in the unit the user wrote
+                check_range("board.pwm_frequency_hz", f, 100.0, 50_000.0)?;
+            }
             let b = b.board(&self.inverter);
             let nameplate = acim::nameplate::Nameplate {
                 power_w: np.power_w,
@@ -1215,12 +1274,13 @@ impl Scenario {
                 pole_pairs: np.pole_pairs,
             };
             let mut cfg =
-                acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| ScenarioError {
-                    field: match e {
-                        acim::nameplate::NameplateError::Invalid { field, .. } => field.into(),
-                        acim::nameplate::NameplateError::Config(_) => "nameplate".into(),
+                acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| match e {
+                    // the field once, in the error's own place
+                    acim::nameplate::NameplateError::Invalid { field, rule } => ScenarioError {
+                        field: field.into(),
+                        allowed: rule.into(),
                     },
-                    allowed: format!("{e}"),
+                    acim::nameplate::NameplateError::Config(c) => config_error(c, true),
                 })?;
             cfg.rs_estimation = drive.rs_estimation;
             cfg.rs_estimation_mode = drive.rs_estimation_mode;
@@ -1249,10 +1309,7 @@ impl Scenario {
             board = Some(b);
             drive = cfg;
         }
-        acim::Drive::new(drive).map_err(|e| ScenarioError {
-            field: "drive".into(),
-            allowed: format!("{e}"),
-        })?;
+        acim::Drive::new(drive).map_err(|e| config_error(e, self.nameplate.is_some()))?;
         if d.observer == ObserverKind::FullOrder {
             if d.arithmetic == Arithmetic::Fixed {
                 return err(
@@ -1285,16 +1342,49 @@ impl Scenario {
             channels,
             bases,
             board,
+            warnings,
         })
+    }
+
+    /// The plant's DC supply, V: `[dc_link] source_v`, else the board's `dc_bus_v`, else
+    /// [`DEFAULT_BUS_V`].
+    pub fn bus_v(&self) -> f32 {
+        self.dc_link
+            .source_v
+            .or(self.board.map(|b| b.dc_bus_v))
+            .unwrap_or(DEFAULT_BUS_V)
+    }
+}
+
+/// The drive's own validation error as a scenario error, naming the scenario field the
+/// user wrote where there is one (`with_board`: the period comes from the board's PWM).
+fn config_error(e: acim::ConfigError, with_board: bool) -> ScenarioError {
+    match e {
+        acim::ConfigError::Invalid { field, rule } => ScenarioError {
+            field: match field {
+                "control_period" if with_board => "board.pwm_frequency_hz".into(),
+                "control_period" => "drive.control_period_s".into(),
+                other => format!("drive ({other})"),
+            },
+            allowed: rule.into(),
+        },
+        other => ScenarioError {
+            field: "drive".into(),
+            allowed: format!("{other}"),
+        },
     }
 }
 
 /// A machine file (`[nameplate]`, `[plant]`, `[inverse_gamma]`, `[board]`, as in the
 /// project's acceptance set) reads as a scenario: its `[inverse_gamma]` table (the same
-/// machine in another form) is dropped, the controller gets the plant's data, the DC link
-/// the board's bus, and a board without a current-sense range gets 2.2 x the rated peak
+/// machine in another form) is dropped, the controller gets the plant's data (the plant
+/// runs on the board's bus, as every scenario with a `[board]` does), and a board without a current-sense range gets 2.2 x the rated peak
 /// current (the trip, 1.75 x, with margin). Any other text passes unchanged.
 pub fn machine_file_as_scenario(text: &str) -> String {
+    // a TOML number as written: `540` and `540.0` are the same bus
+    fn number(v: &toml::Value) -> Option<f64> {
+        v.as_float().or(v.as_integer().map(|i| i as f64))
+    }
     let Ok(mut t) = text.parse::<toml::Table>() else {
         return text.to_string();
     };
@@ -1307,21 +1397,12 @@ pub fn machine_file_as_scenario(text: &str) -> String {
     let rated_peak = t
         .get("nameplate")
         .and_then(|n| n.get("current_a"))
-        .and_then(|v| v.as_float())
+        .and_then(number)
         .map(|i| i * std::f64::consts::SQRT_2);
     if let Some(b) = t.get_mut("board").and_then(|b| b.as_table_mut()) {
         if let (false, Some(i)) = (b.contains_key("current_full_scale_a"), rated_peak) {
             b.insert("current_full_scale_a".into(), toml::Value::Float(2.2 * i));
         }
-    }
-    if let Some(bus) = t
-        .get("board")
-        .and_then(|b| b.get("dc_bus_v"))
-        .and_then(|v| v.as_float())
-    {
-        let mut link = toml::Table::new();
-        link.insert("source_v".into(), toml::Value::Float(bus));
-        t.entry("dc_link").or_insert(toml::Value::Table(link));
     }
     if let Some(n) = t.get_mut("nameplate").and_then(|n| n.as_table_mut()) {
         n.remove("torque_nm");

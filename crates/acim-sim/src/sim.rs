@@ -32,7 +32,7 @@ const SATURATED_MODULATION: f32 = acim::svpwm::VOLTAGE_MARGIN * 0.999;
 const SATURATED_OVERMODULATION: f32 = acim::svpwm::SIX_STEP * SQRT_3 * 0.999;
 
 /// The CSV header: the required columns first, then extra ones.
-pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited";
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm";
 
 /// One recorded control step.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -96,9 +96,24 @@ pub struct Row {
     /// The fault that stopped the drive, while it is in the fault state.
     #[serde(skip)]
     pub fault: Option<FaultReason>,
-    /// The speed target is beyond what the drive can reach (voltage, torque or bus) and
-    /// the reference is held at the reachable speed (the drive's telemetry).
+    /// The user's speed target is not what the drive runs to: beyond what it can reach
+    /// (voltage, torque or bus; the reference is held at the reachable speed, the drive's
+    /// telemetry), or beyond its speed limit (clamped to +/- 90 % of `max_speed`).
     pub speed_target_limited: bool,
+    /// The speed target as the scenario gave it (before any clamp or ramp), rpm.
+    pub speed_target_rpm: f32,
+}
+
+/// A speed target the drive clamped to its limit (`SPEED_TARGET_FRACTION` of
+/// `max_speed`).
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct TargetClamp {
+    /// When the target was given, s.
+    pub t_s: f32,
+    /// The target as given, rpm.
+    pub target_rpm: f32,
+    /// What the drive runs to instead, rpm.
+    pub limited_to_rpm: f32,
 }
 
 /// The drive state's name for a state code of [`Row::state`].
@@ -122,7 +137,7 @@ impl Row {
     /// CSV line for this row (same column order as [`CSV_HEADER`]).
     pub fn csv(&self) -> String {
         format!(
-            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{},{}",
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{},{},{:.3}",
             self.t_s,
             self.speed_ref_rpm,
             self.speed_rpm,
@@ -152,6 +167,7 @@ impl Row {
             state_name(self.state),
             self.fault.map(fault_name).unwrap_or_default(),
             self.speed_target_limited as u8,
+            self.speed_target_rpm,
         )
     }
 }
@@ -187,6 +203,8 @@ pub struct RunResult {
     /// The current sensors' gain correction at the end, g_a / g_b as the drive calibrated
     /// it (1: not calibrated; `drive.current_gain_calibration`).
     pub current_gain_correction: f32,
+    /// Speed targets the drive clamped to its limit, in time order.
+    pub target_clamps: Vec<TargetClamp>,
 }
 
 /// The rotor-resistance adaptation (issue 13, item 7) at the end of a run.
@@ -251,7 +269,7 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
             device_drop: sc.inverter.device_drop_v,
             ..InverterConfig::default()
         },
-        sc.dc_link.source_v,
+        sc.bus_v(),
     );
     let mut cs = CurrentSensorConfig::default();
     cs.adc.bits = sc.sensors.adc_bits;
@@ -293,7 +311,7 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
 /// The scenario's DC link (stiff when its capacitance is 0).
 pub(crate) fn build_dc_link(sc: &Scenario) -> DcLink {
     DcLink::new(
-        sc.dc_link.source_v,
+        sc.bus_v(),
         sc.dc_link.capacitance_f,
         sc.dc_link.source_resistance_ohm,
     )
@@ -468,6 +486,10 @@ pub fn run_with_progress(
     let mut faults = FaultInjector::new(fault_plan(sc));
     let mut fault_time = None;
     let mut search = None;
+    let target_limit_rpm =
+        acim::design::SPEED_TARGET_FRACTION * v.drive.max_speed * acim::math::RAD_S_TO_RPM;
+    let mut target_clamps = Vec::new();
+    let mut user_target_rpm = 0.0f32;
     let plant_nominal = v.plant.data();
     let mut plant_factors = (1.0f32, 1.0f32);
 
@@ -480,7 +502,17 @@ pub fn run_with_progress(
             start(&mut drive)?;
         }
         while si < speed_points.len() && speed_points[si].t_s <= t + 0.5 * ts {
-            let _ = drive.set_speed_target(speed_points[si].rpm * acim::math::RPM_TO_RAD_S);
+            let rpm = speed_points[si].rpm;
+            let _ = drive.set_speed_target(rpm * acim::math::RPM_TO_RAD_S);
+            // the drive clamps a target beyond its limit: report it, never silently
+            if rpm.abs() > target_limit_rpm {
+                target_clamps.push(TargetClamp {
+                    t_s: speed_points[si].t_s,
+                    target_rpm: rpm,
+                    limited_to_rpm: rpm.clamp(-target_limit_rpm, target_limit_rpm),
+                });
+            }
+            user_target_rpm = rpm;
             si += 1;
         }
         while li < load_points.len() && load_points[li].t_s <= t + 0.5 * ts {
@@ -571,7 +603,9 @@ pub fn run_with_progress(
             } else {
                 None
             },
-            speed_target_limited: tel.speed_target_limited,
+            speed_target_limited: tel.speed_target_limited
+                || user_target_rpm.abs() > target_limit_rpm,
+            speed_target_rpm: user_target_rpm,
         });
 
         // apply: a switch-off acts at once, new duties from the next period
@@ -603,6 +637,7 @@ pub fn run_with_progress(
             }
         }),
         current_gain_correction: drive.current_gain_correction(),
+        target_clamps,
         rotor_resistance: v.drive.rr_adaptation.then(|| {
             let r = drive.rotor_resistance();
             RotorResistanceRecord {

@@ -104,7 +104,10 @@ fn run_honours_out_and_set_and_reports_what_ran() {
     let out = text(&o.stdout);
     // the Rs estimator is off in fig 8: no Rs convergence line
     assert!(!out.contains("Rs 15.75 ->"), "{out}");
-    assert!(out.contains("verdicts: faulted ="), "{out}");
+    assert!(
+        out.contains("is judged at that rating): faulted ="),
+        "{out}"
+    );
     let raw = std::fs::read_to_string(d.join("res/rs-short.json")).unwrap();
     let json: serde_json::Value = serde_json::from_str(&raw).unwrap();
     assert_eq!(json["schema_version"], 1);
@@ -204,7 +207,7 @@ fn long_runs_are_decimated_by_default_and_gzip_is_optional() {
     let header = lines.next().unwrap();
     assert_eq!(header, acim_sim::sim::CSV_HEADER);
     assert!(header.ends_with(
-        "voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited"
+        "voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm"
     ));
     assert_eq!(lines.count(), 75_000); // 225 000 steps, every 3rd
     assert_eq!(files(&d.join("res")).len(), 3);

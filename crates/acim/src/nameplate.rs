@@ -46,6 +46,18 @@ pub const TRIP_OVER_LIMIT: f32 = 1.75;
 pub const BUS_MIN_FRACTION: f32 = 0.6;
 /// Highest bus as a fraction of the nominal bus (over-voltage trip: regeneration).
 pub const BUS_MAX_FRACTION: f32 = 1.25;
+/// The smallest rated output power as a fraction of the apparent power sqrt(3) V I: a
+/// motor's efficiency x power factor at rated load is 0.4-0.9, so a nameplate below this
+/// is a unit slip (kW for W), not a motor.
+pub const MIN_POWER_OVER_APPARENT: f32 = 0.2;
+
+/// The plausible range of the rated slip (1 - n / n_sync): large machines slip about
+/// 0.5 %, small high-slip ones up to 15 %. Outside it a speed or frequency is mistyped
+/// (a 50 Hz speed with 60 Hz). A nameplate that prints the synchronous speed is accepted.
+pub const RATED_SLIP_MIN: f32 = 0.005;
+/// See [`RATED_SLIP_MIN`].
+pub const RATED_SLIP_MAX: f32 = 0.15;
+
 /// Speed limit over the synchronous speed.
 pub const SPEED_LIMIT_OVER_RATED: f32 = 1.3;
 /// The speed ramp reaches the rated speed in this time, s.
@@ -193,6 +205,13 @@ impl Nameplate {
         let i = positive(self.current_a, "nameplate.current_a")?;
         let f = positive(self.frequency_hz, "nameplate.frequency_hz")?;
         let apparent = 1.732_050_8 * v * i;
+        if p_out < MIN_POWER_OVER_APPARENT * apparent {
+            return Err(invalid(
+                "nameplate.power_w",
+                "is below 20 % of sqrt(3) V I, while a motor's efficiency x power factor at \
+                 rated load is 0.4-0.9: is it written in kW? power_w is in watts",
+            ));
+        }
         if p_out >= apparent {
             return Err(invalid(
                 "nameplate.power_w",
@@ -247,19 +266,28 @@ impl Nameplate {
         let speed = match speed_rpm {
             Some(n) => {
                 let s = n * RPM_TO_RAD_S;
+                let slip = 1.0 - s / sync;
                 // equal is accepted: some nameplates print the synchronous speed
-                if s > sync * (1.0 + 1e-4) {
+                let printed_synchronous = slip.abs() <= 1e-4;
+                if slip < -1e-4 {
                     return Err(invalid(
                         "nameplate.speed_rpm",
-                        "must not exceed the synchronous speed 60 f / p (an induction motor \
-                         slips)",
+                        "is above the synchronous speed 60 f / p of the given pole_pairs (an \
+                         induction motor slips): check pole_pairs, frequency_hz and speed_rpm",
                     ));
                 }
-                if s < 0.5 * sync {
+                if !printed_synchronous && !(RATED_SLIP_MIN..=RATED_SLIP_MAX).contains(&slip) {
                     return Err(invalid(
                         "nameplate.speed_rpm",
-                        "must be above half the synchronous speed (a slip beyond 50 % is \
-                         no rating)",
+                        if self.pole_pairs.is_none() {
+                            "gives a rated slip outside 0.5-15 % for every pole count with \
+                             frequency_hz: is the frequency right (1440 rpm is a 50 Hz speed, \
+                             1740 rpm its 60 Hz twin), or the speed?"
+                        } else {
+                            "gives a rated slip outside 0.5-15 % with pole_pairs and \
+                             frequency_hz: check all three (1440 rpm is a 50 Hz 4-pole speed, \
+                             1740 rpm its 60 Hz twin)"
+                        },
                     ));
                 }
                 s.min(sync)
@@ -626,6 +654,18 @@ mod tests {
         assert_eq!(field(bad, b), "nameplate.power_w");
         let mut bad = n;
         bad.speed_rpm = Some(1600.0);
+        assert_eq!(field(bad, b), "nameplate.speed_rpm");
+        // the likely mistakes, each named by its field
+        let mut bad = n;
+        bad.power_w = 0.75; // kW
+        assert_eq!(field(bad, b), "nameplate.power_w");
+        let mut bad = n;
+        bad.frequency_hz = 60.0; // 1440 rpm is a 50 Hz speed: 20 % slip at 60 Hz
+        bad.speed_rpm = Some(1440.0);
+        bad.pole_pairs = None;
+        assert_eq!(field(bad, b), "nameplate.speed_rpm");
+        let mut bad = n;
+        bad.speed_rpm = Some(1498.0); // 0.13 % slip: the synchronous speed mistyped?
         assert_eq!(field(bad, b), "nameplate.speed_rpm");
         let mut bad = n;
         bad.power_factor = Some(0.5);
