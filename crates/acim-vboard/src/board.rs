@@ -13,6 +13,7 @@ use acim_firmware_core::protocol::{self, Extension, Request, RequestError};
 use acim_firmware_core::settings::{self, Settings, FIELDS};
 use acim_firmware_core::sim::SimulatedStage;
 use acim_firmware_core::telemetry::{self, TelemetrySample};
+use std::collections::VecDeque;
 use std::time::Instant;
 
 /// The name in the hello frame and the `version` reply.
@@ -45,6 +46,95 @@ pub struct Logged {
     pub event: Event,
 }
 
+/// Entries an [`EventLog`] keeps: the last 1024 events (a [`Logged`] is 72 bytes on a
+/// 64-bit host: 72 KiB). A session's commands are typed or scripted, tens to hundreds of
+/// them, so a whole session normally fits and [`replay`] can reproduce it; past the bound
+/// the oldest entries go (see [`EventLog::is_complete`]).
+pub const LOG_CAPACITY: usize = 1024;
+
+/// The board's event log: a ring of the last [`LOG_CAPACITY`] (or a chosen number of)
+/// [`Logged`] events, oldest first, and the count of every event ever logged.
+///
+/// Only what took effect is logged (and how a commissioning ended): a command the drive
+/// refused, a setting the validation refused and every line answered with `err` leave no
+/// entry (they change nothing, so [`replay`] needs none).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventLog {
+    entries: VecDeque<Logged>,
+    capacity: usize,
+    total: u64,
+}
+
+impl Default for EventLog {
+    fn default() -> Self {
+        Self::with_capacity(LOG_CAPACITY)
+    }
+}
+
+impl EventLog {
+    /// An empty log keeping the last `capacity` entries (at least one).
+    pub fn with_capacity(capacity: usize) -> Self {
+        Self {
+            entries: VecDeque::new(),
+            capacity: capacity.max(1),
+            total: 0,
+        }
+    }
+
+    /// Appends `l`, dropping the oldest entry when the log is full.
+    pub fn push(&mut self, l: Logged) {
+        if self.entries.len() == self.capacity {
+            self.entries.pop_front();
+        }
+        self.entries.push_back(l);
+        self.total += 1;
+    }
+
+    /// Entries kept (at most [`EventLog::capacity`]).
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// No entry kept.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// The most entries it keeps.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Events logged since it was made, kept or not.
+    pub fn total(&self) -> u64 {
+        self.total
+    }
+
+    /// Nothing has been dropped: the entries go back to the first event, so [`replay`]
+    /// of them reproduces the run from power-up.
+    pub fn is_complete(&self) -> bool {
+        self.total == self.entries.len() as u64
+    }
+
+    /// The kept entries, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &Logged> + '_ {
+        self.entries.iter()
+    }
+
+    /// The kept entries, oldest first, as a vector (for [`replay`]).
+    pub fn to_vec(&self) -> Vec<Logged> {
+        self.entries.iter().copied().collect()
+    }
+
+    /// Moves every kept entry to the end of `dst` (as [`EventLog::push`]es), leaving this
+    /// log empty (its [`EventLog::total`] unchanged).
+    pub fn move_into(&mut self, dst: &mut EventLog) {
+        for l in self.entries.drain(..) {
+            dst.push(l);
+        }
+    }
+}
+
 /// One decimated telemetry sample as the link sends it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {
@@ -72,7 +162,7 @@ pub struct Board {
     saved: Settings,
     period: u64,
     timed: bool,
-    log: Vec<Logged>,
+    log: EventLog,
     /// The nameplate of the commissioning under way or last run.
     nameplate: Option<NameplateArgs>,
     /// The reply lines of the last finished commissioning.
@@ -109,7 +199,7 @@ impl Board {
             saved: settings,
             period: 0,
             timed,
-            log: Vec::new(),
+            log: EventLog::default(),
             nameplate: None,
             commissioned: None,
             commission_started: None,
@@ -135,9 +225,16 @@ impl Board {
         self.period
     }
 
-    /// Every event so far, in order.
-    pub fn log(&self) -> &[Logged] {
+    /// The last [`LOG_CAPACITY`] events that took effect, in order (a server moves them
+    /// out with [`Board::take_log_into`]).
+    pub fn log(&self) -> &EventLog {
         &self.log
+    }
+
+    /// Moves the events logged since the last call into `dst`, so that each is kept in
+    /// one place (the server's log, which other threads read).
+    pub fn take_log_into(&mut self, dst: &mut EventLog) {
+        self.log.move_into(dst);
     }
 
     /// The drive's state.
@@ -156,7 +253,8 @@ impl Board {
     }
 
     /// Sends a command to the control loop before the next period (as the firmware's
-    /// interrupt takes it from its queue); `load` also reaches the motor model.
+    /// interrupt takes it from its queue); `load` also reaches the motor model. Logged
+    /// only if the control loop accepts it (a refused command changes nothing).
     pub fn apply(&mut self, cmd: ControlCommand) -> Result<(), acim::CommandError> {
         if let ControlCommand::PlantLoad(nm) = cmd {
             self.stage.set_brake_nm(nm);
@@ -167,11 +265,14 @@ impl Board {
             self.ctl
                 .stage_commissioning(commission::build(&args, self.ctl.inputs().dc_bus));
         }
-        self.log.push(Logged {
-            period: self.period,
-            event: Event::Control(cmd),
-        });
-        self.ctl.apply(cmd).result
+        let result = self.ctl.apply(cmd).result;
+        if result.is_ok() {
+            self.log.push(Logged {
+                period: self.period,
+                event: Event::Control(cmd),
+            });
+        }
+        result
     }
 
     /// Telemetry every `every` periods from the next period on.
@@ -489,6 +590,7 @@ impl Board {
 
 /// Runs `periods` periods from power-up with the events of `log` applied at their
 /// periods, untimed: the reference trace a recording of the same run must reproduce.
+/// `log` must go back to power-up ([`EventLog::is_complete`]) for that.
 pub fn replay(log: &[Logged], periods: u64) -> Vec<Sample> {
     let mut b = Board::new(false);
     let mut out = Vec::new();
@@ -578,6 +680,86 @@ mod tests {
             "{}",
             b.plant_speed_rpm()
         );
-        assert_eq!(replay(b.log(), 20_000), live);
+        assert_eq!(replay(&b.log().to_vec(), 20_000), live);
+    }
+
+    fn at(period: u64) -> Logged {
+        Logged {
+            period,
+            event: Event::Rate(2),
+        }
+    }
+
+    #[test]
+    fn the_log_keeps_the_last_entries() {
+        let mut log = EventLog::with_capacity(3);
+        assert!(log.is_empty() && log.is_complete());
+        for p in 0..3 {
+            log.push(at(p));
+        }
+        assert_eq!(log.len(), 3);
+        assert!(log.is_complete());
+        for p in 3..10 {
+            log.push(at(p));
+        }
+        assert_eq!(log.len(), 3);
+        assert_eq!(log.total(), 10);
+        assert!(!log.is_complete());
+        assert_eq!(log.to_vec(), [at(7), at(8), at(9)]);
+
+        // moved, not copied: the source is left empty, the destination keeps its bound
+        let mut dst = EventLog::with_capacity(4);
+        dst.push(at(0));
+        dst.push(at(1));
+        log.move_into(&mut dst);
+        assert!(log.is_empty());
+        assert_eq!(log.total(), 10);
+        assert_eq!(dst.to_vec(), [at(1), at(7), at(8), at(9)]);
+        assert_eq!(dst.total(), 5);
+
+        // the board's own log is bounded at LOG_CAPACITY
+        let mut b = Board::new(false);
+        for _ in 0..LOG_CAPACITY + 10 {
+            assert_eq!(say(&mut b, "rate 2"), "ok\r\n");
+        }
+        assert_eq!(b.log().len(), LOG_CAPACITY);
+        assert_eq!(b.log().total(), (LOG_CAPACITY + 10) as u64);
+    }
+
+    #[test]
+    fn refused_commands_are_not_logged() {
+        let mut b = Board::new(false);
+        let mut live = Vec::new();
+        let mut run = |b: &mut Board, n: u32| {
+            for _ in 0..n {
+                live.extend(b.step());
+            }
+        };
+        // refused by the drive: no fault to reset, no start while running, a commission
+        // while running; refused by the parser or the validation: never reach the drive
+        assert_eq!(say(&mut b, "reset"), "err refused in this state\r\n");
+        assert_eq!(say(&mut b, "speed 1801"), "err out of range\r\n");
+        assert!(say(&mut b, "set current_limit 99").starts_with("err (overcurrent_trip: "));
+        assert!(b.log().is_empty(), "{:?}", b.log());
+        assert_eq!(say(&mut b, "start"), "ok\r\n");
+        run(&mut b, 100);
+        assert_eq!(say(&mut b, "start"), "err refused in this state\r\n");
+        assert!(say(&mut b, "commission 750 230 3.3 50 1500").starts_with("err "));
+        assert!(say(&mut b, "set current_limit 4").starts_with("err current_limit: refused"));
+        assert_eq!(say(&mut b, "speed 300"), "ok\r\n");
+        run(&mut b, 2000);
+        // a refused command through the board's own interface
+        assert!(b.apply(ControlCommand::ResetFault).is_err());
+        run(&mut b, 100);
+        let events: Vec<Event> = b.log().iter().map(|l| l.event).collect();
+        assert_eq!(
+            events,
+            [
+                Event::Control(ControlCommand::Start),
+                Event::Control(ControlCommand::SpeedRpm(300.0))
+            ]
+        );
+        // and the run is reproduced without them
+        assert_eq!(replay(&b.log().to_vec(), b.period()), live);
     }
 }
