@@ -7,7 +7,7 @@
 //! error names the file it concerns ([`FileError`]).
 
 use crate::metrics::Metrics;
-use crate::plot::{render_panels, Color, LineStyle, Panel, Series};
+use crate::plot::{render_panels_marked, Color, LineStyle, Marks, Panel, Series, SPAN_COLOR};
 use crate::scenario::ControlMode;
 use crate::sim::{RunResult, CSV_HEADER};
 use std::io::Write;
@@ -184,10 +184,12 @@ pub fn write_json(path: &Path, m: &Metrics) -> Result<(), FileError> {
     write_file(path, (text + "\n").as_bytes())
 }
 
-/// Renders the paper-style figure: speed (reference, real, estimated), speed-estimation
-/// error, dq currents, load torque (real and estimated), and Rs estimate when the
-/// estimator is on or the controller's Rs differs from the plant's. Open-loop V/f runs
-/// have no estimator: their figure shows no estimate, no estimation error and no Rs.
+/// Renders the paper-style figure: speed (the target as given, the ramped reference, real,
+/// estimated), speed-estimation error, dq currents, load torque (real and estimated), and
+/// Rs estimate when the estimator is on or the controller's Rs differs from the plant's.
+/// Every panel shades the metric windows and marks the drive's state changes (a fault in
+/// red). Open-loop V/f runs have no estimator: their figure shows no estimate, no
+/// estimation error and no Rs.
 pub fn write_png(path: &Path, r: &RunResult) -> Result<(), FileError> {
     with_temp_file(path, |tmp| draw_png(tmp, r))
 }
@@ -220,9 +222,18 @@ fn draw_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>
                 * crate::scenario::plant_factors(&r.scenario.plant_changes, x.t_s).0
         })
         .collect();
+    let target = ctl(|r| r.speed_target_rpm);
+    // legend entries for the marks drawn behind every panel (no samples of their own)
+    let none = vec![f32::NAN; t.len()];
+    let faulted = rows.iter().any(|x| x.state == 4);
     let mut speed = vec![
         Series {
-            label: "reference",
+            label: "target",
+            values: &target,
+            style: LineStyle::Dashed(Color::Black),
+        },
+        Series {
+            label: "reference (ramped)",
             values: &sref,
             style: LineStyle::Dashed(Color::Gray),
         },
@@ -247,6 +258,23 @@ fn draw_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>
             label: "estimated",
             values: &tle,
             style: LineStyle::Dashed(Color::Red),
+        });
+    }
+    speed.push(Series {
+        label: "metric windows",
+        values: &none,
+        style: LineStyle::Solid(SPAN_COLOR),
+    });
+    speed.push(Series {
+        label: "state change",
+        values: &none,
+        style: LineStyle::Solid(Color::Purple),
+    });
+    if faulted {
+        speed.push(Series {
+            label: "fault",
+            values: &none,
+            style: LineStyle::Solid(Color::Red),
         });
     }
     let mut panels = vec![Panel {
@@ -309,7 +337,25 @@ fn draw_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>
     }
     let title = format!("{}: {}", sc.name, sc.description);
     let height = 220 * panels.len() as u32 + 80;
-    render_panels(path, &title, &t, &panels, 1200, height)?;
+    let mut marks = Marks {
+        spans: sc
+            .windows
+            .iter()
+            .map(|w| (f64::from(w.from_s), f64::from(w.to_s)))
+            .collect(),
+        lines: Vec::new(),
+    };
+    for w in rows.windows(2) {
+        if w[1].state != w[0].state {
+            let c = if w[1].state == 4 {
+                Color::Red
+            } else {
+                Color::Purple
+            };
+            marks.lines.push((f64::from(w[1].t_s), c));
+        }
+    }
+    render_panels_marked(path, &title, &t, &panels, 1200, height, &marks)?;
     Ok(())
 }
 

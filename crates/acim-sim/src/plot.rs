@@ -117,6 +117,19 @@ pub struct Panel<'a> {
     pub series: Vec<Series<'a>>,
 }
 
+/// What a run's figure marks behind its traces, in every panel: shaded time spans (the
+/// metric windows) and vertical lines (state changes, a fault).
+#[derive(Clone, Debug, Default)]
+pub struct Marks {
+    /// Shaded spans, (from, to) in x-axis units.
+    pub spans: Vec<(f64, f64)>,
+    /// Vertical lines at an x value, in a colour.
+    pub lines: Vec<(f64, Color)>,
+}
+
+/// The shading of [`Marks::spans`] (a pale blue behind the grid's gray).
+pub const SPAN_COLOR: Color = Color::Rgb(222, 235, 250);
+
 /// Why a figure could not be rendered.
 #[derive(Debug)]
 pub enum PlotError {
@@ -584,6 +597,21 @@ pub fn render_panels(
     render_panels_over(path, title, "Time (s)", time_s, panels, width, height)
 }
 
+/// [`render_panels`] with [`Marks`] drawn behind the traces of every panel.
+pub fn render_panels_marked(
+    path: &Path,
+    title: &str,
+    time_s: &[f32],
+    panels: &[Panel],
+    width: u32,
+    height: u32,
+    marks: &Marks,
+) -> Result<(), PlotError> {
+    render(
+        path, title, "Time (s)", time_s, panels, width, height, marks,
+    )
+}
+
 /// [`render_panels`] over any ascending x axis `x`, labelled `x_label`.
 pub fn render_panels_over(
     path: &Path,
@@ -593,6 +621,29 @@ pub fn render_panels_over(
     panels: &[Panel],
     width: u32,
     height: u32,
+) -> Result<(), PlotError> {
+    render(
+        path,
+        title,
+        x_label,
+        time_s,
+        panels,
+        width,
+        height,
+        &Marks::default(),
+    )
+}
+
+#[allow(clippy::too_many_arguments)] // the figure's whole description, private
+fn render(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    time_s: &[f32],
+    panels: &[Panel],
+    width: u32,
+    height: u32,
+    marks: &Marks,
 ) -> Result<(), PlotError> {
     if panels.is_empty() {
         return Err(PlotError::InvalidInput("no panels".into()));
@@ -760,6 +811,30 @@ pub fn render_panels_over(
                 grid,
             ))
             .map_err(draw_err)?;
+        }
+
+        // Marks: shaded spans and vertical lines, clipped to the axis.
+        for &(a, b) in &marks.spans {
+            let (a, b) = (a.max(t0), b.min(t1));
+            if b > a {
+                let (xa, _) = to_px(a, y0);
+                let (xb, _) = to_px(b, y0);
+                root.draw(&Rectangle::new(
+                    [(xa, py0 + 1), (xb, py1 - 2)],
+                    SPAN_COLOR.rgb().filled(),
+                ))
+                .map_err(draw_err)?;
+            }
+        }
+        for &(x, c) in &marks.lines {
+            if x >= t0 && x <= t1 {
+                let (gx, _) = to_px(x, y0);
+                root.draw(&PathElement::new(
+                    vec![(gx, py0), (gx, py1 - 1)],
+                    ShapeStyle::from(&c.rgb()).stroke_width(1),
+                ))
+                .map_err(draw_err)?;
+            }
         }
 
         // Traces.
