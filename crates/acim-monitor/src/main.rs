@@ -22,7 +22,9 @@ const USAGE: &str = "usage: acim-monitor (--tcp ADDR | --serial PATH [--baud N])
                      of board time after the first sample, then write --screenshot (the
                      screen as text, --size, default 160x48); fails after --timeout
                      wall-clock seconds (default 60)
-keys: type a board command and Enter; Up/Down history; Esc sends stop; Ctrl-C quits; :help";
+keys: type a board command and Enter; Up/Down history; Esc sends stop; Ctrl-C quits; F1 or :help;
+      PgUp/PgDn scroll the replies, Home the oldest, End the newest
+the terminal: 80x24 at least (speed, currents, torque); 120x40 and up shows all seven charts";
 
 struct Opts {
     source: Source,
@@ -162,6 +164,7 @@ fn headless(o: &Opts) -> Result<(), String> {
         if let Some(ev) = link.event_timeout(App::POLL) {
             app.on_event(ev);
         }
+        app.tick(Instant::now());
         let board_time = app.last().map(|r| r.time_s);
         if first.is_none() {
             first = board_time;
@@ -234,6 +237,7 @@ fn interactive(o: &Opts) -> Result<(), String> {
         while let Some(ev) = link.try_event() {
             app.on_event(ev);
         }
+        app.tick(Instant::now());
         if let Err(e) = term.draw(|f| ui::render(f, &app)) {
             break Err(format!("terminal: {e}"));
         }
@@ -255,6 +259,10 @@ fn interactive(o: &Opts) -> Result<(), String> {
                                 link.send(&c);
                             }
                         }
+                        KeyCode::PageUp => app.scroll_replies(app.reply_page()),
+                        KeyCode::PageDown => app.scroll_replies(-app.reply_page()),
+                        KeyCode::Home => app.replies_oldest(),
+                        KeyCode::End => app.replies_newest(),
                         KeyCode::Backspace => {
                             app.input.pop();
                         }

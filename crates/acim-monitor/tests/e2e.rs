@@ -191,7 +191,8 @@ fn start_speed_load_stop_recorded_as_the_board_ran_it() {
         "Torque [N m]",
         "load estimate",
         "DC bus [V]",
-        "Interrupt time [cycles]",
+        // the virtual board times its step on the host
+        "Host step time [us] (virtual board)",
         "t [s]",
         "state Idle",
         "reconnects 1",
