@@ -146,10 +146,14 @@ fn start_speed_load_stop_recorded_as_the_board_ran_it() {
     assert!(seqs.windows(2).all(|w| w[0] < w[1]));
     let gaps = seqs.windows(2).filter(|w| w[1] != w[0] + 1).count();
     assert_eq!(gaps, 1, "one gap (the cable pull)");
+    // the gap is the outage: the monitor's 100 ms backoff plus its reconnection, at the
+    // board's 10x pace and 50 samples/s (500 samples per wall second); allow half a wall
+    // second in all, for a loaded 2-core machine (0.1-0.25 s seen)
     let span = (seqs.last().unwrap() - seqs[0] + 1) as usize;
+    let lost = span - seqs.len();
     assert!(
-        seqs.len() * 10 >= span * 8,
-        "{} of {span} samples",
+        (20..=250).contains(&lost),
+        "{lost} samples lost in the outage ({} of {span} recorded)",
         seqs.len()
     );
 
