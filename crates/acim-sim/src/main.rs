@@ -97,7 +97,13 @@ impl Opts {
                     o.out = Some(PathBuf::from(dir));
                     i += 1;
                 }
-                a if a.starts_with("--out=") => o.out = Some(PathBuf::from(&a["--out=".len()..])),
+                a if a.starts_with("--out=") => {
+                    let dir = &a["--out=".len()..];
+                    if dir.is_empty() {
+                        return Err("--out needs a directory, got an empty string".into());
+                    }
+                    o.out = Some(PathBuf::from(dir));
+                }
                 "--set" => {
                     o.sets
                         .push(rest.get(i + 1).ok_or("--set needs key=value")?.clone());
@@ -223,8 +229,7 @@ fn load_plain(spec: &str) -> Result<Scenario, String> {
         let text =
             acim_sim::output::read_text_file(Path::new(spec), acim_sim::output::MAX_INPUT_BYTES)
                 .map_err(|e| format!("{spec}: {e}"))?;
-        return Scenario::from_toml(&acim_sim::scenario::machine_file_as_scenario(&text))
-            .map_err(|e| format!("{spec}: {e}"));
+        return Scenario::from_file_text(&text).map_err(|e| format!("{spec}: {e}"));
     }
     Err(format!(
         "no built-in scenario or file named `{spec}` (see `acim-sim list`)"
@@ -286,6 +291,10 @@ fn load_step_text(m: &Metrics, s: &acim_sim::metrics::LoadStepMetrics) -> String
     )
 }
 
+/// The verdict notes a target held below what was asked (by the voltage, the current or
+/// the regeneration limit) when it was held this long in all, s.
+const TARGET_LIMITED_NOTE_S: f32 = 0.5;
+
 /// How a run ended, in one phrase (console table and metrics.md); the criteria are
 /// [`acim_sim::metrics::Verdict`]'s.
 fn outcome(m: &Metrics) -> String {
@@ -314,6 +323,18 @@ fn outcome(m: &Metrics) -> String {
                     .map_or(", never recovered".into(), |d| format!(" for {d:.2} s"))
             )
         }
+        (Verdict::LimitCycle, _) => {
+            let o = m.oscillation.unwrap_or_default();
+            format!(
+                "limit cycle: true speed {:.0}-{:.0} rpm around a steady reference for {:.0} s from {:.2} s (swing {:.0} rpm, bound {})",
+                o.speed_min_rpm,
+                o.speed_max_rpm,
+                o.duration_s,
+                o.from_s,
+                o.peak_to_peak_rpm,
+                acim_sim::metrics::rpm_text(m.thresholds.oscillation_rpm)
+            )
+        }
         (Verdict::Drifting, _) => format!(
             "drifting: rotor at up to {:.1} rpm with the reference held at 0 from {:.2} s",
             m.zero_hold.as_ref().map_or(0.0, |z| z.speed_max_rpm),
@@ -335,6 +356,13 @@ fn outcome(m: &Metrics) -> String {
                 ));
             }
         }
+    }
+    // a short hold (an acceleration at the current limit) is in the CSV and the JSON only
+    if m.target_clamps.is_empty() && m.speed_target_limited_s >= TARGET_LIMITED_NOTE_S {
+        notes.push(format!(
+            "target beyond reach for {:.2} s (the reference held at the speed the drive reaches)",
+            m.speed_target_limited_s
+        ));
     }
     for c in &m.target_clamps {
         notes.push(format!(
@@ -488,6 +516,7 @@ fn verdict_summary(all: &[Metrics]) -> String {
         Verdict::Kept,
         Verdict::Drifting,
         Verdict::Lost,
+        Verdict::LimitCycle,
         Verdict::Faulted,
     ] {
         let runs: Vec<&Metrics> = all.iter().filter(|m| m.verdict == v).collect();
@@ -1069,8 +1098,31 @@ const SERVE_USAGE: &str = "usage: acim-sim serve [--tcp ADDR] [--speed FACTOR|ma
   --speed FACTOR    simulated seconds per second (default 1, real time), or max
   --rate PERIODS    telemetry every PERIODS control periods at start (default 500: 10 Hz)";
 
+/// The arguments as text: one that is not valid Unicode is a usage error naming it.
+fn args_text(args: impl Iterator<Item = std::ffi::OsString>) -> Result<Vec<String>, String> {
+    args.enumerate()
+        .map(|(i, a)| {
+            a.into_string().map_err(|a| {
+                format!(
+                    "argument {} ({}) is not valid Unicode: file and directory names must be \
+                     UTF-8 text",
+                    i + 1,
+                    a.to_string_lossy()
+                )
+            })
+        })
+        .collect()
+}
+
 fn main() -> ExitCode {
-    match real_main(std::env::args().skip(1).collect()) {
+    let args = match args_text(std::env::args_os().skip(1)) {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("acim-sim: {e}\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    match real_main(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("acim-sim: {e}");

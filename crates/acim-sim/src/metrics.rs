@@ -43,6 +43,22 @@ pub const RECOVERY_SPEED_RPM: f32 = 5.0;
 /// at the reference rating (scaled by [`Thresholds`]).
 pub const LOAD_ESTIMATE_NM: f32 = 0.05;
 
+/// A limit cycle: with the reference steady, the true speed's swing around it (peak to
+/// peak of its 10 ms average, over each [`OSCILLATION_BLOCK_S`]) above this, rpm at the
+/// reference rating (scaled by [`Thresholds`]; 2 % of rated speed).
+pub const OSCILLATION_RPM: f32 = 30.0;
+
+/// The swing is judged over blocks of this length, s (a cycle of 1 Hz or faster shows its
+/// whole swing in one block).
+pub const OSCILLATION_BLOCK_S: f32 = 1.0;
+
+/// ... in at least this many consecutive blocks (a transient settles within one).
+pub const OSCILLATION_BLOCKS: usize = 3;
+
+/// The reference must have been constant, and the load unchanged, this long before a
+/// block counts as steady, s.
+pub const STEADY_AFTER_S: f32 = 1.0;
+
 /// The rating every absolute threshold above is stated for: the paper's 750 W machine
 /// (Table 1: 1500 rpm, 5 N m), rpm.
 pub const REFERENCE_RATED_SPEED_RPM: f32 = 1500.0;
@@ -68,6 +84,8 @@ pub struct Thresholds {
     pub recovery_rpm: f32,
     /// [`LOAD_ESTIMATE_NM`] scaled, N m.
     pub load_estimate_nm: f32,
+    /// [`OSCILLATION_RPM`] scaled, rpm.
+    pub oscillation_rpm: f32,
 }
 
 impl Thresholds {
@@ -83,6 +101,7 @@ impl Thresholds {
             drift_rpm: DRIFT_SPEED_RPM * ks,
             recovery_rpm: RECOVERY_SPEED_RPM * ks,
             load_estimate_nm: LOAD_ESTIMATE_NM * kt,
+            oscillation_rpm: OSCILLATION_RPM * ks,
         }
     }
 
@@ -117,6 +136,22 @@ pub fn rpm_text(x: f32) -> String {
     }
 }
 
+/// A sustained oscillation of the true speed around a steady reference (see
+/// [`Verdict::LimitCycle`]).
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
+pub struct Oscillation {
+    /// Start of the first block of the longest run of oscillating blocks, s.
+    pub from_s: f32,
+    /// How long it lasted (whole blocks), s.
+    pub duration_s: f32,
+    /// Largest peak-to-peak swing of speed - ref (10 ms average) in one block, rpm.
+    pub peak_to_peak_rpm: f32,
+    /// Lowest and highest true speed (10 ms average) over those blocks, rpm.
+    pub speed_min_rpm: f32,
+    /// See `speed_min_rpm`, rpm.
+    pub speed_max_rpm: f32,
+}
+
 /// A stretch of running time with |speed - ref| (10 ms average) beyond the lost bound.
 #[derive(Clone, Copy, Debug, Default, Serialize, PartialEq)]
 pub struct Excursion {
@@ -137,6 +172,8 @@ pub const DRIFT_SETTLE_S: f32 = 0.5;
 /// - `faulted`: the drive tripped (a fault reason is reported);
 /// - `lost`: while running, the 10 ms average of |speed - reference| exceeded
 ///   [`LOST_ERROR_RPM`];
+/// - `limit cycle`: not lost, but around a steady reference the true speed swings beyond
+///   [`OSCILLATION_RPM`] (scaled) block after block ([`Oscillation`]);
 /// - `drifting`: control was not lost, but with the ramped reference held at zero for
 ///   [`DRIFT_SETTLE_S`] or longer the rotor's true speed (10 ms average) exceeded
 ///   [`DRIFT_SPEED_RPM`]: at zero stator frequency the estimator does not see the rotor;
@@ -151,6 +188,10 @@ pub enum Verdict {
     Drifting,
     /// The speed error left the bound while running.
     Lost,
+    /// With the reference steady, the true speed swings around it beyond a bound, block
+    /// after block: a limit cycle or a forced oscillation the average hides.
+    #[serde(rename = "limit-cycle")]
+    LimitCycle,
     /// The drive tripped.
     Faulted,
 }
@@ -162,6 +203,7 @@ impl Verdict {
             Verdict::Kept => "kept",
             Verdict::Drifting => "drifting",
             Verdict::Lost => "lost",
+            Verdict::LimitCycle => "limit cycle",
             Verdict::Faulted => "faulted",
         }
     }
@@ -173,9 +215,11 @@ pub fn verdict_criteria() -> String {
         "verdicts (thresholds per rated speed: {LOST_ERROR_RPM:.0} and {DRIFT_SPEED_RPM:.0} rpm per {REFERENCE_RATED_SPEED_RPM:.0} rpm, the paper machine's values; \
          a scenario without a [nameplate] is judged at that rating): faulted = the drive tripped; \
          lost = |speed - ref| (10 ms average) above {:.2} % of rated speed while running, for longer than {LOST_RECOVERY_S} s or to the end (a shorter excursion is reported with its depth and recovery time); \
-         drifting = not lost, but with the reference held at 0 for {DRIFT_SETTLE_S} s or more the true speed (10 ms average) exceeded {:.2} % of rated speed; \
+         limit cycle = not lost, but with the reference and the load steady for {STEADY_AFTER_S} s the true speed (10 ms average) swung more than {:.0} % of rated speed peak to peak in each of {OSCILLATION_BLOCKS} consecutive {OSCILLATION_BLOCK_S} s blocks; \
+         drifting = none of these, but with the reference held at 0 for {DRIFT_SETTLE_S} s or more the true speed (10 ms average) exceeded {:.2} % of rated speed; \
          kept = none of these",
         100.0 * LOST_ERROR_RPM / REFERENCE_RATED_SPEED_RPM,
+        100.0 * OSCILLATION_RPM / REFERENCE_RATED_SPEED_RPM,
         100.0 * DRIFT_SPEED_RPM / REFERENCE_RATED_SPEED_RPM,
     )
 }
@@ -367,6 +411,8 @@ pub struct Metrics {
     pub excursions: Vec<Excursion>,
     /// Speed targets the drive clamped to its speed limit.
     pub target_clamps: Vec<crate::sim::TargetClamp>,
+    /// The longest sustained oscillation around a steady reference, if any.
+    pub oscillation: Option<Oscillation>,
     /// Rotor creep at a held zero reference, when the reference was held at zero long
     /// enough to judge it.
     pub zero_hold: Option<ZeroHoldMetrics>,
@@ -421,6 +467,82 @@ fn moving_average(x: &[f32], n: usize) -> Vec<f32> {
         out.push((sum / len as f64) as f32);
     }
     out
+}
+
+/// The longest run of at least [`OSCILLATION_BLOCKS`] consecutive steady blocks whose
+/// swing of speed - ref (10 ms average) exceeds the bound. A block is steady when the
+/// drive runs throughout, the reference has not moved for [`STEADY_AFTER_S`] and the load
+/// has not changed for as long.
+fn oscillation(r: &RunResult, spd_avg: &[f32], th: &Thresholds) -> Option<Oscillation> {
+    let rows = &r.rows;
+    let ts = r.config.control_period;
+    let block = ((OSCILLATION_BLOCK_S / ts).round() as usize).max(1);
+    let settle = ((STEADY_AFTER_S / ts).round() as usize).max(1);
+    // steps since the last reference move, load change or leaving the running state
+    let mut quiet = 0usize;
+    let mut run: Vec<(usize, f32, f32, f32)> = Vec::new(); // (start, p-p, min, max)
+    let mut best: Option<Oscillation> = None;
+    let mut k = 0;
+    let close = |run: &mut Vec<(usize, f32, f32, f32)>, best: &mut Option<Oscillation>| {
+        if run.len() >= OSCILLATION_BLOCKS {
+            let o = Oscillation {
+                from_s: rows[run[0].0].t_s,
+                duration_s: run.len() as f32 * block as f32 * ts,
+                peak_to_peak_rpm: run.iter().fold(0.0f32, |m, b| m.max(b.1)),
+                speed_min_rpm: run.iter().fold(f32::INFINITY, |m, b| m.min(b.2)),
+                speed_max_rpm: run.iter().fold(f32::NEG_INFINITY, |m, b| m.max(b.3)),
+            };
+            if best.is_none_or(|b| o.duration_s > b.duration_s) {
+                *best = Some(o);
+            }
+        }
+        run.clear();
+    };
+    while k < rows.len() {
+        let steady = |j: usize| {
+            rows[j].state == 2
+                && (j == 0
+                    || (rows[j].speed_ref_rpm == rows[j - 1].speed_ref_rpm
+                        && rows[j].load_torque_nm == rows[j - 1].load_torque_nm))
+        };
+        if !steady(k) {
+            quiet = 0;
+            close(&mut run, &mut best);
+            k += 1;
+            continue;
+        }
+        quiet += 1;
+        if quiet < settle || k + block > rows.len() {
+            k += 1;
+            continue;
+        }
+        // one block from k, if it stays steady throughout
+        if let Some(bad) = (k..k + block).find(|&j| !steady(j)) {
+            quiet = 0;
+            close(&mut run, &mut best);
+            k = bad + 1;
+            continue;
+        }
+        let (lo, hi) = spd_avg[k..k + block]
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &e| {
+                (l.min(e), h.max(e))
+            });
+        let (slo, shi) = rows[k..k + block]
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), x| {
+                (l.min(x.speed_rpm), h.max(x.speed_rpm))
+            });
+        if hi - lo > th.oscillation_rpm {
+            run.push((k, hi - lo, slo, shi));
+        } else {
+            close(&mut run, &mut best);
+        }
+        quiet += block;
+        k += block;
+    }
+    close(&mut run, &mut best);
+    best
 }
 
 fn idx(rows: &[Row], t: f32) -> usize {
@@ -655,10 +777,13 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     let lost = excursions
         .iter()
         .any(|x| x.recovered_after_s.is_none_or(|d| d > LOST_RECOVERY_S));
+    let oscillation = oscillation(r, &spd_avg, &th);
     let verdict = if r.fault.is_some() {
         Verdict::Faulted
     } else if lost {
         Verdict::Lost
+    } else if oscillation.is_some() {
+        Verdict::LimitCycle
     } else if zero_hold
         .as_ref()
         .is_some_and(|z| z.speed_max_rpm > th.drift_rpm)
@@ -703,6 +828,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         thresholds: th,
         excursions,
         target_clamps: r.target_clamps.clone(),
+        oscillation,
         zero_hold,
         voltage_saturated_s,
         modulation_index_max,

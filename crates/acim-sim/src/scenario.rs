@@ -915,6 +915,15 @@ impl Scenario {
         if self.csv_decimation == Some(0) {
             return err("csv_decimation", "must be an integer >= 1");
         }
+        if self.board.is_some() && self.nameplate.is_none() {
+            // its PWM frequency and full scales would be ignored while its bus fed the plant
+            return err(
+                "board",
+                "is used with [nameplate] (the drive configured from the motor's ratings on \
+                 this board); without one the drive follows [drive], the bus [dc_link] \
+                 source_v and the sensing [sensors]",
+            );
+        }
         let plant = self.plant.params("plant")?;
         let ctl = self.controller.params("controller")?;
         let d = &self.drive;
@@ -1410,7 +1419,100 @@ pub fn machine_file_as_scenario(text: &str) -> String {
     toml::to_string(&t).unwrap_or_else(|_| text.to_string())
 }
 
+/// A table header line's name (`[board]` -> `board`, `[[windows]]` -> `windows`), or
+/// `None` for any other line.
+fn header_name(line: &str) -> Option<&str> {
+    let t = line.trim();
+    let (inner, rest) = if let Some(r) = t.strip_prefix("[[") {
+        r.split_once("]]")?
+    } else {
+        t.strip_prefix('[')?.split_once(']')?
+    };
+    let rest = rest.trim_start();
+    let name = inner.trim();
+    let key_like = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "_-. \"'".contains(c));
+    (key_like && (rest.is_empty() || rest.starts_with('#'))).then_some(name)
+}
+
+/// The text [`machine_file_as_scenario`] makes of a machine file, written on the user's
+/// own lines: `[inverse_gamma]` and `torque_nm` blanked out, the added board current range
+/// on a blank line of `[board]` (or at the end), the controller appended at the end. Every
+/// line the user wrote keeps its number, so a parse error quotes it where it is. `None`
+/// where that is not possible, or the result is not the same table.
+fn machine_file_on_user_lines(text: &str) -> Option<String> {
+    let original: toml::Table = text.parse().ok()?;
+    let converted: toml::Table = machine_file_as_scenario(text).parse().ok()?;
+    if !original.contains_key("inverse_gamma") {
+        return None;
+    }
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    // the table each line belongs to
+    let mut table = String::new();
+    let mut scope = Vec::with_capacity(lines.len());
+    for l in &lines {
+        if let Some(name) = header_name(l) {
+            table = name.replace(' ', "");
+        }
+        scope.push(table.clone());
+    }
+    for (l, t) in lines.iter_mut().zip(&scope) {
+        let key = l.split('=').next().unwrap_or("").trim();
+        if t == "inverse_gamma"
+            || t.starts_with("inverse_gamma.")
+            || (t == "nameplate" && key == "torque_nm")
+        {
+            l.clear();
+        }
+    }
+    let added =
+        |t: &toml::Table, k: &str| -> Option<toml::Value> { t.get("board")?.get(k).cloned() };
+    let mut tail = String::new();
+    if let (Some(fs), None) = (
+        added(&converted, "current_full_scale_a"),
+        added(&original, "current_full_scale_a"),
+    ) {
+        let line = format!("current_full_scale_a = {fs}");
+        let last = scope.iter().rposition(|t| t == "board")?;
+        let blank = (0..=last)
+            .rev()
+            .take_while(|&i| scope[i] == "board" && header_name(&lines[i]).is_none())
+            .find(|&i| lines[i].trim().is_empty());
+        match blank {
+            Some(i) => lines[i] = line,
+            // the last table: its scope runs to the end of the file
+            None if scope.last().map(String::as_str) == Some("board") => {
+                tail += &format!("{line}\n");
+            }
+            None => return None,
+        }
+    }
+    if !original.contains_key("controller") {
+        if let Some(plant) = converted.get("controller").and_then(|c| c.as_table()) {
+            tail += &format!("[controller]\n{}", toml::to_string(plant).ok()?);
+        }
+    }
+    let out = lines.join("\n") + "\n" + &tail;
+    (out.parse::<toml::Table>().ok()? == converted).then_some(out)
+}
+
 impl Scenario {
+    /// Reads a scenario or machine file ([`machine_file_as_scenario`]). Errors quote the
+    /// user's own text with its line numbers, also where the machine file was converted.
+    pub fn from_file_text(text: &str) -> Result<Self, ScenarioError> {
+        let converted = machine_file_as_scenario(text);
+        match Self::from_toml(&converted) {
+            Ok(s) => Ok(s),
+            Err(e) if converted == text => Err(e),
+            Err(e) => match machine_file_on_user_lines(text).map(|t| Self::from_toml(&t)) {
+                Some(Err(on_user_lines)) => Err(on_user_lines),
+                _ => Err(e),
+            },
+        }
+    }
+
     /// Applies an `identified.toml` (from `acim-sim commission`) as the controller's
     /// machine: the exact T-model of its inverse-Gamma data (Ls = Lr), its inertia and
     /// friction, and its dead time as the drive's compensation. Errors name the key.

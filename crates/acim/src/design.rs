@@ -389,6 +389,12 @@ pub const MAX_SPEED_OVER_BASE: f32 = 3.0;
 /// The rotor time constant must span at least this many control periods: the discrete
 /// flux model (eq. 13) diverges when tau_r approaches the period.
 pub const MIN_ROTOR_TIME_CONSTANT_PERIODS: f32 = 5.0;
+/// Longest rotor time constant accepted, s: magnetizing gives up after
+/// [`MAGNETIZING_TIMEOUT_TAU_R`] of them and a restart waits [`DEMAGNETIZE_TAU_R`] of them,
+/// so a longer one (a rotor resistance orders of magnitude too small) would leave the
+/// drive magnetizing for hours (the step count saturating at days) instead of faulting.
+/// Large industrial machines reach a few seconds.
+pub const MAX_ROTOR_TIME_CONSTANT: f32 = 10.0;
 /// Largest current-loop bandwidth x period: beyond 0.5 the discrete PI with a one-period
 /// delay loses its phase margin.
 pub const MAX_CURRENT_BANDWIDTH_PERIODS: f32 = 0.5;
@@ -1124,6 +1130,11 @@ impl DriveDesign {
             "rotor time constant Lr/Rr must span at least 5 control periods \
              (MIN_ROTOR_TIME_CONSTANT_PERIODS)",
         )?;
+        check(
+            cfg.machine.rotor_time_constant() <= MAX_ROTOR_TIME_CONSTANT,
+            "machine",
+            "rotor time constant Lr/Rr must be at most 10 s (MAX_ROTOR_TIME_CONSTANT)",
+        )?;
         let i_max = positive(cfg.current_limit, "current_limit")?;
         let i_d = positive(cfg.flux_current, "flux_current")?;
         check(i_d < i_max, "flux_current", "must be below current_limit")?;
@@ -1585,6 +1596,20 @@ mod tests {
         data.rotor_resistance = data.rotor_inductance / (2.0 * c.control_period);
         c.machine = MachineParams::new(data).unwrap();
         assert_eq!(field(c), Some("machine"));
+        // a rotor time constant of days: magnetizing would never time out
+        let mut c = DriveConfig::paper_defaults();
+        let mut data = c.machine.data();
+        data.rotor_resistance = 1e-7;
+        c.machine = MachineParams::new(data).unwrap();
+        assert_eq!(field(c), Some("machine"));
+        data.rotor_resistance = data.rotor_inductance / MAX_ROTOR_TIME_CONSTANT;
+        c.machine = MachineParams::new(data).unwrap();
+        assert_eq!(field(c), None);
+        let d = DriveDesign::new(c).unwrap();
+        assert!(
+            (d.limits.magnetizing_timeout_steps as f32) * c.control_period
+                <= 2.0 * MAGNETIZING_TIMEOUT_TAU_R * MAX_ROTOR_TIME_CONSTANT
+        );
         let mut c = DriveConfig::paper_defaults();
         c.control_period = 5e-6;
         assert_eq!(field(c), Some("control_period"), "not dead_time");

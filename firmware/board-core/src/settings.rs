@@ -23,7 +23,7 @@
 //! as a whole with a [`LoadError`]; the firmware then runs the defaults and reports it.
 
 use crate::board::{self, POWER_STAGE};
-use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
+use acim::math::{sqrt, RAD_S_TO_RPM, RPM_TO_RAD_S};
 use acim::{ConfigError, DriveConfig, DriveDesign, MachineData, MachineParams, ParamError};
 
 /// Start of the flash page reserved for the settings: the last 2 KiB page of the
@@ -75,7 +75,21 @@ pub const FIELDS: [Field; FIELD_COUNT] = [
     f("viscous_friction", "N m s/rad"),
 ];
 
+// indices in FIELDS
+const DC_BUS_MIN: usize = 0;
+const DC_BUS_MAX: usize = 1;
+const CURRENT_LIMIT: usize = 2;
+const OVERCURRENT_TRIP: usize = 3;
+const FLUX_CURRENT: usize = 4;
+const MAX_SPEED: usize = 5;
+const STATOR_RESISTANCE: usize = 6;
+const ROTOR_RESISTANCE: usize = 7;
+const STATOR_INDUCTANCE: usize = 8;
+const ROTOR_INDUCTANCE: usize = 9;
+const MUTUAL_INDUCTANCE: usize = 10;
 const POLE_PAIRS: usize = 11;
+const INERTIA: usize = 12;
+const VISCOUS_FRICTION: usize = 13;
 
 /// The index in [`FIELDS`] of a name.
 pub fn field_index(name: &[u8]) -> Option<usize> {
@@ -212,7 +226,8 @@ impl Settings {
         self.values.get(i).copied().unwrap_or(0.0)
     }
 
-    /// A copy with field `i` set to `value`, validated as a whole.
+    /// A copy with field `i` set to `value`, validated as a whole. A refused relation
+    /// between fields of this board's bounds names field `i` when it is one of them.
     pub fn set(&self, i: usize, value: f32) -> Result<Settings, SettingError> {
         let mut next = *self;
         match next.values.get_mut(i) {
@@ -224,14 +239,21 @@ impl Settings {
                 })
             }
         }
-        next.drive_config()?;
+        next.checked_config(Some(i))?;
         Ok(next)
     }
 
     /// The drive configuration: this board's defaults with these values, checked by
-    /// [`MachineParams::new`], [`DriveDesign::new`] and the board's measurement limits.
-    /// The initial stator-resistance estimate follows `stator_resistance`.
+    /// [`MachineParams::new`], [`DriveDesign::new`], the board's measurement limits and
+    /// the physical bounds of every field ([`MIN_TIME_CONSTANT_S`] and the constants after
+    /// it). The initial stator-resistance estimate follows `stator_resistance`.
     pub fn drive_config(&self) -> Result<DriveConfig, SettingError> {
+        self.checked_config(None)
+    }
+
+    /// [`Settings::drive_config`]; a relation that fails names `changed` (the field a
+    /// `set` changed) when it is one of the related fields, else its first field.
+    fn checked_config(&self, changed: Option<usize>) -> Result<DriveConfig, SettingError> {
         let v = &self.values;
         let p = v[POLE_PAIRS];
         if !((1.0..=32.0).contains(&p) && p == (p as u32) as f32) {
@@ -256,8 +278,12 @@ impl Settings {
         cfg.overcurrent_trip = v[3];
         cfg.flux_current = v[4];
         cfg.max_speed = v[5] * RPM_TO_RAD_S;
+        // bounds the library would report under a field `set` does not know (`machine`,
+        // `regen_min_frequency`, `flying_start`), or does not have
+        machine_bounds(&cfg, changed)?;
+        speed_bounds(&cfg, changed)?;
         DriveDesign::new(cfg)?;
-        // both finite: DriveDesign::new has refused anything else
+        // all finite and positive from here: DriveDesign::new has refused anything else
         if cfg.overcurrent_trip > TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale() {
             return Err(SettingError {
                 field: "overcurrent_trip",
@@ -270,6 +296,8 @@ impl Settings {
                 rule: "at most 95 % of the bus-sense full scale (board::POWER_STAGE)",
             });
         }
+        protection_bounds(&cfg, changed)?;
+        mechanical_bounds(&cfg, changed)?;
         Ok(cfg)
     }
 
@@ -325,6 +353,242 @@ impl Settings {
 pub const TRIP_FULL_SCALE_FRACTION: f32 = 0.9;
 /// Largest bus maximum as a fraction of the bus-sense full scale.
 pub const BUS_FULL_SCALE_FRACTION: f32 = 0.95;
+
+// The physical bounds of the settings, beyond the library's own rules (which stay in
+// force: `DriveDesign::new` checks the same configuration). Each keeps `set` from
+// accepting a value that switches a protection off, makes it fire where the drive
+// operates, or leaves the state machine waiting for ever. Per field:
+//
+// - dc_bus_min: at least MIN_DC_BUS_V and MIN_BUS_WINDOW of dc_bus_max (below dc_bus_max:
+//   the library).
+// - dc_bus_max: at most 95 % of the bus-sense full scale; above dc_bus_min and at most
+//   dc_bus_min / MIN_BUS_WINDOW.
+// - current_limit: above flux_current (library); the trip between MIN_TRIP_OVER_LIMIT and
+//   3 times it; the bus must drive it through the stator resistance at standstill.
+// - overcurrent_trip: MIN_TRIP_OVER_LIMIT .. 3 x current_limit, at most 90 % of the
+//   current-sense full scale.
+// - flux_current: below current_limit (library), at least MIN_FLUX_OVER_TRIP of the trip.
+// - max_speed: at least twice the regeneration limit's speed, at most
+//   MAX_SPEED_OVER_COMMAND times the largest speed command, within the flying start's
+//   quarter turn per period, at most 3 x the base speed (library).
+// - stator_resistance: stator time constant Ls/Rs within the TIME_CONSTANT range; Rs times
+//   current_limit within the linear voltage at dc_bus_max.
+// - rotor_resistance, rotor_inductance: rotor time constant Lr/Rr within the
+//   TIME_CONSTANT range.
+// - stator_inductance: the stator time constant, the transient time constant
+//   sigma Ls / (Rs + R_R) of at least MIN_TRANSIENT_TIME_CONSTANT_PERIODS periods.
+// - mutual_inductance: Lm^2 < Ls Lr (library), Lm at least MIN_MAGNETIZING_FRACTION of
+//   Ls and of Lr, and the transient time constant.
+// - pole_pairs: whole, 1..=32 (library), and the speed bounds above.
+// - inertia: the full-torque run-up to max_speed at least one observer time constant,
+//   the speed ramp within the torque at the current limit.
+// - viscous_friction: >= 0 (library), B/J at most the observer's slowest pole.
+
+/// Shortest rotor (Lr/Rr) and stator (Ls/Rs) time constant, s: 5 control periods at
+/// 5 kHz (the library's `MIN_ROTOR_TIME_CONSTANT_PERIODS`); a motor's are tens of
+/// milliseconds to seconds.
+pub const MIN_TIME_CONSTANT_S: f32 = 1e-3;
+/// Longest rotor and stator time constant, s (`acim::design::MAX_ROTOR_TIME_CONSTANT`):
+/// magnetizing gives up after 10 rotor time constants, and the current loops' integral
+/// (time constant Ls/Rs) must act within it.
+pub const MAX_TIME_CONSTANT_S: f32 = acim::design::MAX_ROTOR_TIME_CONSTANT;
+/// The transient time constant sigma Ls / (Rs + R_R) spans at least this many control
+/// periods: the current loops and the observer's Euler step assume the electrical pole
+/// slower than the sampling (the paper's machine: 10.7 periods at 5 kHz).
+pub const MIN_TRANSIENT_TIME_CONSTANT_PERIODS: f32 = 5.0;
+/// The mutual inductance is at least this fraction of the stator and rotor inductances:
+/// an induction motor's magnetizing path dominates its leakage (0.93-0.98 in the
+/// acceptance machines); below it the rotor flux the drive orients on is mostly leakage.
+pub const MIN_MAGNETIZING_FRACTION: f32 = 0.5;
+/// Lowest under-voltage trip, V: half the low-voltage bring-up profile's
+/// ([`board::LOW_VOLTAGE`]), the lowest bus this power stage is run from. Below it the
+/// trip no longer stops switching on a collapsed supply.
+pub const MIN_DC_BUS_V: f32 = 0.5 * board::LOW_VOLTAGE.dc_bus_min;
+/// The under-voltage trip is at least this fraction of the over-voltage trip: a window
+/// wider than 4:1 cannot tell a collapsed bus from the supply it brackets (mains: at
+/// least 100 V under a 400 V maximum; the bring-up profile: 16.5 V under 66 V).
+pub const MIN_BUS_WINDOW: f32 = 0.25;
+/// The over-current trip is at least this multiple of `current_limit`: the regulated
+/// current's PWM ripple and the current loops' overshoot must not reach it (both
+/// profiles: 1.6-1.7).
+pub const MIN_TRIP_OVER_LIMIT: f32 = 1.2;
+/// `flux_current` is at least this fraction of the trip: five times the current-sensor
+/// offset the drive tolerates (`acim::design::OFFSET_FRACTION`, 2 % of the trip), so an
+/// accepted offset cannot be a sizeable part of the magnetizing current.
+pub const MIN_FLUX_OVER_TRIP: f32 = 5.0 * acim::design::OFFSET_FRACTION;
+/// The over-speed trip is at most this multiple of the largest speed command
+/// ([`board::MAX_SPEED_COMMAND_RPM`]): targets are clamped to 90 % of it anyway, and a
+/// trip far above every commanded speed lets a runaway go unchecked.
+pub const MAX_SPEED_OVER_COMMAND: f32 = 2.0;
+
+/// A relation between fields: `Ok` when `ok`, else an error naming `changed` if it is one
+/// of `fields`, else `fields[0]`.
+fn relation(
+    ok: bool,
+    fields: &[usize],
+    changed: Option<usize>,
+    rule: &'static str,
+) -> Result<(), SettingError> {
+    if ok {
+        return Ok(());
+    }
+    let i = changed.filter(|c| fields.contains(c)).unwrap_or(fields[0]);
+    Err(SettingError {
+        field: FIELDS[i].name,
+        rule,
+    })
+}
+
+/// The machine model's time constants and inductance ratios (`MachineParams::new` has
+/// checked every value finite and positive).
+fn machine_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
+    let m = &cfg.machine;
+    let range = MIN_TIME_CONSTANT_S..=MAX_TIME_CONSTANT_S;
+    relation(
+        range.contains(&m.rotor_time_constant()),
+        &[ROTOR_RESISTANCE, ROTOR_INDUCTANCE],
+        changed,
+        "rotor time constant rotor_inductance / rotor_resistance must be within \
+         1 ms ..= 10 s (magnetizing and its timeout take 3 and 10 of them)",
+    )?;
+    relation(
+        range.contains(&(m.stator_inductance() / m.stator_resistance())),
+        &[STATOR_RESISTANCE, STATOR_INDUCTANCE],
+        changed,
+        "stator time constant stator_inductance / stator_resistance must be within \
+         1 ms ..= 10 s",
+    )?;
+    let lm = m.mutual_inductance();
+    relation(
+        lm >= MIN_MAGNETIZING_FRACTION * m.stator_inductance()
+            && lm >= MIN_MAGNETIZING_FRACTION * m.rotor_inductance(),
+        &[MUTUAL_INDUCTANCE, STATOR_INDUCTANCE, ROTOR_INDUCTANCE],
+        changed,
+        "must be at least half of stator_inductance and of rotor_inductance (the \
+         magnetizing path dominates the leakage)",
+    )?;
+    relation(
+        m.transient_time_constant() >= MIN_TRANSIENT_TIME_CONSTANT_PERIODS * cfg.control_period,
+        &[
+            STATOR_INDUCTANCE,
+            MUTUAL_INDUCTANCE,
+            ROTOR_INDUCTANCE,
+            STATOR_RESISTANCE,
+            ROTOR_RESISTANCE,
+        ],
+        changed,
+        "transient time constant sigma Ls / (Rs + R_R) must span at least 5 control \
+         periods (1 ms)",
+    )
+}
+
+/// The over-speed trip's range, where it is finite and positive (the library names it
+/// otherwise).
+fn speed_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
+    let w = cfg.max_speed;
+    if !(acim::math::is_finite(w) && w > 0.0) {
+        return Ok(());
+    }
+    let p = cfg.machine.pole_pairs_f32();
+    relation(
+        p * w >= 2.0 * cfg.regen_min_frequency,
+        &[MAX_SPEED, POLE_PAIRS],
+        changed,
+        "must be at least 180 rpm / pole_pairs: twice the speed of the regeneration \
+         limit's 1.5 Hz (below it the trip sits in the speed estimate's noise at rest)",
+    )?;
+    relation(
+        w * RAD_S_TO_RPM <= MAX_SPEED_OVER_COMMAND * board::MAX_SPEED_COMMAND_RPM,
+        &[MAX_SPEED],
+        changed,
+        "must be at most 3600 rpm: twice the largest speed command (a trip far above every \
+         commanded speed lets a runaway go unchecked)",
+    )?;
+    relation(
+        p * w * cfg.control_period <= 0.25 * core::f32::consts::PI,
+        &[MAX_SPEED, POLE_PAIRS],
+        changed,
+        "pole_pairs x max_speed must be at most 37 500 rpm: a quarter electrical turn per \
+         control period (the flying start's speed search)",
+    )
+}
+
+/// Trips against the operating limits and the bus against the machine (all values finite
+/// and positive: `DriveDesign::new` accepted them).
+fn protection_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
+    relation(
+        cfg.dc_bus_min >= MIN_DC_BUS_V,
+        &[DC_BUS_MIN],
+        changed,
+        "must be at least 10 V: half the low-voltage bring-up profile's (below it the \
+         under-voltage trip no longer stops switching on a collapsed supply)",
+    )?;
+    relation(
+        cfg.dc_bus_min >= MIN_BUS_WINDOW * cfg.dc_bus_max,
+        &[DC_BUS_MIN, DC_BUS_MAX],
+        changed,
+        "dc_bus_min must be at least a quarter of dc_bus_max (a wider window cannot tell \
+         a collapsed bus from the supply)",
+    )?;
+    relation(
+        cfg.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.current_limit,
+        &[OVERCURRENT_TRIP, CURRENT_LIMIT],
+        changed,
+        "overcurrent_trip must be at least 1.2 x current_limit (the regulated current's \
+         ripple and overshoot must not reach it)",
+    )?;
+    relation(
+        cfg.flux_current >= MIN_FLUX_OVER_TRIP * cfg.overcurrent_trip,
+        &[FLUX_CURRENT, OVERCURRENT_TRIP],
+        changed,
+        "flux_current must be at least 10 % of overcurrent_trip (five times the \
+         current-sensor offset the drive tolerates)",
+    )?;
+    relation(
+        cfg.machine.stator_resistance() * cfg.current_limit
+            <= acim::svpwm::linear_limit(cfg.dc_bus_max),
+        &[STATOR_RESISTANCE, CURRENT_LIMIT, DC_BUS_MAX],
+        changed,
+        "stator_resistance x current_limit must be within the linear voltage at \
+         dc_bus_max, dc_bus_max / sqrt 3 (the bus must drive the current limit at \
+         standstill; the current-response and model checks scale with it)",
+    )
+}
+
+/// The inertia and friction against the speed loop and the observer.
+fn mechanical_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
+    let m = &cfg.machine;
+    let i_q = sqrt(cfg.current_limit * cfg.current_limit - cfg.flux_current * cfg.flux_current);
+    let torque = m.torque_constant(m.rotor_flux_for(cfg.flux_current)) * i_q;
+    let j = m.inertia();
+    let slowest_pole = cfg
+        .observer_poles
+        .p1
+        .min(cfg.observer_poles.p2)
+        .min(cfg.observer_poles.p3);
+    relation(
+        j * cfg.max_speed * slowest_pole >= torque,
+        &[INERTIA, MAX_SPEED, CURRENT_LIMIT, FLUX_CURRENT],
+        changed,
+        "inertia too small: the run-up to max_speed at the current limit's torque must \
+         take at least the observer's slowest time constant (1/120 s); faster, the rotor \
+         is past the over-speed trip before the speed estimate follows",
+    )?;
+    relation(
+        j * cfg.speed_ramp <= torque,
+        &[INERTIA, CURRENT_LIMIT, FLUX_CURRENT],
+        changed,
+        "inertia too large: the speed ramp (500 rpm/s) must need less than the torque at \
+         current_limit (every ramp would end in an overload fault)",
+    )?;
+    relation(
+        m.viscous_friction() <= slowest_pole * j,
+        &[VISCOUS_FRICTION, INERTIA],
+        changed,
+        "viscous_friction / inertia must be at most the observer's slowest pole, 120 /s \
+         (its mechanical model's Euler step and gains assume a slower friction rate)",
+    )
+}
 
 /// CRC-32 (IEEE 802.3 polynomial, reflected, initial and final XOR 0xFFFF_FFFF: zlib's
 /// `crc32`), bitwise: small, and run only at boot and on `save`.
@@ -558,14 +822,211 @@ mod tests {
             "overcurrent_trip"
         );
         let low = s
-            .set(idx("dc_bus_min"), 20.0)
-            .and_then(|s| s.set(idx("overcurrent_trip"), 7.0))
+            .set(idx("overcurrent_trip"), 7.0)
             .and_then(|s| s.set(idx("current_limit"), 2.5))
             .and_then(|s| s.set(idx("overcurrent_trip"), 4.0))
             .unwrap();
+        // the bus window moves in steps that keep it within 4:1 (or `defaults
+        // low-voltage`), the speed limit first (it must stay within 3 x base speed)
+        let low = low
+            .set(idx("max_speed"), 300.0)
+            .and_then(|s| s.set(idx("dc_bus_min"), 100.0))
+            .and_then(|s| s.set(idx("dc_bus_max"), 120.0))
+            .and_then(|s| s.set(idx("dc_bus_min"), 30.0))
+            .and_then(|s| s.set(idx("dc_bus_max"), 66.0))
+            .and_then(|s| s.set(idx("dc_bus_min"), 20.0))
+            .unwrap();
         let lv = Settings::from_config(&board::drive_config_for(&board::LOW_VOLTAGE));
         assert!(lv.drive_config().is_ok());
-        assert_eq!(low.get(idx("current_limit")), lv.get(idx("current_limit")));
+        for (i, f) in FIELDS.iter().enumerate() {
+            let (a, b) = (low.get(i), lv.get(i));
+            assert!((a - b).abs() <= 1e-5 * b.abs(), "{}: {a} vs {b}", f.name);
+        }
+        // both profiles' defaults are valid on this board, whichever the build
+        let mains = Settings::from_config(&board::drive_config_for(&board::MAINS));
+        assert!(mains.drive_config().is_ok());
+    }
+
+    /// The values an adversarial review found accepted: a rotor resistance that left the
+    /// drive magnetizing for days, an under-voltage trip that could never fire, an inertia
+    /// that tripped on over-speed at rest. Each is refused, naming the field; the bound
+    /// values themselves are accepted.
+    #[test]
+    fn values_that_disable_a_protection_are_refused() {
+        let s = Settings::defaults();
+        let tiny = parse_value(b"0.0000001").unwrap();
+        for name in ["rotor_resistance", "dc_bus_min", "inertia"] {
+            let e = s.set(idx(name), tiny).unwrap_err();
+            assert_eq!(e.field, name, "{e:?}");
+        }
+        // rotor time constant: 0.56 H / 10 s and 0.56 H / 1 ms
+        assert!(s.set(idx("rotor_resistance"), 0.057).is_ok());
+        assert_eq!(
+            s.set(idx("rotor_resistance"), 0.05).unwrap_err().field,
+            "rotor_resistance"
+        );
+        assert!(s.set(idx("rotor_resistance"), 560.0).is_err());
+        // a relation names the field that was set
+        assert_eq!(
+            s.set(idx("rotor_inductance"), 100.0).unwrap_err().field,
+            "rotor_inductance"
+        );
+        // the under-voltage trip: at least a quarter of dc_bus_max (400 V here)
+        assert!(s.set(idx("dc_bus_min"), 100.0).is_ok());
+        assert_eq!(
+            s.set(idx("dc_bus_min"), 99.0).unwrap_err().field,
+            "dc_bus_min"
+        );
+        let narrow = s.set(idx("dc_bus_min"), 100.0).unwrap();
+        assert_eq!(
+            narrow.set(idx("dc_bus_max"), 401.0).unwrap_err().field,
+            "dc_bus_max"
+        );
+        // the inertia: the paper machine at 2000 rpm and 4.67 A runs up in
+        // J x 209 rad/s / 10.4 N m; at least 1/120 s, and the 500 rpm/s ramp within it
+        assert!(s.set(idx("inertia"), 0.001).is_ok());
+        assert_eq!(s.set(idx("inertia"), 0.0003).unwrap_err().field, "inertia");
+        assert!(s.set(idx("inertia"), 0.15).is_ok());
+        assert_eq!(s.set(idx("inertia"), 0.25).unwrap_err().field, "inertia");
+    }
+
+    /// Every field has bounds beyond finite and positive; a refusal names the field set.
+    #[test]
+    fn every_field_is_bounded() {
+        let s = Settings::defaults();
+        let cases: &[(&str, f32)] = &[
+            ("dc_bus_min", 5.0),
+            ("dc_bus_max", 460.0),
+            ("current_limit", 6.8),
+            ("overcurrent_trip", 5.0),
+            ("flux_current", 0.7),
+            ("max_speed", 80.0),
+            ("max_speed", 3700.0),
+            ("stator_resistance", 0.05),
+            ("stator_resistance", 60.0),
+            ("rotor_resistance", 0.01),
+            ("stator_inductance", 200.0),
+            ("stator_inductance", 1.5),
+            ("rotor_inductance", 1.2),
+            ("mutual_inductance", 0.2),
+            ("mutual_inductance", 0.5599),
+            ("pole_pairs", 20.0),
+            ("inertia", 0.0001),
+            ("viscous_friction", 2.0),
+        ];
+        for &(name, v) in cases {
+            let e = s.set(idx(name), v).unwrap_err();
+            assert_eq!(e.field, name, "{name} = {v}: {e:?}");
+        }
+        // and values inside them are taken
+        for (name, v) in [
+            ("dc_bus_min", 150.0),
+            ("dc_bus_max", 450.0),
+            ("current_limit", 6.0),
+            ("overcurrent_trip", 6.0),
+            ("flux_current", 0.9),
+            ("max_speed", 100.0),
+            ("max_speed", 3000.0),
+            ("stator_resistance", 20.0),
+            ("rotor_resistance", 2.0),
+            ("mutual_inductance", 0.5),
+            ("pole_pairs", 4.0),
+            ("inertia", 0.05),
+            ("viscous_friction", 0.1),
+        ] {
+            assert!(s.set(idx(name), v).is_ok(), "{name} = {v}");
+        }
+    }
+
+    mod accepted_values {
+        use super::*;
+        use acim::DriveDesign;
+        use proptest::prelude::*;
+
+        /// Any value: from far below to far above every field's scale, either sign, zero
+        /// and the non-finite ones.
+        fn value() -> impl Strategy<Value = f32> {
+            prop_oneof![
+                (-8.0f32..7.0, any::<bool>())
+                    .prop_map(|(e, neg)| if neg { -1.0 } else { 1.0 } * 10f32.powf(e)),
+                Just(0.0),
+                Just(f32::NAN),
+                Just(f32::INFINITY),
+            ]
+        }
+
+        fn change() -> impl Strategy<Value = (usize, f32, bool, f32)> {
+            (
+                0..FIELD_COUNT,
+                value(),
+                any::<bool>(),
+                (-1.5f32..1.5).prop_map(|e| 10f32.powf(e)),
+            )
+        }
+
+        /// The drive a configuration builds: magnetizing ends (settled or faulted) within
+        /// a bounded time, a restart waits a bounded time, every trip stays where it can
+        /// fire and above where the drive operates, and the observer stays stable.
+        fn assert_protected(cfg: &DriveConfig) {
+            let d = DriveDesign::new(*cfg).expect("accepted settings build a drive");
+            let l = &d.limits;
+            let ts = cfg.control_period;
+            let magnetizing_s = l.magnetizing_timeout_steps as f32 * ts;
+            // Rs identification 1.5 s + inverter test 0.45 s + 10 tau_r + the search's
+            // 2 tau_r, tau_r <= 10 s
+            assert!(
+                magnetizing_s > 0.0 && magnetizing_s <= 125.0,
+                "{magnetizing_s} s"
+            );
+            assert!(l.demagnetize_steps as f32 * ts <= 50.0);
+            // under-voltage trip: a real bus level, within 4:1 of the over-voltage trip
+            assert!(l.dc_bus_min >= MIN_DC_BUS_V && l.dc_bus_min >= 0.25 * l.dc_bus_max);
+            assert!(l.dc_bus_max <= BUS_FULL_SCALE_FRACTION * POWER_STAGE.bus_full_scale());
+            // over-current trip: measurable, above the regulated current
+            let fs = POWER_STAGE.current_full_scale();
+            assert!(l.overcurrent_trip <= TRIP_FULL_SCALE_FRACTION * fs);
+            assert!(l.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.current_limit);
+            assert!(l.offset_limit <= 0.2 * cfg.flux_current * 1.0001);
+            // over-speed trip: above the speed targets, below a runaway, and not reached
+            // from rest at full torque within the observer's slowest time constant
+            let rpm = l.max_speed * RAD_S_TO_RPM;
+            assert!(rpm <= 3600.0 && d.speed_target_limit < l.max_speed);
+            let m = &cfg.machine;
+            let torque = m.torque_constant(d.flux_reference) * d.i_sq_limit;
+            assert!(torque / m.inertia() <= l.max_speed * 120.0 * 1.0001);
+            // every judged time is a positive number of steps
+            for steps in [
+                l.stall_steps,
+                l.overload_steps,
+                l.implausible_steps,
+                l.blind_steps,
+            ] {
+                assert!(steps > 0 && steps < u32::MAX / 2);
+            }
+            // the observer's discrete error dynamics are stable at the rated flux, and its
+            // friction step is a decay
+            let rseq = m.equivalent_resistance();
+            assert!(d.observer.discrete_stable(d.flux_reference, rseq));
+            assert!(d.observer.coeffs.ts_friction_rate < 1.0);
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(2000))]
+            #[test]
+            fn any_accepted_set_keeps_the_drive_protected(
+                changes in proptest::collection::vec(change(), 1..8)
+            ) {
+                let mut s = Settings::defaults();
+                for (i, v, scaled, k) in changes {
+                    // half the values near the field's present one, the rest anywhere
+                    let v = if scaled { s.get(i) * k } else { v };
+                    if let Ok(next) = s.set(i, v) {
+                        s = next;
+                        assert_protected(&s.drive_config().unwrap());
+                    }
+                }
+            }
+        }
     }
 
     /// The linker never places code or data in the settings page.
