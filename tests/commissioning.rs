@@ -1,10 +1,12 @@
 //! Self-commissioning (issue 14, item 2): the drive identifies each acceptance machine
 //! (`crates/acim-sim/machines/`) from its nameplate alone, against the plant with its
 //! inverter (1.5 us dead time, 1 V drop) and sensors; the acceptance tolerances: Rs 2 %,
-//! L_sigma 5 %, R_R 5 %, L_M 5 %, J 10 %, dead time 10 %, under 60 s simulated.
+//! L_sigma 5 %, R_R 5 %, L_M 5 %, J 10 %, dead time 10 %, under 60 s simulated; each
+//! quantity's own confidence ([`acim::commissioning::Confidence`]) bounds its true error.
+//! And the refusals: a load left coupled, a nameplate out of line with the motor.
 
-use acim_sim::commission::{commission, Pair};
-use acim_sim::scenario::{machine_file_as_scenario, Scenario};
+use acim_sim::commission::{commission, run, Pair};
+use acim_sim::scenario::{machine_file_as_scenario, LoadKind, LoadPoint, Scenario};
 
 fn machine(text: &str) -> Scenario {
     let mut sc = Scenario::from_toml(&machine_file_as_scenario(text)).unwrap();
@@ -20,6 +22,13 @@ fn within(name: &str, what: &str, p: &Pair, pct: f32) {
         p.true_value,
         p.error_pct
     );
+    // the identification's own bound holds the true error
+    assert!(
+        p.bounded(),
+        "{name} {what}: error {:+.2} % outside its confidence +-{:.2} %",
+        p.error_pct,
+        p.confidence_pct
+    );
 }
 
 fn check(name: &str, sc: &Scenario, inertia: bool) {
@@ -32,7 +41,68 @@ fn check(name: &str, sc: &Scenario, inertia: bool) {
     if inertia {
         within(name, "J", &r.inertia_kgm2.expect("J resolved"), 10.0);
     }
+    assert!(r.friction_nms.bounded(), "{name} B: {:?}", r.friction_nms);
     assert!(r.total_s < 60.0, "{name}: {} s", r.total_s);
+    assert!(r.refusal.is_none() && r.checks.iter().all(|c| c.passed));
+    println!("{name}\n{}", r.summary());
+}
+
+/// A passive brake of 1.5 N m (30 % of the rated torque) left on the paper machine's
+/// shaft, as on the virtual board (`load 1.5`, then `commission 750 230 3.3 50 1500`):
+/// refused as a coupled load, with what to do; nothing is accepted.
+#[test]
+fn a_coupled_load_is_refused() {
+    let mut sc = machine(include_str!("../crates/acim-sim/machines/paper-750w.toml"));
+    sc.load_profile = vec![LoadPoint {
+        t_s: 0.0,
+        kind: LoadKind::Passive,
+        torque_nm: 1.5,
+    }];
+    let e = commission(&sc).unwrap_err();
+    assert!(
+        e.starts_with(
+            "commissioning refused: a load seems coupled (no-load torque over 10 % of rated)"
+        ) && e.ends_with("uncouple the load and run again (or check the power)"),
+        "{e}"
+    );
+    // the run is kept for the report: the hold needed about a third of the rated torque
+    let r = run(&sc).unwrap();
+    assert!(!r.report.checks[0].passed && r.report.checks[0].value > 0.25);
+    assert!(r.report.toml().contains("accepted = false"));
+}
+
+/// Nameplates that pass their own consistency rules but not the motor measured: the
+/// paper machine typed as a 300 W motor (its friction is then 13 % of that rating's
+/// torque, refused first, and its J 14 times the catalogue line for it), and with a 6.5 A
+/// rated current (its no-load current then 13 % of it).
+#[test]
+fn an_implausible_nameplate_is_refused() {
+    let base = machine(include_str!("../crates/acim-sim/machines/paper-750w.toml"));
+    let mut sc = base.clone();
+    sc.nameplate.as_mut().unwrap().power_w = 300.0;
+    let e = commission(&sc).unwrap_err();
+    assert!(
+        e.starts_with("commissioning refused: a load seems coupled")
+            && e.ends_with("(or check the power)"),
+        "{e}"
+    );
+    let r = run(&sc).unwrap().report;
+    let j = r
+        .checks
+        .iter()
+        .find(|c| c.reason.starts_with("J is over 10"))
+        .unwrap();
+    assert!(!j.passed && j.value > 10.0, "{j:?}");
+    let mut sc = base;
+    sc.nameplate.as_mut().unwrap().current_a = 6.5;
+    // a board whose current sense carries the trip of that rating
+    sc.board.as_mut().unwrap().current_full_scale_a = 20.0;
+    let e = commission(&sc).unwrap_err();
+    assert!(
+        e.starts_with("commissioning refused: the no-load current is under 15 % of rated")
+            && e.ends_with("check the nameplate voltage and current (star or delta?)"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -824,14 +824,28 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let sc = sc
                 .with_overrides(&o.sets)
                 .map_err(|e| format!("{spec}: {e}"))?;
-            let r = acim_sim::commission::commission(&sc)?;
+            // the scenario's load_profile, if any, stays coupled (a load left on)
+            let run = acim_sim::commission::run(&sc)?;
+            let r = &run.report;
             let out = o.out();
             std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
-            let file = out.join("identified.toml");
+            // a refused result goes to refused.toml: a controller_file never reads it
+            let file = out.join(if r.refusal.is_none() {
+                "identified.toml"
+            } else {
+                "refused.toml"
+            });
             let text = r.toml();
             print!("{text}");
             std::fs::write(&file, &text).map_err(|e| format!("{}: {e}", file.display()))?;
             println!("wrote {}", file.display());
+            for f in acim_sim::commission::write_figures(&run, &out)? {
+                println!("wrote {}", f.display());
+            }
+            print!("{}", r.summary());
+            if let Some(why) = &r.refusal {
+                return Err(format!("{why}; identified.toml not written"));
+            }
         }
         Some("any-motor") => {
             o.at_most_positional("any-motor", 1, "at most one table file")?;

@@ -132,8 +132,8 @@ fn stop_aborts_commissioning_and_nothing_changes() {
 }
 
 /// A 20 N m brake on the rotor (a coupled load nobody removed) stalls the no-load test:
-/// the fit of L_M fails its plausibility bounds, the reply names it, the settings stay,
-/// and the switches are off.
+/// the torque it needed at the hold names the coupled load, the settings stay, and the
+/// switches are off.
 #[test]
 fn a_failed_commissioning_reports_why_and_changes_nothing() {
     let mut b = Board::new(false);
@@ -153,9 +153,45 @@ fn a_failed_commissioning_reports_why_and_changes_nothing() {
     let r = say(&mut b, "commission");
     assert_eq!(
         r,
-        ["err commissioning failed: magnetizing_inductance (result outside its plausible range); settings unchanged"]
+        [
+            "err commissioning failed: a load seems coupled (no-load torque over 10 % of rated) \
+          (uncouple the load and run again (or check the power)); settings unchanged"
+        ]
     );
     assert_eq!(*b.settings(), before);
     assert_eq!(b.state(), DriveState::Idle);
+    assert_eq!(say(&mut b, "status"), ["ok state 0 fault 00"]);
+}
+
+/// The new user's run: a 1.5 N m brake left on the shaft (30 % of the rated torque),
+/// `stop`, then `commission`: refused as a coupled load with what to do, the settings
+/// unchanged, so the next start runs on the settings it had rather than on a model with
+/// L_M and J corrupted by the load.
+#[test]
+fn a_coupled_load_is_refused_with_what_to_do() {
+    let mut b = Board::new(false);
+    run(&mut b, 0.01);
+    let before = *b.settings();
+    assert_eq!(say(&mut b, "load 1.5"), ["ok"]);
+    assert_eq!(say(&mut b, "stop"), ["ok"]);
+    assert!(
+        say(&mut b, "commission 750 230 3.3 50 1500")[0].starts_with("ok commissioning started")
+    );
+    let mut t = 0.0;
+    while say(&mut b, "status")[0] == "ok state 5 fault 00" {
+        assert!(t < 60.0);
+        run(&mut b, 0.5);
+        t += 0.5;
+    }
+    let r = say(&mut b, "commission");
+    assert_eq!(
+        r,
+        [
+            "err commissioning failed: a load seems coupled (no-load torque over 10 % of rated) \
+          (uncouple the load and run again (or check the power)); settings unchanged"
+        ]
+    );
+    assert!(r[0].len() < acim_firmware_core::protocol::LINE_CAPACITY - 16);
+    assert_eq!(*b.settings(), before);
     assert_eq!(say(&mut b, "status"), ["ok state 0 fault 00"]);
 }

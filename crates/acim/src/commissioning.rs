@@ -36,9 +36,54 @@
 //!    impulse over the ramp's speed change (friction removed), B the hold's torque over
 //!    its speed.
 //!
+//! 6. **Confidence and plausibility** ([`Commissioning::assess`]): each quantity comes
+//!    with a bound on its relative error, and the whole result is checked against the
+//!    nameplate; a result that fails is refused ([`CommissioningError::Implausible`]),
+//!    with what to check ([`Concern`]). See "How sure" below.
+//!
 //! The fits run in [`Commissioning::identify`], outside the interrupt, once the step
 //! reports [`Stage::Done`]. [`mechanics_from_slopes`] gives J and B from two
 //! accelerations at a known torque instead (a test under speed control).
+//!
+//! ## How sure: the confidence of each quantity
+//!
+//! Every window is summed in two halves (each DC step's measuring time, the periods of
+//! each impedance test, the no-load hold) and the V/f ramp's band in a lower and an upper
+//! speed half. The fits are repeated (a) on each half, (b) with each input they take from
+//! an earlier fit moved by that input's own bound (Rs into the impedances, the no-load
+//! test and the power balance; L_sigma into the no-load test; the inverter error, with
+//! its loss model's [`INVERTER_LOSS_MODEL_UNCERTAINTY`], into the no-load test and the
+//! power balance), and (c) with the voltage's timing model (it acts 1.5 periods after
+//! it is computed) off by half a period either way. A quantity's bound
+//! ([`Confidence`]) is the sum of the half-window spread (1.5 times the difference of
+//! the two halves: three standard deviations of their mean) and of the largest change
+//! each moved input makes; Rs and the inverter error add three standard errors of the
+//! least-squares line through the DC steps. A bound is a worst-case sum, not a standard
+//! deviation: the acceptance machines' true errors lie inside it (tests/commissioning.rs).
+//!
+//! ## Plausibility against the nameplate ([`Concern`])
+//!
+//! - **A coupled load**: the air-gap torque the no-load hold needs at constant speed is
+//!   friction and windage only: at most about 3 % of the rated torque for a 4-pole motor
+//!   of 0.5-50 kW (friction and windage losses of 0.5-3 % of the rated output at rated
+//!   speed, e.g. the loss segregation of the no-load test in IEC 60034-2-1, and less at
+//!   80 % speed). Above [`COUPLED_LOAD_TORQUE`] (10 %) a load is coupled. A load whose
+//!   torque does not grow with speed as friction does also splits the two halves of the
+//!   ramp's inertia apart ([`INERTIA_SPREAD_MAX`]).
+//! - **Inertia against the rating**: catalogue rotors of 4-pole IEC motors grow roughly as
+//!   the 1.3th power of the rated power ([`catalogue_inertia`]); the frame follows the
+//!   torque, so a machine of other pole count is compared at the power a 4-pole 50 Hz
+//!   machine of its torque has. More than [`INERTIA_RANGE`] (a factor of ten) either way
+//!   of that line: a load or flywheel is coupled, or the nameplate is wrong.
+//! - **The no-load (magnetizing) current against the rated current**: typically 25-60 %
+//!   of rated, more for small machines; outside [`FLUX_CURRENT_RANGE`] (15-85 %) the
+//!   nameplate current or voltage is wrong (e.g. star typed for delta), or the test did
+//!   not reach rated flux. With a printed power factor it must also stay below
+//!   [`FLUX_OVER_REACTIVE_MAX`] times the rated reactive current I sin(phi), which
+//!   carries it. This is the same check as L_M in per unit: at rated volts per hertz
+//!   i_m = V / (w L_M).
+//! - **Each confidence against its acceptance limit** ([`MAX_UNCERTAINTY`]): a fit that
+//!   cannot tell its own result within it is refused.
 
 // `!(x > 0.0)` is meant: it also rejects a NaN, which `x <= 0.0` would let through
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -93,6 +138,82 @@ pub const VF_STABILISER_GAIN: f32 = 1.0;
 /// acceleration torque and the hold's friction pass unchanged.
 pub const VF_STABILISER_TIME: f32 = 0.4;
 
+/// Largest air-gap torque the no-load hold may need, fraction of the rated torque (module
+/// docs: friction and windage take at most about 3 %): above it a load is coupled.
+pub const COUPLED_LOAD_TORQUE: f32 = 0.10;
+/// Largest difference of the inertias of the ramp's lower and upper speed halves, relative
+/// to their mean: friction removed, both see the same rotor; a coupled load whose torque
+/// does not follow the friction's speed law splits them.
+pub const INERTIA_SPREAD_MAX: f32 = 0.25;
+/// Plausible inertia, times the catalogue line [`catalogue_inertia`] (low, high).
+pub const INERTIA_RANGE: (f32, f32) = (0.1, 10.0);
+/// Plausible rated flux (no-load) current, fraction of the rated current (low, high).
+pub const FLUX_CURRENT_RANGE: (f32, f32) = (0.15, 0.85);
+/// Largest rated flux current over the rated reactive current I sin(phi) (a printed
+/// power factor only).
+pub const FLUX_OVER_REACTIVE_MAX: f32 = 1.2;
+/// Relative uncertainty of the inverter's loss model, (6/pi) V_e |i| (the fundamental of
+/// a square-wave error of V_e per leg): it ignores the current ripple about each zero
+/// crossing, where a leg's error is below V_e. The power balance (J, B) and the no-load
+/// fit (its R_inv) are redone with V_e moved by this fraction on top of its own bound.
+pub const INVERTER_LOSS_MODEL_UNCERTAINTY: f32 = 0.05;
+/// Resolution of the current converters assumed by the no-load fit's bound, bits (the
+/// G474's 12-bit ADC): one step of the full scale over the no-load current is added to
+/// the bounds of L_M and the flux current (an offset left after the offset measurement).
+pub const CURRENT_ADC_BITS: u32 = 12;
+/// Largest accepted relative uncertainty bound: Rs, R_R, L_sigma, L_M, J (a light rotor's
+/// J rests on a small acceleration torque: half of it).
+pub const MAX_UNCERTAINTY: [f32; 5] = [0.05, 0.2, 0.25, 0.1, 0.5];
+/// The catalogue line of [`catalogue_inertia`]: inertia at 1 kW, kg m^2, and exponent.
+pub const CATALOGUE_INERTIA_1KW: f32 = 0.0035;
+/// See [`CATALOGUE_INERTIA_1KW`].
+pub const CATALOGUE_INERTIA_EXPONENT: f32 = 1.3;
+
+/// The rotor inertia of a catalogue 4-pole IEC induction motor of the rated torque
+/// `torque` (N m), kg m^2: J = 0.0035 kg m^2 (P / 1 kW)^1.3 with P = torque x 157.08 rad/s
+/// (the power a 4-pole 50 Hz motor of that torque is rated for: frame size follows the
+/// torque). The line is an approximate reading of the rotor inertias that 4-pole IE3
+/// catalogue ranges list (roughly 0.0025 kg m^2 at 0.75 kW, 0.01 at 2.2 kW, 0.06 at
+/// 11 kW, 0.35 at 37 kW, 1.5 at 110 kW), not yet checked against a catalogue table: the
+/// plausible range [`INERTIA_RANGE`] is a factor of ten either way, so an error of the
+/// line by two refuses no real machine (the acceptance set spans 0.25x to 5x the line).
+pub fn catalogue_inertia(torque: f32) -> f32 {
+    let p_kw = torque * (0.5 * 2.0 * core::f32::consts::PI * 50.0) / 1000.0;
+    if !(p_kw > 0.0) {
+        return 0.0;
+    }
+    CATALOGUE_INERTIA_1KW * exp(CATALOGUE_INERTIA_EXPONENT * ln(p_kw))
+}
+
+/// Natural logarithm of `x` > 0 (0 otherwise): exponent and an atanh series of the
+/// mantissa, relative error below 1e-6 (outside the control step).
+fn ln(x: f32) -> f32 {
+    if !(x > 0.0) || !is_finite(x) {
+        return 0.0;
+    }
+    let bits = x.to_bits();
+    let e = ((bits >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    let t = (m - 1.0) / (m + 1.0);
+    let t2 = t * t;
+    let series = t * (1.0 + t2 * (1.0 / 3.0 + t2 * (0.2 + t2 * (1.0 / 7.0 + t2 / 9.0))));
+    e as f32 * core::f32::consts::LN_2 + 2.0 * series
+}
+
+/// e^y for |y| < 80 (saturates outside), relative error below 1e-6.
+fn exp(y: f32) -> f32 {
+    let y = y.clamp(-80.0, 80.0);
+    let k = (y / core::f32::consts::LN_2 + if y >= 0.0 { 0.5 } else { -0.5 }) as i32;
+    let r = y - k as f32 * core::f32::consts::LN_2;
+    let mut term = 1.0f32;
+    let mut sum = 1.0f32;
+    for n in 1..10 {
+        term *= r / n as f32;
+        sum += term;
+    }
+    sum * f32::from_bits(((k + 127) as u32) << 23)
+}
+
 /// The stage the sequence is in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
@@ -131,6 +252,143 @@ pub enum CommissioningError {
     /// The DC steps do not lie on a straight line (residual above 5 %): the rotor moved
     /// or the inverter error depends on the current.
     PoorFit(&'static str),
+    /// The result is out of line with the nameplate, the test saw a coupled load, or a fit
+    /// cannot tell its own result well enough: refused ([`Concern`] says what to check).
+    Implausible(Concern),
+}
+
+/// Why a result is refused: what was seen and what to check (module docs, "Plausibility").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Concern {
+    /// The no-load hold needed more than [`COUPLED_LOAD_TORQUE`] of the rated torque.
+    CoupledLoad,
+    /// The ramp's two speed halves give inertias more than [`INERTIA_SPREAD_MAX`] apart.
+    InertiaInconsistent,
+    /// J above [`INERTIA_RANGE`] times the catalogue line for the rating.
+    InertiaHigh,
+    /// J below [`INERTIA_RANGE`] times the catalogue line for the rating.
+    InertiaLow,
+    /// The rated flux current above [`FLUX_CURRENT_RANGE`] of the rated current, or
+    /// above [`FLUX_OVER_REACTIVE_MAX`] times the rated reactive current.
+    FluxCurrentHigh,
+    /// The rated flux current below [`FLUX_CURRENT_RANGE`] of the rated current.
+    FluxCurrentLow,
+    /// A quantity's uncertainty bound above [`MAX_UNCERTAINTY`] (the quantity named).
+    Uncertain(&'static str),
+}
+
+impl Concern {
+    /// What was seen, for a user (one short clause, no numbers).
+    pub fn reason(self) -> &'static str {
+        match self {
+            Concern::CoupledLoad => "a load seems coupled (no-load torque over 10 % of rated)",
+            Concern::InertiaInconsistent => {
+                "a load seems coupled (J differs at low and high speed)"
+            }
+            Concern::InertiaHigh => "J is over 10 times a motor of this rating's",
+            Concern::InertiaLow => "J is under a tenth of a motor of this rating's",
+            Concern::FluxCurrentHigh => "the no-load current is over 85 % of rated",
+            Concern::FluxCurrentLow => "the no-load current is under 15 % of rated",
+            Concern::Uncertain(_) => "a fit is too uncertain to use",
+        }
+    }
+
+    /// What to check before running again.
+    pub fn advice(self) -> &'static str {
+        match self {
+            Concern::CoupledLoad => "uncouple the load and run again (or check the power)",
+            Concern::InertiaInconsistent => "uncouple the load and run again",
+            Concern::InertiaHigh => "uncouple the load; check the nameplate power",
+            Concern::InertiaLow => "check the nameplate power and speed",
+            Concern::FluxCurrentHigh | Concern::FluxCurrentLow => {
+                "check the nameplate voltage and current (star or delta?)"
+            }
+            Concern::Uncertain(_) => "keep the rotor free and the supply steady, run again",
+        }
+    }
+
+    /// The quantity the check is about.
+    pub fn field(self) -> &'static str {
+        match self {
+            Concern::CoupledLoad => "viscous_friction",
+            Concern::InertiaInconsistent | Concern::InertiaHigh | Concern::InertiaLow => "inertia",
+            Concern::FluxCurrentHigh | Concern::FluxCurrentLow => "rated_flux_current",
+            Concern::Uncertain(f) => f,
+        }
+    }
+}
+
+/// One plausibility check: the measured figure and its accepted range (the same unit:
+/// a ratio, see [`Concern`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Check {
+    /// What a failure means.
+    pub concern: Concern,
+    /// The measured figure.
+    pub value: f32,
+    /// Accepted range, inclusive (low, high).
+    pub range: (f32, f32),
+}
+
+impl Check {
+    /// Inside its range.
+    pub fn passed(&self) -> bool {
+        self.value >= self.range.0 && self.value <= self.range.1
+    }
+}
+
+/// Bounds on the relative error of each identified quantity (fractions: 0.01 is 1 %);
+/// module docs, "How sure". Infinite where the quantity was not resolved.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Confidence {
+    /// Rs.
+    pub stator_resistance: f32,
+    /// R_R.
+    pub rotor_resistance: f32,
+    /// L_sigma.
+    pub leakage_inductance: f32,
+    /// L_M at rated flux.
+    pub magnetizing_inductance: f32,
+    /// The rated flux current.
+    pub rated_flux_current: f32,
+    /// The inverter voltage error.
+    pub inverter_error: f32,
+    /// The dead time (its error alone; the board's assumed device drop is not known to it).
+    pub dead_time: f32,
+    /// J.
+    pub inertia: f32,
+    /// B.
+    pub viscous_friction: f32,
+}
+
+/// Number of plausibility checks in [`Assessment::checks`].
+pub const CHECK_COUNT: usize = 12;
+
+/// The identified model, how sure each quantity is, and the checks against the nameplate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Assessment {
+    /// The model.
+    pub identified: Identified,
+    /// Relative error bounds.
+    pub confidence: Confidence,
+    /// Every check, in order: coupled load (hold torque / rated torque), inertia spread
+    /// (|J_low - J_high| / J), inertia / catalogue line (high, then low), flux current /
+    /// rated current (high, then low), flux current / rated reactive current (an open
+    /// range without a printed power factor), and the uncertainty bounds of Rs, R_R,
+    /// L_sigma, L_M and J. The inertia checks are open (always passed) when J is not
+    /// resolved.
+    pub checks: [Check; CHECK_COUNT],
+    /// J of the ramp's lower and upper speed halves, kg m^2 (0 when unresolved).
+    pub inertia_halves: (f32, f32),
+    /// The air-gap torque the no-load hold needed, N m.
+    pub hold_torque: f32,
+}
+
+impl Assessment {
+    /// The first failed check, if any (the order of [`Assessment::checks`]).
+    pub fn refusal(&self) -> Option<Check> {
+        self.checks.iter().copied().find(|c| !c.passed())
+    }
 }
 
 /// The inverse-Gamma model and the inverter error the sequence found.
@@ -170,10 +428,63 @@ struct Fourier {
     i: AlphaBeta,
 }
 
+impl Fourier {
+    fn plus(&self, o: &Fourier) -> Fourier {
+        Fourier {
+            v: AlphaBeta {
+                alpha: self.v.alpha + o.v.alpha,
+                beta: self.v.beta + o.v.beta,
+            },
+            i: AlphaBeta {
+                alpha: self.i.alpha + o.i.alpha,
+                beta: self.i.beta + o.i.beta,
+            },
+        }
+    }
+}
+
+/// The air-gap torque of the power balance in parts, so that the fits can redo it with
+/// another Rs or inverter error: T = input - Rs copper - V_e inverter (module docs, 5).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct TorqueParts {
+    /// p 1.5 v i_d / w, N m.
+    input: f32,
+    /// p 1.5 |i|^2 / w, N m per ohm.
+    copper: f32,
+    /// p (6 / pi) |i| / w, N m per volt.
+    inverter: f32,
+}
+
+impl TorqueParts {
+    fn torque(&self, rs: f32, v_e: f32) -> f32 {
+        self.input - rs * self.copper - v_e * self.inverter
+    }
+    fn add(&mut self, o: &TorqueParts, k: f32) {
+        self.input += k * o.input;
+        self.copper += k * o.copper;
+        self.inverter += k * o.inverter;
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct RampSums {
+    impulse: TorqueParts,
+    speed_change: f32,
+    angle: f32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct HoldSums {
+    torque: TorqueParts,
+    speed: f32,
+    n: u32,
+}
+
 /// The sequence's state.
 #[derive(Clone, Debug)]
 pub struct Commissioning {
     rated: RatedPoint,
+    power_factor: Option<f32>,
     board: Board,
     ts: f32,
     trip: f32,
@@ -185,24 +496,29 @@ pub struct Commissioning {
     alpha: PiController,
     beta: PiController,
     offsets: [f32; 3],
-    /// Per DC level: mean current and voltage; and the mean bus.
-    dc: [(f32, f32); 4],
+    /// Per DC level and half of its measuring time: mean current and voltage; the mean bus.
+    dc: [[(f32, f32); 2]; 4],
     bus_sum: f32,
     bus_n: u32,
-    acc: (f32, f32),
-    low: Fourier,
-    high: Fourier,
-    no_load: Fourier,
+    /// The present DC step's sums per half, and their sample counts.
+    acc: [(f32, f32); 2],
+    acc_n: [u32; 2],
+    /// Impedance tests' Fourier sums, per half of the window.
+    low: [Fourier; 2],
+    high: [Fourier; 2],
+    /// No-load hold: per half, the mean voltage (alpha: its magnitude) and current in the
+    /// voltage's frame.
+    no_load: [Fourier; 2],
     rs_fit: f32,
     inverter_fit: f32,
-    /// Ramp: integral of the air-gap torque over the band (N m s), the band's speed
-    /// change (rad/s mechanical), the integral of the speed over it (rad); hold: the mean
-    /// air-gap torque (N m) and speed (rad/s).
-    ramp_impulse: f32,
-    ramp_speed_change: f32,
-    ramp_angle: f32,
-    hold_torque: f32,
-    hold_speed: f32,
+    /// Ramp, per speed half (below and above 60 % of the end frequency): the air-gap
+    /// torque's impulse in parts (N m s), the half's speed change (rad/s mechanical), the
+    /// integral of the speed over it (rad).
+    ramp: [RampSums; 2],
+    /// Hold, per half: the mean air-gap torque in parts (N m) and the mean speed (rad/s).
+    hold: [HoldSums; 2],
+    /// The last step's air-gap torque estimate, N m (the no-load test; 0 before it).
+    torque: f32,
     angle: f32,
     frequency: f32,
     last_v: AlphaBeta,
@@ -232,6 +548,7 @@ impl Commissioning {
                 / rated.torque;
         Ok(Self {
             rated,
+            power_factor: nameplate.power_factor,
             board: *board,
             ts,
             trip: crate::nameplate::TRIP_OVER_LIMIT * rated.current,
@@ -243,20 +560,19 @@ impl Commissioning {
             alpha: PiController::new(),
             beta: PiController::new(),
             offsets: [0.0; 3],
-            dc: [(0.0, 0.0); 4],
+            dc: [[(0.0, 0.0); 2]; 4],
             bus_sum: 0.0,
             bus_n: 0,
-            acc: (0.0, 0.0),
-            low: Fourier::default(),
-            high: Fourier::default(),
-            no_load: Fourier::default(),
+            acc: [(0.0, 0.0); 2],
+            acc_n: [0; 2],
+            low: [Fourier::default(); 2],
+            high: [Fourier::default(); 2],
+            no_load: [Fourier::default(); 2],
             rs_fit: 0.0,
             inverter_fit: 0.0,
-            ramp_impulse: 0.0,
-            ramp_speed_change: 0.0,
-            ramp_angle: 0.0,
-            hold_torque: 0.0,
-            hold_speed: 0.0,
+            ramp: [RampSums::default(); 2],
+            hold: [HoldSums::default(); 2],
+            torque: 0.0,
             angle: 0.0,
             frequency: 0.0,
             last_v: AlphaBeta::default(),
@@ -267,16 +583,57 @@ impl Commissioning {
         })
     }
 
-    /// The no-load test's sums (diagnostics): ramp impulse (N m s), ramp speed change
-    /// (rad/s), ramp angle (rad), hold torque (N m), hold speed (rad/s).
+    /// The no-load test's sums (diagnostics), with the Rs and inverter error of the DC
+    /// steps: ramp impulse (N m s), ramp speed change (rad/s), ramp angle (rad), hold
+    /// torque (N m), hold speed (rad/s).
     pub fn mechanics_sums(&self) -> [f32; 5] {
+        let (rs, ve) = (self.rs_fit, self.inverter_fit);
+        let [a, b] = &self.ramp;
+        let [h0, h1] = &self.hold;
         [
-            self.ramp_impulse,
-            self.ramp_speed_change,
-            self.ramp_angle,
-            self.hold_torque,
-            self.hold_speed,
+            a.impulse.torque(rs, ve) + b.impulse.torque(rs, ve),
+            a.speed_change + b.speed_change,
+            a.angle + b.angle,
+            0.5 * (h0.torque.torque(rs, ve) + h1.torque.torque(rs, ve)),
+            0.5 * (h0.speed + h1.speed),
         ]
+    }
+
+    /// The voltage commanded by the last step (alpha, beta), V: it acts over the next
+    /// period. Zero with the switches off.
+    pub fn voltage(&self) -> AlphaBeta {
+        if matches!(self.stage, Stage::Offsets | Stage::Done | Stage::Failed(_)) {
+            AlphaBeta::default()
+        } else {
+            self.last_v
+        }
+    }
+
+    /// The no-load test's air-gap torque estimate of the last step (power balance with the
+    /// DC steps' Rs and inverter error), N m; 0 outside the test.
+    pub fn air_gap_torque(&self) -> f32 {
+        self.torque
+    }
+
+    /// The V/f test's stator frequency (without the stabiliser's offset), rad/s electrical.
+    pub fn frequency(&self) -> f32 {
+        self.frequency
+    }
+
+    /// The DC steps (after [`Stage::DcStep`] 3): mean alpha current (A) and voltage (V)
+    /// per level, for a plot of the line fit.
+    pub fn dc_points(&self) -> [(f32, f32); 4] {
+        let mut out = [(0.0, 0.0); 4];
+        for (o, d) in out.iter_mut().zip(&self.dc) {
+            *o = (0.5 * (d[0].0 + d[1].0), 0.5 * (d[0].1 + d[1].1));
+        }
+        out
+    }
+
+    /// The line through the DC steps: Rs (ohm) and the intercept (V): v = Rs i + c.
+    pub fn dc_line(&self) -> (f32, f32) {
+        let (rs, c, _) = line_fit(&self.dc_points());
+        (rs, c)
     }
 
     /// The stage the sequence is in.
@@ -297,7 +654,8 @@ impl Commissioning {
     fn next(&mut self, s: Stage) {
         self.stage = s;
         self.steps = 0;
-        self.acc = (0.0, 0.0);
+        self.acc = [(0.0, 0.0); 2];
+        self.acc_n = [0; 2];
     }
 
     fn steps_of(&self, t: f32) -> u32 {
@@ -354,21 +712,30 @@ impl Commissioning {
                 }
                 let measure_from = self.steps_of(DC_STEP_TIME - DC_MEASURE_TIME);
                 if self.steps > measure_from {
-                    // the voltage applied over the past period: last step's command
-                    self.acc.0 += i.alpha;
-                    self.acc.1 += self.last_v.alpha;
+                    // the voltage applied over the past period: last step's command; in
+                    // two halves of the measuring time
+                    let h = usize::from(
+                        self.steps > measure_from + self.steps_of(0.5 * DC_MEASURE_TIME),
+                    );
+                    if let (Some(a), Some(n)) = (self.acc.get_mut(h), self.acc_n.get_mut(h)) {
+                        a.0 += i.alpha;
+                        a.1 += self.last_v.alpha;
+                        *n += 1;
+                    }
                     self.bus_sum += bus;
                     self.bus_n += 1;
                 }
                 if self.steps >= self.steps_of(DC_STEP_TIME) {
-                    let n = (self.steps - measure_from) as f32;
                     if let Some(d) = self.dc.get_mut(k as usize) {
-                        *d = (self.acc.0 / n, self.acc.1 / n);
+                        for ((dh, a), n) in d.iter_mut().zip(self.acc).zip(self.acc_n) {
+                            let n = n.max(1) as f32;
+                            *dh = (a.0 / n, a.1 / n);
+                        }
                     }
                     if (k as usize) + 1 < DC_LEVELS.len() {
                         self.next(Stage::DcStep(k + 1));
                     } else {
-                        let (rs, c, _) = self.line_fit();
+                        let (rs, c, _) = line_fit(&self.dc_points());
                         self.rs_fit = rs;
                         self.inverter_fit = 0.75 * c;
                         self.next(Stage::ImpedanceLow);
@@ -386,14 +753,10 @@ impl Commissioning {
                 // one period to settle, then four
                 let settle = self.steps_of(period);
                 if self.steps > settle {
-                    accumulate(
-                        &mut self.low,
-                        self.last_v.alpha,
-                        i.alpha,
-                        self.angle,
-                        w,
-                        self.ts,
-                    );
+                    let h = usize::from(self.steps > settle + self.steps_of(2.0 * period));
+                    if let Some(f) = self.low.get_mut(h) {
+                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.ts);
+                    }
                 }
                 self.angle = wrap_angle_step(self.angle + w * self.ts);
                 if self.steps >= settle + self.steps_of(4.0 * period) {
@@ -413,14 +776,10 @@ impl Commissioning {
                 let period = core::f32::consts::TAU / w;
                 let settle = self.steps_of(0.1);
                 if self.steps > settle {
-                    accumulate(
-                        &mut self.high,
-                        self.last_v.alpha,
-                        i.alpha,
-                        self.angle,
-                        w,
-                        self.ts,
-                    );
+                    let h = usize::from(self.steps > settle + self.steps_of(5.0 * period));
+                    if let Some(f) = self.high.get_mut(h) {
+                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.ts);
+                    }
                 }
                 self.angle = wrap_angle_step(self.angle + w * self.ts);
                 if self.steps >= settle + self.steps_of(10.0 * period) {
@@ -463,23 +822,32 @@ impl Commissioning {
                     // P_in = 1.5 Re(v e^(-j phi) conj(i)) = 1.5 v (i_d cos phi - i_q sin phi)
                     let phi = FastSinCos.sin_cos(1.5 * w * self.ts);
                     let p_in = 1.5 * mag * (i_d * phi.cos - i_q * phi.sin);
-                    let p_gap = p_in
-                        - 1.5 * self.rs_fit * i_mag * i_mag
-                        - 6.0 / core::f32::consts::PI * self.inverter_fit * i_mag;
-                    let torque = p * p_gap / w;
+                    let parts = TorqueParts {
+                        input: p * p_in / w,
+                        copper: p * 1.5 * i_mag * i_mag / w,
+                        inverter: p * 6.0 / core::f32::consts::PI * i_mag / w,
+                    };
+                    let torque = parts.torque(self.rs_fit, self.inverter_fit);
+                    self.torque = torque;
                     // V/f stabiliser (VF_STABILISER_GAIN): the frequency the voltage turns
                     // at yields to the torque's swing about its low-pass
                     self.stab_torque += (torque - self.stab_torque) * self.stab_alpha;
                     self.stab_offset = -self.stab_gain * (torque - self.stab_torque);
                     let in_band = w > 0.3 * w_end && w < 0.9 * w_end && self.steps < ramp;
                     if in_band {
-                        self.ramp_impulse += torque * self.ts;
-                        self.ramp_speed_change += w_end / ramp as f32 / p;
-                        self.ramp_angle += w / p * self.ts;
+                        if let Some(r) = self.ramp.get_mut(usize::from(w >= 0.6 * w_end)) {
+                            r.impulse.add(&parts, self.ts);
+                            r.speed_change += w_end / ramp as f32 / p;
+                            r.angle += w / p * self.ts;
+                        }
                     }
                     if self.steps > settle {
-                        self.hold_torque += torque;
-                        self.hold_speed += w / p;
+                        let half = self.steps_of(0.5 * NO_LOAD_MEASURE_TIME);
+                        if let Some(h) = self.hold.get_mut(usize::from(self.steps > settle + half))
+                        {
+                            h.torque.add(&parts, 1.0);
+                            h.speed += w / p;
+                        }
                     }
                 }
                 if self.steps > settle {
@@ -488,18 +856,29 @@ impl Commissioning {
                     let (s, c) = (sc.sin, sc.cos);
                     let i_d = i.alpha * c + i.beta * s;
                     let i_q = -i.alpha * s + i.beta * c;
-                    let f = &mut self.no_load;
-                    f.i.alpha += i_d;
-                    f.i.beta += i_q;
-                    f.v.alpha += mag;
+                    let half = self.steps_of(0.5 * NO_LOAD_MEASURE_TIME);
+                    let h = usize::from(self.steps > settle + half);
+                    if let (Some(f), Some(hs)) = (self.no_load.get_mut(h), self.hold.get_mut(h)) {
+                        f.i.alpha += i_d;
+                        f.i.beta += i_q;
+                        f.v.alpha += mag;
+                        hs.n += 1;
+                    }
                 }
                 if self.steps >= settle + self.steps_of(NO_LOAD_MEASURE_TIME) {
-                    let n = (self.steps - settle) as f32;
-                    self.no_load.i.alpha /= n;
-                    self.no_load.i.beta /= n;
-                    self.no_load.v.alpha /= n;
-                    self.hold_torque /= n;
-                    self.hold_speed /= n;
+                    for (f, h) in self.no_load.iter_mut().zip(self.hold.iter_mut()) {
+                        let n = h.n.max(1) as f32;
+                        f.i.alpha /= n;
+                        f.i.beta /= n;
+                        f.v.alpha /= n;
+                        h.torque = TorqueParts {
+                            input: h.torque.input / n,
+                            copper: h.torque.copper / n,
+                            inverter: h.torque.inverter / n,
+                        };
+                        h.speed /= n;
+                    }
+                    self.torque = 0.0;
                     self.next(Stage::Done);
                     return PwmOutput::OFF;
                 }
@@ -530,126 +909,179 @@ impl Commissioning {
         }
     }
 
-    /// Least-squares line v = Rs i + c through the DC steps; (Rs, c, relative residual).
-    fn line_fit(&self) -> (f32, f32, f32) {
-        let n = self.dc.len() as f32;
-        let (mut si, mut sv, mut sii, mut siv) = (0.0, 0.0, 0.0, 0.0);
-        for &(i, v) in &self.dc {
-            si += i;
-            sv += v;
-            sii += i * i;
-            siv += i * v;
+    /// The identified model, once [`Stage::Done`] (outside the interrupt: bisections):
+    /// [`Commissioning::assess`], a failed plausibility check refusing the result
+    /// ([`CommissioningError::Implausible`]).
+    pub fn identify(&self) -> Result<Identified, CommissioningError> {
+        let a = self.assess()?;
+        match a.refusal() {
+            Some(c) => Err(CommissioningError::Implausible(c.concern)),
+            None => Ok(a.identified),
         }
-        let den = n * sii - si * si;
-        if !(den > 0.0) {
-            return (0.0, 0.0, f32::INFINITY);
-        }
-        let rs = (n * siv - si * sv) / den;
-        let c = (sv - rs * si) / n;
-        let mut worst = 0.0f32;
-        for &(i, v) in &self.dc {
-            worst = worst.max((v - rs * i - c).abs() / (rs * i).abs().max(1e-6));
-        }
-        (rs, c, worst)
     }
 
-    /// The identified model, once [`Stage::Done`] (outside the interrupt: a bisection).
-    pub fn identify(&self) -> Result<Identified, CommissioningError> {
+    /// The identified model with the bound of each quantity's error and every
+    /// plausibility check (module docs, "How sure" and "Plausibility"), whether the checks
+    /// pass or not (a report shows a refused result too). An error: the sequence failed,
+    /// or a fit has no result at all.
+    pub fn assess(&self) -> Result<Assessment, CommissioningError> {
         if let Stage::Failed(e) = self.stage {
             return Err(e);
         }
-        let (rs, c, residual) = self.line_fit();
+        let r = &self.rated;
+        let z_nom = r.phase_voltage / r.current;
+        // 1. Rs and the inverter error: the line, its standard errors, its two halves
+        let pts = self.dc_points();
+        let (rs, c, residual) = line_fit(&pts);
         if !(residual < 0.05) {
             return Err(CommissioningError::PoorFit("stator_resistance"));
         }
-        let r = &self.rated;
-        let z_nom = r.phase_voltage / r.current;
         if !(rs > 1e-4 * z_nom && rs < z_nom) {
             return Err(CommissioningError::ResultOutOfRange("stator_resistance"));
         }
+        let half_line = |h: usize| {
+            let mut p = [(0.0, 0.0); 4];
+            for (o, d) in p.iter_mut().zip(&self.dc) {
+                *o = if h == 0 { d[0] } else { d[1] };
+            }
+            line_fit(&p)
+        };
+        let ((rs_a, c_a, _), (rs_b, c_b, _)) = (half_line(0), half_line(1));
+        let (se_rs, se_c) = line_errors(&pts, rs, c);
+        let u_rs = 3.0 * se_rs + spread(rs_a, rs_b);
+        let u_c = 3.0 * se_c + spread(c_a, c_b);
         let v_e = 0.75 * c;
+        let u_ve = 0.75 * u_c;
         let bus = if self.bus_n > 0 {
             self.bus_sum / self.bus_n as f32
         } else {
             self.board.dc_bus_v
         };
         let dead_time = ((v_e - self.board.device_drop_v) / bus * self.ts).max(0.0);
-        // impedances, the resistance removed
-        let w_l = LOW_FREQUENCY * r.frequency;
-        let w_h = r.frequency;
-        let zl = impedance(&self.low, rs);
-        let zh = impedance(&self.high, rs);
-        let (Some(zl), Some(zh)) = (zl, zh) else {
-            return Err(CommissioningError::ResultOutOfRange("impedance"));
-        };
-        // Re Y(w) = Re 1/(Z' - j w L_sigma): equal at both frequencies for the true L_sigma
-        let re_y = |z: (f32, f32), w: f32, ls: f32| {
-            let (x, y) = (z.0, z.1 - w * ls);
-            x / (x * x + y * y)
-        };
-        let f = |ls: f32| re_y(zl, w_l, ls) - re_y(zh, w_h, ls);
-        let (mut lo, mut hi) = (0.0f32, zh.1 / w_h);
-        if !(hi > 0.0) || f(lo) * f(hi * 0.999) > 0.0 {
-            return Err(CommissioningError::ResultOutOfRange("leakage_inductance"));
+        let u_dead = u_ve / bus * self.ts;
+
+        // 2. the standstill impedances: both halves, Rs moved, the timing moved
+        let [l0, l1] = &self.low;
+        let [h0, h1] = &self.high;
+        let (low, high) = (l0.plus(l1), h0.plus(h1));
+        let e0 = self.electrical(rs, &low, &high, 0.0)?;
+        let mut u_e = halves(
+            self.electrical(rs, l0, h0, 0.0).ok(),
+            self.electrical(rs, l1, h1, 0.0).ok(),
+        );
+        add(
+            &mut u_e,
+            worst(&e0, [-u_rs, u_rs], |d| {
+                self.electrical(rs + d, &low, &high, 0.0).ok()
+            }),
+        );
+        add(
+            &mut u_e,
+            worst(&e0, [-0.5, 0.5], |d| {
+                self.electrical(rs, &low, &high, d).ok()
+            }),
+        );
+        let [r_r, l_sigma, l_m_ss] = e0;
+        let u_ls = u_e[1];
+
+        // 3. the no-load test: both halves, Rs, the inverter error, L_sigma and the timing
+        let [n0, n1] = &self.no_load;
+        let mut nl = n0.plus(n1);
+        nl.v.alpha *= 0.5;
+        nl.i.alpha *= 0.5;
+        nl.i.beta *= 0.5;
+        let m0 = self.no_load_fit(&nl, rs, v_e, l_sigma, 0.0)?;
+        let mut u_m = halves(
+            self.no_load_fit(n0, rs, v_e, l_sigma, 0.0).ok(),
+            self.no_load_fit(n1, rs, v_e, l_sigma, 0.0).ok(),
+        );
+        let u_ve_model = u_ve + INVERTER_LOSS_MODEL_UNCERTAINTY * v_e.abs();
+        for (delta, f) in [(u_rs, 0usize), (u_ve_model, 1), (u_ls, 2), (0.5, 3)] {
+            add(
+                &mut u_m,
+                worst(&m0, [-delta, delta], |d| {
+                    let p = |k: usize| if k == f { d } else { 0.0 };
+                    self.no_load_fit(&nl, rs + p(0), v_e + p(1), l_sigma + p(2), p(3))
+                        .ok()
+                }),
+            );
         }
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if f(lo) * f(mid) <= 0.0 {
-                hi = mid;
+        let [l_m, i_flux] = m0;
+        // one converter step over the no-load current (CURRENT_ADC_BITS)
+        let lsb = 2.0 * self.board.current_full_scale_a / (1u32 << CURRENT_ADC_BITS) as f32;
+        let i_nl = sqrt(nl.i.alpha * nl.i.alpha + nl.i.beta * nl.i.beta);
+        if i_nl > 0.0 {
+            u_m[0] += l_m * lsb / i_nl;
+            u_m[1] += i_flux * lsb / i_nl;
+        }
+
+        // 4. inertia and friction: the ramp's halves, the hold's halves, Rs and V_e moved
+        let mech = self.mechanics(rs, v_e);
+        let [hh0, hh1] = &self.hold;
+        let b_half = |h: &HoldSums| {
+            if h.speed > 0.0 {
+                h.torque.torque(rs, v_e) / h.speed
             } else {
-                lo = mid;
+                0.0
+            }
+        };
+        let mut u_b = spread(b_half(hh0), b_half(hh1));
+        let mut u_j = match mech.inertia {
+            Some(_) => {
+                let [ra, rb] = &self.ramp;
+                let dw = ra.speed_change + rb.speed_change;
+                // the halves' disagreement, and the friction's spread acting on J
+                0.5 * (mech.inertia_halves.0 - mech.inertia_halves.1).abs()
+                    + if dw > 0.0 {
+                        u_b * (ra.angle + rb.angle) / dw
+                    } else {
+                        f32::INFINITY
+                    }
+            }
+            None => f32::INFINITY,
+        };
+        for (drs, dve) in [
+            (-u_rs, 0.0),
+            (u_rs, 0.0),
+            (0.0, -u_ve_model),
+            (0.0, u_ve_model),
+        ] {
+            let m = self.mechanics(rs + drs, v_e + dve);
+            u_b += 0.5 * (m.friction - mech.friction).abs();
+            if let (Some(a), Some(b)) = (m.inertia, mech.inertia) {
+                u_j += 0.5 * (a - b).abs();
             }
         }
-        let l_sigma = 0.5 * (lo + hi);
-        let y = |z: (f32, f32), w: f32| {
-            let (x, yy) = (z.0, z.1 - w * l_sigma);
-            let d = x * x + yy * yy;
-            (x / d, -yy / d)
-        };
-        let (gl, bl) = y(zl, w_l);
-        let (gh, bh) = y(zh, w_h);
-        let r_r = 2.0 / (gl + gh);
-        // Im Y = -1/(w L_M): the low frequency resolves L_M (at the high one it is small)
-        let l_m_ss = 1.0 / (w_l * -bl);
-        let _ = bh;
-        if !(r_r > 0.0 && r_r < z_nom && l_m_ss > l_sigma && l_m_ss < 100.0 * z_nom / w_h) {
+
+        if !(r_r > 0.0 && r_r < z_nom && l_m_ss > l_sigma && l_m_ss < 100.0 * z_nom / r.frequency) {
             return Err(CommissioningError::ResultOutOfRange("rotor_resistance"));
         }
-        // no-load: Z = V / I in the frame of the current's samples, where the voltage
-        // commanded at the same angle acts 1.5 periods later: V e^(-j 1.5 w Ts)
-        let nl = &self.no_load;
-        let w_n = NO_LOAD_FREQUENCY * r.frequency;
-        let lead = w_n * 1.5 * self.ts;
-        let lead = FastSinCos.sin_cos(lead);
-        let (vd, vq) = (nl.v.alpha * lead.cos, -nl.v.alpha * lead.sin);
-        let (id, iq) = (nl.i.alpha, nl.i.beta);
-        let i2 = id * id + iq * iq;
-        if !(i2 > 0.0) {
-            return Err(CommissioningError::ResultOutOfRange("rated_flux_current"));
-        }
-        // Z = V conj(I) / |I|^2: the reactance
-        let x = (vq * id - vd * iq) / i2;
-        let l_m = x / w_n - l_sigma;
-        let i_flux = sqrt(i2);
         if !(l_m > 0.0 && i_flux < r.current) {
             return Err(CommissioningError::ResultOutOfRange(
                 "magnetizing_inductance",
             ));
         }
-        let b = if self.hold_speed > 0.0 {
-            (self.hold_torque / self.hold_speed).max(0.0)
-        } else {
-            0.0
+        let rel = |u: f32, x: f32| {
+            if x.abs() > 0.0 && is_finite(u) {
+                u / x.abs()
+            } else {
+                f32::INFINITY
+            }
         };
-        let j = if self.ramp_speed_change > 0.0 {
-            let j = (self.ramp_impulse - b * self.ramp_angle) / self.ramp_speed_change;
-            (j > 0.0).then_some(j)
-        } else {
-            None
+        let confidence = Confidence {
+            stator_resistance: rel(u_rs, rs),
+            rotor_resistance: rel(u_e[0], r_r),
+            leakage_inductance: rel(u_e[1], l_sigma),
+            magnetizing_inductance: rel(u_m[0], l_m),
+            rated_flux_current: rel(u_m[1], i_flux),
+            inverter_error: rel(u_ve, v_e),
+            dead_time: rel(u_dead, dead_time),
+            inertia: mech.inertia.map_or(f32::INFINITY, |j| rel(u_j, j)),
+            viscous_friction: rel(u_b, mech.friction),
         };
-        Ok(Identified {
-            inertia: j,
-            viscous_friction: b,
+        let identified = Identified {
+            inertia: mech.inertia,
+            viscous_friction: mech.friction,
             stator_resistance: rs,
             rotor_resistance: r_r,
             leakage_inductance: l_sigma,
@@ -659,7 +1091,234 @@ impl Commissioning {
             inverter_error: v_e,
             dead_time,
             dc_fit_residual: residual,
+        };
+
+        // 5. plausibility
+        const OPEN: (f32, f32) = (f32::NEG_INFINITY, f32::INFINITY);
+        let check = |concern, value, range| Check {
+            concern,
+            value,
+            range,
+        };
+        let (j_spread, j_ratio) = match mech.inertia {
+            Some(j) => (
+                (mech.inertia_halves.0 - mech.inertia_halves.1).abs() / j,
+                j / catalogue_inertia(r.torque),
+            ),
+            None => (0.0, 1.0),
+        };
+        let resolved = mech.inertia.is_some();
+        let flux = i_flux / r.current;
+        let reactive = match self.power_factor {
+            Some(pf) if pf < 1.0 => i_flux / (r.current * sqrt(1.0 - pf * pf)),
+            _ => 0.0,
+        };
+        let limit = |x: f32| (0.0, x);
+        let checks = [
+            check(
+                Concern::CoupledLoad,
+                mech.hold_torque / r.torque,
+                (f32::NEG_INFINITY, COUPLED_LOAD_TORQUE),
+            ),
+            check(
+                Concern::InertiaInconsistent,
+                j_spread,
+                if resolved {
+                    limit(INERTIA_SPREAD_MAX)
+                } else {
+                    OPEN
+                },
+            ),
+            check(
+                Concern::InertiaHigh,
+                j_ratio,
+                if resolved {
+                    (0.0, INERTIA_RANGE.1)
+                } else {
+                    OPEN
+                },
+            ),
+            check(
+                Concern::InertiaLow,
+                j_ratio,
+                if resolved {
+                    (INERTIA_RANGE.0, f32::INFINITY)
+                } else {
+                    OPEN
+                },
+            ),
+            check(Concern::FluxCurrentHigh, flux, (0.0, FLUX_CURRENT_RANGE.1)),
+            check(
+                Concern::FluxCurrentLow,
+                flux,
+                (FLUX_CURRENT_RANGE.0, f32::INFINITY),
+            ),
+            check(
+                Concern::FluxCurrentHigh,
+                reactive,
+                if self.power_factor.is_some() {
+                    (0.0, FLUX_OVER_REACTIVE_MAX)
+                } else {
+                    OPEN
+                },
+            ),
+            check(
+                Concern::Uncertain("stator_resistance"),
+                confidence.stator_resistance,
+                limit(MAX_UNCERTAINTY[0]),
+            ),
+            check(
+                Concern::Uncertain("rotor_resistance"),
+                confidence.rotor_resistance,
+                limit(MAX_UNCERTAINTY[1]),
+            ),
+            check(
+                Concern::Uncertain("leakage_inductance"),
+                confidence.leakage_inductance,
+                limit(MAX_UNCERTAINTY[2]),
+            ),
+            check(
+                Concern::Uncertain("magnetizing_inductance"),
+                confidence.magnetizing_inductance,
+                limit(MAX_UNCERTAINTY[3]),
+            ),
+            check(
+                Concern::Uncertain("inertia"),
+                if resolved { confidence.inertia } else { 0.0 },
+                limit(MAX_UNCERTAINTY[4]),
+            ),
+        ];
+        Ok(Assessment {
+            identified,
+            confidence,
+            checks,
+            inertia_halves: mech.inertia_halves,
+            hold_torque: mech.hold_torque,
         })
+    }
+
+    /// R_R, L_sigma and the small-signal L_M from the two impedance tests' sums, with Rs
+    /// `rs` (ohm) and the voltage acting `delay` periods later than modelled.
+    fn electrical(
+        &self,
+        rs: f32,
+        low: &Fourier,
+        high: &Fourier,
+        delay: f32,
+    ) -> Result<[f32; 3], CommissioningError> {
+        let r = &self.rated;
+        let w_l = LOW_FREQUENCY * r.frequency;
+        let w_h = r.frequency;
+        let zl = impedance(low, rs, w_l * delay * self.ts);
+        let zh = impedance(high, rs, w_h * delay * self.ts);
+        let (Some(zl), Some(zh)) = (zl, zh) else {
+            return Err(CommissioningError::ResultOutOfRange("impedance"));
+        };
+        // A fixed point: at the low frequency the rotor branch's admittance
+        // Y = 1 / (Z' - j w L_sigma) = 1/R_R - j / (w L_M) gives R_R and L_M for a given
+        // L_sigma (which is a tenth of that impedance there); at the rated frequency the
+        // rotor branch is nearly R_R alone and the reactance is w L_sigma plus the branch's
+        // small X_r = w L_M R_R^2 / (R_R^2 + (w L_M)^2), so L_sigma = (Im Z'_h - X_r) / w.
+        // Each pass changes L_sigma by the few per cent X_r is of Im Z'_h: it converges in
+        // a few passes, and errors of R_R and L_M reach L_sigma only through X_r. (Equating
+        // the real parts of Y at both frequencies instead, the earlier method, is
+        // ill-conditioned: both tend to 1/R_R near the root, and a 0.1 % error in either
+        // moved L_sigma by several per cent or left no root.)
+        let mut l_sigma = zh.1 / w_h;
+        let (mut r_r, mut l_m_ss) = (0.0f32, 0.0f32);
+        for _ in 0..30 {
+            let (x, y) = (zl.0, zl.1 - w_l * l_sigma);
+            let d = x * x + y * y;
+            if !(x > 0.0 && y > 0.0 && d > 0.0) {
+                return Err(CommissioningError::ResultOutOfRange("leakage_inductance"));
+            }
+            // Y = (x - j y) / d
+            r_r = d / x;
+            l_m_ss = d / (w_l * y);
+            let xm = w_h * l_m_ss;
+            let x_r = xm * r_r * r_r / (r_r * r_r + xm * xm);
+            l_sigma = (zh.1 - x_r) / w_h;
+            if !(l_sigma > 0.0) {
+                return Err(CommissioningError::ResultOutOfRange("leakage_inductance"));
+            }
+        }
+        Ok([r_r, l_sigma, l_m_ss])
+    }
+
+    /// L_M at rated flux (H) and the rated flux current (A peak) from the no-load hold's
+    /// mean voltage and current `nl` (the voltage's frame), with Rs, the inverter error
+    /// and L_sigma, the voltage acting `delay` periods later than modelled. The rotor
+    /// branch's admittance Y = 1 / (Z - Rs - R_inv - j w L_sigma) = s / R_R - j / (w L_M)
+    /// (R_inv = (4/pi) V_e / |I|, the inverter error's fundamental, in phase with the
+    /// current): its imaginary part gives L_M whatever the slip, so friction or a load
+    /// does not bias it; the flux current is the magnetizing branch's,
+    /// |Z - Rs - R_inv - j w L_sigma| |I| / (w L_M).
+    fn no_load_fit(
+        &self,
+        nl: &Fourier,
+        rs: f32,
+        v_e: f32,
+        l_sigma: f32,
+        delay: f32,
+    ) -> Result<[f32; 2], CommissioningError> {
+        let w_n = NO_LOAD_FREQUENCY * self.rated.frequency;
+        // the voltage commanded at an angle acts 1.5 periods later: V e^(-j 1.5 w Ts)
+        let lead = FastSinCos.sin_cos(w_n * (1.5 + delay) * self.ts);
+        let (vd, vq) = (nl.v.alpha * lead.cos, -nl.v.alpha * lead.sin);
+        let (id, iq) = (nl.i.alpha, nl.i.beta);
+        let i2 = id * id + iq * iq;
+        if !(i2 > 0.0) {
+            return Err(CommissioningError::ResultOutOfRange("rated_flux_current"));
+        }
+        let i_mag = sqrt(i2);
+        // Z = V conj(I) / |I|^2, less the series elements
+        let r_inv = 4.0 / core::f32::consts::PI * v_e / i_mag;
+        let x = (vd * id + vq * iq) / i2 - rs - r_inv;
+        let y = (vq * id - vd * iq) / i2 - w_n * l_sigma;
+        if !(y > 0.0) {
+            return Err(CommissioningError::ResultOutOfRange(
+                "magnetizing_inductance",
+            ));
+        }
+        let z2 = x * x + y * y;
+        let l_m = z2 / (w_n * y);
+        let i_flux = sqrt(z2) * i_mag / (w_n * l_m);
+        Ok([l_m, i_flux])
+    }
+
+    /// J and B from the no-load test's sums with Rs `rs` and inverter error `v_e`.
+    fn mechanics(&self, rs: f32, v_e: f32) -> Mechanics {
+        let [h0, h1] = &self.hold;
+        let hold_torque = 0.5 * (h0.torque.torque(rs, v_e) + h1.torque.torque(rs, v_e));
+        let speed = 0.5 * (h0.speed + h1.speed);
+        let friction = if speed > 0.0 {
+            (hold_torque / speed).max(0.0)
+        } else {
+            0.0
+        };
+        let j_of = |s: &RampSums| {
+            if s.speed_change > 0.0 {
+                (s.impulse.torque(rs, v_e) - friction * s.angle) / s.speed_change
+            } else {
+                0.0
+            }
+        };
+        let [a, b] = &self.ramp;
+        let dw = a.speed_change + b.speed_change;
+        let inertia = if dw > 0.0 {
+            let j = (a.impulse.torque(rs, v_e) + b.impulse.torque(rs, v_e)
+                - friction * (a.angle + b.angle))
+                / dw;
+            (j > 0.0).then_some(j)
+        } else {
+            None
+        };
+        Mechanics {
+            inertia,
+            inertia_halves: (j_of(a), j_of(b)),
+            friction,
+            hold_torque,
+        }
     }
 }
 
@@ -677,14 +1336,117 @@ fn accumulate(f: &mut Fourier, v_prev: f32, i: f32, angle: f32, w: f32, ts: f32)
     f.v.beta -= v_prev * sv;
 }
 
-/// Z - Rs from Fourier sums (real, imaginary), `None` without current.
-fn impedance(f: &Fourier, rs: f32) -> Option<(f32, f32)> {
-    let (vr, vi, ir, ii) = (f.v.alpha, f.v.beta, f.i.alpha, f.i.beta);
+/// Z - Rs from Fourier sums (real, imaginary), the voltage delayed by `phi` (rad) more
+/// than its timing model says; `None` without current.
+fn impedance(f: &Fourier, rs: f32, phi: f32) -> Option<(f32, f32)> {
+    let ph = FastSinCos.sin_cos(phi);
+    // V e^(-j phi)
+    let vr = f.v.alpha * ph.cos + f.v.beta * ph.sin;
+    let vi = f.v.beta * ph.cos - f.v.alpha * ph.sin;
+    let (ir, ii) = (f.i.alpha, f.i.beta);
     let d = ir * ir + ii * ii;
     if !(d > 0.0) {
         return None;
     }
     Some(((vr * ir + vi * ii) / d - rs, (vi * ir - vr * ii) / d))
+}
+
+/// J, B and the hold's torque from the no-load test.
+#[derive(Clone, Copy, Debug)]
+struct Mechanics {
+    inertia: Option<f32>,
+    inertia_halves: (f32, f32),
+    friction: f32,
+    hold_torque: f32,
+}
+
+/// Least-squares line v = Rs i + c through the DC steps; (Rs, c, relative residual: the
+/// largest deviation over its Rs i).
+fn line_fit(points: &[(f32, f32); 4]) -> (f32, f32, f32) {
+    let n = points.len() as f32;
+    let (mut si, mut sv, mut sii, mut siv) = (0.0, 0.0, 0.0, 0.0);
+    for &(i, v) in points {
+        si += i;
+        sv += v;
+        sii += i * i;
+        siv += i * v;
+    }
+    let den = n * sii - si * si;
+    if !(den > 0.0) {
+        return (0.0, 0.0, f32::INFINITY);
+    }
+    let rs = (n * siv - si * sv) / den;
+    let c = (sv - rs * si) / n;
+    let mut worst = 0.0f32;
+    for &(i, v) in points {
+        worst = worst.max((v - rs * i - c).abs() / (rs * i).abs().max(1e-6));
+    }
+    (rs, c, worst)
+}
+
+/// Standard errors of the slope and the intercept of the line (`rs`, `c`) through
+/// `points` (ordinary least squares, n - 2 degrees of freedom).
+fn line_errors(points: &[(f32, f32); 4], rs: f32, c: f32) -> (f32, f32) {
+    let n = points.len() as f32;
+    let mean_i = points.iter().map(|p| p.0).sum::<f32>() / n;
+    let mut sxx = 0.0;
+    let mut ssr = 0.0;
+    let mut sii = 0.0;
+    for &(i, v) in points {
+        sxx += (i - mean_i) * (i - mean_i);
+        let e = v - rs * i - c;
+        ssr += e * e;
+        sii += i * i;
+    }
+    if !(sxx > 0.0) {
+        return (f32::INFINITY, f32::INFINITY);
+    }
+    let s2 = ssr / (n - 2.0);
+    (sqrt(s2 / sxx), sqrt(s2 * sii / (n * sxx)))
+}
+
+/// The half-window part of a bound: 1.5 |a - b|, three standard deviations of the mean of
+/// two estimates whose difference is `a - b`.
+fn spread(a: f32, b: f32) -> f32 {
+    1.5 * (a - b).abs()
+}
+
+/// [`spread`] of each component of two fits' results; infinite where a half had none.
+fn halves<const N: usize>(a: Option<[f32; N]>, b: Option<[f32; N]>) -> [f32; N] {
+    let mut out = [f32::INFINITY; N];
+    if let (Some(a), Some(b)) = (a, b) {
+        for ((o, x), y) in out.iter_mut().zip(a).zip(b) {
+            *o = spread(x, y);
+        }
+    }
+    out
+}
+
+/// The largest change of each component of `base` when the fit `f` is redone with each
+/// of `deltas`; infinite where it has no result.
+fn worst<const N: usize>(
+    base: &[f32; N],
+    deltas: [f32; 2],
+    f: impl Fn(f32) -> Option<[f32; N]>,
+) -> [f32; N] {
+    let mut out = [0.0f32; N];
+    for d in deltas {
+        match f(d) {
+            Some(x) => {
+                for ((o, x), b) in out.iter_mut().zip(x).zip(base) {
+                    *o = o.max((x - b).abs());
+                }
+            }
+            None => out = [f32::INFINITY; N],
+        }
+    }
+    out
+}
+
+fn add<const N: usize>(acc: &mut [f32; N], x: [f32; N]) {
+    for (a, x) in acc.iter_mut().zip(x) {
+        *a += x;
+    }
 }
 
 /// Inertia J (kg m^2) and viscous friction B (N m s/rad) from two accelerations at the
@@ -708,4 +1470,51 @@ pub fn mechanics_from_slopes(
         0.0
     };
     Some((j, b.max(0.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn logarithm_and_exponential_are_accurate() {
+        for x in [1e-3f32, 0.3, 1.0, 2.0, 7.5, 1234.0] {
+            let l = ln(x);
+            assert!((exp(l) - x).abs() <= 2e-6 * x, "{x}");
+        }
+        assert!((ln(10.0) - core::f32::consts::LN_10).abs() < 2e-6);
+        assert!((exp(1.0) - core::f32::consts::E).abs() < 2e-6);
+    }
+
+    /// The catalogue line: about 0.0024 kg m^2 for a 0.75 kW 4-pole motor, and a 2-pole
+    /// motor of twice the power (the same torque) gets the same.
+    #[test]
+    fn catalogue_inertia_follows_the_torque() {
+        let j = catalogue_inertia(750.0 / 157.08);
+        assert!((j - 0.0035 * 0.75f32.powf(1.3)).abs() < 1e-6, "{j}");
+        assert!((catalogue_inertia(37_000.0 / 157.08) - 0.0035 * 37f32.powf(1.3)).abs() < 1e-3);
+        assert_eq!(catalogue_inertia(0.0), 0.0);
+    }
+
+    #[test]
+    fn every_concern_says_what_to_check_within_a_reply_line() {
+        for c in [
+            Concern::CoupledLoad,
+            Concern::InertiaInconsistent,
+            Concern::InertiaHigh,
+            Concern::InertiaLow,
+            Concern::FluxCurrentHigh,
+            Concern::FluxCurrentLow,
+            Concern::Uncertain("magnetizing_inductance"),
+        ] {
+            assert!(c.reason().len() + c.advice().len() < 120, "{c:?}");
+            assert!(!c.field().is_empty());
+        }
+        let k = Check {
+            concern: Concern::CoupledLoad,
+            value: 0.3,
+            range: (f32::NEG_INFINITY, COUPLED_LOAD_TORQUE),
+        };
+        assert!(!k.passed());
+    }
 }

@@ -171,6 +171,7 @@ pub fn error_text(e: CommissioningError) -> &'static str {
         CommissioningError::SensorOffset => "a current-sensor offset beyond 2 % of the trip",
         CommissioningError::ResultOutOfRange(f) => f,
         CommissioningError::PoorFit(f) => f,
+        CommissioningError::Implausible(c) => c.reason(),
     }
 }
 
@@ -181,6 +182,7 @@ pub fn error_detail(e: CommissioningError) -> Option<&'static str> {
         CommissioningError::PoorFit(_) => {
             Some("the DC steps are not on a line: the rotor moved or the inverter error varies")
         }
+        CommissioningError::Implausible(c) => Some(c.advice()),
         _ => None,
     }
 }
