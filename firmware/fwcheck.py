@@ -3,9 +3,14 @@
 
 usage: fwcheck.py ELF ISR_SYMBOL BIN_DIR [--warn-only] [--allow-flash=REGEX]
 
-- flash (everything loaded from flash) <= 96 KiB (the smallest STM32G474, the xB part,
-  has 128 KiB; its last page holds the settings), static RAM (.data + .bss + .uninit +
-  .ccmram_uninit) <= 16 KiB;
+- flash (everything loaded from flash) <= 128 KiB, static RAM (.data + .bss + .uninit +
+  .ccmram_uninit) <= 16 KiB. The flash budget was 96 KiB while the settings were meant
+  for the last page of a 128 KiB part; the settings page needs the 512 KiB part (below),
+  so the image is bounded by bank 1 instead: 128 KiB keeps half of it free. The part is the NUCLEO-G474RE's STM32G474RE (512 KiB,
+  dual-bank, 2 KiB pages): the settings page (board-core/src/settings.rs SETTINGS_ADDR,
+  bank 2 page 127) exists only on the 512 KiB parts (xE), not on the xB (128 KiB) or xC
+  (256 KiB). Checked: the page lies inside that part's flash, in bank 2, on a page
+  boundary that matches its page number, and above everything the image loads;
 - the ISR lies in CCM SRAM (0x1000_0000 .. 0x1000_8000);
 - call graph from the ISR (direct `bl`/`b` targets in the disassembly, through linker
   thunks): fails if any reachable function is a panic routine or an f64 routine, or lies
@@ -20,7 +25,11 @@ import subprocess
 import sys
 from collections import defaultdict
 
-FLASH_BUDGET = 96 * 1024
+FLASH_BUDGET = 128 * 1024
+# the part the settings address needs (STM32G474xE, dual-bank mode: two banks of 256 KiB
+# in 2 KiB pages)
+PART, PART_FLASH, BANK_BYTES, PAGE_BYTES = "STM32G474xE", 512 * 1024, 256 * 1024, 2048
+FLASH_BASE = 0x0800_0000
 RAM_BUDGET = 16 * 1024
 CCM_LO, CCM_HI = 0x1000_0000, 0x1000_8000
 
@@ -58,9 +67,17 @@ def main():
           f"(.data {secs.get('.data', (0, 0))[0]}, .bss {secs.get('.bss', (0, 0))[0]}, "
           f".uninit {secs.get('.uninit', (0, 0))[0]}, CCM state {secs.get('.ccmram_uninit', (0, 0))[0]})")
     print(f"  CCM code   {ccm_code:7d} B (copied from flash at start-up, counted in flash)")
+    # the control interrupt's state (`control_isr::STATE`): its size and where it lies
+    for line in run(f"{bindir}/llvm-nm", "-S", "--defined-only", elf).splitlines():
+        m = re.match(r"^([0-9a-f]+) ([0-9a-f]+) [bBdD] \S*control_isr5STATE", line)
+        if m:
+            addr, size = int(m.group(1), 16), int(m.group(2), 16)
+            where = "CCM SRAM" if CCM_LO <= addr < CCM_HI else "SRAM"
+            print(f"  control state {size} B in {where}")
     if flash > FLASH_BUDGET:
         print("  FAIL: flash over budget")
         ok = False
+    ok &= check_settings_page(elf, bindir)
     if ram > RAM_BUDGET:
         print("  FAIL: static RAM over budget")
         ok = False
@@ -183,6 +200,43 @@ def main():
         print("  (warn-only: not failing)")
         return 0
     return 0 if ok else 1
+
+
+def settings_constants():
+    import os
+    src = open(os.path.join(os.path.dirname(os.path.abspath(__file__)),
+                            "board-core", "src", "settings.rs")).read()
+    def const(name):
+        m = re.search(rf"pub const {name}: \w+ = ([0-9_xXa-fA-F]+);", src)
+        return int(m.group(1).replace("_", ""), 0)
+    return const("SETTINGS_ADDR"), const("SETTINGS_PAGE_BYTES"), const("SETTINGS_PAGE_NUMBER")
+
+
+def check_settings_page(elf, bindir):
+    """The settings page exists on the part and nothing the image loads reaches it."""
+    addr, size, page = settings_constants()
+    import struct
+    data = open(elf, "rb").read()
+    phoff, = struct.unpack_from("<I", data, 28)
+    phentsize, phnum = struct.unpack_from("<HH", data, 42)
+    end = 0
+    for i in range(phnum):
+        typ, _off, _va, pa, filesz = struct.unpack_from("<5I", data, phoff + i * phentsize)
+        if typ == 1 and filesz:                        # PT_LOAD: what the flash holds
+            end = max(end, pa + filesz)
+    problems = []
+    if not FLASH_BASE + BANK_BYTES <= addr and addr + size <= FLASH_BASE + PART_FLASH:
+        problems.append(f"0x{addr:08x} is not in bank 2 of the {PART} (512 KiB)")
+    if size != PAGE_BYTES or addr != FLASH_BASE + BANK_BYTES + page * PAGE_BYTES:
+        problems.append(f"0x{addr:08x} is not bank 2 page {page}")
+    if end > addr:
+        problems.append(f"the image ends at 0x{end:08x}, above the settings page")
+    for p in problems:
+        print(f"  FAIL: settings page: {p}")
+    if not problems:
+        print(f"  settings page 0x{addr:08x} (bank 2 page {page}) exists on the {PART}; "
+              f"image ends at 0x{end:08x}")
+    return not problems
 
 
 def expand(reglist):

@@ -82,7 +82,8 @@ PERIPHERALS = {
                           0x20: "CICR", 0x48: "AHB1ENR", 0x4C: "AHB2ENR", 0x50: "AHB3ENR",
                           0x58: "APB1ENR1", 0x5C: "APB1ENR2", 0x60: "APB2ENR", 0x88: "CCIPR",
                           0x90: "BDCR", 0x94: "CSR", 0x9C: "CCIPR2"}),
-    0x4002_2000: ("FLASH", {0x0: "ACR", 0x8: "KEYR", 0x10: "SR", 0x14: "CR", 0x20: "OPTR"}),
+    0x4002_2000: ("FLASH", {0x0: "ACR", 0x8: "KEYR", 0x10: "SR", 0x14: "CR", 0x18: "ECCR",
+                            0x20: "OPTR"}),
     0x4800_0000: ("GPIOA", {}), 0x4800_0400: ("GPIOB", {}), 0x4800_0800: ("GPIOC", {}),
     0x5000_0000: ("ADC1", {}), 0x5000_0100: ("ADC2", {}), 0x5000_0300: ("ADC12", {0x8: "CCR"}),
     0xE004_2000: ("DBGMCU", {0x4: "CR", 0x8: "APB1FZR1", 0xC: "APB1FZR2", 0x10: "APB2FZR"}),
@@ -241,9 +242,15 @@ class Machine:
     """The emulated MCU with its peripherals, running one ELF."""
 
     def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0,
-                 settings_page=None):
+                 settings_page=None, current_offset_counts=0, tx_bytes_per_period=None,
+                 torn=()):
         """`settings_page`: the 2 KiB settings page's contents at power-up (default erased),
-        e.g. another Machine's `settings_page()` after a `save`: a reboot with that flash."""
+        e.g. another Machine's `settings_page()` after a `save`: a reboot with that flash.
+        `current_offset_counts`: added to every phase-current sample (an amplifier whose
+        bias is off). `tx_bytes_per_period`: the UART transmitter's pace (115 200 baud
+        carries 2.3 bytes per 200 us period; None: it takes every byte at once).
+        `torn`: offsets (from 0x0807_F800) of settings-page double words a power cut left
+        half written: reading one is an ECC double error (FLASH_ECCR.ECCD, NMI)."""
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
         self.flash_top = bytearray(b"\xff" * 0x1000)
@@ -252,6 +259,13 @@ class Machine:
                 raise ValueError("settings_page must be 2048 bytes")
             self.flash_top[0x800:] = settings_page
         self._flash_key = 0          # unlock sequence position
+        # double words (offsets in flash_top) with an ECC double error; reading one sets
+        # FLASH_ECCR and raises the NMI (RM0440 3.3.4)
+        self.flash_torn = {0x800 + o for o in torn}
+        self.nmi_pending = False
+        self._ecc_replay = None
+        self.flash_ops = 0           # erase and double-word program operations begun
+        self.cut_at_op = None        # power cut during this flash operation (1-based)
         self._flash_half = None      # first word of a double word being programmed
         self.uc.mmio_map(FLASH_TOP, 0x1000, self._flash_mem_read, None,
                          self._flash_mem_write, None)
@@ -294,6 +308,11 @@ class Machine:
         self.dc_bus = dc_bus
         self.pwr_gated_writes = pwr_gated_writes
         self.moe_history = []    # (period, moe)
+        self.current_offset_counts = current_offset_counts
+        self.isr_stopped = False  # the control interrupt is never taken (a hung ISR)
+        self.uart_ore = False     # USART2_ISR.ORE: the RX FIFO overflowed
+        self.tx_pace = tx_bytes_per_period
+        self._tx_credit = 8.0 if tx_bytes_per_period is not None else None
         self.selftest = False
         self.mpu_guard = None       # (base, size) of the no-access MPU region, once enabled
         self.mpu_violation = None   # first address accessed inside it
@@ -386,7 +405,9 @@ class Machine:
         elif base in (0x5000_0000, 0x5000_0100) and off == 0x8:
             v &= ~(1 << 31)                             # ADCAL done at once
         elif base == 0x4000_4400 and off == 0x1C:       # USART2_ISR
-            v = (1 << 7) | (1 << 6) | (1 << 21) | (1 << 22) | ((1 << 5) if self.rx else 0)
+            txfnf = self._tx_credit is None or self._tx_credit >= 1.0
+            v = ((1 << 7) if txfnf else 0) | (1 << 6) | (1 << 21) | (1 << 22) \
+                | ((1 << 5) if self.rx else 0) | ((1 << 3) if self.uart_ore else 0)
         elif base == 0x4000_4400 and off == 0x24:       # RDR
             v = self.rx.pop(0) if self.rx else 0
         elif base == 0x4002_0C00 and off == 0x0:
@@ -424,7 +445,7 @@ class Machine:
         if base in (0x5000_0000, 0x5000_0100):
             self._adc_write(base, off4, value)
             return
-        if base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14):
+        if base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14, 0x18):
             self._flash_reg_write(off4, value)
             return
         if base == 0x4001_2C00:
@@ -438,6 +459,13 @@ class Machine:
             self.cordic_results = [q(math.sin(math.pi * x)), q(math.cos(math.pi * x))]
         if base == 0x4000_4400 and off4 == 0x28:
             self.tx.append(value & 0xFF)
+            if self._tx_credit is not None:
+                self._tx_credit -= 1.0
+        if base == 0x4000_4400 and off4 == 0x20 and value & (1 << 3):   # ICR.ORECF
+            self.uart_ore = False
+        if base == 0x4000_4400 and off4 == 0x18 and value & (1 << 3):   # RQR.RXFRQ
+            self.events.append(("USART RX flush", len(self.rx)))
+            self.rx.clear()                             # the RX FIFO's content discarded
         if base == 0x4000_3000 and off4 == 0x0:
             if value == 0xCCCC:
                 self.iwdg_started = True
@@ -488,8 +516,40 @@ class Machine:
         self.regs[(b, off)] = value
 
     # --- flash (RM0440 3.3.6-3.3.7: unlock, page erase, double-word programming) --------
-    def _flash_mem_read(self, _uc, off, size, _d):
+    def _flash_mem_read(self, uc, off, size, _d):
+        dw = off & ~7
+        if dw == self._ecc_replay:
+            # the load the NMI interrupted, executed again after the handler returned
+            # (Unicorn restarts an instruction stopped in a memory callback): it completes
+            self._ecc_replay = None
+        elif dw in self.flash_torn:
+            # ECCD, BK_ECC (bank 2), ADDR_ECC: the double word's offset in bank 2
+            addr = FLASH_TOP + dw - 0x0804_0000
+            self.regs[(0x4002_2000, 0x18)] = (1 << 31) | (1 << 21) | addr
+            self.events.append(("FLASH ECC double error", FLASH_TOP + dw))
+            self.nmi_pending = True
+            self._ecc_replay = dw
+            uc.emu_stop()
         return int.from_bytes(self.flash_top[off:off + size], "little")
+
+    def _flash_op(self, region):
+        """Counts a flash operation; at `cut_at_op` the power fails during it: the
+        double words of `region` (offset, length) are left torn and the machine stops."""
+        self.flash_ops += 1
+        if self.cut_at_op != self.flash_ops:
+            return False
+        o, n = region
+        for dw in range(o, o + n, 8):
+            self.flash_torn.add(dw)
+            # half programmed / half erased bits
+            self.flash_top[dw:dw + 8] = bytes(b & 0x5A for b in self.flash_top[dw:dw + 8])
+        self.halted = f"power cut during flash operation {self.flash_ops}"
+        self.uc.emu_stop()
+        return True
+
+    def torn_offsets(self):
+        """The settings page's torn double words (offsets from 0x0807_F800)."""
+        return sorted(o - 0x800 for o in self.flash_torn if o >= 0x800)
 
     def _flash_sr(self, bits):
         self.regs[(0x4002_2000, 0x10)] = self.reg(0x4002_2000, 0x10) | bits
@@ -520,6 +580,9 @@ class Machine:
             self._flash_sr(1 << 3)                       # PROGERR: not erased
             return
         self.flash_top[o:o + 8] = struct.pack("<II", lo, value)
+        self.flash_torn.discard(o)
+        if self._flash_op((o, 8)):
+            return
         self.events.append(("FLASH program", first))
 
     def _flash_reg_write(self, off, value):
@@ -537,6 +600,9 @@ class Machine:
         if off == 0x10:                                  # SR: rc_w1
             self.regs[(b, off)] = self.reg(b, off) & ~(value & ~FLASH_BSY)
             return
+        if off == 0x18:                                  # ECCR: ECCD/ECCC rc_w1
+            self.regs[(b, off)] = self.reg(b, off) & ~(value & (3 << 30))
+            return
         old = self.reg(b, 0x14)                           # CR
         if old & FLASH_LOCK:
             self.events.append(("FLASH CR write while locked", value))
@@ -553,6 +619,8 @@ class Machine:
             if addr >= FLASH_TOP:
                 o = addr - FLASH_TOP
                 self.flash_top[o:o + size] = b"\xff" * size
+                self.flash_torn -= set(range(o, o + size, 8))
+                self._flash_op((o, size))
             else:
                 self.uc.mem_write(addr, b"\xff" * size)
             value &= ~(1 << 16)                          # STRT clears when done
@@ -584,13 +652,18 @@ class Machine:
 
     def _counts(self, amps):
         v = AMP_BIAS_V + CURRENT_SIGN * amps * SHUNT_OHM * AMP_GAIN
-        return max(0, min(COUNTS - 1, int(round(v / VREF * COUNTS))))
+        c = int(round(v / VREF * COUNTS)) + self.current_offset_counts
+        return max(0, min(COUNTS - 1, c))
 
     def _period_hardware(self):
         """One PWM period: the load integrates the applied duties, the ADCs convert."""
         self.periods += 1
         b = 0x4001_2C00
         running = self.reg(b, 0) & 1
+        if running:
+            self.regs[(b, 0x10)] = self.reg(b, 0x10) | 1   # UIF: one update per period (RCR = 1)
+        if self._tx_credit is not None:
+            self._tx_credit = min(8.0, self._tx_credit + self.tx_pace)
         self.load.period(self.duties(), self.moe(), self.dc_bus)
         self.moe_history.append((self.periods, self.moe()))
         if running:
@@ -605,6 +678,8 @@ class Machine:
             self.regs[(0x4000_1000, 0x10)] = self.reg(0x4000_1000, 0x10) | 1
 
     def _irq_pending(self):
+        if self.isr_stopped:
+            return None
         if ADC1_2_IRQ in self.nvic_enabled and self.reg(0x5000_0000, 4) & (1 << 6) \
                 and self.reg(0x5000_0000, 0) & (1 << 6):
             return ADC1_2_IRQ
@@ -747,6 +822,16 @@ class Machine:
                 break
             self.pc = self.uc.reg_read(UC_ARM_REG_PC)
             self.instret += n
+            if self.halted is not None:
+                break
+            if self.nmi_pending:
+                # the ECC double error's NMI, taken after the load that read the word
+                self.nmi_pending = False
+                self.uc.reg_write(UC_ARM_REG_PC, self.pc | 1)
+                self.run_exception(NMI_VECTOR, limit=200_000)
+                self.pc = self.uc.reg_read(UC_ARM_REG_PC)
+                if self.halted is not None:
+                    break
             if self.mpu_violation is not None:
                 self._stack_fault()
                 break
@@ -778,6 +863,14 @@ class Machine:
     def send(self, text):
         self.rx.extend(text.encode())
         self.rx_history.extend(text.encode())
+
+    def overrun(self, in_fifo, lost):
+        """A receiver overrun (RM0440 USART, FIFO mode): the 8-byte RX FIFO holds
+        `in_fifo`, the bytes of `lost` that arrived while it was full are gone, ORE is
+        set."""
+        self.rx.extend(in_fifo.encode())
+        self.rx_history.extend((in_fifo + lost).encode())
+        self.uart_ore = True
 
     def output(self):
         return self.tx.decode(errors="replace")

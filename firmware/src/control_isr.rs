@@ -49,9 +49,17 @@ pub struct IsrState {
     /// Self-test: the simulated power stage.
     #[cfg(feature = "selftest")]
     pub sim: acim_firmware_core::sim::SimulatedStage,
+    /// The start latch and whether the last period switched on (MOE set only on a
+    /// deliberate off-to-on transition: `acim_firmware_core::stage`).
+    #[cfg(not(feature = "selftest"))]
+    pub outputs: acim_firmware_core::stage::Outputs,
 }
 
-#[link_section = ".ccmram_uninit.isr_state"]
+// In SRAM1, not CCM: the interrupt's code runs from CCM SRAM over the I-bus while its
+// data goes over the S-bus (both zero wait states), so fetches and loads do not contend,
+// and CCM's 32 KiB stay for the code (the state outgrew the room beside it when the
+// commissioning's accumulators doubled for its confidence bounds).
+#[link_section = ".uninit.isr_state"]
 static mut STATE: MaybeUninit<IsrState> = MaybeUninit::uninit();
 static READY: AtomicBool = AtomicBool::new(false);
 
@@ -225,14 +233,16 @@ fn ADC1_2() {
         io_ack(&mut io);
         return;
     };
-    // at most one command per period; a start arms MOE, an accepted reset clears breaks
+    // at most one command per period; a start arms the outputs, an accepted reset
+    // clears breaks
     if let Some(cmd) = st.cmd.dequeue() {
-        let r = apply_command(&mut st.ctl, &mut io, cmd);
+        let r = apply_command(&mut st.ctl, &mut io, &mut st.outputs, cmd);
         let _ = st.reply.enqueue(r);
     }
-    // flags read before acknowledging, break checks, step, PWM write (never sets MOE),
-    // deadline check: acim_firmware_core::stage::control_period
-    control_period(&mut st.ctl, &mut io);
+    // flags read before acknowledging, break checks, step, PWM write (MOE set only on an
+    // armed off-to-on transition with no break flag), deadline check:
+    // acim_firmware_core::stage::control_period
+    control_period(&mut st.ctl, &mut io, &mut st.outputs);
     let t1 = DWT::cycle_count();
     publish(st, elapsed(t0, t1), 0.0);
 }

@@ -2,22 +2,67 @@
 //! program it (unlock with the two KEYR keys, page erase PER/BKER/PNB/STRT, double-word
 //! programming with PG, BSY wait, errors checked, lock, data cache reset, read back).
 //!
-//! Only the reserved page `settings::SETTINGS_ADDR` (bank 2, page 127; memory.x keeps the
-//! program out of it) is ever erased. Writing needs the factory dual-bank mode
+//! Only the reserved page `settings::SETTINGS_ADDR` (bank 2, page 127 of the 512 KiB
+//! STM32G474xE; memory.x keeps the program out of it, fwcheck.py checks that it exists
+//! on that part and lies above the image) is ever erased, and only with the factory bank
+//! mapping (FLASH_OPTR.BFB2 = 0: no bank swap). Writing needs the factory dual-bank mode
 //! (FLASH_OPTR.DBANK = 1): then the erase runs in bank 2 while the program (bank 1) and the
 //! control interrupt (CCM SRAM) keep running; in single-bank mode the pages are 4 KiB and
 //! an erase would stall every flash fetch for up to 40 ms, so `save` is refused.
 //!
 //! Called from the main loop only (never from an interrupt), while the drive is Idle.
 
-use acim_firmware_core::settings::{RECORD_LEN, SETTINGS_ADDR, SETTINGS_PAGE_NUMBER};
+use acim_firmware_core::settings::{
+    RECORD_LEN, SETTINGS_ADDR, SETTINGS_PAGE_BYTES, SETTINGS_PAGE_NUMBER,
+};
+use core::sync::atomic::{AtomicBool, Ordering};
 use stm32g4xx_hal::pac;
+
+/// A flash ECC double error was found in the settings page (by the NMI handler,
+/// [`ecc_error_in_settings`]) since the last [`take_ecc_error`].
+static ECC_IN_SETTINGS: AtomicBool = AtomicBool::new(false);
+
+/// FLASH_ECCR: ECCD (double error, rc_w1), BK_ECC, ADDR_ECC (offset in the bank).
+const ECCR_ECCD: u32 = 1 << 31;
+const ECCR_BK_ECC: u32 = 1 << 21;
+const ECCR_ADDR_ECC: u32 = 0x7_FFFF;
+/// Bank 2's start in dual-bank mode (256 KiB banks).
+const BANK2: u32 = 0x0804_0000;
+
+/// Called by the NMI handler: if the NMI is a flash ECC double error inside the settings
+/// page (a double word torn by a power cut during `save`), clears ECCD, notes it, and
+/// returns true: the handler returns and the read carries on with whatever the word
+/// holds, which the record's CRC then refuses (review N2: the board hung in the NMI
+/// handler at every boot, before the watchdog and the UART). Any other NMI: false.
+pub fn ecc_error_in_settings() -> bool {
+    let f = flash();
+    let eccr = f.eccr().read().bits();
+    let addr = BANK2 + (eccr & ECCR_ADDR_ECC);
+    if eccr & ECCR_ECCD == 0
+        || eccr & ECCR_BK_ECC == 0
+        || !(SETTINGS_ADDR..SETTINGS_ADDR + SETTINGS_PAGE_BYTES).contains(&addr)
+    {
+        return false;
+    }
+    // SAFETY: ECCD is rc_w1; the other bits written as read (ECCCIE kept, ECCC not set)
+    f.eccr().write(|w| unsafe { w.bits(eccr & !(1 << 30)) });
+    ECC_IN_SETTINGS.store(true, Ordering::Relaxed);
+    true
+}
+
+/// Whether an ECC double error in the settings page was found since the last call.
+pub fn take_ecc_error() -> bool {
+    ECC_IN_SETTINGS.swap(false, Ordering::Relaxed)
+}
 
 /// Why a save failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FlashError {
     /// FLASH_OPTR.DBANK = 0 (single-bank mode, 4 KiB pages): not supported.
     SingleBank,
+    /// FLASH_OPTR.BFB2 = 1: the banks may be swapped (boot from bank 2), and BKER selects
+    /// the physical bank, so the erase could hit the running program: refused.
+    BankSwap,
     /// The unlock sequence did not clear LOCK.
     Locked,
     /// BSY did not clear in time.
@@ -35,6 +80,7 @@ impl FlashError {
     pub fn as_str(self) -> &'static str {
         match self {
             FlashError::SingleBank => "flash in single-bank mode (OPTR.DBANK = 0)",
+            FlashError::BankSwap => "bank swap option set (OPTR.BFB2 = 1)",
             FlashError::Locked => "flash did not unlock",
             FlashError::Timeout => "flash busy timeout",
             FlashError::Erase(_) => "page erase error",
@@ -73,24 +119,34 @@ pub fn read_record() -> [u8; RECORD_LEN] {
     r
 }
 
+/// Waits for BSY to clear, calling `poll` (the main loop's watchdog and interrupt watch)
+/// meanwhile: an erase takes up to 40 ms.
 #[inline(never)]
-fn wait_idle(f: &pac::flash::RegisterBlock) -> Result<u32, FlashError> {
+fn wait_idle(f: &pac::flash::RegisterBlock, poll: &mut dyn FnMut()) -> Result<u32, FlashError> {
     for _ in 0..BUSY_POLLS {
         let sr = f.sr().read().bits();
         if sr & (1 << 16) == 0 {
             return Ok(sr);
         }
+        poll();
     }
     Err(FlashError::Timeout)
 }
 
-/// Erases the settings page and programs `record` at its start, then reads it back.
-pub fn write_record(record: &[u8; RECORD_LEN]) -> Result<(), FlashError> {
+/// Erases the settings page and programs `record` at its start, then reads it back;
+/// `poll` runs while the flash is busy.
+pub fn write_record(record: &[u8; RECORD_LEN], poll: &mut dyn FnMut()) -> Result<(), FlashError> {
     let f = flash();
-    if !f.optr().read().dbank().bit_is_set() {
+    let optr = f.optr().read();
+    if !optr.dbank().bit_is_set() {
         return Err(FlashError::SingleBank);
     }
-    wait_idle(f)?;
+    // BKER addresses the physical bank: with BFB2 set, bank 2 may be the one mapped at
+    // 0x0800_0000 (the program), so the settings page of bank 2 is not ours to erase
+    if optr.bfb2().bit_is_set() {
+        return Err(FlashError::BankSwap);
+    }
+    wait_idle(f, poll)?;
     if f.cr().read().lock().bit_is_set() {
         // SAFETY (both writes): the documented unlock keys; a wrong sequence would only
         // lock FLASH_CR until the next reset.
@@ -100,7 +156,7 @@ pub fn write_record(record: &[u8; RECORD_LEN]) -> Result<(), FlashError> {
     if f.cr().read().lock().bit_is_set() {
         return Err(FlashError::Locked);
     }
-    let result = erase_and_program(f, record);
+    let result = erase_and_program(f, record, poll);
     f.cr()
         .modify(|_, w| w.pg().clear_bit().per().clear_bit().lock().set_bit());
     // the flash data cache may hold the page's old words: reset it (DCEN off around DCRST)
@@ -118,6 +174,7 @@ pub fn write_record(record: &[u8; RECORD_LEN]) -> Result<(), FlashError> {
 fn erase_and_program(
     f: &pac::flash::RegisterBlock,
     record: &[u8; RECORD_LEN],
+    poll: &mut dyn FnMut(),
 ) -> Result<(), FlashError> {
     // SAFETY: writing 1 clears a status flag (rc_w1); no other effect
     f.sr().write(|w| unsafe { w.bits(SR_ERRORS | SR_EOP) });
@@ -134,7 +191,7 @@ fn erase_and_program(
         }
     });
     f.cr().modify(|_, w| w.strt().set_bit());
-    let sr = wait_idle(f)?;
+    let sr = wait_idle(f, poll)?;
     f.cr().modify(|_, w| w.per().clear_bit());
     if sr & SR_ERRORS != 0 {
         return Err(FlashError::Erase(sr));
@@ -151,7 +208,7 @@ fn erase_and_program(
             core::ptr::write_volatile(addr, lo);
             core::ptr::write_volatile(addr.add(1), hi);
         }
-        let sr = wait_idle(f)?;
+        let sr = wait_idle(f, poll)?;
         if sr & SR_ERRORS != 0 {
             return Err(FlashError::Program(sr));
         }

@@ -6,6 +6,8 @@
 //! - ADC1/ADC2: power-up, calibration and injected conversions triggered by TIM1 TRGO2.
 //! - NVIC priority/unmask of the control interrupt.
 //! - TIM6 flags for the self-test's period interrupt.
+//! - The main loop's period count (TIM1's update flag), the UART's receive flush and the
+//!   last-words line of a fatal error, flash prefetch.
 //!
 //! Soundness, common to every `unsafe` below: the peripherals are used by exactly one
 //! context at a time. `main` configures them before the control interrupt is unmasked;
@@ -53,8 +55,17 @@ pub fn emergency_off() {
 /// floating, idle levels low for all six outputs.
 pub fn tim1_safe_state() {
     let t = tim1();
-    t.bdtr()
-        .modify(|_, w| w.moe().clear_bit().ossi().set_bit().ossr().set_bit());
+    // SAFETY (bits): BKF is a 4-bit filter code (board::BREAK_FILTER, checked < 16)
+    t.bdtr().modify(|_, w| unsafe {
+        w.moe()
+            .clear_bit()
+            .ossi()
+            .set_bit()
+            .ossr()
+            .set_bit()
+            .bkf()
+            .bits(acim_firmware_core::board::BREAK_FILTER)
+    });
     t.cr2().modify(|_, w| {
         w.ois1()
             .clear_bit()
@@ -120,6 +131,67 @@ pub fn break_flag() -> bool {
 pub fn clear_break_flags() {
     // SAFETY: rc_w0 flags: writing 1 leaves a flag unchanged, 0 clears it.
     tim1().sr().write(|w| unsafe { w.bits(!BREAK_FLAGS) });
+}
+
+/// A PWM period passed since the last call: TIM1's update flag (one update per period,
+/// RCR = 1), read and cleared. Main loop only: the control interrupt never reads UIF, and
+/// its only SR write ([`clear_break_flags`]) writes 1 to UIF, which leaves it unchanged.
+pub fn take_period_flag() -> bool {
+    let t = tim1();
+    if t.sr().read().uif().bit_is_clear() {
+        return false;
+    }
+    // SAFETY: rc_w0 flags: writing 0 clears UIF, the 1s leave every other flag as it is
+    // (a break flag set meanwhile is not lost)
+    t.sr().write(|w| unsafe { w.bits(!1) });
+    true
+}
+
+/// Discards the USART2 receive FIFO (RQR.RXFRQ): after an overrun its bytes are the start
+/// of a line whose rest was lost.
+pub fn uart_flush_rx() {
+    // SAFETY: RQR is a write-only request register; RXFRQ only empties the RX FIFO. The
+    // main loop owns USART2 (the HAL's Rx does not cache anything).
+    let u = unsafe { &*pac::USART2::ptr() };
+    u.rqr().write(|w| w.rxfrq().set_bit());
+}
+
+/// The last words of a fatal error on the UART (review N8: boot failures and panics were
+/// on RTT only): `fatal <what><detail>; switches off\r\n`, written directly to USART2 with
+/// a bounded wait per byte. Does nothing before the UART is enabled.
+#[inline(never)]
+pub fn uart_fatal(what: &[u8], detail: &[u8]) {
+    // SAFETY: called with the outputs already off, on the way to a halt or a watchdog
+    // reset; the main loop's UART objects are not used again. Reads of CR1/ISR, writes of
+    // TDR only.
+    let u = unsafe { &*pac::USART2::ptr() };
+    if u.cr1().read().ue().bit_is_clear() {
+        return;
+    }
+    for part in [
+        b"\r\nfatal ".as_slice(),
+        what,
+        detail,
+        b"; switches off\r\n",
+    ] {
+        for &b in part {
+            // TXFNF (bit 7 in FIFO mode); about 87 us per byte at 115 200 baud
+            let mut n = 0u32;
+            while u.isr().read().bits() & (1 << 7) == 0 && n < 100_000 {
+                n += 1;
+            }
+            // SAFETY: any byte may be written to TDR
+            u.tdr().write(|w| unsafe { w.bits(b as u32) });
+        }
+    }
+}
+
+/// Flash prefetch on (FLASH_ACR.PRFTEN; review D12), after the HAL has set the wait
+/// states; the instruction and data caches stay on.
+pub fn flash_prefetch_on() {
+    // SAFETY: a read-modify-write of PRFTEN only, at start-up (single-threaded)
+    let f = unsafe { &*pac::FLASH::ptr() };
+    f.acr().modify(|_, w| w.prften().set_bit());
 }
 
 /// TIM1 and ADC1/2 as the control interrupt's power stage (the sequence itself, with its
@@ -286,6 +358,8 @@ pub struct InjectedChannels {
     pub adc1: [u8; 2],
     /// ADC2 rank 1, rank 2.
     pub adc2: [u8; 2],
+    /// The bus divider's channel (ADC1 rank 2): the longer sampling time.
+    pub slow: u8,
 }
 
 /// Powers up, calibrates and enables ADC1 and ADC2 (independent mode, synchronous clock
@@ -322,15 +396,21 @@ pub fn adc_init(ch: &InjectedChannels, mut delay_us: impl FnMut(u32)) -> bool {
         // SAFETY: RES = 0 is 12 bits
         adc.cfgr()
             .modify(|_, w| unsafe { w.res().bits(0).jqdis().set_bit() });
-        // 24.5-cycle sampling on the used channels (code 0b011): 0.58 us
+        // sampling times: 24.5 cycles (0.58 us) on the current channels, longer on the
+        // bus divider's channel (ch.slow: its source impedance, review D11)
         for c in chans {
+            let smp = if c == ch.slow {
+                acim_firmware_core::board::BUS_SMP
+            } else {
+                0b011
+            };
             if c <= 9 {
-                // SAFETY: SMPx = 0b011 is a valid 3-bit code, c in 0..=9
-                adc.smpr1().modify(|_, w| unsafe { w.smp(c).bits(0b011) });
+                // SAFETY: SMPx is a 3-bit code (board constants < 8), c in 0..=9
+                adc.smpr1().modify(|_, w| unsafe { w.smp(c).bits(smp) });
             } else {
                 // SAFETY: as above, c in 10..=18
                 adc.smpr2()
-                    .modify(|_, w| unsafe { w.smp(c - 10).bits(0b011) });
+                    .modify(|_, w| unsafe { w.smp(c - 10).bits(smp) });
             }
         }
         // SAFETY: JL = 1 (two conversions), channel numbers < 19, JEXTSEL/JEXTEN from the

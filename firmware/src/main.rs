@@ -150,11 +150,9 @@ fn main() -> ! {
             .boost(true),
         pwr,
     );
-    // judged from the registers, not from the HAL's computed value
-    if let Err(e) = acim_firmware_core::clock::check(&hw::clock_registers(), board::SYSCLK_HZ) {
-        defmt::error!("clock set-up wrong: {}", e);
-        panic!("system clock is not 170 MHz boost");
-    }
+    // flash prefetch on (review D12: the main loop runs from flash at 4 wait states, and
+    // its interrupt-masked sections delay the control interrupt)
+    hw::flash_prefetch_on();
     defmt::info!(
         "acim-firmware {}: {} Hz core, {} Hz PWM, mode: {}",
         env!("CARGO_PKG_VERSION"),
@@ -185,12 +183,23 @@ fn main() -> ! {
         panic!("USART2 set-up failed")
     };
     let (mut tx, mut rx) = serial.split();
+    // judged from the registers, not from the HAL's computed value; after the UART set-up
+    // so that a failure is reported there too (the panic handler writes it; at a wrong
+    // clock the baud rate may be off, but the RTT log has it as well)
+    if let Err(e) = acim_firmware_core::clock::check(&hw::clock_registers(), board::SYSCLK_HZ) {
+        defmt::error!("clock set-up wrong: {}", e);
+        panic!("system clock is not 170 MHz boost");
+    }
 
     let sincos = board_cfg::sincos(dp.CORDIC, &mut rcc);
     // settings from the reserved flash page; anything but an intact, valid record of this
     // version: the defaults, reported after the ready line (the drive starts Idle anyway)
-    let (mut settings, load) = match Settings::decode(&flash::read_record()) {
-        Ok(s) => (s, Ok(())),
+    let record = flash::read_record();
+    // a double word torn by a power cut during a save (ECC double error, NMI handled)
+    let torn = flash::take_ecc_error();
+    let (mut settings, load) = match Settings::decode(&record) {
+        Ok(s) if !torn => (s, Ok(())),
+        Ok(_) => (Settings::defaults(), Err(LoadError::Crc)),
         Err(e) => (Settings::defaults(), Err(e)),
     };
     match load {
@@ -230,7 +239,15 @@ fn main() -> ! {
             .period(board::PWM_ARR)
             .center_aligned()
             .with_deadtime(board::DEAD_TIME_NS.nanos())
-            .with_break_pin(gpioa.pa6.into_alternate(), Polarity::ActiveLow)
+            // the fault line is active low (open drain on the power stage): pulled up, so a
+            // missing pull on the board reads as "no fault" only while it is driven
+            .with_break_pin(
+                gpioa
+                    .pa6
+                    .into_alternate()
+                    .internal_resistor(stm32g4xx_hal::gpio::Pull::Up),
+                Polarity::ActiveLow,
+            )
             .finalize();
         // the HAL leaves MOE set: clear it before any channel is enabled
         hw::tim1_safe_state();
@@ -252,6 +269,7 @@ fn main() -> ! {
             &hw::InjectedChannels {
                 adc1: [1, 6],
                 adc2: [7, 2],
+                slow: 6,
             },
             |us| delay.delay_us(us),
         );
@@ -275,6 +293,7 @@ fn main() -> ! {
             Err(e) => {
                 // never run with wrong offsets: outputs stay off until a power cycle
                 defmt::error!("offset calibration failed: {}; switches stay off", e);
+                hw::uart_fatal(b"current offset calibration failed: ", offset_text(&e));
                 halt_safe();
             }
         }
@@ -301,20 +320,18 @@ fn main() -> ! {
         reply: reply_p,
         #[cfg(feature = "selftest")]
         sim: acim_firmware_core::sim::SimulatedStage::new(conv),
+        #[cfg(not(feature = "selftest"))]
+        outputs: acim_firmware_core::stage::Outputs::default(),
     });
     hw::nvic_enable_top(irq, &mut cp.NVIC);
 
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());
-    let mut last_beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
-    let first_beat = last_beat;
-    while last_beat.wrapping_sub(first_beat) < settle_periods {
+    let mut alive = Alive::new(watchdog);
+    let first_beat = alive.last_beat;
+    while alive.last_beat.wrapping_sub(first_beat) < settle_periods {
         // the watchdog as in the main loop: fed only while the control interrupt is alive
-        let beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
-        if beat != last_beat {
-            last_beat = beat;
-            watchdog.feed();
-        }
+        alive.poll();
     }
 
     let mut line = RequestAssembler::new();
@@ -324,6 +341,12 @@ fn main() -> ! {
     const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
     raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
+    if torn {
+        say(
+            &mut out,
+            b"warn settings page: flash ECC error (a save cut by a power loss?)\r\n",
+        );
+    }
     match load {
         Ok(()) => say(&mut out, b"settings loaded from flash\r\n"),
         Err(LoadError::Blank) => say(&mut out, b"settings: defaults (nothing saved)\r\n"),
@@ -337,13 +360,11 @@ fn main() -> ! {
         }
     }
 
+    // after a receive overrun: the rest of the cut line is dropped (up to its end)
+    let mut rx_discard = false;
     loop {
-        // watchdog: fed only while the control interrupt is alive
-        let beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
-        if beat != last_beat {
-            last_beat = beat;
-            watchdog.feed();
-        }
+        // watchdog fed only while the control interrupt is alive; outputs off if it stops
+        alive.poll();
         let code = control_isr::STATE_CODE.load(Ordering::Relaxed);
         if code == 1 || code == 2 || code == 3 || code == control::STATE_COMMISSIONING {
             led.set_high();
@@ -354,7 +375,10 @@ fn main() -> ! {
         // commands in
         match rx.read() {
             Ok(byte) => {
-                if let Some(parsed) = line.push(byte) {
+                if rx_discard {
+                    // the line an overrun cut: dropped up to its end
+                    rx_discard = !(byte == b'\r' || byte == b'\n');
+                } else if let Some(parsed) = line.push(byte) {
                     let mut ctx = Ctx {
                         cmd_p: &mut cmd_p,
                         out: &mut out,
@@ -363,13 +387,21 @@ fn main() -> ! {
                         settings: &mut settings,
                         rcc: &mut rcc,
                         com: &mut com,
+                        alive: &mut alive,
                     };
                     handle(parsed, &mut ctx);
                 }
             }
             Err(stm32g4xx_hal::nb::Error::WouldBlock) => {}
-            Err(stm32g4xx_hal::nb::Error::Other(_)) => {
+            Err(stm32g4xx_hal::nb::Error::Other(e)) => {
+                // the line being received is cut: drop what was assembled, and after an
+                // overrun also the FIFO's bytes (they precede the lost ones) and the rest
+                // of the line up to its end, so no fragment of it can run (review N6)
                 line.reset();
+                if matches!(e, stm32g4xx_hal::serial::Error::Overrun) {
+                    hw::uart_flush_rx();
+                    rx_discard = true;
+                }
                 say(&mut out, b"err uart receive error, line dropped\r\n");
             }
         }
@@ -429,6 +461,63 @@ fn main() -> ! {
 }
 
 #[cfg(target_os = "none")]
+/// The main loop's watch on the control interrupt: the watchdog is fed only while the
+/// interrupt's heartbeat advances, and if it stops advancing for
+/// [`board::ISR_STALL_PERIODS`] PWM periods (counted by TIM1's update flag, which keeps
+/// coming while the interrupt does not) the outputs are switched off at once (review N3:
+/// the bridge kept switching at frozen duties until the watchdog reset). Polled by the
+/// main loop and inside the flash waits of `save`.
+struct Alive {
+    watchdog: IndependentWatchdog,
+    last_beat: u32,
+    stalled: u32,
+}
+
+#[cfg(target_os = "none")]
+impl Alive {
+    fn new(watchdog: IndependentWatchdog) -> Self {
+        Self {
+            watchdog,
+            last_beat: control_isr::HEARTBEAT.load(Ordering::Acquire),
+            stalled: 0,
+        }
+    }
+
+    #[inline(never)]
+    fn poll(&mut self) {
+        let beat = control_isr::HEARTBEAT.load(Ordering::Acquire);
+        // a period passed (self-test: TIM1 is not running; the model is never switched)
+        let period = !cfg!(feature = "selftest") && hw::take_period_flag();
+        if beat != self.last_beat {
+            self.last_beat = beat;
+            self.stalled = 0;
+            self.watchdog.feed();
+        } else if period {
+            // a missed poll only delays this count: it never counts periods that did not
+            // pass (a slow main loop sees one flag for several periods)
+            self.stalled += 1;
+            if self.stalled >= board::ISR_STALL_PERIODS {
+                // masked: a control interrupt that resumes cannot interleave the RMW
+                cortex_m::interrupt::free(|_| hw::emergency_off());
+            }
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+#[cfg(not(feature = "selftest"))]
+/// The reason of a refused offset calibration, for the UART.
+fn offset_text(e: &acim_firmware_core::convert::OffsetError) -> &'static [u8] {
+    use acim_firmware_core::convert::OffsetError;
+    match e {
+        OffsetError::NoSamples => b"no samples",
+        OffsetError::OutOfTolerance { channel: 0, .. } => b"phase U out of tolerance",
+        OffsetError::OutOfTolerance { channel: 1, .. } => b"phase V out of tolerance",
+        OffsetError::OutOfTolerance { .. } => b"phase W out of tolerance",
+    }
+}
+
+#[cfg(target_os = "none")]
 /// Telemetry samples per second the UART carries: a `$T` frame and its `$X` are about
 /// 128 bytes with the values of a running drive, 10 bits per byte on the line.
 const UART_SAMPLES_PER_S: u32 = board::UART_BAUD / 10 / 128;
@@ -457,6 +546,10 @@ struct Uart {
     framed: bool,
     /// The reply line being framed, after its `K,` (kind, comma).
     line: heapless::Vec<u8, { protocol::LINE_CAPACITY - 8 }>,
+    /// Bytes of the unfinished plain line already queued (taken back if it does not fit).
+    partial: usize,
+    /// The rest of a plain line that did not fit is being dropped (up to its `\n`).
+    dropping: bool,
 }
 
 #[cfg(target_os = "none")]
@@ -466,6 +559,8 @@ impl Uart {
             q: Deque::new(),
             framed: false,
             line: heapless::Vec::new(),
+            partial: 0,
+            dropping: false,
         }
     }
 }
@@ -504,9 +599,34 @@ fn send_sample(out: &mut Uart, s: &TelemetrySample) {
 /// line is an `$E`), its CRC computed in place.
 #[inline(never)]
 fn say(out: &mut Uart, text: &[u8]) {
-    let Uart { q, framed, line } = out;
+    let Uart {
+        q,
+        framed,
+        line,
+        partial,
+        dropping,
+    } = out;
     if !*framed {
-        return push(q, text);
+        // whole lines or nothing (review N7: a full queue cut lines and glued them): a
+        // line that does not fit is taken back out and the rest of it dropped
+        for &b in text {
+            if *dropping {
+                *dropping = b != b'\n';
+                continue;
+            }
+            if q.push_back(b).is_err() {
+                for _ in 0..(*partial).min(q.len()) {
+                    q.pop_back();
+                }
+                *partial = 0;
+                *dropping = b != b'\n';
+            } else if b == b'\n' {
+                *partial = 0;
+            } else {
+                *partial += 1;
+            }
+        }
+        return;
     }
     for &b in text {
         if line.is_empty() {
@@ -517,6 +637,11 @@ fn say(out: &mut Uart, text: &[u8]) {
             b'\n' => {
                 if line[2..].starts_with(b"err") {
                     line[0] = b'E';
+                }
+                // `$`, the line, `*HHHH\r\n`: the whole frame or nothing
+                if q.capacity() - q.len() < line.len() + 8 {
+                    line.clear();
+                    continue;
                 }
                 push(q, b"$");
                 push(q, line);
@@ -711,6 +836,7 @@ struct Ctx<'a> {
     settings: &'a mut Settings,
     rcc: &'a mut stm32g4xx_hal::rcc::Rcc,
     com: &'a mut CommissionState,
+    alive: &'a mut Alive,
 }
 
 #[cfg(target_os = "none")]
@@ -929,7 +1055,10 @@ fn handle(parsed: Parsed, ctx: &mut Ctx) {
                     b"err save: refused while the drive is not idle (stop or reset first)\r\n",
                 );
             } else {
-                match flash::write_record(&ctx.settings.encode()) {
+                // the watchdog keeps being fed (and a stopped interrupt still switches
+                // off) while the flash is busy
+                let alive = &mut *ctx.alive;
+                match flash::write_record(&ctx.settings.encode(), &mut || alive.poll()) {
                     Ok(()) => say(ctx.out, b"ok saved to flash\r\n"),
                     Err(e) => {
                         defmt::error!("settings save failed: {}", e.as_str());
@@ -983,9 +1112,11 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     // switches off first, before anything that could fail
     cortex_m::interrupt::disable();
     hw::emergency_off();
+    // on the UART too (review N8): the user of the virtual COM port sees why
+    let msg = info.message().as_str().unwrap_or("(formatted message)");
+    hw::uart_fatal(b"panic: ", msg.as_bytes());
     // location and static message only: formatting arbitrary panic arguments would link
     // core::fmt's float machinery (~15 KB) for nothing
-    let msg = info.message().as_str().unwrap_or("(formatted message)");
     match info.location() {
         Some(l) => defmt::error!("panic at {}:{}: {}", l.file(), l.line(), msg),
         None => defmt::error!("panic: {}", msg),
@@ -1017,9 +1148,14 @@ unsafe fn MemoryManagement() {
 }
 
 #[cfg(target_os = "none")]
-/// NMI (e.g. a flash ECC double error): switch off, then wait for the watchdog.
+/// NMI: a flash ECC double error in the settings page (a save torn by a power cut) is
+/// cleared and noted, and the read carries on (the record's CRC refuses it); anything
+/// else switches off, then waits for the watchdog.
 #[exception]
 unsafe fn NonMaskableInt() {
+    if flash::ecc_error_in_settings() {
+        return;
+    }
     hw::emergency_off();
     loop {
         cortex_m::asm::nop();

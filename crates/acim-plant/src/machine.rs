@@ -481,7 +481,7 @@ impl InductionMachine {
 
     /// State derivative (eq. 1-3) and the powers, for stage state `x`. The source is a
     /// trait object: one copy of this code for every inverter model (the firmware's
-    /// self-test carries the plant within its 96 KiB flash budget).
+    /// self-test carries the plant within its 128 KiB flash budget).
     fn deriv(
         &self,
         x: &[f32; NX],

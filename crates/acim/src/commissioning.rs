@@ -623,11 +623,10 @@ impl Commissioning {
     /// The DC steps (after [`Stage::DcStep`] 3): mean alpha current (A) and voltage (V)
     /// per level, for a plot of the line fit.
     pub fn dc_points(&self) -> [(f32, f32); 4] {
-        let mut out = [(0.0, 0.0); 4];
-        for (o, d) in out.iter_mut().zip(&self.dc) {
-            *o = (0.5 * (d[0].0 + d[1].0), 0.5 * (d[0].1 + d[1].1));
-        }
-        out
+        // the step calls this from the interrupt: a plain array map (a zipped iterator's
+        // generic `next` would be instantiated out of line, in flash)
+        self.dc
+            .map(|d| (0.5 * (d[0].0 + d[1].0), 0.5 * (d[0].1 + d[1].1)))
     }
 
     /// The line through the DC steps: Rs (ohm) and the intercept (V): v = Rs i + c.
@@ -727,9 +726,11 @@ impl Commissioning {
                 }
                 if self.steps >= self.steps_of(DC_STEP_TIME) {
                     if let Some(d) = self.dc.get_mut(k as usize) {
-                        for ((dh, a), n) in d.iter_mut().zip(self.acc).zip(self.acc_n) {
-                            let n = n.max(1) as f32;
-                            *dh = (a.0 / n, a.1 / n);
+                        // indexed: the interrupt runs this, and a zipped iterator's generic
+                        // `next` would be instantiated out of line, in flash
+                        for h in 0..2 {
+                            let n = self.acc_n[h].max(1) as f32;
+                            d[h] = (self.acc[h].0 / n, self.acc[h].1 / n);
                         }
                     }
                     if (k as usize) + 1 < DC_LEVELS.len() {
@@ -866,7 +867,8 @@ impl Commissioning {
                     }
                 }
                 if self.steps >= settle + self.steps_of(NO_LOAD_MEASURE_TIME) {
-                    for (f, h) in self.no_load.iter_mut().zip(self.hold.iter_mut()) {
+                    for k in 0..2 {
+                        let (f, h) = (&mut self.no_load[k], &mut self.hold[k]);
                         let n = h.n.max(1) as f32;
                         f.i.alpha /= n;
                         f.i.beta /= n;

@@ -219,8 +219,28 @@ pub const PROFILE: BusProfile = if cfg!(feature = "low-voltage") {
 };
 
 /// Independent watchdog timeout, ms (the main loop feeds it only while the control
-/// interrupt is alive).
-pub const WATCHDOG_TIMEOUT_MS: u32 = 100;
+/// interrupt is alive, also inside the flash waits of `save`). It resets a hung main
+/// loop; a stopped control interrupt is switched off much sooner, by the main loop
+/// ([`ISR_STALL_PERIODS`]).
+pub const WATCHDOG_TIMEOUT_MS: u32 = 20;
+
+/// PWM periods without a control-interrupt heartbeat after which the main loop clears
+/// MOE (0.6 ms at 5 kHz; the interrupt runs once per period).
+pub const ISR_STALL_PERIODS: u32 = 3;
+
+/// TIM1 break input filter, BDTR.BKF (RM0440: 0b1000 = f_DTS / 8, N = 6: a fault pulse
+/// must last 6 samples at 21.25 MHz, 282 ns, to clear MOE). Long enough against gate-drive
+/// noise on the fault line, short against an IGBT's short-circuit withstand time (5-10 us).
+pub const BREAK_FILTER: u8 = 0b1000;
+const _: () = assert!(BREAK_FILTER < 16);
+
+/// ADC sampling time code of the bus divider's channel (0b110 = 247.5 cycles, 5.8 us at
+/// 42.5 MHz): the divider's source impedance (990 k || 6.8 k, about 6.8 k) on a slow
+/// channel needs far more than the current channels' 24.5 cycles. The bus is converted
+/// after the U current (ADC1 rank 2), so only the interrupt's start moves later (by about
+/// 5.2 us of its 200 us period), not the current sampling instant.
+pub const BUS_SMP: u8 = 0b110;
+const _: () = assert!(BUS_SMP < 8);
 
 /// USART2 baud rate (ST-LINK virtual COM port).
 pub const UART_BAUD: u32 = 115_200;

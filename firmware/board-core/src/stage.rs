@@ -2,14 +2,19 @@
 //! that its ordering rules are tested on the host against a model of the registers
 //! (`firmware/src/hw.rs` implements the trait for TIM1 and ADC1/2).
 //!
-//! Rules this sequence keeps (issue 11, firmware review D1 and D3):
+//! Rules this sequence keeps (firmware reviews D1, D3 and N1):
 //! - the ADC completion flags of *both* converters are read before they are acknowledged
 //!   (acknowledging first made the second flag read as "not done" and tripped every
 //!   interrupt);
-//! - the periodic path never sets the main output enable (MOE): it is armed once, by a
-//!   start command, and only if no break flag is set. If MOE is found clear while the drive
-//!   believes it is switching, the hardware break fired during or after the last check:
-//!   the drive trips instead of re-arming;
+//! - the main output enable (MOE) is set only on a deliberate off-to-on transition: the
+//!   period's output turns on after a period with the outputs off, while the [`Outputs`]
+//!   latch is armed (by an accepted start, V/f start or commissioning; disarmed by a stop,
+//!   a fault, a break, the end of a commissioning), and only if no break flag is set
+//!   (re-read just before the write). A start that switches off and on again inside it
+//!   (the commissioning's offset stage, a start waiting for the offset measurement)
+//!   switches on again; a break never re-arms: it trips;
+//! - if MOE is found clear after a period that switched on, the hardware break fired
+//!   during or after the last check: the drive trips (fault 16) instead of re-arming;
 //! - break flags are cleared only by an accepted fault reset.
 
 use crate::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
@@ -33,7 +38,8 @@ pub trait PowerStageIo {
     fn clear_break_flags(&mut self);
     /// Whether the main output is enabled (MOE).
     fn outputs_enabled(&self) -> bool;
-    /// Sets MOE (arming after a start command).
+    /// Sets MOE unless a break flag is set (read again right before the write): the
+    /// off-to-on transition of an armed start.
     fn enable_outputs(&mut self);
     /// Writes the compare values (preloaded: act from the next period).
     fn write_duties(&mut self, duties: [f32; 3]);
@@ -41,12 +47,32 @@ pub trait PowerStageIo {
     fn switch_off(&mut self);
 }
 
+/// The interrupt's memory of the outputs between periods.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Outputs {
+    /// An accepted start (or V/f start, or commissioning) permits switching on; cleared
+    /// once the loop neither switches nor waits for a start (stop, fault, break, the end
+    /// of a commissioning).
+    armed: bool,
+    /// The last period switched on (MOE set and expected to stay set).
+    on: bool,
+}
+
+impl Outputs {
+    /// Whether a start, V/f start or commissioning is armed.
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+}
+
 /// Applies one command from the main loop, with the hardware side of it: an accepted
-/// start arms the outputs (if no break is pending, else the drive trips), an accepted
-/// reset clears the break flags (a refused one leaves them).
+/// start arms the [`Outputs`] latch (if no break is pending, else the drive trips; MOE
+/// itself is set by the period that switches on), an accepted reset clears the break
+/// flags (a refused one leaves them).
 pub fn apply_command<S: SinCos, P: PowerStageIo>(
     ctl: &mut ControlLoop<S>,
     io: &mut P,
+    outputs: &mut Outputs,
     cmd: ControlCommand,
 ) -> CommandReply {
     let reply = ctl.apply(cmd);
@@ -59,8 +85,9 @@ pub fn apply_command<S: SinCos, P: PowerStageIo>(
                 if io.break_flag() {
                     ctl.trip(FirmwareFault::HardwareBreak);
                     io.switch_off();
+                    *outputs = Outputs::default();
                 } else {
-                    io.enable_outputs();
+                    outputs.armed = true;
                 }
             }
             ControlCommand::Stop
@@ -78,36 +105,59 @@ pub fn apply_command<S: SinCos, P: PowerStageIo>(
 pub fn control_period<S: SinCos, P: PowerStageIo>(
     ctl: &mut ControlLoop<S>,
     io: &mut P,
+    outputs: &mut Outputs,
 ) -> PwmOutput {
     // read both completion flags and the samples before acknowledging
     let (adc1_done, adc2_done) = io.conversions_done();
     let raw = io.read();
     io.acknowledge();
-    let switching = ctl.switching();
-    let out = if io.break_flag() || (switching && !io.outputs_enabled()) {
+    let out = if io.break_flag() || (outputs.on && !io.outputs_enabled()) {
         ctl.trip(FirmwareFault::HardwareBreak)
     } else if !(adc1_done && adc2_done) {
         ctl.trip(FirmwareFault::AdcSequence)
     } else {
         ctl.step(&raw)
     };
-    write(io, &out);
+    let mut out = write(ctl, io, outputs, out);
     if io.sequence_pending() {
-        let off = ctl.trip(FirmwareFault::DeadlineMissed);
-        write(io, &off);
-        return off;
+        out = ctl.trip(FirmwareFault::DeadlineMissed);
+        io.switch_off();
+        outputs.on = false;
     }
+    // disarmed once nothing switches and no start waits (stop, fault, commissioning done)
+    outputs.armed &= ctl.switching() || ctl.drive().start_pending();
     out
 }
 
+/// Writes the period's output; returns what was written (a trip's switch-off if MOE may
+/// not be set).
 #[inline(always)]
-fn write<P: PowerStageIo>(io: &mut P, out: &PwmOutput) {
-    if out.enabled {
-        // never sets MOE: a break that cleared it since the check above stays effective
-        io.write_duties(out.duties);
-    } else {
+fn write<S: SinCos, P: PowerStageIo>(
+    ctl: &mut ControlLoop<S>,
+    io: &mut P,
+    outputs: &mut Outputs,
+    out: PwmOutput,
+) -> PwmOutput {
+    if !out.enabled {
         io.switch_off();
+        outputs.on = false;
+        return out;
     }
+    io.write_duties(out.duties);
+    if !outputs.on {
+        // off -> on, the only place the period sets MOE: armed, and no break flag (the
+        // flag is read again just before the write by `enable_outputs`)
+        if !outputs.armed || io.break_flag() {
+            let off = ctl.trip(FirmwareFault::HardwareBreak);
+            io.switch_off();
+            *outputs = Outputs::default();
+            return off;
+        }
+        io.enable_outputs();
+        outputs.on = true;
+    }
+    // else: never touches MOE; a break that cleared it since the check stays effective
+    out
 }
 
 #[cfg(test)]
@@ -175,9 +225,15 @@ mod tests {
         }
     }
 
-    fn setup() -> (ControlLoop<acim::frames::FastSinCos>, Regs) {
+    fn setup() -> (ControlLoop<acim::frames::FastSinCos>, Regs, Outputs) {
+        setup_with(crate::control::tests::powered())
+    }
+
+    fn setup_with(
+        drive: acim::Drive<acim::frames::FastSinCos>,
+    ) -> (ControlLoop<acim::frames::FastSinCos>, Regs, Outputs) {
         let conv = Converter::new(&POWER_STAGE);
-        let ctl = ControlLoop::new(crate::control::tests::powered(), conv, 500);
+        let ctl = ControlLoop::new(drive, conv, 500);
         let bias = POWER_STAGE.bias_counts() as u16;
         let bus = (325.0 / POWER_STAGE.volts_per_count()) as u16;
         let regs = Regs {
@@ -187,7 +243,7 @@ mod tests {
             },
             ..Regs::default()
         };
-        (ctl, regs)
+        (ctl, regs, Outputs::default())
     }
 
     fn conversion(r: &mut Regs) {
@@ -198,87 +254,106 @@ mod tests {
     /// old order (acknowledge, then read ADC2's flag) tripped fault 19 on every interrupt.
     #[test]
     fn completed_conversions_run_the_step() {
-        let (mut ctl, mut r) = setup();
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
-            .result
-            .is_ok());
+        let (mut ctl, mut r, mut o) = setup();
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start)
+                .result
+                .is_ok()
+        );
         // (a few periods: the bias-only samples of this register model carry no current,
         // which the drive's current-response check rightly faults on after some ms)
         for _ in 0..10 {
             conversion(&mut r);
-            let out = control_period(&mut ctl, &mut r);
+            let out = control_period(&mut ctl, &mut r, &mut o);
             assert!(out.enabled, "fault {}", ctl.fault_code());
         }
         assert_eq!(ctl.state(), DriveState::Magnetizing);
         // a missing ADC2 sequence is still a fault
         r.jeos = [true, false];
-        assert!(!control_period(&mut ctl, &mut r).enabled);
+        assert!(!control_period(&mut ctl, &mut r, &mut o).enabled);
         assert_eq!(ctl.fault_code(), 19);
     }
 
-    /// D3: MOE is set once, by the start command; a break during the step's PWM write
-    /// leaves it clear, the next period trips, and only an accepted reset clears BIF.
+    /// D3: MOE is set once, by the period that switches on after the start; a break
+    /// during the step's PWM write leaves it clear, the next period trips, and only an
+    /// accepted reset clears BIF.
     #[test]
     fn a_break_during_the_step_is_not_undone() {
-        let (mut ctl, mut r) = setup();
-        apply_command(&mut ctl, &mut r, ControlCommand::Start);
-        assert!(r.moe);
+        let (mut ctl, mut r, mut o) = setup();
+        apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start);
+        assert!(!r.moe, "the command arms; the period switches on");
         for _ in 0..10 {
             conversion(&mut r);
-            control_period(&mut ctl, &mut r);
+            control_period(&mut ctl, &mut r, &mut o);
+            assert!(r.moe);
         }
-        assert_eq!(r.moe_sets, 1, "the periodic path never sets MOE");
+        assert_eq!(r.moe_sets, 1, "MOE is set only on the off-to-on transition");
         r.break_during_write = true;
         conversion(&mut r);
-        control_period(&mut ctl, &mut r);
+        control_period(&mut ctl, &mut r, &mut o);
         assert!(!r.moe, "the break cleared MOE and nothing re-armed it");
         conversion(&mut r);
-        let out = control_period(&mut ctl, &mut r);
+        let out = control_period(&mut ctl, &mut r, &mut o);
         assert!(!out.enabled && !r.moe);
         assert_eq!(ctl.fault_code(), 16);
         // a start while faulted is refused and does not touch MOE or the flags
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
-            .result
-            .is_err());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start)
+                .result
+                .is_err()
+        );
         assert!(r.bif && !r.moe);
         // stop is accepted (faulted drives stay faulted) and does not clear the flag
-        let _ = apply_command(&mut ctl, &mut r, ControlCommand::Stop);
+        let _ = apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Stop);
         assert!(r.bif);
         // an accepted reset clears BIF; a new start arms again
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::ResetFault)
-            .result
-            .is_ok());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::ResetFault)
+                .result
+                .is_ok()
+        );
         assert!(!r.bif);
         // a start before the rotor flux has decayed (5 tau_r) is refused, MOE stays clear
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
-            .result
-            .is_err());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start)
+                .result
+                .is_err()
+        );
         assert!(!r.moe);
         let cfg = ctl.drive().config();
         let wait = (5.0 * cfg.machine.rotor_time_constant() / cfg.control_period) as u32;
         for _ in 0..wait {
             conversion(&mut r);
-            control_period(&mut ctl, &mut r);
+            control_period(&mut ctl, &mut r, &mut o);
         }
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
-            .result
-            .is_ok());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start)
+                .result
+                .is_ok()
+        );
+        conversion(&mut r);
+        control_period(&mut ctl, &mut r, &mut o);
         assert!(r.moe);
+        assert_eq!(r.moe_sets, 2);
     }
 
     /// A refused reset (drive not faulted) leaves the break flags alone.
     #[test]
     fn a_refused_reset_keeps_the_break_flags() {
-        let (mut ctl, mut r) = setup();
+        let (mut ctl, mut r, mut o) = setup();
         r.bif = true;
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::ResetFault)
-            .result
-            .is_err());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::ResetFault)
+                .result
+                .is_err()
+        );
         assert!(r.bif);
         // and a start with a pending break trips instead of arming
-        assert!(apply_command(&mut ctl, &mut r, ControlCommand::Start)
-            .result
-            .is_ok());
+        assert!(
+            apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start)
+                .result
+                .is_ok()
+        );
         assert!(!r.moe);
         assert_eq!(ctl.state(), DriveState::Fault);
     }
@@ -286,12 +361,135 @@ mod tests {
     /// A missed deadline switches off in the same period.
     #[test]
     fn a_missed_deadline_switches_off() {
-        let (mut ctl, mut r) = setup();
-        apply_command(&mut ctl, &mut r, ControlCommand::Start);
+        let (mut ctl, mut r, mut o) = setup();
+        apply_command(&mut ctl, &mut r, &mut o, ControlCommand::Start);
         conversion(&mut r);
         r.pending = true;
-        let out = control_period(&mut ctl, &mut r);
+        let out = control_period(&mut ctl, &mut r, &mut o);
         assert!(!out.enabled && !r.moe);
         assert_eq!(ctl.fault_code(), 17);
+    }
+
+    /// The register model around the self-test's motor model: each period converts the
+    /// model's currents, and the model runs on what the registers hold (MOE and the
+    /// compare values written).
+    struct Bench {
+        ctl: ControlLoop<acim::frames::FastSinCos>,
+        r: Regs,
+        o: Outputs,
+        sim: crate::sim::SimulatedStage,
+        duties: [f32; 3],
+    }
+
+    impl Bench {
+        fn new(drive: acim::Drive<acim::frames::FastSinCos>) -> Self {
+            let (ctl, r, o) = setup_with(drive);
+            let sim = crate::sim::SimulatedStage::new(Converter::new(&POWER_STAGE));
+            Self {
+                ctl,
+                r,
+                o,
+                sim,
+                duties: [0.5; 3],
+            }
+        }
+        fn command(&mut self, cmd: ControlCommand) -> bool {
+            apply_command(&mut self.ctl, &mut self.r, &mut self.o, cmd)
+                .result
+                .is_ok()
+        }
+        fn periods(&mut self, n: u32) {
+            for _ in 0..n {
+                self.r.sample = self.sim.sample();
+                conversion(&mut self.r);
+                let out = control_period(&mut self.ctl, &mut self.r, &mut self.o);
+                if out.enabled {
+                    self.duties = out.duties;
+                }
+                self.sim.run_period(PwmOutput {
+                    duties: self.duties,
+                    enabled: self.r.moe,
+                });
+            }
+        }
+    }
+
+    /// A drive as `set`/`defaults`/commissioning leave it: freshly built, its offsets not
+    /// measured yet (a start waits 0.1 s with the outputs off).
+    fn unsettled() -> acim::Drive<acim::frames::FastSinCos> {
+        acim::Drive::new(crate::board::drive_config()).unwrap()
+    }
+
+    /// N1: a start that waits for the offset measurement (outputs off) switches on after
+    /// its wait; before, MOE was set by the command, cleared by the first off period and
+    /// never set again: fault 16 at the end of the wait.
+    #[test]
+    fn a_start_that_waits_switches_on_after_the_wait() {
+        let mut b = Bench::new(unsettled());
+        assert!(b.command(ControlCommand::SpeedRpm(300.0)));
+        assert!(b.command(ControlCommand::Start));
+        assert!(b.ctl.drive().start_pending());
+        b.periods(10);
+        assert!(!b.r.moe, "outputs off while the start waits");
+        b.periods(590);
+        assert_eq!(b.ctl.fault_code(), 0);
+        assert!(b.r.moe, "switched on after the wait");
+        assert_eq!(b.r.moe_sets, 1);
+        assert!(matches!(
+            b.ctl.state(),
+            DriveState::Magnetizing | DriveState::Running
+        ));
+        // stop: off and disarmed
+        assert!(b.command(ControlCommand::Stop));
+        b.periods(1);
+        assert!(!b.r.moe && !b.o.armed());
+    }
+
+    /// N1: a commissioning (its first 0.2 s stage measures the offsets with the outputs
+    /// off) switches on for its tests; before, fault 16 0.2 ms after it began.
+    #[test]
+    fn a_commissioning_switches_on_after_its_offset_stage() {
+        let mut b = Bench::new(crate::control::tests::powered());
+        let args = [750.0, 230.0, 3.3, 50.0, 1500.0];
+        b.ctl
+            .stage_commissioning(crate::commission::build(&args, 325.0));
+        assert!(b.command(ControlCommand::Commission(args)));
+        b.periods(500);
+        assert_eq!(b.ctl.fault_code(), 0);
+        b.periods(1000);
+        assert_eq!(b.ctl.fault_code(), 0, "tripped after the offset stage");
+        assert_eq!(b.ctl.state_code(), crate::control::STATE_COMMISSIONING);
+        assert!(b.r.moe, "the commissioning's tests switch on");
+        // a stop aborts it: off, disarmed
+        assert!(b.command(ControlCommand::Stop));
+        b.periods(1);
+        assert!(!b.r.moe && !b.o.armed());
+    }
+
+    /// N1: a break while a start waits (outputs off) is never switched on over: the
+    /// transition trips instead, MOE stays clear.
+    #[test]
+    fn a_break_during_the_wait_trips_at_the_transition() {
+        let mut b = Bench::new(unsettled());
+        assert!(b.command(ControlCommand::Start));
+        b.periods(100);
+        b.r.bif = true;
+        b.periods(500);
+        assert!(!b.r.moe);
+        assert_eq!(b.r.moe_sets, 0);
+        assert_eq!(b.ctl.fault_code(), 16);
+        assert!(!b.o.armed());
+    }
+
+    /// Without a start, nothing switches on: the latch is clear.
+    #[test]
+    fn an_idle_loop_is_not_armed() {
+        let mut b = Bench::new(crate::control::tests::powered());
+        b.periods(10);
+        assert!(!b.o.armed() && !b.r.moe);
+        // a refused start (the drive is faulted) does not arm
+        b.ctl.trip(FirmwareFault::AdcSequence);
+        assert!(!b.command(ControlCommand::Start));
+        assert!(!b.o.armed());
     }
 }
