@@ -728,10 +728,12 @@ impl Commissioning {
                     if let Some(d) = self.dc.get_mut(k as usize) {
                         // indexed: the interrupt runs this, and a zipped iterator's generic
                         // `next` would be instantiated out of line, in flash
-                        for h in 0..2 {
-                            let n = self.acc_n[h].max(1) as f32;
-                            d[h] = (self.acc[h].0 / n, self.acc[h].1 / n);
-                        }
+                        let (acc, acc_n) = (self.acc, self.acc_n);
+                        let mean = |h: usize| {
+                            let n = acc_n[h].max(1) as f32;
+                            (acc[h].0 / n, acc[h].1 / n)
+                        };
+                        *d = [mean(0), mean(1)];
                     }
                     if (k as usize) + 1 < DC_LEVELS.len() {
                         self.next(Stage::DcStep(k + 1));
