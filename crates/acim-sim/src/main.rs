@@ -360,7 +360,7 @@ fn outcome(m: &Metrics) -> String {
     // a short hold (an acceleration at the current limit) is in the CSV and the JSON only
     if m.target_clamps.is_empty() && m.speed_target_limited_s >= TARGET_LIMITED_NOTE_S {
         notes.push(format!(
-            "target beyond reach for {:.2} s (the reference held at the speed the drive reaches)",
+            "the reference held short of the target for {:.2} s in all (a voltage, current or regeneration limit)",
             m.speed_target_limited_s
         ));
     }
