@@ -237,8 +237,26 @@ fn run(
     let t2 = Instant::now();
     let mut fixed_json = serde_json::Map::new();
     let mut fixed_rows: Vec<(&'static str, Vec<Row>, String)> = Vec::new();
-    for fc in &FIXED_CORES {
-        let (frows, prof, fsummary) = run_fixed(&qemu, &tools, fc)?;
+    // the two cores' emulations and trace parses are independent: one thread each (the
+    // counts come from QEMU's icount, so the host's load does not change them)
+    let fixed_runs: Vec<_> = std::thread::scope(|sc| {
+        let handles: Vec<_> = FIXED_CORES
+            .iter()
+            .map(|fc| {
+                let (qemu, tools) = (&qemu, &tools);
+                sc.spawn(move || run_fixed(qemu, tools, fc))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err("a fixed-point run panicked".into()))
+            })
+            .collect()
+    });
+    for (fc, run) in FIXED_CORES.iter().zip(fixed_runs) {
+        let (frows, prof, fsummary) = run?;
         let mut m = serde_json::Map::new();
         for r in &frows {
             m.insert(r.name.clone(), region_json(r));

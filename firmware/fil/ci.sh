@@ -19,4 +19,10 @@ cargo build --profile firmware -p acim-firmware --target thumbv7em-none-eabihf -
 cp "$OUT/acim-firmware" "$OUT/acim-firmware-selftest-soft.elf"
 mkdir -p "${CARGO_TARGET_DIR:-$PWD/target}"
 cd firmware/fil
-python3 -m unittest -v test_fil
+# one test class per process, as many at once as there are cores (each boots its own
+# emulated MCU); FIL_UPDATE=1 runs serially, since it rewrites shared golden files
+if [ "${FIL_UPDATE:-}" = 1 ]; then
+  python3 -m unittest -v test_fil
+else
+  python3 run_parallel.py
+fi
