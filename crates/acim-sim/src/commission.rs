@@ -12,7 +12,6 @@
 use crate::scenario::Scenario;
 use crate::sim::build_plant;
 use acim::commissioning::{Assessment, Check, Commissioning, Concern, Confidence, Stage};
-use acim::nameplate::Nameplate;
 use acim::DriveInputs;
 use acim_plant::{LoadTorque, PwmPreload};
 use serde::Serialize;
@@ -336,15 +335,7 @@ pub fn run(sc: &Scenario) -> Result<Run, String> {
     let (Some(np), Some(board)) = (sc.nameplate, v.board) else {
         return Err("commissioning needs [nameplate] and [board] (or --nameplate FILE)".into());
     };
-    let nameplate = Nameplate {
-        power_w: np.power_w,
-        voltage_v: np.voltage_v,
-        current_a: np.current_a,
-        frequency_hz: np.frequency_hz,
-        speed_rpm: np.speed_rpm,
-        power_factor: np.power_factor,
-        pole_pairs: np.pole_pairs,
-    };
+    let nameplate = np.nameplate();
     let rated = nameplate.rated().map_err(|e| e.to_string())?;
     let mut plant = build_plant(sc, &v);
     let ts = 1.0 / board.pwm_frequency_hz;

@@ -107,19 +107,7 @@ impl Thresholds {
 
     /// The scenario's thresholds: its nameplate's rating, else the reference rating.
     pub fn for_scenario(sc: &crate::scenario::Scenario) -> Self {
-        let rated = sc.nameplate.and_then(|np| {
-            acim::nameplate::Nameplate {
-                power_w: np.power_w,
-                voltage_v: np.voltage_v,
-                current_a: np.current_a,
-                frequency_hz: np.frequency_hz,
-                speed_rpm: np.speed_rpm,
-                power_factor: np.power_factor,
-                pole_pairs: np.pole_pairs,
-            }
-            .rated()
-            .ok()
-        });
+        let rated = sc.nameplate.and_then(|np| np.nameplate().rated().ok());
         match rated {
             Some(r) => Self::for_rating(r.speed * acim::math::RAD_S_TO_RPM, r.torque, true),
             None => Self::for_rating(REFERENCE_RATED_SPEED_RPM, REFERENCE_RATED_TORQUE_NM, false),

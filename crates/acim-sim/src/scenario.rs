@@ -687,6 +687,21 @@ pub struct BoardSpec {
     pub pwm_frequency_hz: Option<f32>,
 }
 
+impl NameplateSpec {
+    /// The library's nameplate (the informative `torque_nm` is not part of it).
+    pub fn nameplate(&self) -> acim::nameplate::Nameplate {
+        acim::nameplate::Nameplate {
+            power_w: self.power_w,
+            voltage_v: self.voltage_v,
+            current_a: self.current_a,
+            frequency_hz: self.frequency_hz,
+            speed_rpm: self.speed_rpm,
+            power_factor: self.power_factor,
+            pole_pairs: self.pole_pairs,
+        }
+    }
+}
+
 impl BoardSpec {
     /// The library's board description (dead time and device drop: the inverter's).
     pub fn board(&self, inverter: &InverterSpec) -> acim::nameplate::Board {
@@ -1273,15 +1288,7 @@ impl Scenario {
                 check_range("board.pwm_frequency_hz", f, 100.0, 50_000.0)?;
             }
             let b = b.board(&self.inverter);
-            let nameplate = acim::nameplate::Nameplate {
-                power_w: np.power_w,
-                voltage_v: np.voltage_v,
-                current_a: np.current_a,
-                frequency_hz: np.frequency_hz,
-                speed_rpm: np.speed_rpm,
-                power_factor: np.power_factor,
-                pole_pairs: np.pole_pairs,
-            };
+            let nameplate = np.nameplate();
             let mut cfg =
                 acim::nameplate::drive_config(ctl, &nameplate, &b).map_err(|e| match e {
                     // the field once, in the error's own place
