@@ -198,9 +198,15 @@ impl Report {
         if let Some(r) = &self.refusal {
             s += &format!("refusal = {r:?}\n");
         }
-        for (k, c) in self.checks.iter().enumerate() {
+        // a check with no bound on either side does not apply here (e.g. the power factor's
+        // when the nameplate prints none): not listed
+        let applied = self
+            .checks
+            .iter()
+            .filter(|c| c.low.is_finite() || c.high.is_finite());
+        for (k, c) in applied.enumerate() {
             s += &format!(
-                "check_{k} = {{ field = \"{}\", value = {}, low = {}, high = {}, passed = {}, meaning = {:?} }}\n",
+                "check_{k} = {{ field = \"{}\", value = {}, low = {}, high = {}, passed = {}, fails_as = {:?} }}\n",
                 c.field,
                 toml_f32(c.value),
                 toml_f32(c.low),
@@ -229,25 +235,27 @@ impl Report {
     /// One line per quantity: identified, confidence, true, error.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        let mut line = |k: &str, x: &Pair| {
+        // each quantity in a unit that shows its digits (a dead time of 1.5e-6 s printed
+        // with six decimals read as 0.000001 against a true 0.000002)
+        let mut line = |k: &str, unit: &str, scale: f32, x: &Pair| {
             s += &format!(
-                "{k:<10} {:>12.6} +-{:>6} %   true {:>12.6}  error {:>+7.2} %{}\n",
-                x.identified,
+                "{k:<10} {:>11.4} {unit:<6} +-{:>6} %   true {:>11.4}  error {:>+7.2} %{}\n",
+                x.identified * scale,
                 pct(x.confidence_pct),
-                x.true_value,
+                x.true_value * scale,
                 x.error_pct,
                 if x.bounded() { "" } else { "  (outside)" }
             );
         };
-        line("Rs", &self.rs_ohm);
-        line("R_R", &self.rr_ohm);
-        line("L_sigma", &self.l_sigma_h);
-        line("L_M", &self.l_m_h);
+        line("Rs", "ohm", 1.0, &self.rs_ohm);
+        line("R_R", "ohm", 1.0, &self.rr_ohm);
+        line("L_sigma", "mH", 1e3, &self.l_sigma_h);
+        line("L_M", "mH", 1e3, &self.l_m_h);
         if let Some(j) = &self.inertia_kgm2 {
-            line("J", j);
+            line("J", "g m^2", 1e3, j);
         }
-        line("B", &self.friction_nms);
-        line("dead time", &self.dead_time_s);
+        line("B", "mN m s", 1e3, &self.friction_nms);
+        line("dead time", "us", 1e6, &self.dead_time_s);
         s
     }
 }
