@@ -1,4 +1,4 @@
-//! Host-side runner of the cycle-count bench (issue 4).
+//! Host-side runner of the cycle-count bench.
 //!
 //! ```text
 //! cargo run -p acim-bench --release                  # measure, print, write results/
@@ -41,7 +41,7 @@
 //! | VDIV, VSQRT | 14 |
 //!
 //! On top of the table, [`timed`] models the TRM's load/store pipelining rules, the FP
-//! result-use stall and the core-FP moves (issue 16; validated in the tests on the TRM's
+//! result-use stall and the core-FP moves (validated in the tests on the TRM's
 //! own sequences), and [`slack`] reports what stays open (refill 1-3 cycles, division
 //! overlap, M3 early termination) as a range.
 //!
@@ -644,7 +644,7 @@ fn region_json(r: &Row) -> serde_json::Value {
     })
 }
 
-/// The cycle target of the control interrupt, entry to return (issue 16).
+/// The cycle target of the control interrupt, entry to return.
 const ISR_CYCLE_TARGET: f64 = 1000.0;
 
 /// Weighs the control interrupt's executed addresses recorded by the firmware-in-the-loop

@@ -252,7 +252,7 @@ mod fw {
         let mut c = DriveConfig::paper_defaults();
         c.rs_estimation = true;
         // the synthetic loop has no machine behind the voltages: the running Rs law
-        // (the default since issue 13) reads them as a resistance and took the estimate
+        // (the default) reads them as a resistance and took the estimate
         // to its bound (EstimatorOutOfRange) within 1.4 s in both arithmetics, so this
         // comparison keeps the standstill mode (the running law's Q7.24 cost is not in
         // these figures; the f32 bench, closed loop against the motor model, has it)
@@ -263,7 +263,7 @@ mod fw {
         // only while magnetizing, outside these figures; its two products per step in
         // the sense stage remain)
         c.current_gain_calibration = false;
-        // nor the inverter test at start (on by default since issue 13): its fit would
+        // nor the inverter test at start (on by default): its fit would
         // read the current PI's voltage, and its 0.6 s before speed control moved the
         // measured steps into the speed ramp (drive_step 2617 -> 2623-2689 instructions
         // on the M4F, the speed PI 310 -> 323-384); off, the figures stay those of the
