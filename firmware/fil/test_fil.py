@@ -643,23 +643,36 @@ class SelfTest(unittest.TestCase):
         print(f"\nself-test interrupt: at most {worst} instructions per period")
         self.assertLess(worst, 8000)
     def test_commission_identifies_the_motor_model_and_applies_it(self):
-        """Issue 14 (the firmware runs the sequence on a command and stores the result in
-        its parameter page): `commission 750 230 3.3 50 1500` (the paper's nameplate) on
-        the self-test ELF: state 5 while it runs, then the settings it wrote, within the
-        issue's bounds of the model's inverse-Gamma values (Rs 10.5 ohm: 2 %; the T-form
-        settings are read back as Rs, R_R = Rr (Lm/Lr)^2: 5 %), then a start on them."""
+        """The firmware runs the sequence on a command and keeps the result for its
+        parameter page: `commission 750 230 3.3 50 1500` (the paper's nameplate) on the
+        self-test ELF: state 5 while it runs, then the identified values with their
+        bounds, nothing changed until `commission apply`, then the settings it wrote,
+        within the required bounds of the model's inverse-Gamma values (Rs 10.5 ohm: 2 %;
+        the T-form settings are read back as Rs, R_R = Rr (Lm/Lr)^2: 5 %), then a start on
+        them."""
         m = fil.Machine(fil.default_elf("selftest"))
         m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+        before = command(m, "get")
         self.assertIn("err (nameplate.power_w", command(m, "commission 2000 230 3.3 50 1500"))
+        self.assertIn("err nothing to apply", command(m, "commission apply"))
         self.assertIn("ok commissioning started", command(m, "commission 750 230 3.3 50 1500"))
         self.assertEqual(state_fault(m), (5, 0))
         self.assertIn("err refused in this state", command(m, "start"))
         m.run(5000 * 18)
         reply = command(m, "commission")
         print("\n" + reply, file=sys.stderr)
-        self.assertIn("ok commissioned: settings applied", reply)
+        self.assertIn("ok commissioned: send 'commission apply' to use these settings", reply)
+        ident = {l.split()[1]: (float(l.split()[2]), l) for l in reply.split("\r\n")
+                 if l.startswith("identified ") and len(l.split()) > 2}
+        rs, line = ident["rs"]
+        self.assertLess(abs(rs - 10.5) / 10.5, 0.02, line)
+        self.assertIn(" ohm +/-", line)
+        # nothing applied yet
+        self.assertEqual(command(m, "get"), before)
+        self.assertIn("ok applied", command(m, "commission apply"))
+        self.assertIn("err nothing to apply (already applied)", command(m, "commission apply"))
         vals = {l.split(" = ")[0]: float(l.split(" = ")[1].split()[0])
-                for l in reply.split("\r\n") if " = " in l}
+                for l in command(m, "get").split("\r\n") if " = " in l}
         rs, rr, lr, lm = (vals["stator_resistance"], vals["rotor_resistance"],
                           vals["rotor_inductance"], vals["mutual_inductance"])
         self.assertLess(abs(rs - 10.5) / 10.5, 0.02)
@@ -784,10 +797,10 @@ class Rearm(unittest.TestCase):
                 break
         reply = command(m, "commission")
         print("\n" + reply, file=sys.stderr)
-        # its own result: applied, or the identification's verdict; never abandoned by a
-        # trip (the fault 16 of N1)
+        # its own result: identified (pending its `commission apply`), or the
+        # identification's verdict; never abandoned by a trip (the fault 16 of N1)
         self.assertNotIn("abandoned", reply)
-        self.assertTrue("ok commissioned: settings applied" in reply
+        self.assertTrue("ok commissioned: send 'commission apply'" in reply
                         or "err commissioning failed:" in reply, reply)
         self.assertEqual(state_fault(m), (0, 0))
         self.assertFalse(m.moe())

@@ -39,12 +39,11 @@ use {
     acim::math::RAD_S_TO_RPM,
     acim::Drive,
     acim_firmware_core::board::{self, POWER_STAGE},
-    acim_firmware_core::command::Command,
-    acim_firmware_core::commission::{self, NameplateArgs},
     acim_firmware_core::control::{self, CommandReply, ControlCommand, ControlLoop},
     acim_firmware_core::convert::Converter,
-    acim_firmware_core::protocol::{self, Parsed, Request, RequestAssembler},
-    acim_firmware_core::settings::{self, LoadError, Settings, FIELDS},
+    acim_firmware_core::dispatch::{self, Dispatch, Platform, Rebuild, Reply, Sent},
+    acim_firmware_core::protocol::{self, RequestAssembler},
+    acim_firmware_core::settings::{self, LoadError, Settings},
     acim_firmware_core::telemetry::{self, TelemetrySample},
     control_isr::{IsrState, CMD_Q, TEL_Q},
     core::sync::atomic::Ordering,
@@ -102,11 +101,15 @@ static mut CMD_QUEUE: Queue<ControlCommand, CMD_Q> = Queue::new();
 static mut REPLY_QUEUE: Queue<CommandReply, CMD_Q> = Queue::new();
 
 #[cfg(target_os = "none")]
-const MODE: &str = if cfg!(feature = "selftest") {
-    "self-test (motor model, outputs disabled)"
+/// The board's name in the `version` reply: `acim-firmware <MODE>`.
+const BOARD_NAME: &str = if cfg!(feature = "selftest") {
+    "acim-firmware self-test (motor model, outputs disabled)"
 } else {
-    "power stage"
+    "acim-firmware power stage"
 };
+
+#[cfg(target_os = "none")]
+const MODE: &str = BOARD_NAME.split_at("acim-firmware ".len()).1;
 
 #[cfg(target_os = "none")]
 #[entry]
@@ -197,7 +200,7 @@ fn main() -> ! {
     let record = flash::read_record();
     // a double word torn by a power cut during a save (ECC double error, NMI handled)
     let torn = flash::take_ecc_error();
-    let (mut settings, load) = match Settings::decode(&record) {
+    let (settings, load) = match Settings::decode(&record) {
         Ok(s) if !torn => (s, Ok(())),
         Ok(_) => (Settings::defaults(), Err(LoadError::Crc)),
         Err(e) => (Settings::defaults(), Err(e)),
@@ -207,7 +210,7 @@ fn main() -> ! {
         Err(LoadError::Blank) => defmt::info!("no saved settings: defaults"),
         Err(e) => defmt::warn!("saved settings refused ({}): defaults", e),
     }
-    let (mut cfg, drive) = match build_drive(&settings, sincos) {
+    let (cfg, drive) = match build_drive(&settings, sincos) {
         Ok(d) => d,
         Err(e) => {
             defmt::error!("drive configuration rejected: {}", e);
@@ -220,7 +223,7 @@ fn main() -> ! {
     // SAFETY: the queues are split exactly once, here, before the interrupt that uses
     // the other halves is enabled; afterwards each half has exactly one user.
     let (tel_p, mut tel_c) = unsafe { (*core::ptr::addr_of_mut!(TEL_QUEUE)).split() };
-    let (mut cmd_p, cmd_c) = unsafe { (*core::ptr::addr_of_mut!(CMD_QUEUE)).split() };
+    let (cmd_p, cmd_c) = unsafe { (*core::ptr::addr_of_mut!(CMD_QUEUE)).split() };
     let (reply_p, mut reply_c) = unsafe { (*core::ptr::addr_of_mut!(REPLY_QUEUE)).split() };
 
     #[cfg(not(feature = "selftest"))]
@@ -336,8 +339,14 @@ fn main() -> ! {
 
     let mut line = RequestAssembler::new();
     let mut out = Uart::new();
-    let mut stream = false;
-    let mut com = CommissionState::default();
+    let mut dispatch = Dispatch::new(settings);
+    let mut fw = Fw {
+        cmd_p,
+        cfg,
+        rcc,
+        alive,
+        stream: false,
+    };
     const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
     raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
@@ -354,7 +363,7 @@ fn main() -> ! {
             say(&mut out, b"warn settings in flash refused: ");
             say(&mut out, e.as_str().as_bytes());
             if let LoadError::Invalid(se) = e {
-                say_setting_error(&mut out, &se);
+                dispatch::setting_error(&mut out, &se);
             }
             say(&mut out, b"; defaults in use, drive idle\r\n");
         }
@@ -364,7 +373,7 @@ fn main() -> ! {
     let mut rx_discard = false;
     loop {
         // watchdog fed only while the control interrupt is alive; outputs off if it stops
-        alive.poll();
+        fw.alive.poll();
         let code = control_isr::STATE_CODE.load(Ordering::Relaxed);
         if code == 1 || code == 2 || code == 3 || code == control::STATE_COMMISSIONING {
             led.set_high();
@@ -379,17 +388,13 @@ fn main() -> ! {
                     // the line an overrun cut: dropped up to its end
                     rx_discard = !(byte == b'\r' || byte == b'\n');
                 } else if let Some(parsed) = line.push(byte) {
-                    let mut ctx = Ctx {
-                        cmd_p: &mut cmd_p,
-                        out: &mut out,
-                        stream: &mut stream,
-                        cfg: &mut cfg,
-                        settings: &mut settings,
-                        rcc: &mut rcc,
-                        com: &mut com,
-                        alive: &mut alive,
-                    };
-                    handle(parsed, &mut ctx);
+                    // replies (also the interrupt's, which come later) go out as the
+                    // command came
+                    out.framed = parsed.framed;
+                    if let Err(e) = parsed.request {
+                        defmt::warn!("command rejected: {}", e.as_str());
+                    }
+                    dispatch.handle(parsed.request, &mut fw, &mut out);
                 }
             }
             Err(stm32g4xx_hal::nb::Error::WouldBlock) => {}
@@ -407,43 +412,21 @@ fn main() -> ! {
         }
 
         // replies from the interrupt
-        while let Some(r) = reply_c.dequeue() {
-            match r.result {
-                Ok(()) => {
-                    defmt::info!("ok {}", r.command);
-                    if let ControlCommand::Commission(args) = r.command {
-                        com.start(args);
-                        say(&mut out, COMMISSION_STARTED);
-                    } else if matches!(r.command, ControlCommand::Rate(n) if n < UART_RATE_FLOOR) {
-                        say(&mut out, RATE_ABOVE_UART);
-                    } else {
-                        say(&mut out, b"ok\r\n");
-                    }
-                }
-                Err(e) => {
-                    defmt::warn!("refused {}: {}", r.command, e);
-                    say(&mut out, control::refusal_text(e));
-                }
+        while let Some(CommandReply { command, result }) = reply_c.dequeue() {
+            match result {
+                Ok(()) => defmt::info!("ok {}", command),
+                Err(e) => defmt::warn!("refused {}: {}", command, e),
             }
+            dispatch.control_reply(command, result, &mut fw, &mut out);
         }
 
-        // commissioning: the fits and the new drive once the interrupt has finished it
-        if let Some(c) = control_isr::take_finished_commissioning() {
-            com.finish(&c, &mut settings, &mut cfg, &mut rcc);
-        } else if com.running
-            && control_isr::STATE_CODE.load(Ordering::Relaxed) != control::STATE_COMMISSIONING
-        {
-            // stopped, or abandoned by a trip
-            com.running = false;
-            com.outcome = Some(Outcome::Aborted(
-                control_isr::FAULT_CODE.load(Ordering::Relaxed),
-            ));
-        }
+        // commissioning: the fits once the interrupt has finished it, or its abort
+        dispatch.poll(&mut fw);
 
         // telemetry
         while let Some(s) = tel_c.dequeue() {
             defmt::info!("{}", s);
-            if stream {
+            if fw.stream {
                 send_sample(&mut out, &s);
             }
         }
@@ -516,23 +499,6 @@ fn offset_text(e: &acim_firmware_core::convert::OffsetError) -> &'static [u8] {
         OffsetError::OutOfTolerance { .. } => b"phase W out of tolerance",
     }
 }
-
-#[cfg(target_os = "none")]
-/// Telemetry samples per second the UART carries: a `$T` frame and its `$X` are about
-/// 128 bytes with the values of a running drive, 10 bits per byte on the line.
-const UART_SAMPLES_PER_S: u32 = board::UART_BAUD / 10 / 128;
-#[cfg(target_os = "none")]
-/// The fastest `rate` whose samples all fit the UART (periods).
-const UART_RATE_FLOOR: u16 = board::PWM_FREQUENCY_HZ.div_ceil(UART_SAMPLES_PER_S) as u16;
-#[cfg(target_os = "none")]
-/// The reply to a faster `rate`: accepted, with what the user will see.
-const RATE_ABOVE_UART: &[u8] =
-    b"ok (the UART carries about 90 samples/s, a rate of 56 periods: faster samples are dropped whole, seq shows the gaps)\r\n";
-#[cfg(target_os = "none")]
-const _: () = assert!(
-    UART_SAMPLES_PER_S == 90 && UART_RATE_FLOOR == 56,
-    "RATE_ABOVE_UART states these numbers"
-);
 
 #[cfg(target_os = "none")]
 /// UART output buffer, bytes (`get` lists every setting in one go).
@@ -658,196 +624,150 @@ fn say(out: &mut Uart, text: &[u8]) {
 }
 
 #[cfg(target_os = "none")]
-/// ` (field: rule)`
-#[inline(never)]
-fn say_setting_error(out: &mut Uart, e: &settings::SettingError) {
-    say(out, b" (");
-    say(out, e.field.as_bytes());
-    say(out, b": ");
-    say(out, e.rule.as_bytes());
-    say(out, b")");
-}
-
-#[cfg(target_os = "none")]
-/// One `name = value unit` line.
-#[inline(never)]
-fn say_setting(out: &mut Uart, s: &Settings, i: usize) {
-    let Some(f) = FIELDS.get(i) else { return };
-    let mut buf = [0u8; 24];
-    say(out, f.name.as_bytes());
-    say(out, b" = ");
-    say(out, settings::format_value(s.get(i), &mut buf));
-    if !f.unit.is_empty() {
-        say(out, b" ");
-        say(out, f.unit.as_bytes());
+/// Reply lines of the shared command handling: `\r\n`-ended, or framed ([`say`]).
+impl Reply for Uart {
+    fn put(&mut self, text: &[u8]) {
+        say(self, text);
     }
-    say(out, b"\r\n");
+    fn end(&mut self) {
+        say(self, b"\r\n");
+    }
 }
 
 #[cfg(target_os = "none")]
-const COMMISSION_STARTED: &[u8] = b"ok commissioning started: about 20 s, the rotor turns in the last test (commission: progress; stop: abort)\r\n";
-
-#[cfg(target_os = "none")]
-/// How the last commissioning ended.
-enum Outcome {
-    /// Its settings were applied.
-    Applied(acim::commissioning::Identified),
-    /// The sequence failed.
-    Failed(acim::commissioning::CommissioningError),
-    /// The identified model was refused by the settings' validation.
-    Refused(settings::SettingError),
-    /// Stopped (fault code 0) or abandoned by a trip (its fault code).
-    Aborted(u8),
+/// What the shared command handling ([`dispatch`]) needs of this board: the interrupt's
+/// command queue, the drive's rebuild, the flash page, the telemetry switch.
+struct Fw {
+    cmd_p: heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
+    /// The configuration of the drive in use (for `params`).
+    cfg: acim::DriveConfig,
+    rcc: stm32g4xx_hal::rcc::Rcc,
+    alive: Alive,
+    /// Text telemetry on the UART.
+    stream: bool,
 }
 
 #[cfg(target_os = "none")]
-/// The main loop's half of the `commission` command ([`commission`]).
-#[derive(Default)]
-struct CommissionState {
-    nameplate: Option<NameplateArgs>,
-    running: bool,
-    outcome: Option<Outcome>,
-}
+impl Platform for Fw {
+    const NAME: &'static str = BOARD_NAME;
+    const PLANT: bool = cfg!(feature = "selftest");
+    const RATE_FLOOR: u16 = dispatch::UART_RATE_FLOOR;
 
-#[cfg(target_os = "none")]
-impl CommissionState {
-    fn start(&mut self, args: NameplateArgs) {
-        self.nameplate = Some(args);
-        self.running = true;
-        self.outcome = None;
+    fn send(&mut self, cmd: ControlCommand) -> Sent {
+        // the reply ("ok" / the refusal) comes back from the interrupt
+        match self.cmd_p.enqueue(cmd) {
+            Ok(()) => Sent::Queued,
+            Err(_) => Sent::Busy,
+        }
     }
 
-    /// The fits (a bisection: here, not in the interrupt), the settings, the new drive.
+    fn state_code(&self) -> u8 {
+        control_isr::STATE_CODE.load(Ordering::Relaxed)
+    }
+
+    fn fault_code(&self) -> u8 {
+        control_isr::FAULT_CODE.load(Ordering::Relaxed)
+    }
+
+    fn status(&mut self) -> (u8, u8) {
+        let (st, fault) = (self.state_code(), self.fault_code());
+        defmt::info!(
+            "status: state {}, fault {}, outputs {}, periods {}, telemetry dropped {}",
+            st,
+            fault,
+            hw_outputs_enabled(),
+            control_isr::HEARTBEAT.load(Ordering::Relaxed),
+            control_isr::TEL_DROPPED.load(Ordering::Relaxed)
+        );
+        (st, fault)
+    }
+
+    fn dc_bus(&self) -> f32 {
+        f32::from_bits(control_isr::DC_BUS_BITS.load(Ordering::Relaxed))
+    }
+
+    fn periods(&self) -> u32 {
+        control_isr::HEARTBEAT.load(Ordering::Relaxed)
+    }
+
     #[inline(never)]
-    fn finish(
-        &mut self,
-        c: &acim::commissioning::Commissioning,
-        settings: &mut Settings,
-        cfg: &mut acim::DriveConfig,
-        rcc: &mut stm32g4xx_hal::rcc::Rcc,
-    ) {
-        self.running = false;
-        let rated = self
-            .nameplate
-            .and_then(|a| commission::nameplate(&a).rated().ok());
-        self.outcome = Some(match (c.identify(), rated) {
-            (Err(e), _) => Outcome::Failed(e),
-            (Ok(_), None) => Outcome::Refused(settings::SettingError {
-                field: "nameplate",
-                rule: "missing",
-            }),
-            (Ok(id), Some(rated)) => {
-                match commission::settings_from(&id, &rated, settings)
-                    .and_then(|next| build_drive(&next, board_cfg::another(rcc)).map(|d| (next, d)))
-                {
-                    Err(e) => Outcome::Refused(e),
-                    Ok((next, (c2, drive))) => match control_isr::replace_drive_if_idle(drive) {
-                        Ok(()) => {
-                            *settings = next;
-                            *cfg = c2;
-                            Outcome::Applied(id)
-                        }
-                        Err(_) => Outcome::Aborted(0),
-                    },
-                }
+    fn rebuild(&mut self, next: &Settings) -> Result<(), Rebuild> {
+        let (cfg, drive) =
+            build_drive(next, board_cfg::another(&mut self.rcc)).map_err(Rebuild::Invalid)?;
+        control_isr::replace_drive_if_idle(drive).map_err(|_| Rebuild::NotIdle)?;
+        self.cfg = cfg;
+        Ok(())
+    }
+
+    #[inline(never)]
+    fn save(&mut self, s: &Settings) -> Result<&'static str, &'static str> {
+        // the watchdog keeps being fed (and a stopped interrupt still switches off) while
+        // the flash is busy
+        let alive = &mut self.alive;
+        match flash::write_record(&s.encode(), &mut || alive.poll()) {
+            Ok(()) => Ok("saved to flash"),
+            Err(e) => {
+                defmt::error!("settings save failed: {}", e.as_str());
+                Err(e.as_str())
             }
-        });
-        defmt::info!("commissioning finished");
+        }
+    }
+
+    #[inline(never)]
+    fn params<R: Reply>(&mut self, _s: &Settings, out: &mut R) {
+        let cfg = &self.cfg;
+        let m = &cfg.machine;
+        defmt::info!(
+            "params: Ts {} s, flux current {} A, current limit {} A, trip {} A, bus {}..{} V, max speed {} rpm, ramp {} rpm/s, Rs0 {} ohm, Rs estimation {}, dead time {} s, sensing {}, pole pairs {}",
+            cfg.control_period,
+            cfg.flux_current,
+            cfg.current_limit,
+            cfg.overcurrent_trip,
+            cfg.dc_bus_min,
+            cfg.dc_bus_max,
+            cfg.max_speed * RAD_S_TO_RPM,
+            cfg.speed_ramp * RAD_S_TO_RPM,
+            cfg.rs_initial,
+            cfg.rs_estimation,
+            cfg.dead_time,
+            cfg.current_sensing,
+            m.pole_pairs_f32(),
+        );
+        defmt::info!(
+            "board: {}, {} A/count, {} V/count, PWM ARR {}, sample lead {} ticks",
+            POWER_STAGE.name,
+            POWER_STAGE.amps_per_count(),
+            POWER_STAGE.volts_per_count(),
+            board::PWM_ARR,
+            board::SAMPLE_LEAD_TICKS
+        );
+        out.line(b"ok parameters logged on RTT (defmt)");
+    }
+
+    fn set_stream(&mut self, on: bool) {
+        self.stream = on;
+    }
+
+    fn stage_commissioning(&mut self, c: Option<acim::commissioning::Commissioning>) {
+        control_isr::stage_commissioning(c);
+    }
+
+    fn commissioning_progress(&self) -> Option<(acim::commissioning::Stage, f32)> {
+        control_isr::commissioning_progress()
+    }
+
+    fn take_finished_commissioning(&mut self) -> Option<acim::commissioning::Commissioning> {
+        let c = control_isr::take_finished_commissioning();
+        if c.is_some() {
+            defmt::info!("commissioning finished");
+        }
+        c
     }
 }
 
 #[cfg(target_os = "none")]
-/// The `commission` query's reply: progress, or how the last one ended.
-#[inline(never)]
-fn say_commission(ctx: &mut Ctx) {
-    let mut buf = [0u8; 24];
-    if let Some((stage, t)) = control_isr::commissioning_progress() {
-        say(ctx.out, b"ok commissioning: ");
-        say(ctx.out, commission::stage_name(stage).as_bytes());
-        say(ctx.out, b", ");
-        say(ctx.out, settings::format_value(t, &mut buf));
-        say(ctx.out, b" s in this stage\r\n");
-        return;
-    }
-    match &ctx.com.outcome {
-        None => say(
-            ctx.out,
-            b"ok no commissioning yet (commission <P W> <V> <A> <Hz> <rpm>)\r\n",
-        ),
-        Some(Outcome::Applied(id)) => {
-            // the settings it wrote, then the inverter's dead time
-            for i in [4, 6, 7, 8, 9, 10, 11, 12, 13] {
-                say_setting(ctx.out, ctx.settings, i);
-            }
-            say(ctx.out, b"dead time = ");
-            say(
-                ctx.out,
-                settings::format_value(id.dead_time * 1e6, &mut buf),
-            );
-            say(ctx.out, b" us\r\n");
-            if id.inertia.is_none() {
-                say(ctx.out, b"inertia not resolved: kept\r\n");
-            }
-            say(
-                ctx.out,
-                b"ok commissioned: settings applied (get lists them; save to keep them)\r\n",
-            );
-        }
-        Some(Outcome::Failed(e)) => {
-            say(ctx.out, b"err commissioning failed: ");
-            say(ctx.out, commission::error_text(*e).as_bytes());
-            if let Some(d) = commission::error_detail(*e) {
-                say(ctx.out, b" (");
-                say(ctx.out, d.as_bytes());
-                say(ctx.out, b")");
-            }
-            say(ctx.out, b"; settings unchanged\r\n");
-        }
-        Some(Outcome::Refused(e)) => {
-            say(
-                ctx.out,
-                b"err commissioning failed: the identified model is refused",
-            );
-            say_setting_error(ctx.out, e);
-            say(ctx.out, b"; settings unchanged\r\n");
-        }
-        Some(Outcome::Aborted(0)) => say(
-            ctx.out,
-            b"ok commissioning aborted by stop; settings unchanged\r\n",
-        ),
-        Some(Outcome::Aborted(f)) => {
-            say(
-                ctx.out,
-                b"err commissioning abandoned: the drive tripped (fault ",
-            );
-            say(ctx.out, protocol::fault_name(*f).as_bytes());
-            say(ctx.out, b"); settings unchanged\r\n");
-        }
-    }
-}
-
-#[cfg(target_os = "none")]
-/// What the command handler works on.
-struct Ctx<'a> {
-    cmd_p: &'a mut heapless::spsc::Producer<'static, ControlCommand, CMD_Q>,
-    out: &'a mut Uart,
-    stream: &'a mut bool,
-    cfg: &'a mut acim::DriveConfig,
-    settings: &'a mut Settings,
-    rcc: &'a mut stm32g4xx_hal::rcc::Rcc,
-    com: &'a mut CommissionState,
-    alive: &'a mut Alive,
-}
-
-#[cfg(target_os = "none")]
-/// The drive is Idle (the last period's state; `replace_drive_if_idle` re-checks
-/// atomically).
-fn idle() -> bool {
-    control_isr::STATE_CODE.load(Ordering::Relaxed) == acim::DriveState::Idle.code()
-}
-
-#[cfg(target_os = "none")]
-/// The drive for `s` (the one place a drive is built: at boot and on `set`/`defaults`).
+/// The drive for `s` (the one place a drive is built: at boot, on `set`, `defaults` and
+/// `commission apply`).
 #[inline(never)]
 fn build_drive(
     s: &Settings,
@@ -855,235 +775,6 @@ fn build_drive(
 ) -> Result<(acim::DriveConfig, Drive<board_cfg::Sc>), settings::SettingError> {
     let cfg = s.drive_config()?;
     Ok((cfg, Drive::with_sincos(cfg, sincos)?))
-}
-
-#[cfg(target_os = "none")]
-/// Rebuilds the drive from `next` and swaps it in if Idle; replies naming `field`.
-#[inline(never)]
-fn apply_settings(ctx: &mut Ctx, next: Settings, field: &str) {
-    let refused = |out: &mut Uart| {
-        say(out, b"err ");
-        say(out, field.as_bytes());
-        say(
-            out,
-            b": refused while the drive is not idle (stop or reset first)\r\n",
-        );
-    };
-    if !idle() {
-        return refused(ctx.out);
-    }
-    match build_drive(&next, board_cfg::another(ctx.rcc)) {
-        Err(e) => {
-            say(ctx.out, b"err");
-            say_setting_error(ctx.out, &e);
-            say(ctx.out, b"\r\n");
-        }
-        Ok((cfg, drive)) => match control_isr::replace_drive_if_idle(drive) {
-            Ok(()) => {
-                *ctx.settings = next;
-                *ctx.cfg = cfg;
-                say(ctx.out, b"ok ");
-                say(ctx.out, field.as_bytes());
-                say(ctx.out, b" applied (save to keep it)\r\n");
-            }
-            Err(_) => refused(ctx.out),
-        },
-    }
-}
-
-#[cfg(target_os = "none")]
-#[inline(never)]
-fn handle(parsed: Parsed, ctx: &mut Ctx) {
-    // replies (also the interrupt's, which come later) go out as the command came
-    ctx.out.framed = parsed.framed;
-    let c = match parsed.request {
-        Ok(Request::Command(c)) => c,
-        Ok(Request::Version) => {
-            say(ctx.out, b"ok protocol 1 board acim-firmware ");
-            say(ctx.out, MODE.as_bytes());
-            const _: () = assert!(
-                board::PWM_FREQUENCY_HZ == 5000,
-                "the version reply says 5000"
-            );
-            say(ctx.out, b" pwm 5000 Hz\r\n");
-            return;
-        }
-        Ok(Request::Rate(n)) => {
-            // to the interrupt's decimator; its "ok" comes back as for any command
-            if ctx.cmd_p.enqueue(ControlCommand::Rate(n)).is_err() {
-                say(ctx.out, b"err busy, command dropped\r\n");
-            }
-            return;
-        }
-        Err(e) => {
-            defmt::warn!("command rejected: {}", e.as_str());
-            say(ctx.out, b"err ");
-            say(ctx.out, e.as_str().as_bytes());
-            say(ctx.out, b"\r\n");
-            return;
-        }
-    };
-    let to_isr = match c {
-        Command::Start => Some(ControlCommand::Start),
-        Command::StartOpenLoop => Some(ControlCommand::StartOpenLoop),
-        Command::Stop => Some(ControlCommand::Stop),
-        Command::Speed(rpm) => Some(ControlCommand::SpeedRpm(rpm)),
-        Command::ResetFault => Some(ControlCommand::ResetFault),
-        Command::Load(nm) => {
-            if cfg!(feature = "selftest") {
-                Some(ControlCommand::PlantLoad(nm))
-            } else {
-                say(
-                    ctx.out,
-                    b"err load applies to the self-test's motor model only\r\n",
-                );
-                None
-            }
-        }
-        Command::Stream(on) => {
-            *ctx.stream = on;
-            say(ctx.out, b"ok\r\n");
-            None
-        }
-        Command::Commission(None) => {
-            say_commission(ctx);
-            None
-        }
-        Command::Commission(Some(args)) => {
-            let bus = f32::from_bits(control_isr::DC_BUS_BITS.load(Ordering::Relaxed));
-            match commission::check(&args, bus, ctx.settings) {
-                // built here (from flash), started by the interrupt; a nameplate the
-                // library refuses reaches the interrupt with nothing staged, which
-                // refuses it (`err value out of range`)
-                Ok(_) => {
-                    control_isr::stage_commissioning(commission::build(&args, bus));
-                    Some(ControlCommand::Commission(args))
-                }
-                Err(e) => {
-                    say(ctx.out, b"err");
-                    say_setting_error(ctx.out, &e);
-                    say(ctx.out, b"\r\n");
-                    None
-                }
-            }
-        }
-        Command::Params => {
-            let cfg = &*ctx.cfg;
-            let m = &cfg.machine;
-            defmt::info!(
-                "params: Ts {} s, flux current {} A, current limit {} A, trip {} A, bus {}..{} V, max speed {} rpm, ramp {} rpm/s, Rs0 {} ohm, Rs estimation {}, dead time {} s, sensing {}, pole pairs {}",
-                cfg.control_period,
-                cfg.flux_current,
-                cfg.current_limit,
-                cfg.overcurrent_trip,
-                cfg.dc_bus_min,
-                cfg.dc_bus_max,
-                cfg.max_speed * RAD_S_TO_RPM,
-                cfg.speed_ramp * RAD_S_TO_RPM,
-                cfg.rs_initial,
-                cfg.rs_estimation,
-                cfg.dead_time,
-                cfg.current_sensing,
-                m.pole_pairs_f32(),
-            );
-            defmt::info!(
-                "board: {}, {} A/count, {} V/count, PWM ARR {}, sample lead {} ticks",
-                POWER_STAGE.name,
-                POWER_STAGE.amps_per_count(),
-                POWER_STAGE.volts_per_count(),
-                board::PWM_ARR,
-                board::SAMPLE_LEAD_TICKS
-            );
-            say(ctx.out, b"ok parameters logged on RTT (defmt)\r\n");
-            None
-        }
-        Command::Status => {
-            let st = control_isr::STATE_CODE.load(Ordering::Relaxed);
-            let fault = control_isr::FAULT_CODE.load(Ordering::Relaxed);
-            defmt::info!(
-                "status: state {}, fault {}, outputs {}, periods {}, telemetry dropped {}",
-                st,
-                fault,
-                hw_outputs_enabled(),
-                control_isr::HEARTBEAT.load(Ordering::Relaxed),
-                control_isr::TEL_DROPPED.load(Ordering::Relaxed)
-            );
-            say(ctx.out, b"ok state ");
-            say(ctx.out, &[b'0' + st.min(9)]);
-            say(ctx.out, b" fault ");
-            say(ctx.out, &[b'0' + fault / 10 % 10, b'0' + fault % 10]);
-            say(ctx.out, b"\r\n");
-            None
-        }
-        Command::Set(i, v) => {
-            let Some(field) = FIELDS.get(i) else {
-                say(ctx.out, b"err unknown setting\r\n");
-                return;
-            };
-            match ctx.settings.set(i, v) {
-                Ok(next) => apply_settings(ctx, next, field.name),
-                Err(e) => {
-                    say(ctx.out, b"err");
-                    say_setting_error(ctx.out, &e);
-                    say(ctx.out, b"\r\n");
-                }
-            }
-            None
-        }
-        Command::Defaults(low_voltage) => {
-            let p = if low_voltage {
-                board::LOW_VOLTAGE
-            } else {
-                board::PROFILE
-            };
-            let next = Settings::from_config(&board::drive_config_for(&p));
-            apply_settings(ctx, next, "defaults");
-            None
-        }
-        Command::Get(which) => {
-            match which {
-                Some(i) => say_setting(ctx.out, ctx.settings, i),
-                None => (0..FIELDS.len()).for_each(|i| say_setting(ctx.out, ctx.settings, i)),
-            }
-            say(ctx.out, b"ok\r\n");
-            None
-        }
-        Command::Save => {
-            if !idle() {
-                say(
-                    ctx.out,
-                    b"err save: refused while the drive is not idle (stop or reset first)\r\n",
-                );
-            } else {
-                // the watchdog keeps being fed (and a stopped interrupt still switches
-                // off) while the flash is busy
-                let alive = &mut *ctx.alive;
-                match flash::write_record(&ctx.settings.encode(), &mut || alive.poll()) {
-                    Ok(()) => say(ctx.out, b"ok saved to flash\r\n"),
-                    Err(e) => {
-                        defmt::error!("settings save failed: {}", e.as_str());
-                        say(ctx.out, b"err save failed: ");
-                        say(ctx.out, e.as_str().as_bytes());
-                        say(ctx.out, b"\r\n");
-                    }
-                }
-            }
-            None
-        }
-        Command::Help => {
-            say(
-                ctx.out,
-                b"commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | commission [<P W> <V> <A> <Hz> <rpm>] | version\r\nok\r\n",
-            );
-            None
-        }
-    };
-    if let Some(cmd) = to_isr {
-        if ctx.cmd_p.enqueue(cmd).is_err() {
-            say(ctx.out, b"err busy, command dropped\r\n");
-        }
-        // the reply ("ok" / "err refused") comes back from the interrupt
-    }
 }
 
 #[cfg(target_os = "none")]

@@ -549,5 +549,6 @@ pub const HELP: &[&str] = &[
     "keys: type a command and Enter; Up/Down history; Esc sends stop; Ctrl-C quits",
     "replies: PgUp/PgDn scroll a page; Home the oldest, End the newest (and follow)",
     "board: start | vf | stop | speed <rpm> | load <N m> | reset | status | get [<name>] | set <name> <value> | defaults | save | rate <periods> | version | help",
+    "commissioning: commission <P W> <V> <A> <Hz> <rpm> | commission (progress, result) | commission apply (its settings; a start, vf, set or defaults first discards them)",
     "monitor: :record FILE | :record (close) | :pause | :window <s> | :quit | :help",
 ];

@@ -899,8 +899,8 @@ mod tests {
     use acim_firmware_core::telemetry::TelemetrySample;
     use std::time::Duration;
 
-    /// The commissioning's first reply line on the virtual board (about 110 characters).
-    const IDENTIFIED: &str = "identified in 16.3 s: Rs 10.497 ohm, R_R 7.213 ohm, L_sigma 41.27 mH, L_M 421.9 mH (inverse-Gamma)";
+    /// The commissioning's last reply line, pending its apply (about 110 characters).
+    const IDENTIFIED: &str = "ok commissioned: send 'commission apply' to use these settings (or 'commission <P W> <V> <A> <Hz> <rpm>' to repeat)";
 
     /// A monitor connected to `board`, fed `n` samples 0.01 s of board time apart in
     /// drive state `state` with fault `fault`.
@@ -1029,11 +1029,11 @@ mod tests {
         let s = screenshot(&app, 80, 24);
         assert_fits(&s, 80, 24);
         // its tail, on a continuation line
+        assert!(s.contains("<Hz> <rpm>' to repeat)"), "{s}");
         assert!(
-            s.contains("\n  mH (inverse-Gamma)") || s.contains("(inverse-Gamma)"),
+            s.contains("ok commissioned: send 'commission apply'"),
             "{s}"
         );
-        assert!(s.contains("identified in 16.3 s: Rs 10.497 ohm"), "{s}");
 
         for k in 0..30 {
             app.on_event(Event::Reply {
@@ -1068,7 +1068,7 @@ mod tests {
         app.replies_oldest();
         let top = screenshot(&app, 80, 24);
         assert!(
-            top.contains("identified in") && top.contains("(inverse-Gamma)"),
+            top.contains("ok commissioned: send") && top.contains("to repeat)"),
             "{top}"
         );
         app.replies_newest();

@@ -1,15 +1,17 @@
 //! The board without its link: the firmware's control loop on the motor model, and the
-//! firmware's command handling with its reply texts (firmware/src/main.rs), plus protocol
-//! version 1 ([`acim_firmware_core::protocol`]).
+//! firmware's own command handling ([`acim_firmware_core::dispatch`], shared with
+//! firmware/src/main.rs) with protocol version 1 ([`acim_firmware_core::protocol`]).
 
+use acim::commissioning::Stage;
 use acim::frames::FastSinCos;
 use acim::{Drive, DriveState};
 use acim_firmware_core::board::{self, POWER_STAGE, PWM_FREQUENCY_HZ, TELEMETRY_DECIMATION};
-use acim_firmware_core::command::{Command, ParseError};
-use acim_firmware_core::commission::{self, Commissioning, NameplateArgs};
-use acim_firmware_core::control::{refusal_text, ControlCommand, ControlLoop};
+use acim_firmware_core::command::ParseError;
+use acim_firmware_core::commission::{self, Commissioning};
+use acim_firmware_core::control::{ControlCommand, ControlLoop};
 use acim_firmware_core::convert::Converter;
-use acim_firmware_core::protocol::{self, Extension, Request, RequestError};
+use acim_firmware_core::dispatch::{self, Dispatch, Platform, Rebuild, Reply, Sent};
+use acim_firmware_core::protocol::{self, Extension};
 use acim_firmware_core::settings::{self, Settings, FIELDS};
 use acim_firmware_core::sim::SimulatedStage;
 use acim_firmware_core::telemetry::{self, TelemetrySample};
@@ -30,11 +32,8 @@ pub enum Event {
     Control(ControlCommand),
     /// A new telemetry decimation.
     Rate(u16),
-    /// A drive rebuilt from new settings.
+    /// A drive rebuilt from new settings (`set`, `defaults`, `commission apply`).
     Settings(Settings),
-    /// Commissioning finished and its settings replaced the drive's (`None`: it failed
-    /// and nothing changed). [`replay`] re-derives it from the commission command.
-    Commissioned(Option<Settings>),
 }
 
 /// An [`Event`] and the period it was applied before.
@@ -55,9 +54,11 @@ pub const LOG_CAPACITY: usize = 1024;
 /// The board's event log: a ring of the last [`LOG_CAPACITY`] (or a chosen number of)
 /// [`Logged`] events, oldest first, and the count of every event ever logged.
 ///
-/// Only what took effect is logged (and how a commissioning ended): a command the drive
-/// refused, a setting the validation refused and every line answered with `err` leave no
-/// entry (they change nothing, so [`replay`] needs none).
+/// Only what took effect is logged: a command the drive refused, a setting the validation
+/// refused and every line answered with `err` leave no entry (they change nothing, so
+/// [`replay`] needs none). A commissioning's end is not an entry: [`replay`] re-derives
+/// it from the commission command, and its settings are a [`Event::Settings`] entry when
+/// `commission apply` uses them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventLog {
     entries: VecDeque<Logged>,
@@ -156,19 +157,147 @@ impl Sample {
 /// The virtual board: the self-test firmware's interrupt body and main-loop command
 /// handling, with no I/O.
 pub struct Board {
+    hw: Hw,
+    dispatch: Dispatch,
+}
+
+/// What the firmware's interrupt and its flash are on this board: the control loop, the
+/// motor model, the "flash" and the event log.
+struct Hw {
     ctl: ControlLoop<FastSinCos>,
     stage: SimulatedStage,
-    settings: Settings,
     saved: Settings,
     period: u64,
     timed: bool,
     log: EventLog,
-    /// The nameplate of the commissioning under way or last run.
-    nameplate: Option<NameplateArgs>,
-    /// The reply lines of the last finished commissioning.
-    commissioned: Option<Vec<String>>,
-    /// The period the commissioning under way started at.
-    commission_started: Option<u64>,
+}
+
+impl Hw {
+    /// Applies `cmd` to the control loop (a commissioning must be staged first); `load`
+    /// also reaches the motor model. Logged only if accepted.
+    fn apply(&mut self, cmd: ControlCommand) -> Result<(), acim::CommandError> {
+        if let ControlCommand::PlantLoad(nm) = cmd {
+            self.stage.set_brake_nm(nm);
+        }
+        let result = self.ctl.apply(cmd).result;
+        if result.is_ok() {
+            self.log.push(Logged {
+                period: self.period,
+                event: Event::Control(cmd),
+            });
+        }
+        result
+    }
+
+    fn set_rate(&mut self, every: u16) {
+        self.log.push(Logged {
+            period: self.period,
+            event: Event::Rate(every),
+        });
+        // as the firmware's interrupt applies it
+        let _ = self.ctl.apply(ControlCommand::Rate(every));
+    }
+
+    /// A drive for `next`, swapped in only while Idle.
+    fn rebuild(&mut self, next: &Settings) -> Result<(), Rebuild> {
+        let drive = next
+            .drive_config()
+            .and_then(|cfg| Drive::new(cfg).map_err(settings::SettingError::from))
+            .map_err(Rebuild::Invalid)?;
+        self.ctl.replace_drive(drive).map_err(|_| Rebuild::NotIdle)
+    }
+}
+
+/// The board as the shared command handling sees it: the hardware half and this
+/// connection's telemetry switch.
+struct Link<'a> {
+    hw: &'a mut Hw,
+    stream: &'a mut bool,
+}
+
+impl Platform for Link<'_> {
+    const NAME: &'static str = BOARD_NAME;
+    const PLANT: bool = true;
+
+    fn send(&mut self, cmd: ControlCommand) -> Sent {
+        // applied before the next period, as the firmware's interrupt takes it from its
+        // queue
+        Sent::Done(match cmd {
+            ControlCommand::Rate(n) => {
+                self.hw.set_rate(n);
+                Ok(())
+            }
+            _ => self.hw.apply(cmd),
+        })
+    }
+    fn state_code(&self) -> u8 {
+        self.hw.ctl.state_code()
+    }
+    fn fault_code(&self) -> u8 {
+        self.hw.ctl.fault_code()
+    }
+    fn dc_bus(&self) -> f32 {
+        self.hw.ctl.inputs().dc_bus
+    }
+    fn periods(&self) -> u32 {
+        self.hw.period as u32
+    }
+    fn rebuild(&mut self, next: &Settings) -> Result<(), Rebuild> {
+        self.hw.rebuild(next)?;
+        self.hw.log.push(Logged {
+            period: self.hw.period,
+            event: Event::Settings(*next),
+        });
+        Ok(())
+    }
+    fn save(&mut self, s: &Settings) -> Result<&'static str, &'static str> {
+        self.hw.saved = *s;
+        Ok("saved (virtual board: kept in memory until it exits)")
+    }
+    fn params<R: Reply>(&mut self, s: &Settings, out: &mut R) {
+        out.line(
+            format!(
+                "params: Ts {} s, telemetry every {} periods, board {}",
+                1.0 / PWM_FREQUENCY_HZ as f32,
+                TELEMETRY_DECIMATION,
+                POWER_STAGE.name
+            )
+            .as_bytes(),
+        );
+        for i in 0..FIELDS.len() {
+            dispatch::setting_line(out, s, i);
+        }
+        out.line(b"ok parameters listed (the firmware logs them on RTT)");
+    }
+    fn set_stream(&mut self, on: bool) {
+        *self.stream = on;
+    }
+    fn stage_commissioning(&mut self, c: Option<Commissioning>) {
+        self.hw.ctl.stage_commissioning(c);
+    }
+    fn commissioning_progress(&self) -> Option<(Stage, f32)> {
+        let c = self.hw.ctl.commissioning()?;
+        Some((c.stage(), c.stage_time()))
+    }
+    fn take_finished_commissioning(&mut self) -> Option<Commissioning> {
+        self.hw.ctl.take_finished_commissioning()
+    }
+}
+
+/// Reply lines without their line ends.
+#[derive(Default)]
+struct Lines {
+    done: Vec<Vec<u8>>,
+    cur: Vec<u8>,
+}
+
+impl Reply for Lines {
+    fn put(&mut self, text: &[u8]) {
+        self.cur.extend_from_slice(text);
+    }
+    fn end(&mut self) {
+        self.done.push(std::mem::take(&mut self.cur));
+    }
 }
 
 impl Default for Board {
@@ -193,16 +322,15 @@ impl Board {
             Err(e) => panic!("the firmware's default drive configuration is refused: {e:?}"),
         };
         let mut board = Self {
-            ctl: ControlLoop::new(drive, conv, TELEMETRY_DECIMATION),
-            stage: SimulatedStage::new(conv),
-            settings,
-            saved: settings,
-            period: 0,
-            timed,
-            log: EventLog::default(),
-            nameplate: None,
-            commissioned: None,
-            commission_started: None,
+            hw: Hw {
+                ctl: ControlLoop::new(drive, conv, TELEMETRY_DECIMATION),
+                stage: SimulatedStage::new(conv),
+                saved: settings,
+                period: 0,
+                timed,
+                log: EventLog::default(),
+            },
+            dispatch: Dispatch::new(settings),
         };
         board.power_up();
         board
@@ -213,106 +341,97 @@ impl Board {
     /// the firmware's interrupt runs it while the main loop boots. Not counted as
     /// periods, no telemetry.
     fn power_up(&mut self) {
-        for _ in 0..self.ctl.drive().coeffs().limits.offset_settle_steps {
-            let raw = self.stage.sample();
-            let out = self.ctl.step(&raw);
-            self.stage.run_period(out);
+        let hw = &mut self.hw;
+        for _ in 0..hw.ctl.drive().coeffs().limits.offset_settle_steps {
+            let raw = hw.stage.sample();
+            let out = hw.ctl.step(&raw);
+            hw.stage.run_period(out);
         }
     }
 
     /// Periods run so far.
     pub fn period(&self) -> u64 {
-        self.period
+        self.hw.period
     }
 
     /// The last [`LOG_CAPACITY`] events that took effect, in order (a server moves them
     /// out with [`Board::take_log_into`]).
     pub fn log(&self) -> &EventLog {
-        &self.log
+        &self.hw.log
     }
 
     /// Moves the events logged since the last call into `dst`, so that each is kept in
     /// one place (the server's log, which other threads read).
     pub fn take_log_into(&mut self, dst: &mut EventLog) {
-        self.log.move_into(dst);
+        self.hw.log.move_into(dst);
     }
 
     /// The drive's state.
     pub fn state(&self) -> DriveState {
-        self.ctl.state()
+        self.hw.ctl.state()
     }
 
     /// The settings in use.
     pub fn settings(&self) -> &Settings {
-        &self.settings
+        self.dispatch.settings()
     }
 
     /// The motor model's true speed, rpm.
     pub fn plant_speed_rpm(&self) -> f32 {
-        self.stage.speed_rpm()
+        self.hw.stage.speed_rpm()
     }
 
     /// Sends a command to the control loop before the next period (as the firmware's
-    /// interrupt takes it from its queue); `load` also reaches the motor model. Logged
-    /// only if the control loop accepts it (a refused command changes nothing).
+    /// interrupt takes it from its queue), as if it had come over the link with its reply
+    /// dropped; `load` also reaches the motor model. Logged only if the control loop
+    /// accepts it (a refused command changes nothing).
     pub fn apply(&mut self, cmd: ControlCommand) -> Result<(), acim::CommandError> {
-        if let ControlCommand::PlantLoad(nm) = cmd {
-            self.stage.set_brake_nm(nm);
-        }
         // as the firmware's main loop: the sequence is built outside the control step, with
         // the bus of the last period, and staged for the command that starts it
         if let ControlCommand::Commission(args) = cmd {
-            self.ctl
-                .stage_commissioning(commission::build(&args, self.ctl.inputs().dc_bus));
+            let bus = self.hw.ctl.inputs().dc_bus;
+            self.hw
+                .ctl
+                .stage_commissioning(commission::build(&args, bus));
         }
-        let result = self.ctl.apply(cmd).result;
-        if result.is_ok() {
-            self.log.push(Logged {
-                period: self.period,
-                event: Event::Control(cmd),
-            });
-        }
+        let result = self.hw.apply(cmd);
+        let mut stream = false;
+        let mut link = Link {
+            hw: &mut self.hw,
+            stream: &mut stream,
+        };
+        self.dispatch
+            .control_reply(cmd, result, &mut link, &mut Lines::default());
         result
     }
 
     /// Telemetry every `every` periods from the next period on.
     pub fn set_rate(&mut self, every: u16) {
-        self.log.push(Logged {
-            period: self.period,
-            event: Event::Rate(every),
-        });
-        // as the firmware's interrupt applies it
-        let _ = self.ctl.apply(ControlCommand::Rate(every));
+        self.hw.set_rate(every);
     }
 
     /// Runs one control period (sample, step, PWM into the model) and returns the
     /// telemetry sample if this period closes a decimation window.
     pub fn step(&mut self) -> Option<Sample> {
-        let raw = self.stage.sample();
-        let t0 = self.timed.then(Instant::now);
-        let out = self.ctl.step(&raw);
+        let hw = &mut self.hw;
+        let raw = hw.stage.sample();
+        let t0 = hw.timed.then(Instant::now);
+        let out = hw.ctl.step(&raw);
         let cycles = t0.map_or(0, |t| {
             (t.elapsed().as_nanos() as f64 * board::SYSCLK_HZ as f64 * 1e-9) as u32
         });
-        self.stage.run_period(out);
-        if let Some(c) = self.ctl.take_finished_commissioning() {
-            self.finish_commissioning(&c);
-        } else if self.commission_started.is_some() && self.ctl.commissioning().is_none() {
-            // abandoned: a stop, or a trip (the drive's fault says which)
-            self.commission_started = None;
-            self.commissioned = Some(vec![if self.ctl.state() == DriveState::Fault {
-                format!(
-                    "err commissioning abandoned: the drive tripped (fault {}); settings unchanged",
-                    protocol::fault_name(self.ctl.fault_code())
-                )
-            } else {
-                "ok commissioning aborted by stop; settings unchanged".into()
-            }]);
-        }
-        self.period += 1;
+        hw.stage.run_period(out);
+        // the main loop's half: a finished commissioning's fits, or its abort
+        let mut stream = false;
+        self.dispatch.poll(&mut Link {
+            hw: &mut self.hw,
+            stream: &mut stream,
+        });
+        let hw = &mut self.hw;
+        hw.period += 1;
         // the loop counts the periods too (`t.period`, u32): the same as `self.period`
         // before this one, wrapped
-        let t = self.ctl.finish_period(cycles, self.stage.speed_rpm())?;
+        let t = hw.ctl.finish_period(cycles, hw.stage.speed_rpm())?;
         Some(Sample {
             t,
             x: Extension::of(&t),
@@ -324,18 +443,21 @@ impl Board {
     /// `stream` is this connection's telemetry switch. Nothing changes on an error.
     pub fn handle_line(&mut self, line: &[u8], stream: &mut bool) -> Vec<Vec<u8>> {
         let p = protocol::parse_line(line);
-        let texts = match p.request {
-            Err(RequestError::Parse(ParseError::Empty)) => Vec::new(),
-            Err(e) => vec![format!("err {}", e.as_str())],
-            Ok(r) => self.handle(r, stream),
+        let mut out = Lines::default();
+        let mut link = Link {
+            hw: &mut self.hw,
+            stream,
         };
-        texts
+        self.dispatch.handle(p.request, &mut link, &mut out);
+        out.done
             .into_iter()
             .map(|t| {
                 if p.framed {
-                    protocol::reply_frame(t.as_bytes()).to_vec()
+                    protocol::reply_frame(&t).to_vec()
                 } else {
-                    format!("{t}\r\n").into_bytes()
+                    let mut t = t;
+                    t.extend_from_slice(b"\r\n");
+                    t
                 }
             })
             .collect()
@@ -348,242 +470,6 @@ impl Board {
             protocol::reply_frame(t.as_bytes()).to_vec()
         } else {
             format!("{t}\r\n").into_bytes()
-        }
-    }
-
-    /// The main loop's half of commissioning: the fits, the settings, the new drive.
-    fn finish_commissioning(&mut self, c: &Commissioning) {
-        let t = self.commission_started.take().map_or(0.0, |k| {
-            (self.period + 1 - k) as f32 / PWM_FREQUENCY_HZ as f32
-        });
-        let fail = |why: &str| {
-            vec![format!(
-                "err commissioning failed: {why}; settings unchanged"
-            )]
-        };
-        let rated = self
-            .nameplate
-            .and_then(|a| commission::nameplate(&a).rated().ok());
-        let (lines, applied) = match (c.identify(), rated) {
-            (Err(e), _) => {
-                let why = commission::error_text(e);
-                match commission::error_detail(e) {
-                    Some(d) => (fail(&format!("{why} ({d})")), None),
-                    None => (fail(why), None),
-                }
-            }
-            (Ok(_), None) => (fail("no nameplate"), None),
-            (Ok(id), Some(rated)) => {
-                match commission::settings_from(&id, &rated, &self.settings).and_then(|next| {
-                    Drive::new(next.drive_config()?)
-                        .map(|d| (next, d))
-                        .map_err(settings::SettingError::from)
-                }) {
-                    Err(e) => (
-                        fail(&format!(
-                            "the identified model is refused ({}: {})",
-                            e.field, e.rule
-                        )),
-                        None,
-                    ),
-                    Ok((next, drive)) => match self.ctl.replace_drive(drive) {
-                        Err(_) => (fail("the drive left Idle"), None),
-                        Ok(()) => {
-                            self.settings = next;
-                            let j = id.inertia.map_or("not resolved (kept)".to_string(), |j| {
-                                format!("{j:.5} kg m^2")
-                            });
-                            (
-                                vec![
-                                    format!(
-                                        "identified in {t:.1} s: Rs {:.3} ohm, R_R {:.3} ohm, L_sigma {:.2} mH, L_M {:.1} mH (inverse-Gamma)",
-                                        id.stator_resistance,
-                                        id.rotor_resistance,
-                                        id.leakage_inductance * 1e3,
-                                        id.magnetizing_inductance * 1e3
-                                    ),
-                                    format!(
-                                        "rated flux current {:.3} A, dead time {:.2} us, J {j}, friction {:.5} N m s/rad",
-                                        id.rated_flux_current,
-                                        id.dead_time * 1e6,
-                                        id.viscous_friction
-                                    ),
-                                    "ok commissioned: settings applied (get lists them; save to keep them)".into(),
-                                ],
-                                Some(next),
-                            )
-                        }
-                    },
-                }
-            }
-        };
-        self.log.push(Logged {
-            period: self.period,
-            event: Event::Commissioned(applied),
-        });
-        self.commissioned = Some(lines);
-    }
-
-    fn commission(&mut self, args: Option<NameplateArgs>) -> Vec<String> {
-        let Some(args) = args else {
-            if let Some(c) = self.ctl.commissioning() {
-                return vec![format!(
-                    "ok commissioning: {}, {:.1} s in this stage",
-                    commission::stage_name(c.stage()),
-                    c.stage_time()
-                )];
-            }
-            return self.commissioned.clone().unwrap_or_else(|| {
-                vec!["ok no commissioning yet (commission <P W> <V> <A> <Hz> <rpm>)".into()]
-            });
-        };
-        if let Err(e) = commission::check(&args, self.ctl.inputs().dc_bus, &self.settings) {
-            return vec![format!("err ({}: {})", e.field, e.rule)];
-        }
-        match self.apply(ControlCommand::Commission(args)) {
-            Ok(()) => {
-                self.nameplate = Some(args);
-                self.commissioned = None;
-                self.commission_started = Some(self.period);
-                vec!["ok commissioning started: about 20 s, the rotor turns in the last test (commission: progress; stop: abort)".into()]
-            }
-            Err(e) => vec![String::from_utf8_lossy(refusal_text(e))
-                .trim_end()
-                .to_string()],
-        }
-    }
-
-    fn control(&mut self, cmd: ControlCommand) -> String {
-        match self.apply(cmd) {
-            Ok(()) => "ok".into(),
-            Err(e) => String::from_utf8_lossy(refusal_text(e))
-                .trim_end()
-                .to_string(),
-        }
-    }
-
-    fn setting_line(&self, i: usize) -> String {
-        let f = &FIELDS[i];
-        let mut buf = [0u8; 24];
-        let v = String::from_utf8_lossy(settings::format_value(self.settings.get(i), &mut buf))
-            .to_string();
-        if f.unit.is_empty() {
-            format!("{} = {v}", f.name)
-        } else {
-            format!("{} = {v} {}", f.name, f.unit)
-        }
-    }
-
-    fn apply_settings(&mut self, next: Settings, field: &str) -> String {
-        let refused =
-            format!("err {field}: refused while the drive is not idle (stop or reset first)");
-        if self.ctl.state() != DriveState::Idle {
-            return refused;
-        }
-        let drive = match next.drive_config() {
-            Ok(cfg) => Drive::new(cfg).map_err(settings::SettingError::from),
-            Err(e) => Err(e),
-        };
-        match drive {
-            Err(e) => format!("err ({}: {})", e.field, e.rule),
-            Ok(drive) => match self.ctl.replace_drive(drive) {
-                Ok(()) => {
-                    self.settings = next;
-                    self.log.push(Logged {
-                        period: self.period,
-                        event: Event::Settings(next),
-                    });
-                    format!("ok {field} applied (save to keep it)")
-                }
-                Err(_) => refused,
-            },
-        }
-    }
-
-    fn handle(&mut self, r: Request, stream: &mut bool) -> Vec<String> {
-        let c = match r {
-            Request::Version => {
-                return vec![format!(
-                    "ok protocol {} board {BOARD_NAME} pwm {PWM_FREQUENCY_HZ} Hz",
-                    protocol::PROTOCOL_VERSION
-                )]
-            }
-            Request::Rate(n) => {
-                self.set_rate(n);
-                return vec!["ok".into()];
-            }
-            Request::Command(c) => c,
-        };
-        let one = |s: String| vec![s];
-        match c {
-            Command::Start => one(self.control(ControlCommand::Start)),
-            Command::StartOpenLoop => one(self.control(ControlCommand::StartOpenLoop)),
-            Command::Stop => one(self.control(ControlCommand::Stop)),
-            Command::Speed(rpm) => one(self.control(ControlCommand::SpeedRpm(rpm))),
-            Command::ResetFault => one(self.control(ControlCommand::ResetFault)),
-            Command::Load(nm) => one(self.control(ControlCommand::PlantLoad(nm))),
-            Command::Commission(args) => self.commission(args),
-            Command::Stream(on) => {
-                *stream = on;
-                one("ok".into())
-            }
-            Command::Params => {
-                let mut v: Vec<String> = (0..FIELDS.len()).map(|i| self.setting_line(i)).collect();
-                v.insert(
-                    0,
-                    format!(
-                        "params: Ts {} s, telemetry every {} periods, board {}",
-                        1.0 / PWM_FREQUENCY_HZ as f32,
-                        TELEMETRY_DECIMATION,
-                        POWER_STAGE.name
-                    ),
-                );
-                v.push("ok parameters listed (the firmware logs them on RTT)".into());
-                v
-            }
-            Command::Status => one(format!(
-                "ok state {} fault {:02}",
-                self.ctl.state_code().min(9),
-                self.ctl.fault_code() % 100
-            )),
-            Command::Set(i, v) => match (FIELDS.get(i), self.settings.set(i, v)) {
-                (None, _) => one("err unknown setting".into()),
-                (Some(f), Ok(next)) => one(self.apply_settings(next, f.name)),
-                (Some(_), Err(e)) => one(format!("err ({}: {})", e.field, e.rule)),
-            },
-            Command::Defaults(low_voltage) => {
-                let p = if low_voltage {
-                    board::LOW_VOLTAGE
-                } else {
-                    board::PROFILE
-                };
-                let next = Settings::from_config(&board::drive_config_for(&p));
-                one(self.apply_settings(next, "defaults"))
-            }
-            Command::Get(which) => {
-                let mut v: Vec<String> = match which {
-                    Some(i) if i < FIELDS.len() => vec![self.setting_line(i)],
-                    Some(_) => Vec::new(),
-                    None => (0..FIELDS.len()).map(|i| self.setting_line(i)).collect(),
-                };
-                v.push("ok".into());
-                v
-            }
-            Command::Save => {
-                if self.ctl.state() != DriveState::Idle {
-                    one("err save: refused while the drive is not idle (stop or reset first)".into())
-                } else {
-                    self.saved = self.settings;
-                    one("ok saved (virtual board: kept in memory until it exits)".into())
-                }
-            }
-            // protocol 1: every reply ends with an `ok` or `err` line (the firmware's help
-            // line has none)
-            Command::Help => vec![
-                "commands: start | vf | stop | speed <rpm> | reset | params | status | stream on|off | load <N m> (self-test) | set <name> <value> | get [<name>] | save | defaults [low-voltage] | commission [<P W> <V> <A> <Hz> <rpm>] | version | rate <periods>"
-                    .into(),
-                "ok".into(),
-            ],
         }
     }
 }
@@ -599,20 +485,12 @@ pub fn replay(log: &[Logged], periods: u64) -> Vec<Sample> {
         while let Some(l) = next.next_if(|l| l.period <= b.period()) {
             match l.event {
                 Event::Control(c) => {
-                    let accepted = b.apply(c).is_ok();
-                    if let (ControlCommand::Commission(args), true) = (c, accepted) {
-                        b.nameplate = Some(args);
-                        b.commission_started = Some(b.period);
-                    }
+                    let _ = b.apply(c);
                 }
-                // re-derived by the replayed board itself
-                Event::Commissioned(_) => {}
                 Event::Rate(n) => b.set_rate(n),
                 Event::Settings(s) => {
-                    if let Ok(Ok(d)) = s.drive_config().map(Drive::new) {
-                        if b.ctl.replace_drive(d).is_ok() {
-                            b.settings = s;
-                        }
+                    if b.hw.rebuild(&s).is_ok() {
+                        b.dispatch.replace_settings(s);
                     }
                 }
             }
@@ -660,6 +538,42 @@ mod tests {
         let c = protocol::command_frame("status");
         let f = say(&mut b, std::str::from_utf8(&c).unwrap().trim_end());
         assert!(f.starts_with("$R,ok state 1 fault 00*"), "{f}");
+        // the firmware's texts (acim_firmware_core::dispatch), a line each
+        let help: String = dispatch::HELP
+            .iter()
+            .map(|l| format!("{}\r\n", std::str::from_utf8(l).unwrap()))
+            .collect();
+        assert_eq!(say(&mut b, "help"), format!("{help}ok\r\n"));
+        assert_eq!(
+            say(&mut b, "commission apply"),
+            "err nothing to apply (no accepted commissioning result: commission shows the last)\r\n"
+        );
+        assert_eq!(
+            say(&mut b, "save"),
+            "err save: refused while the drive is not idle (stop or reset first)\r\n"
+        );
+        assert_eq!(
+            say(&mut b, "defaults"),
+            "err defaults: refused while the drive is not idle (stop or reset first)\r\n"
+        );
+        assert_eq!(say(&mut b, "stop"), "ok\r\n");
+        assert_eq!(
+            say(&mut b, "save"),
+            "ok saved (virtual board: kept in memory until it exits)\r\n"
+        );
+        // a framed reply of several lines: one frame a line, the last an `ok`
+        let c = protocol::command_frame("get current_limit");
+        let f = say(&mut b, std::str::from_utf8(&c).unwrap().trim_end());
+        let lines: Vec<&str> = f.lines().collect();
+        assert_eq!(lines.len(), 2, "{f}");
+        assert_eq!(
+            protocol::unframe(lines[0].as_bytes()).unwrap(),
+            (b'R', &b"current_limit = 4.67 A"[..])
+        );
+        assert_eq!(
+            protocol::unframe(lines[1].as_bytes()).unwrap(),
+            (b'R', &b"ok"[..])
+        );
     }
 
     #[test]

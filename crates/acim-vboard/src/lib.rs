@@ -2,8 +2,8 @@
 //!
 //! The self-test firmware's control loop on the host: [`acim_firmware_core`]'s
 //! `ControlLoop` (the interrupt body) and `SimulatedStage` (the motor model behind the
-//! board's ADC), with the firmware's command handling and reply texts, speaking the
-//! firmware's protocol (docs/protocol.md) on a local TCP port in real time, a multiple of
+//! board's ADC), with the firmware's own command handling and reply texts
+//! ([`acim_firmware_core::dispatch`]), speaking the firmware's protocol (docs/protocol.md) on a local TCP port in real time, a multiple of
 //! it, or as fast as the host runs it. Every host tool that talks to the board's UART
 //! talks to this the same way.
 //!

@@ -1,6 +1,7 @@
 //! `commission` as a user runs it on the virtual board: the nameplate typed on the
-//! command line, progress while it runs, the identified model in the settings, then a
-//! sensorless start on those settings alone. The motor model is the paper's machine
+//! command line, progress while it runs, the identified values with their bounds, the
+//! settings unchanged until `commission apply`, then a sensorless start on those settings
+//! alone. The motor model is the paper's machine
 //! (shared/machines/paper-750w.toml: 750 W, 230 V, 3.3 A, 50 Hz, 1500 rpm), behind the
 //! firmware's ADC conversion and the model's default inverter (1.5 us dead time).
 
@@ -62,9 +63,58 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     println!("commissioned in about {t:.1} s:\n{}", r.join("\n"));
     assert_eq!(
         r.last().unwrap(),
-        "ok commissioned: settings applied (get lists them; save to keep them)"
+        "ok commissioned: send 'commission apply' to use these settings \
+         (or 'commission <P W> <V> <A> <Hz> <rpm>' to repeat)"
     );
+    assert!(r[0].starts_with("identified in "), "{r:?}");
+    // each identified value with its bound, the bound covering the true error
+    let value = |name: &str| -> (f32, f32) {
+        let l = r
+            .iter()
+            .find(|l| l.starts_with(&format!("identified {name} ")))
+            .unwrap_or_else(|| panic!("no {name} in {r:?}"));
+        let w: Vec<&str> = l.split(' ').collect();
+        let bound = l.split("+/-").nth(1).unwrap().trim_end_matches(" %");
+        (w[2].parse().unwrap(), bound.parse().unwrap())
+    };
+    let (rs, rs_pct) = value("rs");
+    assert!((rs - 10.5).abs() / 10.5 < 0.02, "{rs}");
+    assert!(rs_pct > 0.0 && rs_pct < 10.0, "{rs_pct}");
+    assert!(
+        100.0 * (rs - 10.5).abs() / 10.5 <= rs_pct + 0.05,
+        "{rs} +/-{rs_pct} %"
+    );
+    for name in ["r_r", "l_sigma", "l_m", "flux_current", "dead_time"] {
+        let (v, pct) = value(name);
+        assert!(v > 0.0 && pct > 0.0, "{name} {v} +/-{pct}");
+    }
+    // nothing applied yet: the settings are the ones before, and the drive idle
+    assert_eq!(*b.settings(), before);
     assert_eq!(say(&mut b, "status"), ["ok state 0 fault 00"]);
+    // the queries and save keep the result (save stores the settings in use)
+    assert!(say(&mut b, "get").len() > 10);
+    assert!(say(&mut b, "save")[0].starts_with("ok saved"));
+    assert_eq!(say(&mut b, "commission"), r);
+    let log = b.log().len();
+    assert_eq!(
+        say(&mut b, "commission apply"),
+        ["ok applied (get lists the settings; save to keep them)"]
+    );
+    assert_ne!(*b.settings(), before);
+    assert_eq!(
+        say(&mut b, "commission apply"),
+        ["err nothing to apply (already applied)"]
+    );
+    assert_eq!(
+        say(&mut b, "commission").last().unwrap(),
+        "ok commissioned: applied (get lists the settings; save to keep them)"
+    );
+    // the applied settings are an entry of the log (a replay reproduces them)
+    assert_eq!(b.log().len(), log + 1);
+    assert_eq!(
+        b.log().iter().last().unwrap().event,
+        acim_vboard::board::Event::Settings(*b.settings())
+    );
 
     // against the paper machine's inverse-Gamma model (issue 14's bounds)
     let truth = MachineParams::paper_table1();
@@ -129,6 +179,43 @@ fn stop_aborts_commissioning_and_nothing_changes() {
         say(&mut b, "commission"),
         ["ok commissioning aborted by stop; settings unchanged"]
     );
+    assert!(say(&mut b, "commission apply")[0].starts_with("err nothing to apply"));
+    assert_eq!(*b.settings(), before);
+}
+
+/// A start before `commission apply` goes on with the settings in use: the result is
+/// discarded, and `commission apply` has nothing to apply afterwards.
+#[test]
+fn a_start_before_the_apply_discards_the_result() {
+    let mut b = Board::new(false);
+    run(&mut b, 0.01);
+    let before = *b.settings();
+    assert!(
+        say(&mut b, "commission 750 230 3.3 50 1500")[0].starts_with("ok commissioning started")
+    );
+    let mut t = 0.0;
+    while say(&mut b, "status")[0] == "ok state 5 fault 00" {
+        assert!(t < 60.0);
+        run(&mut b, 0.5);
+        t += 0.5;
+    }
+    assert!(say(&mut b, "commission")
+        .last()
+        .unwrap()
+        .starts_with("ok commissioned: send 'commission apply'"));
+    // the rotor coasts down from the no-load test and the flux decays, then a start
+    run(&mut b, 3.0);
+    assert_eq!(say(&mut b, "start"), ["ok"]);
+    assert_eq!(say(&mut b, "stop"), ["ok"]);
+    assert_eq!(
+        say(&mut b, "commission apply"),
+        ["err nothing to apply (discarded by a start, vf, set or defaults after it)"]
+    );
+    assert_eq!(
+        say(&mut b, "commission").last().unwrap(),
+        "ok commissioned: not applied (a start, vf, set or defaults came first; settings unchanged)"
+    );
+    assert_eq!(*b.settings(), before);
 }
 
 /// A 20 N m brake on the rotor (a coupled load nobody removed) stalls the no-load test:
@@ -161,6 +248,9 @@ fn a_failed_commissioning_reports_why_and_changes_nothing() {
     assert_eq!(*b.settings(), before);
     assert_eq!(b.state(), DriveState::Idle);
     assert_eq!(say(&mut b, "status"), ["ok state 0 fault 00"]);
+    // a refused result can never be applied
+    assert!(say(&mut b, "commission apply")[0].starts_with("err nothing to apply"));
+    assert_eq!(*b.settings(), before);
 }
 
 /// The new user's run: a 1.5 N m brake left on the shaft (30 % of the rated torque),

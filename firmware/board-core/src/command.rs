@@ -16,7 +16,9 @@
 //! defaults [low-voltage]  this build's default settings (or the 24-60 V bring-up profile), Idle only, not saved
 //! commission <P W> <V> <A> <Hz> <rpm>  self-commissioning from the nameplate (rated power, line
 //!                  voltage rms, line current rms, frequency, speed), Idle only; the rotor turns
-//! commission       its progress, or its result
+//! commission       its progress, or its result (the identified values with their confidence)
+//! commission apply use the last commissioning's result: its settings replace the drive's
+//!                  (Idle only; a start, vf, set or defaults after the result discards it)
 //! help             list the commands
 //! ```
 //!
@@ -67,6 +69,9 @@ pub enum Command {
     /// Start self-commissioning with this nameplate (`Some`), or report its progress or
     /// result (`None`); see [`crate::commission`].
     Commission(Option<crate::commission::NameplateArgs>),
+    /// `commission apply`: the last commissioning's identified settings replace the
+    /// drive's ([`crate::dispatch`]).
+    CommissionApply,
     /// List the commands.
     Help,
 }
@@ -195,11 +200,17 @@ pub fn parse(line: &[u8]) -> Result<Command, ParseError> {
     }
 }
 
-/// `commission` and its five positive nameplate numbers, or none.
+/// `commission` and its five positive nameplate numbers, or none, or `apply`.
 fn commission<'a>(mut words: impl Iterator<Item = &'a [u8]>) -> Result<Command, ParseError> {
     let Some(first) = words.next() else {
         return Ok(Command::Commission(None));
     };
+    if first == b"apply" {
+        return match words.next() {
+            None => Ok(Command::CommissionApply),
+            Some(_) => Err(ParseError::UnexpectedArgument),
+        };
+    }
     let mut args = [0.0f32; 5];
     let mut word = Some(first);
     for a in args.iter_mut() {
@@ -487,6 +498,30 @@ mod tests {
         assert_eq!(
             parse(b"commission 750 230 3.3 0 1500"),
             Err(ParseError::OutOfRange)
+        );
+    }
+
+    #[test]
+    fn commission_apply_takes_nothing_more() {
+        assert_eq!(parse(b"commission apply"), Ok(Command::CommissionApply));
+        assert_eq!(parse(b" commission\tapply  "), Ok(Command::CommissionApply));
+        assert_eq!(
+            parse(b"commission apply now"),
+            Err(ParseError::UnexpectedArgument)
+        );
+        assert_eq!(
+            parse(b"commission apply 750"),
+            Err(ParseError::UnexpectedArgument)
+        );
+        // only the whole word, in lower case, and only first
+        assert_eq!(parse(b"commission Apply"), Err(ParseError::BadNumber));
+        assert_eq!(parse(b"commission applied"), Err(ParseError::BadNumber));
+        assert_eq!(parse(b"commission 750 apply"), Err(ParseError::BadNumber));
+        assert_eq!(parse(b"apply"), Err(ParseError::UnknownCommand));
+        // framed and plain alike (the protocol's parser routes it here)
+        assert_eq!(
+            crate::protocol::parse_plain(b"commission apply"),
+            Ok(crate::protocol::Request::Command(Command::CommissionApply))
         );
     }
 

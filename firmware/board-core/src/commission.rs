@@ -15,11 +15,17 @@
 //! the nameplate is tighter**: current limit at most the rated peak current, trip at most
 //! [`acim::nameplate::TRIP_OVER_LIMIT`] times it, speed limit at most
 //! [`acim::nameplate::SPEED_LIMIT_OVER_RATED`] times the synchronous speed. The bus window
-//! stays the user's. Nothing is saved until `save`.
+//! stays the user's.
+//!
+//! A finished sequence becomes an [`Outcome`] ([`outcome`]): the identified values with
+//! the library's bound on each one's error ([`acim::commissioning::Confidence`]) and the
+//! settings they make, checked against the nameplate and validated as a whole. Those
+//! settings wait for `commission apply` ([`crate::dispatch`]); nothing changes before it,
+//! and nothing is saved until `save`. A result that fails a check is never applied.
 
 use crate::board::{CONTROL_PERIOD_S, DEAD_TIME_NS, POWER_STAGE};
 use crate::settings::{SettingError, Settings, FIELD_COUNT};
-use acim::commissioning::{CommissioningError, Identified, Stage};
+use acim::commissioning::{CommissioningError, Confidence, Identified, Stage};
 use acim::math::RAD_S_TO_RPM;
 use acim::nameplate::{
     Board, Nameplate, NameplateError, RatedPoint, SPEED_LIMIT_OVER_RATED, TRIP_OVER_LIMIT,
@@ -144,6 +150,84 @@ pub fn settings_from(
     v[12] = m.inertia();
     v[13] = m.viscous_friction();
     Settings::from_values(v)
+}
+
+/// Where an accepted result stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decision {
+    /// Waiting for `commission apply`.
+    Pending,
+    /// Its settings replaced the drive's.
+    Applied,
+    /// Dropped: a start, vf, set or defaults came before `commission apply`.
+    Discarded,
+}
+
+/// An accepted result: what was identified, how sure, and the settings `commission
+/// apply` writes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Proposal {
+    /// The identified model.
+    pub identified: Identified,
+    /// The bound on each quantity's relative error.
+    pub confidence: Confidence,
+    /// The settings made from it and the settings in use when it finished
+    /// ([`settings_from`]), validated as a whole.
+    pub settings: Settings,
+    /// How long the sequence ran, s.
+    pub seconds: f32,
+    /// Applied, waiting, or dropped.
+    pub decision: Decision,
+}
+
+/// How the last commissioning ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Outcome {
+    /// Identified, every check passed, the settings valid: see [`Proposal::decision`].
+    Identified(Proposal),
+    /// The sequence failed, or a check refused the result
+    /// ([`CommissioningError::Implausible`]).
+    Failed(CommissioningError),
+    /// The settings made from the result were refused by their validation.
+    Refused(SettingError),
+    /// Stopped (fault code 0) or abandoned by a trip (its fault code).
+    Aborted(u8),
+}
+
+/// The outcome of the finished sequence `c` run on `args` (the fits, a bisection: in the
+/// main loop, not in the interrupt), with `current` the settings in use and `seconds` its
+/// duration. Only a result that passes every check of [`Commissioning::assess`] and whose
+/// settings pass their validation is an [`Outcome::Identified`], and that is pending.
+#[inline(never)]
+pub fn outcome(
+    c: &Commissioning,
+    args: Option<&NameplateArgs>,
+    current: &Settings,
+    seconds: f32,
+) -> Outcome {
+    let a = match c.assess() {
+        Ok(a) => a,
+        Err(e) => return Outcome::Failed(e),
+    };
+    if let Some(refused) = a.refusal() {
+        return Outcome::Failed(CommissioningError::Implausible(refused.concern));
+    }
+    let Some(rated) = args.and_then(|a| nameplate(a).rated().ok()) else {
+        return Outcome::Refused(SettingError {
+            field: "nameplate",
+            rule: "missing",
+        });
+    };
+    match settings_from(&a.identified, &rated, current) {
+        Err(e) => Outcome::Refused(e),
+        Ok(settings) => Outcome::Identified(Proposal {
+            identified: a.identified,
+            confidence: a.confidence,
+            settings,
+            seconds,
+            decision: Decision::Pending,
+        }),
+    }
 }
 
 /// The stage's name in the `commission` progress reply.

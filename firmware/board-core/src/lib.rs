@@ -12,6 +12,9 @@
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
 //! - [`commission`]: the `commission` command (self-commissioning from a typed nameplate)
 //!   and how its result becomes the settings;
+//! - [`dispatch`]: the command handling (a parsed line in, its action, the reply lines
+//!   out) that the firmware's main loop and the virtual board share, over a trait for
+//!   what differs between them;
 //! - [`telemetry`]: the decimated telemetry sample and its text framing;
 //! - [`protocol`]: protocol version 1 (framed commands and replies, hello, rate, the
 //!   telemetry extension), shared with the host tools (docs/protocol.md);
@@ -37,6 +40,7 @@ pub mod command;
 pub mod commission;
 pub mod control;
 pub mod convert;
+pub mod dispatch;
 pub mod protocol;
 pub mod settings;
 pub mod sim;

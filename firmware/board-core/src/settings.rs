@@ -646,26 +646,66 @@ pub fn parse_value(s: &[u8]) -> Option<f32> {
 /// print as `?`. Returns the used part of `buf`.
 #[inline(never)]
 pub fn format_value(v: f32, buf: &mut [u8; 24]) -> &[u8] {
+    // f32 keeps about 7 significant digits: as many fraction digits as the integer part
+    // leaves of them (so the scaled value stays below 1e7 and fits a u32)
+    let mut digits = 6usize;
+    let mut lim = 10.0f32;
+    while digits > 0 && v.abs() >= lim {
+        digits -= 1;
+        lim *= 10.0;
+    }
+    format_digits(v, digits, true, buf)
+}
+
+/// Formats a value with exactly `decimals` fraction digits (at most 6), rounded
+/// (`16.0`, `0.25`); values of 1e7 or more, and non-finite ones, print as `?`.
+pub fn format_fixed(v: f32, decimals: usize, buf: &mut [u8; 24]) -> &[u8] {
+    format_digits(v, decimals.min(6), false, buf)
+}
+
+/// Formats a value rounded to `significant` digits (at most 6 fraction digits), trailing
+/// zeros dropped: 4 digits give `10.5`, `421.9`, `0.02345`, `1.492`; 2 give `0.81`,
+/// `2.1`, `15`. Values of 1e7 or more, and non-finite ones, print as `?`.
+pub fn format_significant(v: f32, significant: u32, buf: &mut [u8; 24]) -> &[u8] {
+    // the decimal exponent of |v| (0 for values below 1e-6: they print as 0)
+    let a = v.abs();
+    let mut exp: i32 = 0;
+    if a >= 1.0 {
+        let mut lim = 10.0f32;
+        while a >= lim && exp < 7 {
+            exp += 1;
+            lim *= 10.0;
+        }
+    } else if a > 0.0 {
+        let mut lim = 1.0f32;
+        while a < lim && exp > -7 {
+            exp -= 1;
+            lim *= 0.1;
+        }
+    }
+    let decimals = (significant as i32 - 1 - exp).clamp(0, 6) as usize;
+    format_digits(v, decimals, true, buf)
+}
+
+/// `v` rounded to `digits` fraction digits (at most 6), trailing zeros dropped if
+/// `strip`; `?` for values of 1e7 or more and non-finite ones.
+fn format_digits(v: f32, mut digits: usize, strip: bool, buf: &mut [u8; 24]) -> &[u8] {
     const POW10: [u32; 7] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000];
     let a = v.abs();
     if !a.is_finite() || a >= 1e7 {
         buf[0] = b'?';
         return &buf[..1];
     }
-    // f32 keeps about 7 significant digits: as many fraction digits as the integer part
-    // leaves of them (so the scaled value stays below 1e7 and fits a u32)
-    let mut digits = 6usize;
-    let mut lim = 10.0f32;
-    while digits > 0 && a >= lim {
+    // at most 1e7 * 10^digits fits a u32 only while the product stays below 4.29e9
+    while digits > 0 && a * POW10[digits] as f32 >= 4.0e9 {
         digits -= 1;
-        lim *= 10.0;
     }
     let scale = POW10[digits];
     let scaled = (a * scale as f32 + 0.5) as u32;
     let (mut int, mut frac) = (scaled / scale, scaled % scale);
     let mut tmp = [0u8; 24];
     let mut n = 0;
-    while digits > 0 && frac % 10 == 0 {
+    while strip && digits > 0 && frac % 10 == 0 {
         frac /= 10;
         digits -= 1;
     }
@@ -1111,6 +1151,50 @@ mod tests {
                 (back - v).abs() <= 1e-6 * v.abs().max(1.0),
                 "{}",
                 field.name
+            );
+        }
+    }
+
+    #[test]
+    fn fixed_and_significant_formats() {
+        let mut buf = [0u8; 24];
+        for (v, d, text) in [
+            (16.0f32, 1, "16.0"),
+            (16.04, 1, "16.0"),
+            (16.05, 1, "16.1"),
+            (0.25, 2, "0.25"),
+            (-0.25, 1, "-0.3"),
+            (-0.04, 1, "0.0"),
+            (2.0, 0, "2"),
+            (1234.5, 2, "1234.50"),
+            (f32::INFINITY, 1, "?"),
+        ] {
+            assert_eq!(
+                core::str::from_utf8(format_fixed(v, d, &mut buf)).unwrap(),
+                text,
+                "{v} {d}"
+            );
+        }
+        for (v, sig, text) in [
+            (10.497f32, 4, "10.5"),
+            (421.93, 4, "421.9"),
+            (0.023449, 4, "0.02345"),
+            (1.49234, 4, "1.492"),
+            (7.2134, 4, "7.213"),
+            (0.81234, 2, "0.81"),
+            (2.0512, 2, "2.1"),
+            (15.3, 2, "15"),
+            (150.2, 2, "150"),
+            (-0.0021, 3, "-0.0021"),
+            (0.0, 4, "0"),
+            (1e-9, 4, "0"),
+            (9.9996, 4, "10"),
+            (f32::NAN, 4, "?"),
+        ] {
+            assert_eq!(
+                core::str::from_utf8(format_significant(v, sig, &mut buf)).unwrap(),
+                text,
+                "{v} {sig}"
             );
         }
     }
