@@ -1,4 +1,4 @@
-//! Any motor (issue 14, items 1, 2 and 5): each acceptance machine
+//! Any motor: each acceptance machine
 //! (`crates/acim-sim/machines/`) is commissioned from its nameplate and board alone
 //! against its plant (realistic sensors and inverter), the drive is built from the
 //! identified model only, and it runs the issue's scenarios closed loop

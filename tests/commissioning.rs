@@ -1,4 +1,4 @@
-//! Self-commissioning (issue 14, item 2): the drive identifies each acceptance machine
+//! Self-commissioning: the drive identifies each acceptance machine
 //! (`crates/acim-sim/machines/`) from its nameplate alone, against the plant with its
 //! inverter (1.5 us dead time, 1 V drop) and sensors; the acceptance tolerances: Rs 2 %,
 //! L_sigma 5 %, R_R 5 %, L_M 5 %, J 10 %, dead time 10 %, under 60 s simulated; each

@@ -90,7 +90,7 @@ fn nan_sample_trips_at_once() {
     check("fault-nan-sample", "NonFiniteInput", 3.0, 0.0002);
 }
 
-// Faults judged without trusting the estimates (issue 12). Bounds: the detection time
+// Faults judged without trusting the estimates. Bounds: the detection time
 // measured with `cargo run --release -p acim-sim -- run <name>` plus margin, and the
 // safety bound of the issue: never switching with a true phase current beyond the trip
 // or the true speed beyond 110 % of max_speed for more than 5 ms.
@@ -159,7 +159,7 @@ fn drifting_offset_ends_in_a_fault_not_a_runaway() {
     check_scenario(&sc, "CurrentSensor", 1.0, 1.2);
 }
 
-/// Item 3 of issue 13: an offset drifting beyond the limit while running (0.3 A over
+/// Item 3 of an offset drifting beyond the limit while running (0.3 A over
 /// 10 s from 2 s; the limit, 0.16 A, is crossed at 7.33 s) is followed by the running
 /// offset tracker (about 0.8 s behind at 0.03 A/s, its 1 s time constant) until its
 /// estimate reaches the limit: `CurrentSensor`. Without the tracker the 2 s mean of the
@@ -205,7 +205,7 @@ fn overhauling_load_beyond_capability_faults_as_overload() {
 /// Hz, across the line w_s = 0 where no fundamental-model estimator sees the rotor (the
 /// estimate settles at the slip, DC stator currents fitting any rotor speed, while the
 /// rotor runs away). The load step throws the rotor to 359 rpm; by default the drive
-/// brakes it back through the line to the far side (issue 13: the far-side mode) and holds
+/// brakes it back through the line to the far side (the far-side mode) and holds
 /// 120 rpm within 5 rpm 0.64 s after the step. Without the far-side mode the regeneration
 /// limit (1.5 Hz) keeps the operating point off the line: the load raises the speed to
 /// where the braking torque it allows balances the load (209 rpm measured), held and
@@ -238,7 +238,7 @@ fn overhauling_load_that_would_blind_the_estimator_is_held_or_faults_as_overload
     assert!(m.switching_beyond_limits_s <= 0.005);
 }
 
-/// Issue 12's overhauling-load sweep (`acim_sim::overhauling`, `acim-sim overhauling`,
+/// the overhauling-load sweep (`acim_sim::overhauling`, `acim-sim overhauling`,
 /// docs/overhauling.md): 0..12 N m at 500, 120 and 60 rpm. Every case is held at its
 /// target, held at the reachable speed and reported (the regeneration limit keeps the
 /// stator frequency 1.5 Hz on the rotor's side of zero), or faults cleanly; none switches

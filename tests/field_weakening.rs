@@ -1,4 +1,4 @@
-//! The whole speed range (issue 15): field weakening on the paper machine at 325 V up to
+//! The whole speed range: field weakening on the paper machine at 325 V up to
 //! 3000 rpm (2x its nameplate speed, about 2.9x the no-load base speed at rated flux),
 //! the reachable speed held and reported, braking without a brake resistor on a 470 uF
 //! link with the over-voltage control. Scenarios in `acim_sim::builtins` (`fw-*`).
@@ -243,7 +243,7 @@ fn light_load(optimise: bool, light: f32, rated: f32) -> (f32, f32, f32) {
     )
 }
 
-/// Light-load flux optimisation (issue 15, item 4): at 20 % of the paper machine's rated
+/// Light-load flux optimisation: at 20 % of the paper machine's rated
 /// torque (0.95 of 4.77 N m) at 500 rpm the copper losses (the plant's energy account,
 /// stator and rotor, 4-6 s) fall from 41.0 to 28.1 W (-31 %; the steady-state optimum of
 /// the equations predicts -36 % for the load alone, friction adds torque), the flux from

@@ -1,4 +1,4 @@
-//! Flying start (issue 12, item 4): the start command comes while the rotor turns; the
+//! Flying start: the start command comes while the rotor turns; the
 //! speed search measures the rotor speed from the voltage the current loops apply while
 //! magnetizing and the drive catches it, instead of braking it with DC or faulting.
 
@@ -61,7 +61,7 @@ fn catches_any_speed_within_1000_rpm_in_both_arithmetics() {
     sweep(false);
 }
 
-/// The same sweep with the inverter test at start on (issue 13, item 2): the search runs
+/// The same sweep with the inverter test at start on: the search runs
 /// first, at the flux current it is designed for, and the test does not begin on a turning
 /// rotor. (Before, the test's first level, 0.4 of the flux current, was already applied
 /// during the search: at -500 rpm in Q7.24 the search measured -390 rpm of -493 and the

@@ -27,7 +27,7 @@ fn reversal_against_an_active_load_keeps_control() {
 
 /// The paper's scheme (gain 0) loses control in the same regenerating reversal at 500 rpm:
 /// the positive root of s^2 + s/tau_r + w_s w_slip. Since the supervisor judges the
-/// voltage the current loops need against the machine model (issue 12), the lost
+/// voltage the current loops need against the machine model, the lost
 /// orientation ends in a LossOfControl trip instead of switching on regardless.
 #[test]
 fn paper_scheme_loses_orientation_in_regeneration() {

@@ -1,4 +1,4 @@
-//! Issue 13: Rs tracked while running, the robustness matrix (a subset) and the
+//! Rs tracked while running, the robustness matrix (a subset) and the
 //! zero-speed policy, closed loop against the motor model. The whole matrix:
 //! `cargo run --release -p acim-sim -- robustness` (docs/robustness-matrix.md).
 
@@ -40,7 +40,7 @@ fn rs_tracked_while_running() {
     }
 }
 
-/// Before issue 13 (the standstill mode) the same drift leaves the estimate at its
+/// In the standstill mode the same drift leaves the estimate at its
 /// standstill value and the speed estimate off by the Rs error times i_sq / (p lambda):
 /// the issue's 18.5 rpm at 500 rpm.
 #[test]
@@ -283,7 +283,7 @@ fn inverter_error_is_tracked_while_running() {
     }
 }
 
-/// A scenario with a nameplate derives the drive from it; issue 13's switches still come
+/// A scenario with a nameplate derives the drive from it; the switches still come
 /// from `[drive]` (before, `--set drive.inverter_identification=false` and the other
 /// three were silently ignored there).
 #[test]
@@ -543,7 +543,7 @@ fn far_side_mode_holds_the_far_side_by_default() {
     );
 }
 
-/// Issue 13, items 2 and 4-5: without the start test the inverter's error is unknown, and
+/// without the start test the inverter's error is unknown, and
 /// the limit holds the far-side target at f_s = 1.5 Hz; the inverter tracker adapts there
 /// (the limit's hold is not a ramp), and once it has adapted for
 /// `INVERTER_TRACKER_TRUST` (3 s) its correction stands in for the test's: the mode takes
@@ -579,7 +579,7 @@ fn far_side_mode_follows_a_trusted_inverter_tracker() {
 
 const RR_SCENARIO: &str = include_str!("../crates/acim-sim/scenarios/rr-adaptation.toml");
 
-/// Issue 13, item 7: the rotor resistance adapted at speed steps (f32 and Q7.24), with
+/// the rotor resistance adapted at speed steps (f32 and Q7.24), with
 /// the controller's Rr 30 % low or high and its J 5 % off: R_R_hat within 5 % (the
 /// windows scatter by about 3 % with the paper scenarios' sensor noise) and the steady
 /// speed-estimation error within the matrix's 2 rpm; without the adaptation the slip

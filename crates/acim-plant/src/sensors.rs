@@ -354,7 +354,7 @@ mod tests {
     use super::*;
 
     /// Far beyond the range (and beyond i32 in LSBs) the quantiser saturates to its end
-    /// codes instead of overflowing (issue 12: it overflowed beyond about 1e7 A).
+    /// codes instead of overflowing (it overflowed beyond about 1e7 A).
     #[test]
     fn quantiser_saturates_at_any_input() {
         let adc = CurrentSensorConfig::default().adc;

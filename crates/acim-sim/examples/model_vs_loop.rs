@@ -1,5 +1,5 @@
 //! The linearised model against the sampled closed loop at the points docs/robustness.md
-//! quotes (issue 13, item 4): `cargo run --release -p acim-sim --example model_vs_loop`.
+//! quotes: `cargo run --release -p acim-sim --example model_vs_loop`.
 //!
 //! - the paper's scheme (orientation gain 0) regenerating at 250 rpm / -1.5 N m: the
 //!   model's eigenvalue, the two-state analysis, the sampled loop's growth while the

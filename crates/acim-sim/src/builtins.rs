@@ -44,8 +44,8 @@ fn base(name: &str, description: &str, duration_s: f32) -> Scenario {
 }
 
 /// A figure the paper ran without its Rs estimator (figs. 6-8, and the experiments of
-/// figs. 10-12, for which it reports none): the drive's default, Rs tracked while running
-/// (issue 13), is switched off so that the published results are the paper's setup.
+/// figs. 10-12, for which it reports none): the drive's default, Rs tracked while running,
+/// is switched off so that the published results are the paper's setup.
 fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) -> Scenario {
     let mut s = base(name, description, duration_s);
     s.drive.rs_estimation = false;
@@ -106,7 +106,7 @@ fn load_step(name: &str, description: &str) -> Scenario {
 fn regen(name: &str, rpm: f32) -> Scenario {
     let mut s = base(
         name,
-        "reversal against an active 1.5 N m load (regenerating phase; see issue 7)",
+        "reversal against an active 1.5 N m load (regenerating phase)",
         8.0,
     );
     s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm)];
@@ -274,7 +274,7 @@ pub fn all() -> Vec<Scenario> {
     s.faults.nan_sample_at_s = Some(3.0);
     v.push(s);
 
-    // faults the drive must detect without trusting its estimates (issue 12)
+    // faults the drive must detect without trusting its estimates
     let mut s = fault(
         "fault-open-phase",
         "motor phase b opens at 3 s (500 rpm, 1 N m): current-regulation trip",
@@ -389,7 +389,7 @@ pub fn all() -> Vec<Scenario> {
     s.windows = vec![win("reversed", 4.5, 5.0)];
     v.push(s);
 
-    // the whole speed range (issue 15): field weakening up to 2x the nameplate speed
+    // the whole speed range: field weakening up to 2x the nameplate speed
     let mut s = fw_base(
         "fw-ramp-3000",
         "field weakening: ramp 0 -> 3000 rpm with a 1 N m passive load",
@@ -578,7 +578,7 @@ fn zero_speed_drift() -> crate::scenario::Expected {
     }
 }
 
-/// The common base of the field-weakening cases (issue 15): the paper machine on 325 V
+/// The common base of the field-weakening cases: the paper machine on 325 V
 /// with the over-speed trip at 3600 rpm (targets up to 3240 rpm).
 fn fw_base(name: &str, description: &str, duration_s: f32) -> Scenario {
     let mut s = base(name, description, duration_s);

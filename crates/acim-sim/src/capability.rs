@@ -1,4 +1,4 @@
-//! `acim-sim capability` (issue 15): the steady torque the drive holds at each speed up
+//! `acim-sim capability`: the steady torque the drive holds at each speed up
 //! to 3000 rpm, against the theoretical envelope of the machine equations with the same
 //! current and voltage limits.
 //!

@@ -1,4 +1,4 @@
-//! The linearised closed loop (issue 13, item 4): the eigenvalues of the drive's
+//! The linearised closed loop: the eigenvalues of the drive's
 //! sensorless speed control around an operating point, with the controller's model and the
 //! inverter compensation different from the machine.
 //!
@@ -18,7 +18,7 @@
 //! | i_d_hat | the eq. (20) current model of the Rs estimator | sigma Ls^ di/dt = v_sd* - Rs^ i_d_hat + sigma Ls^ w_s i_sq |
 //! | i_q_hat, Omega_hat, T_hat | the reduced-order observer (eq. 12) | as `acim::observer`, its gains from the drive's design |
 //! | I | the speed PI's integral | dI/dt = K_i (Omega* - Omega_hat) |
-//! | Rs_hat, i_q_hat | the running Rs law and its q-axis current model (issue 13), where the drive runs it and it adapts | `acim::rs_estimator`, "While running" |
+//! | Rs_hat, i_q_hat | the running Rs law and its q-axis current model, where the drive runs it and it adapts | `acim::rs_estimator`, "While running" |
 //! | i_sq | the regulated torque current | di_sq/dt = w_c (i_sq* - i_sq), w_c the current loops' bandwidth |
 //!
 //! The frame turns at w_s = p Omega_hat + R_R^ i_sq / lambda_hat + dw (eq. 8 with the
@@ -37,7 +37,7 @@
 //! the reachable speed, which is where the equilibrium is found. (The sampled loop does
 //! the same: there the PI sits at the bound and the torque-current reference follows the
 //! bound at the estimated speed step by step, a speed feedback of gain p lambda_ref /
-//! R_R_hat.) In the drive's far-side mode (issue 13: `acim::DriveConfig::far_side_gain`
+//! R_R_hat.) In the drive's far-side mode (`acim::DriveConfig::far_side_gain`
 //! on, the running Rs law, no inverter error left, and a load that puts the target's point
 //! at least `far_side_enter` beyond the line w_s = 0) the limit does not bind and, where
 //! w_s turns against Omega_hat, the observer's speed and load updates take
@@ -623,7 +623,7 @@ fn maps(base: fn() -> Scenario, section: &str) -> Result<(String, String, usize)
     Ok((summary, tables, unstable_observable))
 }
 
-/// The eigenvalue maps of issue 13 item 4 as Markdown: for each error of
+/// The eigenvalue maps of as Markdown: for each error of
 /// [`crate::stability::robust_errors`], the largest real part of the linearised closed
 /// loop's eigenvalues over [`crate::stability::ROBUST_SPEEDS_RPM`] x
 /// [`crate::stability::ROBUST_LOADS_NM`], first with the Rs estimate held and no
@@ -791,7 +791,7 @@ mod tests {
         assert!(!l.limited && (l.state[2] - 2.0 * core::f64::consts::PI).abs() < 0.1);
     }
 
-    /// The far-side transit (issue 13, item 5): 60 rpm at -4.5 N m is 1.05 Hz beyond the
+    /// The far-side transit: 60 rpm at -4.5 N m is 1.05 Hz beyond the
     /// line, so the drive as it ships releases the limit and holds the point, stable with
     /// the far-side gain. Without the gain (0: no transit either) the limit holds it at the
     /// reachable speed, and without the limit it is unstable; with the gain but Rs held (no

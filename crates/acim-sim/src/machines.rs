@@ -1,4 +1,4 @@
-//! The any-motor acceptance (issue 14): the machines of `crates/acim-sim/machines/`, each
+//! The any-motor acceptance: the machines of `crates/acim-sim/machines/`, each
 //! commissioned from its nameplate against its plant, then driven with the identified
 //! model only through the acceptance scenarios. Shared by `acim-sim any-motor` (the
 //! README table and `docs/any-motor/`) and `tests/any_motor.rs`.

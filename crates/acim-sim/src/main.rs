@@ -9,7 +9,7 @@
 //! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
 //! acim-sim faults [FILE] [OPTIONS]         fault table
 //! acim-sim overhauling [FILE] [OPTIONS]    overhauling-load sweep
-//! acim-sim robustness [FILE]               issue 13's robustness matrix
+//! acim-sim robustness [FILE]               the robustness matrix
 //! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! acim-sim linear-stability [FILE]         eigenvalues of the linearised closed loop
 //! ```
@@ -57,7 +57,7 @@ const USAGE: &str = "usage:
   acim-sim linear-stability [FILE]          eigenvalues of the linearised closed loop over the
                                             same plane and errors (table to FILE, default
                                             docs/linear-stability.md)
-  acim-sim robustness [FILE]                issue 13's robustness matrix, Rs estimation in the
+  acim-sim robustness [FILE]                the robustness matrix, Rs estimation in the
                                             standstill and running modes (table to FILE,
                                             default docs/robustness-matrix.md)
   acim-sim commission <scenario|machine.toml> [--nameplate FILE] [OPTIONS]

@@ -1,4 +1,4 @@
-//! Issue 12's overhauling-load sweep: an active load that drives the machine (0 to 12 N m,
+//! the overhauling-load sweep: an active load that drives the machine (0 to 12 N m,
 //! the paper machine's torque capability is about 10.3 N m at the 4.67 A current limit)
 //! applied at 2.5 s while the drive holds 500, 120 or 60 rpm. Each case must be held (at
 //! its target, or at the reachable speed the low-frequency regeneration limit allows,
@@ -24,7 +24,7 @@ pub const DURATION_S: f32 = 6.0;
 /// Length of the judged window at the end, s.
 pub const WINDOW_S: f32 = 1.5;
 /// Longest time switching beyond the trip or 110 % of the speed limit a clean outcome
-/// allows, s (issue 12: 5 ms).
+/// allows, s (5 ms).
 pub const BEYOND_LIMIT_S: f32 = 0.005;
 
 /// How one case ended.
@@ -211,7 +211,7 @@ pub fn markdown(cells: &[Cell]) -> String {
          coasting machine on). f_s: the stator frequency of the operating point at the \
          target (computed, rated flux). Peaks are true values while switching; beyond: time \
          switched with the current beyond the 8 A trip or the speed beyond 110 % of the \
-         2000 rpm limit (issue 12: at most 5 ms).\n\n\
+         2000 rpm limit (at most 5 ms).\n\n\
          | speed (rpm) | load (N m) | f_s at the target (Hz) | outcome | peak speed while switching (rpm) | peak current while switching (A) | beyond (ms) |\n\
          |---|---|---|---|---|---|---|\n",
     );

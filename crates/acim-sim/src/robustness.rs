@@ -1,4 +1,4 @@
-//! The robustness matrix of issue 13: speeds x motoring/regenerating x loads x parameter
+//! The robustness matrix of speeds x motoring/regenerating x loads x parameter
 //! and inverter errors, with the paper scenarios' sensor noise and gain errors, measured
 //! closed loop. `acim-sim robustness` writes it to `docs/robustness.md`.
 //!
@@ -28,7 +28,7 @@ pub enum Variant {
     /// The machine's Rs steps up 20 % while running.
     PlantRsStep20,
     /// The inverter's dead time is 1.0 us; the drive is configured for 1.5 us (and, as it
-    /// ships, identifies the error at start: `drive.inverter_identification`, issue 13
+    /// ships, identifies the error at start: `drive.inverter_identification`
     /// item 2).
     DeadTime1_0,
     /// The inverter's dead time is 2.2 us; the drive is configured for 1.5 us.
@@ -38,8 +38,7 @@ pub enum Variant {
     /// or skipped switches-off measurement leaves).
     Offset20mA,
     /// 20 mA offsets on phases a and b drifting in after the start's measurement, over
-    /// 1 s from the change time while the motor turns (an amplifier's drift; issue 13,
-    /// item 3).
+    /// 1 s from the change time while the motor turns (an amplifier's drift).
     OffsetDrift20mA,
     /// The inverter's dead time is 1.0 us, the drive is configured for 1.5 us and its start
     /// test is switched off (`drive.inverter_identification = false`): the configured
@@ -50,7 +49,7 @@ pub enum Variant {
 }
 
 impl Variant {
-    /// Every variant of the acceptance matrix (issue 13), in table order.
+    /// Every variant of the acceptance matrix, in table order.
     pub const MATRIX: [Variant; 10] = [
         Variant::Nominal,
         Variant::ControllerRsPlus20,
@@ -91,7 +90,7 @@ pub struct Setup {
     pub regen_min_frequency_hz: f32,
 }
 
-/// The setups the report compares: before issue 13 (the standstill Rs mode, no regeneration
+/// The setups the report compares: earlier (the standstill Rs mode, no regeneration
 /// limit), Rs while running, Rs while running with the 1.5 Hz regeneration limit (the
 /// drive's defaults), and the standstill Rs mode with the limit (the defaults from issue
 /// 12's overhauling-load sweep until Rs tracking became the default).
@@ -205,7 +204,7 @@ impl Case {
             kind: LoadKind::Active,
             torque_nm: torque,
         }];
-        // the change ends at `end`; the window starts 2 s later (issue 13: "2 s after
+        // the change ends at `end`; the window starts 2 s later ("2 s after
         // the change ends")
         let mut end = CHANGE_AT;
         match self.variant {
@@ -294,7 +293,7 @@ impl Outcome {
         self.speed_error_rpm.abs() <= (0.02 * self.case.rpm).max(4.0)
     }
 
-    /// The pass criterion of issue 13 (module docs).
+    /// The pass criterion (module docs).
     pub fn pass(&self) -> bool {
         let ok = !self.faulted && !self.lost;
         if self.observable() {
@@ -400,7 +399,7 @@ pub fn table(outcomes: &[Outcome]) -> String {
     s
 }
 
-/// The Rs-tracking cases of issue 13, item 1: a +30 % plant Rs ramp over 20 s and a +20 %
+/// The Rs-tracking cases of a +30 % plant Rs ramp over 20 s and a +20 %
 /// step, at 500, 120 and 60 rpm, motoring and regenerating, 1.5 N m.
 pub fn tracking_cases() -> Vec<Case> {
     let mut v = Vec::new();
@@ -420,7 +419,7 @@ pub fn tracking_cases() -> Vec<Case> {
 }
 
 /// `acim-sim robustness`: the Rs-tracking cases and the whole matrix, with the Rs
-/// estimator in the standstill mode (before issue 13) and the running mode (the default),
+/// estimator in the standstill mode (earlier) and the running mode (the default),
 /// as Markdown. `progress` is called with each case's one-line summary.
 pub fn report(progress: &mut dyn FnMut(&str)) -> Result<String, crate::scenario::ScenarioError> {
     let mut md = String::from(

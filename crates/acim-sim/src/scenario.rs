@@ -225,7 +225,7 @@ pub enum ModulationKind {
 pub enum RsMode {
     /// Standstill identification only.
     Standstill,
-    /// Also while running (issue 13; the default).
+    /// Also while running (the default).
     #[default]
     Running,
 }
@@ -280,7 +280,7 @@ pub struct DriveSpec {
     /// 10-12 set it off).
     pub rs_estimation: bool,
     /// When Rs adapts: "standstill" (identification before the ramp only) or "running"
-    /// (the default: also while turning, issue 13).
+    /// (the default: also while turning).
     pub rs_estimation_mode: RsMode,
     /// Initial Rs estimate, ohm (the controller model's Rs when absent).
     pub rs_initial_ohm: Option<f32>,
@@ -310,12 +310,12 @@ pub struct DriveSpec {
     /// Over-speed trip, rpm (the drive's default, 2000 rpm, when absent); speed targets
     /// are limited to 90 % of it.
     pub max_speed_rpm: Option<f32>,
-    /// Field weakening above base speed (issue 15).
+    /// Field weakening above base speed.
     pub field_weakening: bool,
-    /// Over-voltage control: regenerative torque reduced near the bus trip (issue 15).
+    /// Over-voltage control: regenerative torque reduced near the bus trip.
     pub overvoltage_control: bool,
     /// Light-load flux optimisation: the flux lowered to the copper-loss optimum at light
-    /// load (issue 15; off by default).
+    /// load (off by default).
     pub flux_optimisation: bool,
     /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
     /// `zero_speed_dwell_s`).
@@ -341,7 +341,7 @@ pub struct DriveSpec {
     /// Calibrate the current sensors' relative gain at every start from rest (default true;
     /// `acim::DriveConfig::current_gain_calibration`; the paper's scheme sets it off).
     pub current_gain_calibration: bool,
-    /// Rotor-resistance adaptation at the start of speed ramps (issue 13, item 7;
+    /// Rotor-resistance adaptation at the start of speed ramps (item 7;
     /// `acim::DriveConfig::rr_adaptation`, off by default: it assumes the load holds).
     pub rr_adaptation: bool,
 }
@@ -550,7 +550,7 @@ impl LoadPoint {
     }
 }
 
-/// A change of the real machine's resistances over time (thermal drift, issue 13),
+/// A change of the real machine's resistances over time (thermal drift),
 /// relative to the `[plant]` values: from `t_s` the factors move linearly, over `ramp_s`
 /// (0: a step), from those in effect before (1 at the start) to `rs_factor` and
 /// `rr_factor`. The controller is not told.
@@ -784,7 +784,7 @@ pub struct Scenario {
     /// `mode`, `arithmetic`, `observer`, `rs_estimation`, `rs_estimation_mode`,
     /// `rs_initial_ohm`, `orientation_gain`, `current_sensing`, `field_weakening`,
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
-    /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and issue 13's
+    /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and the
     /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
     /// `rr_adaptation` and `far_side_gain`; the plant's sensors take the board's full
     /// scales.
@@ -1312,7 +1312,7 @@ impl Scenario {
             cfg.zero_speed_policy = drive.zero_speed_policy;
             cfg.zero_speed_dwell = drive.zero_speed_dwell;
             cfg.regen_min_frequency = drive.regen_min_frequency;
-            // issue 13's switches (before, a `--set` of them was silently ignored here)
+            // the switches (before, a `--set` of them was silently ignored here)
             cfg.inverter_identification = drive.inverter_identification;
             cfg.offset_tracking = drive.offset_tracking;
             cfg.inverter_tracking = drive.inverter_tracking;

@@ -207,7 +207,7 @@ pub struct RunResult {
     pub target_clamps: Vec<TargetClamp>,
 }
 
-/// The rotor-resistance adaptation (issue 13, item 7) at the end of a run.
+/// The rotor-resistance adaptation at the end of a run.
 #[derive(Serialize, Clone, Debug, PartialEq)]
 pub struct RotorResistanceRecord {
     /// R_R_hat, the referred rotor resistance the drive uses at the end, ohm.
@@ -226,7 +226,7 @@ pub struct RotorResistanceRecord {
     pub last_fit_rms_rpm: f32,
 }
 
-/// The inverter test at start (issue 13, item 2): what the drive identified.
+/// The inverter test at start: what the drive identified.
 #[derive(Serialize, Clone, Debug, PartialEq)]
 pub struct InverterTestRecord {
     /// The last test's outcome (`Identified`, `Skipped`, `Rejected`, ...).

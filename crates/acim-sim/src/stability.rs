@@ -82,7 +82,7 @@ pub fn measure(speed_rpm: f32, load_nm: f32, k: f32) -> Result<GrowthPoint, Scen
 /// The paper machine and the drive's defaults with what the stability maps leave out:
 /// zero friction, no inverter error (none in the plant, none compensated), and the Rs
 /// estimate held at the controller's value (a map switches the estimator on itself). The
-/// sensors are ideal, so the running offset tracker (issue 13, item 3) has nothing to
+/// sensors are ideal, so the running offset tracker has nothing to
 /// track: it is off, as in the linearisation, which does not model it (a perturbation's
 /// transient would otherwise reach it as a DC voltage).
 pub fn ideal_scenario(name: &str) -> Scenario {
@@ -116,7 +116,7 @@ pub fn map_header(md: &mut String) {
 }
 
 /// [`measure`] with the scenario changed by `setup` before it is built (parameter errors,
-/// inverter, Rs estimation mode; issue 13).
+/// inverter, Rs estimation mode).
 pub fn measure_with(
     speed_rpm: f32,
     load_nm: f32,
@@ -358,7 +358,7 @@ pub fn stator_frequency_hz(speed_rpm: f32, load_nm: f32) -> f32 {
     (m.pole_pairs_f32() * speed_rpm * RPM_TO_RAD_S + w_slip) / acim::math::TAU
 }
 
-/// Issue 12, item 3: the orientation gain against its stability bound up to the current
+/// the orientation gain against its stability bound up to the current
 /// limit. In regeneration the orientation mode is stable for k > tau_r |w_slip|
 /// (`docs/orientation-stability.md`); with lambda = L_M i_sd* and tau_r = L_M / R_R that is
 /// k > |i_sq| / i_sd*, independent of speed. The drive's gain is scheduled with the load,
@@ -375,7 +375,7 @@ pub fn gain_margin_markdown() -> String {
     let i_max =
         (cfg.current_limit * cfg.current_limit - cfg.flux_current * cfg.flux_current).sqrt();
     let mut md = format!(
-        "## Orientation gain against its stability bound (issue 12)\n\n\
+        "## Orientation gain against its stability bound\n\n\
          Regeneration is stable for k > tau_r |w_slip| = |i_sq| / i_sd* (at any speed). The \
          fixed gain k = {k} meets it up to {:.1} N m; the drive schedules the gain with the \
          load, k max(1, {:.3} |i_sq|), which keeps the margin k / (tau_r |w_slip|) at least \

@@ -116,7 +116,7 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
         acim_vboard::board::Event::Settings(*b.settings())
     );
 
-    // against the paper machine's inverse-Gamma model (issue 14's bounds)
+    // against the paper machine's inverse-Gamma model (the bounds)
     let truth = MachineParams::paper_table1();
     let m = MachineParams::new(acim::MachineData {
         stator_resistance: setting(&b, "stator_resistance"),

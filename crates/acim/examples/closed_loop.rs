@@ -9,7 +9,7 @@
 //! must have it too: `PwmPreload` holds this period's duties back by one period (a
 //! switch-off acts at once). Apply `out` in the same period instead and the drive
 //! compensates a delay the plant does not have: here the load estimate then reads 1.06
-//! instead of 1.00 N m; issue 17 measured speed biases of up to 22 rpm in other cases.
+//! instead of 1.00 N m; a review measured speed biases of up to 22 rpm in other cases.
 use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
 use acim::{Drive, DriveConfig, DriveInputs, DriveState};
 use acim_plant::{LoadTorque, Plant, PwmPreload};

@@ -31,13 +31,13 @@ pub enum CurrentSensing {
     ThreePhase,
 }
 
-/// When the stator-resistance estimator adapts (with `rs_estimation` on; issue 13).
+/// When the stator-resistance estimator adapts (with `rs_estimation` on).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RsEstimationMode {
     /// The eq. (19) law below `rs_max_frequency` only, where the orientation part of the
     /// d-axis residual vanishes: in practice the standstill identification before the
-    /// speed ramp (the behaviour before issue 13).
+    /// speed ramp (the earlier behaviour).
     Standstill,
     /// The standstill identification, then adaptation while running, motoring and
     /// regenerating, from the q-axis and d-axis residuals together
@@ -48,13 +48,13 @@ pub enum RsEstimationMode {
     Running,
 }
 
-/// What the drive does with a held zero speed target (issue 13, item 6). Speed
+/// What the drive does with a held zero speed target. Speed
 /// reversals pass through zero as before with either policy: only a target of zero,
 /// reached by the ramp and held for `zero_speed_dwell`, counts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ZeroSpeedPolicy {
-    /// Keep the flux and control zero speed (the behaviour before issue 13; the paper's
+    /// Keep the flux and control zero speed (the earlier behaviour; the paper's
     /// trapezoids, figs. 10-12, hold zero this way). At zero stator frequency speed and
     /// orientation are unobservable (design notes, section 10): the rotor may creep under
     /// sensor offsets and load while the estimate reads 0.
@@ -110,11 +110,11 @@ pub struct DriveConfig {
     /// and 10-12 run without it).
     pub rs_estimation: bool,
     /// When Rs adapts (with `rs_estimation`): standstill only, or also while running
-    /// (issue 13; the default).
+    /// (the default).
     pub rs_estimation_mode: RsEstimationMode,
     /// With `rs_estimation` in the running mode: whether Rs is also identified at standstill
     /// while magnetizing (default true; magnetizing then waits for it). False: Rs converges
-    /// only while turning, from `rs_initial` (issue 13's fig 9 variant). The standstill
+    /// only while turning, from `rs_initial` (the fig 9 variant). The standstill
     /// mode has no other law and needs it.
     pub rs_standstill_identification: bool,
     /// Initial stator-resistance estimate R0, ohm (eq. 19).
@@ -137,7 +137,7 @@ pub struct DriveConfig {
     pub orientation_gain: f32,
     /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
     pub orientation_fade: (f32, f32),
-    /// The far-side mode (issue 13, items 4-5; [`FAR_SIDE_GAIN`] by default, 0 = off): the
+    /// The far-side mode ([`FAR_SIDE_GAIN`] by default, 0 = off): the
     /// gain c (dimensionless) of a term the observer's speed and load updates (eq. 12) take
     /// on the far side of the unobservable line, where the stator frequency turns against
     /// the speed estimate: the q-axis error e minus c max(1, |i_sq| / (2 i_sd*)) times the
@@ -179,17 +179,17 @@ pub struct DriveConfig {
     /// current loops apply ([`crate::speed_search`]) and catches a turning rotor instead
     /// of braking it with DC. Needs p `max_speed` `control_period` <= pi/4.
     pub flying_start: bool,
-    /// Field weakening above base speed (issue 15, [`FieldWeakeningDesign`]): the flux
+    /// Field weakening above base speed ([`FieldWeakeningDesign`]): the flux
     /// reference and the torque-current limit follow the voltage the bus supplies at the
     /// present stator frequency. Off: the flux stays at `flux_current` and speed targets
-    /// are limited to the no-load base speed (the behaviour before issue 15).
+    /// are limited to the no-load base speed (the earlier behaviour).
     pub field_weakening: bool,
-    /// Over-voltage control (issue 15): above [`OVC_START_FRACTION`] of `dc_bus_max` the
+    /// Over-voltage control: above [`OVC_START_FRACTION`] of `dc_bus_max` the
     /// regenerative torque current is reduced linearly to zero at [`OVC_END_FRACTION`],
     /// so braking without a brake resistor cannot pump the bus to its trip. Off by
     /// default: the fault scenarios test the trip itself.
     pub overvoltage_control: bool,
-    /// Light-load flux optimisation (issue 15, item 4; off by default): below the torque
+    /// Light-load flux optimisation (off by default): below the torque
     /// where the copper-loss optimum needs the rated flux, the flux current follows
     /// i_sd* = sqrt((Rs + R_R) / Rs) |i_sq*| (the minimum of 1.5 (Rs |i_s|^2 + R_R i_sq^2)
     /// at a given torque 1.5 p L_M i_sd i_sq, steady state), floored at
@@ -215,7 +215,7 @@ pub struct DriveConfig {
     /// fig 12 then estimated 4.2 rpm wrong (4 is its bound) and the any-motor 3 %
     /// trapezoid 7-14 rpm (1.2-3.4 at 1.5 Hz).
     pub regen_min_frequency: f32,
-    /// Inverter voltage-error identification at every start (issue 13, item 2; on by
+    /// Inverter voltage-error identification at every start (on by
     /// default): the first [`INVERTER_TEST_TIME`] of magnetizing holds the d-axis current at
     /// three levels ([`INVERTER_TEST_LEVELS`] of `flux_current`) with the frame held on phase
     /// a, and a straight-line fit of the d-axis voltage the current loop needed (the rotor
@@ -227,13 +227,13 @@ pub struct DriveConfig {
     /// design leaves the test out (the lowest level's phase currents would sit inside the
     /// band, where the fit's sign pattern does not hold) and the outcome stays `NotRun`.
     pub inverter_identification: bool,
-    /// Running current-sensor offset tracking (issue 13, item 3; on by default): the
+    /// Running current-sensor offset tracking (on by default): the
     /// offsets' drift after the start's switches-off measurement, estimated from the DC
     /// part of the stator voltage while |w_s| >= 1.5 Hz (in the far-side mode from 0.5 Hz,
     /// ten times slower) and subtracted ([`crate::offset_tracker`]); an estimate at
     /// `offset_limit` is a current-sensor fault.
     pub offset_tracking: bool,
-    /// Inverter voltage-error tracking while running (issue 13, item 2, online part):
+    /// Inverter voltage-error tracking while running (online part):
     /// the error the compensation leaves, from the sixth-harmonic pattern it puts into the
     /// current loops' command across the current, which a resistance error cannot make
     /// ([`crate::inverter_tracker`]); it adapts the start test's correction while
@@ -244,7 +244,7 @@ pub struct DriveConfig {
     /// voltage while magnetizing with the frame held, equalizes the a and b samples (their
     /// mean gain kept) from the handover ([`crate::gain_calibration`]).
     pub current_gain_calibration: bool,
-    /// Rotor-resistance adaptation from speed transients (issue 13, item 7; off by
+    /// Rotor-resistance adaptation from speed transients (off by
     /// default): over each speed ramp from a steady point (its start, its run and 0.25 s
     /// beyond its end, at most 0.8 s), the speed the observer moved beyond what the
     /// mechanical model integrates is fitted as the slip law's R_R error times the
@@ -426,7 +426,7 @@ pub const FAR_SIDE_GAIN: f32 = 1.5;
 pub const FAR_SIDE_LOAD_FRACTION: f32 = 0.5;
 /// Largest accepted [`DriveConfig::far_side_gain`].
 pub const MAX_FAR_SIDE_GAIN: f32 = 10.0;
-/// The far-side transit (issue 13, item 5): with [`DriveConfig::far_side_gain`] on, the
+/// The far-side transit: with [`DriveConfig::far_side_gain`] on, the
 /// regeneration limit is released while the load torque estimate puts the speed target's
 /// operating point at least this far beyond the line w_s = 0, Hz (the issue's observable
 /// bound, |f_s| >= 1 Hz).
@@ -438,7 +438,7 @@ pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
 pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
 /// Field weakening keeps the steady-state stator voltage within this fraction of the
-/// current loops' voltage limit (issue 15): the margin the current loops keep for
+/// current loops' voltage limit: the margin the current loops keep for
 /// transients and for what the model of [`FieldWeakeningDesign`] neglects. 0.97 keeps
 /// the no-load voltage of the paper machine at rated flux and 1000 rpm (about 177 V of
 /// the 184 V limit on 325 V) below it: the drive weakens the field only above that.
@@ -479,7 +479,7 @@ pub const FW_TRIM_FRACTION: f32 = 0.92;
 /// 0.7 x base speed up): below it the rated flux is kept without computing anything, and
 /// faults that saturate the current loops at lower speed do not move the flux. (A load
 /// whose Rs i_sq drop alone exceeds 0.3 V below that speed is voltage-limited by the
-/// current loops, as before issue 15.)
+/// current loops, as earlier.)
 pub const FW_TRIM_GATE: f32 = 0.7;
 /// Torque held at the voltage or bus limit: the speed reference stays within this
 /// fraction of `max_speed` of the speed estimate (the reachable speed is held and
@@ -644,7 +644,7 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub impedance_voltage_floor: N,
 }
 
-/// Field weakening and over-voltage control (issue 15): a model-based flux reference
+/// Field weakening and over-voltage control: a model-based flux reference
 /// with a voltage-feedback trim.
 ///
 /// Why this combination: a pure voltage-feedback loop (integrating |v*| - V into i_sd*)
@@ -811,7 +811,7 @@ pub struct MagnetizingDesign<N: Num = f32> {
 /// that the last is the magnetizing current and the flux build-up goes on from it).
 pub const INVERTER_TEST_LEVELS: [f32; 3] = [0.4, 0.7, 1.0];
 /// Time each level of the inverter test is held, s (three levels: 0.45 s, within the
-/// 0.5 s issue 13 allows).
+/// 0.5 s budget of the start).
 pub const INVERTER_TEST_LEVEL_TIME: f32 = 0.15;
 /// The first part of each level is not measured, s (the current loop settles in a few ms;
 /// the rest lets the L_sigma di/dt part of the voltage die out).
@@ -829,7 +829,7 @@ pub const INVERTER_TEST_MIN_BANDS: f32 = 20.0;
 /// it is not believed (no correction, telemetry shows none).
 pub const INVERTER_TEST_MAX_DUTY: f32 = 0.05;
 
-/// The inverter test at start (issue 13, item 2; [`DriveConfig::inverter_identification`]).
+/// The inverter test at start ([`DriveConfig::inverter_identification`]).
 ///
 /// At rest with the frame held on phase a (angle 0), a d-axis current i puts +i in phase a
 /// and -i/2 in b and c. Each leg's dead-time and device-drop error V_e opposes its current,
@@ -985,9 +985,9 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub limits: SupervisionLimits<N>,
     /// Open-loop V/f.
     pub vf: VfDesign<N>,
-    /// Field weakening and over-voltage control (issue 15).
+    /// Field weakening and over-voltage control.
     pub fw: FieldWeakeningDesign<N>,
-    // issue 13's additions last, so that the default path's field offsets stay as they were
+    // the additions last, so that the default path's field offsets stay as they were
     /// The running Rs law ([`crate::rs_estimator`], "While running").
     pub rs_running: RsRunningConfig<N>,
     /// Steps a zero speed target and reference last before the zero-speed policy acts
@@ -1045,7 +1045,7 @@ pub struct DriveDesign {
     pub observer: ObserverConfig,
     /// Rs estimator (eq. 19-20).
     pub rs: RsEstimatorConfig,
-    /// The running Rs law (issue 13).
+    /// The running Rs law.
     pub rs_running: RsRunningConfig,
     /// Modulator (SVPWM with dead-time compensation).
     pub pwm: SvpwmConfig,
@@ -1088,15 +1088,15 @@ pub struct DriveDesign {
     pub far_side_enter: f32,
     /// [`FAR_SIDE_LEAVE_HZ`], rad/s electrical.
     pub far_side_leave: f32,
-    /// The inverter test at start (issue 13, item 2).
+    /// The inverter test at start.
     pub inverter_test: InverterTestDesign,
-    /// The running current-sensor offset tracker (issue 13, item 3).
+    /// The running current-sensor offset tracker.
     pub offset_tracker: OffsetTrackerConfig,
-    /// The running inverter-error tracker (issue 13, item 2).
+    /// The running inverter-error tracker.
     pub inverter_tracker: InverterTrackerConfig,
     /// The current-sensor gain calibration at start.
     pub gain_calibration: GainCalibrationConfig,
-    /// The rotor-resistance adaptation (issue 13, item 7).
+    /// The rotor-resistance adaptation.
     pub rr_estimator: RrEstimatorConfig,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
@@ -1106,7 +1106,7 @@ pub struct DriveDesign {
     pub magnetizing: MagnetizingDesign,
     /// What the supervisor judges against.
     pub limits: SupervisionLimits,
-    /// Field weakening and over-voltage control (issue 15).
+    /// Field weakening and over-voltage control.
     pub field_weakening: FieldWeakeningDesign,
 }
 
@@ -1539,7 +1539,7 @@ mod tests {
         DriveDesign::new(cfg).err().map(|e| e.field())
     }
 
-    /// Issue 13's Rs-while-running, zero-speed stop and inverter test are accepted in every
+    /// the Rs-while-running, zero-speed stop and inverter test are accepted in every
     /// build (the firmware compiles the same step as the simulator); Rs tracked while
     /// running is the default.
     #[test]
@@ -1570,7 +1570,7 @@ mod tests {
         s.rs_estimation_mode = RsEstimationMode::Standstill;
         s.rs_standstill_identification = false;
         assert_eq!(field(s), Some("rs_standstill_identification"));
-        // the regeneration limit is in every build (a protection, issue 12)
+        // the regeneration limit is in every build (a protection)
         let mut r = DriveConfig::paper_defaults();
         assert_eq!(field(r), None);
         r.regen_min_frequency = 0.0;
@@ -1580,7 +1580,7 @@ mod tests {
     }
 
     /// Protections cannot be switched off by configuration, and errors name the field
-    /// that is wrong (issue 12): a trip far above the current limit, a speed limit the bus
+    /// that is wrong: a trip far above the current limit, a speed limit the bus
     /// could never reach, a rotor time constant near the period, a tiny period.
     #[test]
     fn physics_bounds_name_the_field() {

@@ -138,14 +138,14 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// dwell with the flux on. Speed and orientation are then unobservable (zero stator
     /// frequency): the rotor may creep under sensor offsets or load while the estimate
     /// reads about 0 (docs/robustness.md measures 17 rpm over 30 s with the paper
-    /// sensors), which this flag reports (issue 13, item 6). With `Stop` only while a drive
+    /// sensors), which this flag reports. With `Stop` only while a drive
     /// started with a zero target waits for one (after turning, `Stop` switches off
     /// instead).
     pub zero_speed_held: bool,
 }
 
-/// The running Rs law's step ([`RsEstimator::update_running`], the default mode since
-/// issue 13): currents `i` (A), the d-axis voltage `v_sd` the estimator uses
+/// The running Rs law's step ([`RsEstimator::update_running`], the default mode):
+/// currents `i` (A), the d-axis voltage `v_sd` the estimator uses
 /// (V), the last stator frequency `ws` (rad/s), the last applied `v_sq` (V), the model
 /// flux `rotor_flux` (Wb) and the last torque-current reference `i_sq_ref` (A, the law's
 /// steadiness gate). Always inlined: out of line, the call and the argument moves cost 20
@@ -302,7 +302,7 @@ struct Estimator<N: Num, O> {
     rs: RsEstimator<N>,
     flux: FluxModel<N>,
     filtered_residual: N,
-    /// The rotor-resistance adaptation (issue 13, item 7).
+    /// The rotor-resistance adaptation.
     rr: RrEstimator<N>,
 }
 
@@ -321,17 +321,17 @@ struct References<N> {
     ramping: bool,
     /// Steps the target stays reported as limited since the hold last bound.
     limited_hold: u32,
-    /// The far-side mode (issue 13, items 4-5): the regeneration limit released and the
+    /// The far-side mode: the regeneration limit released and the
     /// observer's far-side term on.
     far_side: bool,
-    /// The previous step's i_sq*, A (the field-weakening model's load, issue 15).
+    /// The previous step's i_sq*, A (the field-weakening model's load).
     i_sq_ref: N,
     /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
     fw_trim: N,
-    /// The light-load flux optimiser's i_sd*, A (issue 15; rated when off).
+    /// The light-load flux optimiser's i_sd*, A (rated when off).
     flux_optimum: N,
     /// Field weakening has moved the flux and it has not settled back at its rated value
-    /// yet: the estimators take the moving flux into account (issue 15).
+    /// yet: the estimators take the moving flux into account.
     fw_active: bool,
     /// A flying start: magnetizing in a frame turning with the rotor at the speed the
     /// search measured.
@@ -346,7 +346,7 @@ struct References<N> {
     overmodulation_reserve: u32,
 }
 
-/// The field-weakening stage's output (issue 15).
+/// The field-weakening stage's output.
 #[derive(Clone, Copy, Debug)]
 struct FwLimits<N> {
     /// i_sd*, A.
@@ -400,18 +400,18 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     /// The flying start's speed search ([`crate::speed_search`]), used only while
     /// magnetizing (last: it keeps the running step's state within short load offsets).
     search: SpeedSearch<N>,
-    /// The inverter test at start and its correction (issue 13, item 2).
+    /// The inverter test at start and its correction.
     inverter: InverterTest<N>,
-    /// The offsets' drift since the start, tracked while turning (issue 13, item 3).
+    /// The offsets' drift since the start, tracked while turning.
     offset_tracker: OffsetTracker<N>,
-    /// The inverter error tracked while turning (issue 13, item 2): it adapts the
+    /// The inverter error tracked while turning: it adapts the
     /// inverter test's correction.
     inverter_tracker: InverterTracker<N>,
     /// The current sensors' relative gain, calibrated while magnetizing at rest
     /// ([`crate::gain_calibration`]).
     gain_cal: GainCalibration<N>,
     /// A start asked for before the switches-off offset measurement had settled: the idle
-    /// step performs it once the measurement has (issue 13, item 3: offsets measured
+    /// step performs it once the measurement has (item 3: offsets measured
     /// before every start).
     pending_start: Option<DriveState>,
 }
@@ -1030,7 +1030,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // observer, with the voltage applied over the past period and the flux state of
         // the last step
         probe.begin(StepRegion::ObserverReduced);
-        // the far-side term (issue 13, items 4-5): in the far-side mode (the reference
+        // the far-side term: in the far-side mode (the reference
         // stage's, from the last step) and while w_s is against Omega_hat, the speed and
         // load updates see e - c(i_sq) w e_d (`DriveConfig::far_side_gain`)
         let far_side_error = {
@@ -1071,7 +1071,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let ws_prev = est.flux.stator_frequency;
         // eq. (20) holds with settled flux; while field weakening moves it, the rotor
         // part of eq. (9a), R_R i_sd - lambda_r/tau_r (the flux's rate of change), is
-        // taken out of v_sd so that the residual stays the orientation's (issue 15)
+        // taken out of v_sd so that the residual stays the orientation's
         let weakened = self.refs.fw_active;
         let v_sd = if weakened {
             self.applied.v_dq.d - c.referred_rotor_resistance * i.d
@@ -1080,7 +1080,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             self.applied.v_dq.d
         };
         if c.rs_running.enabled {
-            // issue 13: Rs also while running (the default mode)
+            // Rs also while running (the default mode)
             rs_running_step(
                 &mut est.rs,
                 c,
@@ -1130,7 +1130,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         };
         // the rotor's electrical speed the frame turns with (sensorless: p Omega_hat)
         let mut rotor_speed = N::gain(c.pole_pairs, observer.speed) + correction;
-        // rotor resistance (issue 13, item 7): adapts at the start of speed ramps; its
+        // rotor resistance: adapts at the start of speed ramps; its
         // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (skipped when off, so
         // the default step neither pays for it nor changes by a rounding)
         if c.rr.enabled {
@@ -1209,7 +1209,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 || r.flying
                 || r.rs_settled_steps > mag.rs_settle_steps
                 || r.magnetizing_steps > mag.rs_timeout_steps;
-            // the inverter test (issue 13, item 2) holds the d-axis current at its levels
+            // the inverter test holds the d-axis current at its levels
             // for 0.45 s from the search's decision: the search measures at the flux
             // current it is designed for (at the test's first level, 0.4 of it, the Q7.24
             // search read -390 rpm of -493 and the drive stalled); on a flying start the
@@ -1293,7 +1293,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         r.speed_reference = r.speed_reference + dv;
         r.ramping = dv != N::ZERO;
         let speed = e.observer.speed;
-        // the far-side mode (issue 13, items 4-5): the braking torque the target needs,
+        // the far-side mode: the braking torque the target needs,
         // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
         // beyond the line by `far_side_enter` (entering) or within `far_side_leave` of it
         // (leaving); only with the inverter's voltage error known (the start test
@@ -1397,7 +1397,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
     }
 
-    /// Light-load flux optimisation (issue 15, [`crate::DriveConfig::flux_optimisation`]):
+    /// Light-load flux optimisation ([`crate::DriveConfig::flux_optimisation`]):
     /// the copper-loss optimum i_sd* = sqrt((Rs + R_R)/Rs) |i_sq*| of the last step's
     /// torque current, between the floor and `i_sd_max` (the rated or weakened flux
     /// current). It rises at once (a load step takes the flux back up, with tau_r) and
@@ -1421,7 +1421,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         }
     }
 
-    /// Field weakening and over-voltage control (issue 15, [`crate::design::FieldWeakeningDesign`] for
+    /// Field weakening and over-voltage control ([`crate::design::FieldWeakeningDesign`] for
     /// the equations): the flux current i_sd* and the torque-current limits at this
     /// step's stator frequency, bus and load. Below base speed (i_sd* at its rated value)
     /// and off the bus limit it returns the design's static values unchanged.
@@ -1632,7 +1632,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // not 1.5 periods old like the samples
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
         // the inverter error the start test found beyond the configured compensation
-        // (issue 13, item 2) is compensated with it, as more dead-time duty per leg with
+        // is compensated with it, as more dead-time duty per leg with
         // the same current signs; the estimators keep the command v, which the two
         // compensations make the machine see
         let out = self.modulator.modulate(
@@ -1644,7 +1644,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             self.inverter.correction_duty,
         );
         // the inverter error the correction still leaves, from the sixth-harmonic
-        // pattern across the current in this step's command (issue 13, item 2), for the
+        // pattern across the current in this step's command, for the
         // next step's modulation
         if c.inverter_tracker.enabled {
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
@@ -1874,7 +1874,7 @@ mod tests {
         );
     }
 
-    /// Issue 13, item 6: started with a zero target, the drive waits for one with either
+    /// started with a zero target, the drive waits for one with either
     /// policy and reports the hold; after turning, a zero target held for the dwell
     /// (0.5 s) switches it off with `Stop` (the default) and is reported with `Hold`,
     /// which keeps running; before the dwell neither acts.
@@ -2124,7 +2124,7 @@ mod tests {
 
     /// A current channel reading 0.5 A with the switches off (a drifted amplifier) refuses
     /// the start and faults the drive; a small offset is measured and subtracted; a start
-    /// asked for before the measurement has settled waits for it (issue 13, item 3).
+    /// asked for before the measurement has settled waits for it.
     #[test]
     fn idle_offsets_are_checked_at_start_and_compensated() {
         let idle = |d: &mut Drive, a: f32, n: usize| {

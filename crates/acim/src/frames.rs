@@ -155,7 +155,7 @@ pub fn inverse_park<N: Num>(v: Dq<N>, sc: SinCosValue<N>) -> AlphaBeta<N> {
 /// by the angle-sum formula with 3rd/4th-order series for delta (error < 2e-5 at 0.3 rad,
 /// < 1e-7 at the 0.1 rad of 1500 rpm and 1.5 periods). The f32 voltage lead.
 /// Always inlined: LLVM kept it out of line in the step (a call, a frame and four
-/// register moves, about 15 cycles of its 50; issue 16).
+/// register moves, about 15 cycles of its 50).
 #[inline(always)]
 pub fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
     let d = crate::math::clamp(delta, -0.3, 0.3);

@@ -1,4 +1,4 @@
-//! The current sensors' relative gain, identified while magnetizing at rest (issue 13: the
+//! The current sensors' relative gain, identified while magnetizing at rest (the
 //! far side's ripple).
 //!
 //! ## Why

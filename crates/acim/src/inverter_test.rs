@@ -1,4 +1,4 @@
-//! The inverter test at start (issue 13, item 2): the voltage error the configured
+//! The inverter test at start: the voltage error the configured
 //! dead-time and device-drop compensation leaves, identified in the first 0.45 s of
 //! magnetizing from three d-axis current levels (the analysis is on
 //! [`crate::design::InverterTestDesign`]), then compensated on top of the configured part.

@@ -1,4 +1,4 @@
-//! The inverter's voltage error tracked while running (issue 13, item 2, online part):
+//! The inverter's voltage error tracked while running (online part):
 //! its sixth harmonic, which the stator resistance does not make.
 //!
 //! Each leg's error voltage opposes its current: the machine sees the command less

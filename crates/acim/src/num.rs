@@ -104,7 +104,7 @@ pub trait Num:
     /// `x / count` for a count >= 1 (a running mean's step; 0 for a count of 0).
     fn per_count(x: Self, count: u32) -> Self;
     /// sqrt(x) for x >= 0 (0 for x <= 0): the field-weakening limits of
-    /// [`crate::Drive`] (issue 15).
+    /// [`crate::Drive`].
     fn sqrt(self) -> Self;
     /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
     fn neg_mean(a: Self, b: Self) -> Self;

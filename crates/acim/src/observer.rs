@@ -379,7 +379,7 @@ pub trait SpeedObserver<N: Num = f32> {
     /// Whether the observer takes the far-side term (`SpeedObserverInputs::far_side_error`).
     /// The drive enters the far-side mode, which releases the regeneration limit, only
     /// with an observer that does: without the term nothing would hold the point beyond
-    /// the unobservable line (issue 13, items 4-5).
+    /// the unobservable line.
     const FAR_SIDE_TERM: bool;
     /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
     /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).
@@ -473,7 +473,7 @@ mod tests {
         );
     }
 
-    /// The far-side term (issue 13, items 4-5) enters the speed and load updates as an
+    /// The far-side term enters the speed and load updates as an
     /// addition to the q-axis error, and not the current model: one step with
     /// `far_side_error` x moves Omega_hat and T_L_hat as one with the current estimate x
     /// higher would, and leaves i_sq_hat's update alone.

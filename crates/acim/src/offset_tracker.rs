@@ -1,4 +1,4 @@
-//! Running current-sensor offset tracker (issue 13, item 3): the drift of the current
+//! Running current-sensor offset tracker: the drift of the current
 //! channels' offsets after the start's switches-off measurement, estimated from the DC
 //! part of the stator voltage while the motor turns.
 //!

@@ -269,7 +269,7 @@ impl MachineParams {
 /// Default inertia, kg m^2 (not given by the paper; the bench had variable inertia disks).
 pub const DEFAULT_INERTIA: f32 = 0.01;
 /// Default viscous friction, N m s/rad. With zero friction and zero load the scheme's
-/// orientation is only neutrally stable (design notes, issue 7).
+/// orientation is only neutrally stable (design notes).
 pub const DEFAULT_VISCOUS_FRICTION: f32 = 2e-3;
 /// Default DC-bus voltage, V (rectified 230 V mains).
 pub const DEFAULT_DC_BUS: f32 = 325.0;

@@ -1,4 +1,4 @@
-//! Rotor-resistance adaptation from speed transients (issue 13, item 7): the slip law's
+//! Rotor-resistance adaptation from speed transients: the slip law's
 //! R_R (eq. 8) and the observer's Rseq (eq. 12) corrected from how the estimated speed
 //! moved against the mechanical model when the torque current changed.
 //!

@@ -39,7 +39,7 @@
 //! [`min_resistance`, `max_resistance`]; reaching a bound is reported so the drive can
 //! raise an "estimator out of range" fault.
 //!
-//! ## While running (issue 13, [`RsRunningConfig`])
+//! ## While running ([`RsRunningConfig`])
 //!
 //! Above a few hertz the d-axis residual mixes the resistance error with the orientation
 //! error: r_d = dR i_sd - w_s y (dR = Rs - Rs_hat, y = lambda_q the flux on the q axis,
@@ -110,7 +110,7 @@
 use crate::num::Num;
 use crate::params::MachineParams;
 
-/// The running law adapts from this stator frequency up, Hz (issue 13: "from about 1 Hz").
+/// The running law adapts from this stator frequency up, Hz ("from about 1 Hz").
 pub const RUNNING_MIN_FREQUENCY_HZ: f32 = 1.0;
 /// The running law adapts with |i_sq| at least this fraction of the flux current (its
 /// information is 2 dR i_sd i_sq: none at zero torque); 0.2 x 1.5 A is 0.7 N m on the
@@ -149,7 +149,7 @@ pub struct RsEstimatorConfig<N: Num = f32> {
     pub adapt: bool,
 }
 
-/// The running law's configuration (module docs, "While running"; issue 13; the drive's
+/// The running law's configuration (module docs, "While running"; the drive's
 /// default mode). A struct of its own, kept apart from [`RsEstimatorConfig`], which the
 /// standstill mode uses alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,10 +157,10 @@ pub struct RsEstimatorConfig<N: Num = f32> {
 pub struct RsRunningConfig<N: Num = f32> {
     /// Adapt while running from the q-axis and d-axis residuals: the eq. (19) law then
     /// runs only with the frame held (standstill identification). False: the eq. (19)
-    /// law below `max_stator_frequency` only (the behaviour before issue 13).
+    /// law below `max_stator_frequency` only (the earlier behaviour).
     pub enabled: bool,
     /// With `enabled`: whether the eq. (19) law identifies Rs at standstill (the frame
-    /// held, before the ramp) too. False: Rs converges only while turning (issue 13's
+    /// held, before the ramp) too. False: Rs converges only while turning (the
     /// fig 9 variant, `DriveConfig::rs_standstill_identification`).
     pub standstill: bool,
     /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
@@ -316,7 +316,7 @@ impl<N: Num> RsEstimator<N> {
         self.at_bound = false;
     }
 
-    /// One step of the mode before issue 13: Euler update of eq. (20) and, inside the
+    /// One step of the mode before Euler update of eq. (20) and, inside the
     /// gate, of the corrected eq. (19). (The running mode is [`RsEstimator::update_running`].)
     #[inline]
     pub fn update(&mut self, cfg: &RsEstimatorConfig<N>, u: &RsEstimatorInputs<N>) -> N {
@@ -368,7 +368,7 @@ impl<N: Num> RsEstimator<N> {
     /// One step of the running mode ([`RsRunningConfig`]; the caller uses it when
     /// `run.enabled`): eq. (19) with the frame held (standstill identification), the
     /// running law (module docs) while turning, the q-axis and d-axis current models.
-    /// Inlined into the step (the default mode since issue 13).
+    /// Inlined into the step (the default mode).
     #[inline(always)]
     pub fn update_running(
         &mut self,

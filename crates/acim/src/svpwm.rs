@@ -110,7 +110,7 @@ pub fn modulate<N: Num>(
 
 /// [`modulate`] with the bus already checked (> 0) and its reciprocal `inv_dc_bus` given,
 /// and `dead_time_correction` (duty; 0 for none) added to the configured dead-time duty of
-/// every leg (the inverter test's correction, issue 13 item 2).
+/// every leg (the inverter test's correction).
 #[inline(always)]
 pub fn modulate_with_inverse<N: Num>(
     cfg: &SvpwmConfig<N>,
@@ -212,7 +212,7 @@ pub trait Modulator<N: Num = f32> {
     /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
     /// with `phase_currents` (A) predicted for the dead-time compensation, whose duty
     /// per leg is the configured one plus `dead_time_correction` (the inverter test's,
-    /// issue 13 item 2; 0 leaves the configured compensation bit for bit).
+    ///; 0 leaves the configured compensation bit for bit).
     fn modulate(
         &self,
         coeffs: &DriveCoeffs<N>,

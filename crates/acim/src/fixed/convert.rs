@@ -153,7 +153,7 @@ pub fn rs_estimator(cfg: &RsEstimatorConfig, b: &PerUnitBases) -> Option<RsEstim
     })
 }
 
-/// The running Rs law (issue 13); its input is a voltage: ohm per V per step.
+/// The running Rs law; its input is a voltage: ohm per V per step.
 pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningConfig<Q24>> {
     Some(RsRunningConfig {
         enabled: cfg.enabled,
@@ -497,7 +497,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
     })
 }
 
-/// Field weakening and over-voltage control (issue 15): voltages of V_base, currents of
+/// Field weakening and over-voltage control: voltages of V_base, currents of
 /// I_base, frequencies of w_base; flux linkage V/w comes out of the Q7.24 ratio in
 /// V_base/w_base. The frequency floor must be inside the reciprocal's domain (2^-6 pu).
 fn field_weakening(

@@ -236,7 +236,7 @@ impl Gain {
 }
 
 /// Square root of a Q7.24 value, in Q7.24 (0 for x <= 0): exact to the floor of the
-/// last bit (integer square root of x 2^24). Used by the field-weakening limits (issue 15).
+/// last bit (integer square root of x 2^24). Used by the field-weakening limits.
 #[inline]
 pub fn sqrt_q24(x: i32) -> i32 {
     if x <= 0 {
@@ -541,7 +541,7 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    /// The 64-bit form [`mul`] had before the word-wise rewrite (issue 16), verbatim: the
+    /// The 64-bit form [`mul`] had before the word-wise rewrite, verbatim: the
     /// reference the rewrite must reproduce bit for bit.
     fn mul_64(a: i32, b: i32) -> i32 {
         saturate(

@@ -334,7 +334,7 @@ proptest! {
     }
 }
 
-/// The running Rs law (issue 13) in Q7.24 follows the f32 trajectory: the same steady
+/// The running Rs law in Q7.24 follows the f32 trajectory: the same steady
 /// machine (resistance 30 % above the estimate, an orientation error), motoring and
 /// regenerating, forward and reverse.
 #[test]
