@@ -262,6 +262,14 @@ pub struct DriveSpec {
     pub flux_current_a: f32,
     /// Stator current limit, A peak.
     pub current_limit_a: f32,
+    /// The machine's continuous current, A peak (absent: the current limit, no
+    /// fold-back); a current limit above it folds back after `overload_duration_s`.
+    pub continuous_current_a: Option<f32>,
+    /// How long the current limit may be drawn before it folds back, s (default 60).
+    pub overload_duration_s: Option<f32>,
+    /// Torque at its limit with the speed far from its reference this long faults
+    /// `Overload`, s (default 0.2; from the nameplate: five speed-loop time constants).
+    pub overload_time_s: Option<f32>,
     /// Phase over-current trip, A.
     pub overcurrent_trip_a: f32,
     /// Bus under-voltage trip, V.
@@ -301,6 +309,9 @@ pub struct DriveSpec {
     pub orientation_gain: f32,
     /// Far-side gain of the observer's speed update (0: off), dimensionless.
     pub far_side_gain: f32,
+    /// The two-degree-of-freedom speed loop (the observer's load estimate, the ramp and
+    /// the friction fed forward; `acim::speed_loop`); absent: off, on from a nameplate.
+    pub load_torque_feedforward: Option<bool>,
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
     /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
@@ -355,6 +366,9 @@ impl Default for DriveSpec {
             control_period_s: d.control_period,
             flux_current_a: d.flux_current,
             current_limit_a: d.current_limit,
+            continuous_current_a: None,
+            overload_duration_s: None,
+            overload_time_s: None,
             overcurrent_trip_a: d.overcurrent_trip,
             dc_bus_min_v: d.dc_bus_min,
             dc_bus_max_v: d.dc_bus_max,
@@ -375,6 +389,7 @@ impl Default for DriveSpec {
             stall_time_s: d.stall_time,
             orientation_gain: d.orientation_gain,
             far_side_gain: d.far_side_gain,
+            load_torque_feedforward: None,
             arithmetic: Arithmetic::F32,
             observer: ObserverKind::Reduced,
             modulation: ModulationKind::Linear,
@@ -786,7 +801,8 @@ pub struct Scenario {
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
     /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and the
     /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
-    /// `rr_adaptation` and `far_side_gain`; the plant's sensors take the board's full
+    /// `rr_adaptation`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
+    /// and `overload_time_s`; the plant's sensors take the board's full
     /// scales.
     pub nameplate: Option<NameplateSpec>,
     /// The power board (with `[nameplate]`).
@@ -1226,6 +1242,23 @@ impl Scenario {
         drive.control_period = d.control_period_s;
         drive.flux_current = d.flux_current_a;
         drive.current_limit = d.current_limit_a;
+        if let Some(i) = d.continuous_current_a {
+            check_range(
+                "drive.continuous_current_a",
+                i,
+                d.flux_current_a * 1.01,
+                200.0,
+            )?;
+            drive.continuous_current = i;
+        }
+        if let Some(t) = d.overload_duration_s {
+            check_range("drive.overload_duration_s", t, 0.1, 3600.0)?;
+            drive.overload_duration = t;
+        }
+        if let Some(t) = d.overload_time_s {
+            check_range("drive.overload_time_s", t, 0.01, 60.0)?;
+            drive.overload_time = t;
+        }
         drive.overcurrent_trip = d.overcurrent_trip_a;
         drive.dc_bus_min = d.dc_bus_min_v;
         drive.dc_bus_max = d.dc_bus_max_v;
@@ -1250,6 +1283,9 @@ impl Scenario {
         drive.stall_time = d.stall_time_s;
         drive.orientation_gain = d.orientation_gain;
         drive.far_side_gain = d.far_side_gain;
+        if let Some(on) = d.load_torque_feedforward {
+            drive.load_torque_feedforward = on;
+        }
         if let Some(rpm) = d.max_speed_rpm {
             drive.max_speed = rpm * acim::math::RPM_TO_RAD_S;
         }
@@ -1305,6 +1341,15 @@ impl Scenario {
             }
             cfg.orientation_gain = drive.orientation_gain;
             cfg.far_side_gain = drive.far_side_gain;
+            if let Some(on) = d.load_torque_feedforward {
+                cfg.load_torque_feedforward = on;
+            }
+            if d.overload_duration_s.is_some() {
+                cfg.overload_duration = drive.overload_duration;
+            }
+            if d.overload_time_s.is_some() {
+                cfg.overload_time = drive.overload_time;
+            }
             cfg.current_sensing = drive.current_sensing;
             cfg.field_weakening = drive.field_weakening;
             cfg.overvoltage_control = drive.overvoltage_control;

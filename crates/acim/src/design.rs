@@ -18,8 +18,10 @@ use crate::params::{self, MachineParams};
 use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
+use crate::speed_loop::SpeedLoopConfig;
 use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig, INV_SQRT3, VOLTAGE_MARGIN};
+use crate::thermal::ThermalConfig;
 
 /// How many phase currents are measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -90,6 +92,17 @@ pub struct DriveConfig {
     pub flux_current: f32,
     /// Stator current vector limit I_max, A peak.
     pub current_limit: f32,
+    /// The machine's continuous (rated) current I_c, A peak: a `current_limit` above it is
+    /// a short-time overload rating, allowed for `overload_duration` before the limit
+    /// folds back to I_c ([`crate::thermal`]); 0 (the default) or at or above
+    /// `current_limit`: no fold-back, the limit is the continuous rating.
+    pub continuous_current: f32,
+    /// How long `current_limit` may be drawn before the fold-back (I^2 t), s.
+    pub overload_duration: f32,
+    /// How long the torque may stay at its limit with the speed far from its reference
+    /// (more than half of it, and 50 rpm) before the drive faults `Overload`, s: the load
+    /// is then beyond what the machine can give.
+    pub overload_time: f32,
     /// Phase current trip level, A (any phase above it faults).
     pub overcurrent_trip: f32,
     /// Lowest DC-bus voltage while active, V.
@@ -102,8 +115,14 @@ pub struct DriveConfig {
     pub speed_ramp: f32,
     /// Current-loop bandwidth, rad/s.
     pub current_bandwidth: f32,
-    /// Speed-loop bandwidth, rad/s.
+    /// Speed-loop bandwidth, rad/s: both poles of the speed loop (J s^2 + k_t (kp s + ki)
+    /// = J (s + alpha)^2, [`crate::speed_loop`]).
     pub speed_bandwidth: f32,
+    /// The speed loop's two-degree-of-freedom design: the observer's load-torque estimate,
+    /// the ramp's acceleration and the friction fed forward, proportional feedback
+    /// ([`crate::speed_loop`]; default off: the paper's PI; the nameplate path's default
+    /// on).
+    pub load_torque_feedforward: bool,
     /// Observer poles (rates, rad/s).
     pub observer_poles: ObserverPoles,
     /// Whether the stator-resistance estimator adapts (default on; the paper's figs. 6-8
@@ -270,13 +289,17 @@ impl DriveConfig {
             control_period: params::DEFAULT_CONTROL_PERIOD,
             flux_current: params::DEFAULT_FLUX_CURRENT,
             current_limit: params::DEFAULT_CURRENT_LIMIT,
+            continuous_current: 0.0,
+            overload_duration: DEFAULT_OVERLOAD_DURATION,
+            overload_time: 0.2,
             overcurrent_trip: 8.0,
             dc_bus_min: 200.0,
             dc_bus_max: 400.0,
             max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
             speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
             current_bandwidth: 1000.0,
-            speed_bandwidth: 25.0,
+            speed_bandwidth: 12.5,
+            load_torque_feedforward: false,
             observer_poles: ObserverPoles::DEFAULT,
             rs_estimation: true,
             rs_estimation_mode: RsEstimationMode::Running,
@@ -412,8 +435,13 @@ pub const MAX_DELAY_PERIODS: f32 = 3.0;
 /// Largest orientation-correction gain.
 pub const MAX_ORIENTATION_GAIN: f32 = 50.0;
 /// Overload: the speed loop settles in this many of its time constants (1 /
-/// speed_bandwidth); torque at the limit with a large speed error beyond that is a fault.
-pub const OVERLOAD_SPEED_LOOP_CONSTANTS: f32 = 5.0;
+/// speed_bandwidth); torque at the limit with a large speed error beyond that is a fault
+/// (the nameplate's [`DriveConfig::overload_time`]; the default's 0.2 s is 2.5 of the
+/// default 12.5 rad/s).
+pub const OVERLOAD_SPEED_LOOP_CONSTANTS: f32 = 10.0;
+/// The default time the overload limit may be drawn, s (the common 150 % for 60 s rating
+/// of industrial drives).
+pub const DEFAULT_OVERLOAD_DURATION: f32 = 60.0;
 /// Overload: the speed error counts beyond this fraction of the reference.
 pub const OVERLOAD_FRACTION: f32 = 0.5;
 /// The far-side gain's default ([`DriveConfig::far_side_gain`]): the value that leaves the
@@ -489,7 +517,7 @@ pub const FW_HOLD_BAND_FRACTION: f32 = 0.01;
 /// after the hold last bound: the hold binds only in the steps where the speed PI sits at
 /// its limit, which flickers at the reachable speed, and a report that flickers with it
 /// (a third of the steps, measured) says less than it knows.
-pub const FW_REPORT_SPEED_LOOP_CONSTANTS: f32 = 5.0;
+pub const FW_REPORT_SPEED_LOOP_CONSTANTS: f32 = 2.5;
 /// Over-voltage control starts reducing the regenerative current at this fraction of
 /// `dc_bus_max`.
 pub const OVC_START_FRACTION: f32 = 0.9;
@@ -580,8 +608,7 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub implausible_steps: u32,
     /// Steps the stall condition may persist.
     pub stall_steps: u32,
-    /// Steps the overload condition may persist (leaky): [`OVERLOAD_SPEED_LOOP_CONSTANTS`]
-    /// / speed_bandwidth.
+    /// Steps the overload condition may persist (leaky): [`DriveConfig::overload_time`].
     pub overload_steps: u32,
     /// Overload: speed error beyond this fraction of |reference| ([`OVERLOAD_FRACTION`]).
     pub overload_fraction: N,
@@ -927,8 +954,10 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub pi_d: PiConfig<N>,
     /// q-axis current PI.
     pub pi_q: PiConfig<N>,
-    /// Speed PI.
-    pub pi_speed: PiConfig<N>,
+    /// Speed loop: the disturbance PI and the feed-forwards.
+    pub speed_loop: SpeedLoopConfig<N>,
+    /// The short-time overload rating's I^2 t model.
+    pub thermal: ThermalConfig<N>,
     /// Flux model and slip law (eq. 13, 8).
     pub flux: FluxModelConfig<N>,
     /// Reduced-order observer step (eq. 12).
@@ -1037,8 +1066,10 @@ pub struct DriveDesign {
     pub pi_d: PiConfig,
     /// q-axis current PI (eq. 9b plant).
     pub pi_q: PiConfig,
-    /// Speed PI (J, k_t at the flux reference).
-    pub pi_speed: PiConfig,
+    /// Speed loop (J, k_t at the flux reference; [`crate::speed_loop`]).
+    pub speed_loop: SpeedLoopConfig,
+    /// The short-time overload rating ([`crate::thermal`]).
+    pub thermal: ThermalConfig,
     /// Flux model and slip law (eq. 13, 8).
     pub flux: FluxModelConfig,
     /// Reduced-order observer (eq. 12, 14).
@@ -1160,6 +1191,18 @@ impl DriveDesign {
         positive(cfg.speed_ramp, "speed_ramp")?;
         positive(cfg.current_bandwidth, "current_bandwidth")?;
         positive(cfg.speed_bandwidth, "speed_bandwidth")?;
+        check(
+            cfg.continuous_current == 0.0
+                || (is_finite(cfg.continuous_current) && cfg.continuous_current > cfg.flux_current),
+            "continuous_current",
+            "0 (no fold-back) or finite and above flux_current",
+        )?;
+        positive(cfg.overload_duration, "overload_duration")?;
+        check(
+            is_finite(cfg.overload_time) && cfg.overload_time >= ts,
+            "overload_time",
+            "finite and at least one control period",
+        )?;
         check(
             cfg.current_bandwidth * ts <= MAX_CURRENT_BANDWIDTH_PERIODS,
             "current_bandwidth",
@@ -1295,7 +1338,21 @@ impl DriveDesign {
             ts,
             pi_d: pi_current,
             pi_q: pi_current,
-            pi_speed: PiConfig::speed_loop(&m, flux_reference, cfg.speed_bandwidth, ts, i_sq_limit),
+            speed_loop: SpeedLoopConfig::new(
+                &m,
+                flux_reference,
+                cfg.speed_bandwidth,
+                ts,
+                i_sq_limit,
+                cfg.load_torque_feedforward,
+            ),
+            thermal: ThermalConfig::new(
+                cfg.current_limit,
+                cfg.continuous_current,
+                cfg.overload_duration,
+                i_d,
+                ts,
+            ),
             flux: FluxModelConfig::new(&m, ts, flux_reference),
             observer,
             rs,
@@ -1418,7 +1475,7 @@ impl DriveDesign {
                 max_load_torque: cfg.max_load_torque_estimate,
                 implausible_steps: (IMPLAUSIBLE_TIME / ts) as u32,
                 stall_steps: (cfg.stall_time / ts) as u32,
-                overload_steps: (OVERLOAD_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32,
+                overload_steps: (cfg.overload_time / ts) as u32,
                 overload_fraction: OVERLOAD_FRACTION,
                 overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
                 blind_frequency: fa,
@@ -1484,7 +1541,8 @@ impl DriveCoeffs<f32> {
         Self {
             pi_d: d.pi_d,
             pi_q: d.pi_q,
-            pi_speed: d.pi_speed,
+            speed_loop: d.speed_loop,
+            thermal: d.thermal,
             flux: d.flux,
             observer: d.observer.coeffs,
             rs: d.rs,

@@ -66,6 +66,7 @@ pub use crate::supervisor::{
     Supervisor,
 };
 use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
+use crate::thermal::ThermalModel;
 
 /// Samples of one control step (A and V; pu in fixed point).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -414,6 +415,10 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     /// step performs it once the measurement has (item 3: offsets measured
     /// before every start).
     pending_start: Option<DriveState>,
+    /// The machine's heat against its short-time overload rating ([`crate::thermal`]):
+    /// kept across stops and faults (the machine cools with the drive off too, which the
+    /// model does not see: it errs on the safe side).
+    thermal: ThermalModel<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -500,6 +505,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             inverter_tracker: InverterTracker::default(),
             gain_cal: GainCalibration::default(),
             pending_start: None,
+            thermal: ThermalModel::new(),
         })
     }
 
@@ -1292,6 +1298,11 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
         r.speed_reference = r.speed_reference + dv;
         r.ramping = dv != N::ZERO;
+        // the ramp's slope, fed forward (`speed_loop`): zero where the hold below moves
+        // the reference instead, and in field weakening (the torque the voltage leaves is
+        // the hold's to share out: with the slope's torque on top, braking from 3000 rpm
+        // ran into the current-regulation trip)
+        let mut slope = if r.fw_active { N::ZERO } else { dv };
         let speed = e.observer.speed;
         // the far-side mode: the braking torque the target needs,
         // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
@@ -1329,6 +1340,14 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             (fw.i_sq_min, fw.i_sq_max, false)
         };
+        // the short-time overload rating (`thermal`): on the measured current, the
+        // torque-current limits fold back to the continuous current when it is spent
+        let (i_sq_min, i_sq_max) = if c.thermal.enabled {
+            let rating = self.thermal.update(&c.thermal, m.i_dq.d, m.i_dq.q);
+            (i_sq_min * rating, i_sq_max * rating)
+        } else {
+            (i_sq_min, i_sq_max)
+        };
         // the speed PI at its limit, or its torque current beyond what the voltage left
         // to the q loop drives (the q loop at its limit: at the field-weakening onset the
         // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
@@ -1345,6 +1364,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             // overload trip) and report it
             let band = c.fw.hold_band;
             let held = r.speed_reference.clamp(speed - band, speed + band);
+            slope = N::ZERO;
             // reported when the hold binds, and whenever the regeneration limit holds the
             // torque: the speed then settles above the target, inside the band or not
             if held != r.speed_reference || braking {
@@ -1365,20 +1385,33 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         r.limited_hold = r.limited_hold.saturating_sub(1);
         let error = r.speed_reference - speed;
         // the torque per ampere is 1.5 p lambda_r and the speed PI is designed at lambda_ref
-        // (`PiConfig::speed_loop`): while the flux is weakened its gains are scaled by
+        // (`SpeedLoopConfig::new`): while the flux is weakened its gains are scaled by
         // lambda_ref/lambda_r (the error it sees), so the loop keeps its bandwidth and
         // damping as the flux falls. Unscaled, at a sixth of the flux the loop's gain fell
         // to a sixth: in fw-braking-3000 the ramp lagged 79 rpm and the speed overshot
         // 3000 rpm by 78 rpm. The error, not the output, is scaled: the torque current does
         // not jump with the flux estimate (lambda_r >= the flux model's floor)
-        let error = if r.fw_active {
-            error * (c.fw.flux_reference * self.est.flux.inv_rotor_flux)
+        // the feed-forwards (`speed_loop`): the torque currents that accelerate the rotor
+        // along the ramp, overcome the friction at the reference and hold the observer's
+        // load-torque estimate;
+        // both are torques over k_t at lambda_ref, scaled like the error below
+        let sl = &c.speed_loop;
+        let feedforward = if sl.feedforward {
+            N::gain(sl.acceleration_feedforward, slope)
+                + N::gain(sl.friction_feedforward, r.speed_reference)
+                + N::gain(sl.load_feedforward, e.observer.load_torque)
         } else {
-            error
+            N::ZERO
+        };
+        let (error, feedforward) = if r.fw_active {
+            let scale = c.fw.flux_reference * self.est.flux.inv_rotor_flux;
+            (error * scale, feedforward * scale)
+        } else {
+            (error, feedforward)
         };
         let i_sq_ref =
             r.speed_ctl
-                .update_with_limits(&c.pi_speed, error, N::ZERO, i_sq_min, i_sq_max);
+                .update_with_limits(&sl.pi, error, feedforward, i_sq_min, i_sq_max);
         r.i_sq_ref = i_sq_ref;
         let saturated = r.speed_ctl.saturated();
         let stall = self
@@ -1436,8 +1469,8 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let fw = &c.fw;
         let mut out = FwLimits {
             i_sd_ref: c.i_sd_ref,
-            i_sq_min: c.pi_speed.out_min,
-            i_sq_max: c.pi_speed.out_max,
+            i_sq_min: c.speed_loop.pi.out_min,
+            i_sq_max: c.speed_loop.pi.out_max,
             torque_limited: false,
         };
         if fw.enabled {
@@ -1884,6 +1917,10 @@ mod tests {
         for policy in [ZeroSpeedPolicy::Stop, ZeroSpeedPolicy::Hold] {
             let mut cfg = synthetic_defaults();
             cfg.zero_speed_policy = policy;
+            // no plant: with the constant samples below the observer's load estimate
+            // drifts, and fed forward it asks for a current the samples never follow
+            // (a CurrentRegulation fault, rightly); the policy is what is tested here
+            cfg.load_torque_feedforward = false;
             let mut d = powered(Drive::new(cfg).unwrap());
             d.start().unwrap();
             let inp = DriveInputs {

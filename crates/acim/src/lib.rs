@@ -59,8 +59,10 @@ pub mod params;
 pub mod pi;
 pub mod rr_estimator;
 pub mod rs_estimator;
+pub mod speed_loop;
 pub mod speed_search;
 pub mod svpwm;
+pub mod thermal;
 
 // the cascade: configuration and design, supervision, the staged drive
 pub mod commissioning;

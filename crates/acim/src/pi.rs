@@ -55,24 +55,6 @@ impl PiConfig<f32> {
         let ki = m.equivalent_resistance() * bandwidth;
         Self::new(kp, ki, ts, voltage_limit)
     }
-
-    /// Speed-loop design for a bandwidth `bandwidth` (rad/s) at rotor flux `rotor_flux`
-    /// (Wb): the mechanical plant of eq. (9b) is k_t/(J s) from i_sq to speed, with
-    /// k_t = 1.5 p lambda_r. kp = J wc / k_t (A per rad/s), PI zero a factor four below the
-    /// crossover (ki = kp wc / 4) for about 60 degrees of phase margin. Output limit is the
-    /// q-current limit (A).
-    pub fn speed_loop(
-        m: &MachineParams,
-        rotor_flux: f32,
-        bandwidth: f32,
-        ts: f32,
-        current_limit: f32,
-    ) -> Self {
-        let kt = m.torque_constant(rotor_flux).max(1e-6);
-        let kp = m.inertia() * bandwidth / kt;
-        let ki = kp * bandwidth * 0.25;
-        Self::new(kp, ki, ts, current_limit)
-    }
 }
 
 /// State of one PI controller.

@@ -24,7 +24,9 @@ use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
+use crate::speed_loop::SpeedLoopConfig;
 use crate::svpwm::SvpwmConfig;
+use crate::thermal::ThermalConfig;
 
 /// Largest |signal| in pu the configuration may ask for (limits, trips, references): 2 pu
 /// leaves 64x before Q7.24 saturates (module docs, headroom).
@@ -69,6 +71,20 @@ pub fn pi(cfg: &PiConfig, error_base: f32, output_base: f32) -> Option<PiConfig<
         ki_ts: Gain::from_f32(cfg.ki_ts * k)?,
         out_min: Q24(to_q24(cfg.out_min / output_base)),
         out_max: Q24(to_q24(cfg.out_max / output_base)),
+    })
+}
+
+/// The speed loop: the PI from speed to current, the ramp's step (speed) and the load
+/// estimate (torque) to current.
+pub fn speed_loop(cfg: &SpeedLoopConfig, b: &PerUnitBases) -> Option<SpeedLoopConfig<Q24>> {
+    Some(SpeedLoopConfig {
+        pi: pi(&cfg.pi, b.speed, b.current)?,
+        acceleration_feedforward: Gain::from_f32(
+            cfg.acceleration_feedforward * b.speed / b.current,
+        )?,
+        friction_feedforward: Gain::from_f32(cfg.friction_feedforward * b.speed / b.current)?,
+        load_feedforward: Gain::from_f32(cfg.load_feedforward * b.torque / b.current)?,
+        feedforward: cfg.feedforward,
     })
 }
 
@@ -295,7 +311,21 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
     Ok(DriveCoeffs {
         pi_d: pi_current,
         pi_q: pi_current,
-        pi_speed: pi(&d.pi_speed, b.speed, b.current).ok_or(missing("speed_bandwidth"))?,
+        speed_loop: speed_loop(&d.speed_loop, b).ok_or(missing("speed_bandwidth"))?,
+        thermal: ThermalConfig {
+            heat_gain: gain(
+                d.thermal.heat_gain * b.current * b.current,
+                "overload_duration",
+            )?,
+            continuous_squared: pu(
+                d.thermal.continuous_squared,
+                b.current * b.current,
+                "continuous_current",
+            )?,
+            continuous_ratio: pu(d.thermal.continuous_ratio, 1.0, "continuous_current")?,
+            release: pu(d.thermal.release, 1.0, "overload_duration")?,
+            enabled: d.thermal.enabled,
+        },
         flux: flux(&d.flux, b).ok_or(missing("machine"))?,
         observer: observer(&d.observer, b).ok_or(missing("observer_poles"))?,
         rs: rs_estimator(&d.rs, b).ok_or(missing("rs_convergence_time"))?,

@@ -652,8 +652,11 @@ mod tests {
         let gains = [
             c.pi_d.kp,
             c.pi_d.ki_ts,
-            c.pi_speed.kp,
-            c.pi_speed.ki_ts,
+            c.speed_loop.pi.kp,
+            c.speed_loop.pi.ki_ts,
+            c.speed_loop.acceleration_feedforward,
+            c.speed_loop.friction_feedforward,
+            c.speed_loop.load_feedforward,
             c.flux.blend,
             c.flux.magnetizing_inductance,
             c.flux.slip_gain,

@@ -173,7 +173,7 @@ proptest! {
     ) {
         let m = m();
         let cur = PiConfig::current_loop(&m, bandwidth, TS, 231.0);
-        let spd = PiConfig::speed_loop(&m, m.rotor_flux_for(1.5), speed_bw, TS, 4.42);
+        let spd = crate::speed_loop::SpeedLoopConfig::new(&m, m.rotor_flux_for(1.5), speed_bw, TS, 4.42, true).pi;
         // (design, error base, output base, error scale in SI)
         for (c, eb, ob, scale) in [(cur, B.current, B.voltage, 2.0f32), (spd, B.speed, B.current, 50.0)] {
             let cq = convert::pi(&c, eb, ob).unwrap();
