@@ -11,13 +11,16 @@
 //! disassembles it with the rustup `llvm-tools` `llvm-objdump`, finds the marker functions
 //! and the static call graph of the measured code, runs QEMU (`netduinoplus2`, Cortex-M4F)
 //! with one guest instruction per translation block and the execution log restricted by
-//! `-dfilter` to the measured code, and stream-parses the log (never held in memory):
-//! every executed instruction is one `Trace` line with its PC, so the count between the
-//! `bench_begin_R` and `bench_end_R` marker calls is exact. Each executed instruction is
-//! weighted with the Cortex-M4 timing table below and the pipeline model of [`timed`] to
-//! estimate cycles. The same run traces the fixed-point firmware `acim-bench-fixed` on the
-//! Cortex-M4F and the Cortex-M3 (`netduino2`; [`Core::M3`] for its multiplies), and
-//! `--weigh-isr` weighs the firmware-in-the-loop traces of the control interrupt.
+//! `-dfilter` to the measured code (less the soft-float routines, which only unmeasured
+//! code calls: [`TraceFilter`]), and stream-parses the log from a pipe (never held in
+//! memory; read in batches, [`BatchedPipe`]): every executed instruction is one `Trace`
+//! line with its PC, so the count between the `bench_begin_R` and `bench_end_R` marker
+//! calls is exact. Each executed instruction is weighted with the Cortex-M4 timing table
+//! below and the pipeline model of [`timed`] to estimate cycles (decoded once per static
+//! instruction: [`Weights`]). The same run traces the fixed-point firmware
+//! `acim-bench-fixed` on the Cortex-M4F and the Cortex-M3 (`netduino2`; [`Core::M3`] for
+//! its multiplies), in two more threads beside the f32 run, and `--weigh-isr` weighs the
+//! firmware-in-the-loop traces of the control interrupt.
 //!
 //! ## Cortex-M4 timing table (Arm Cortex-M4 TRM r0p1, tables 3-1 and 7-1) and assumptions
 //!
@@ -59,7 +62,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 #[path = "scenario.rs"]
 #[allow(dead_code)]
@@ -178,13 +181,42 @@ fn run(
     let mut roots = vec![shadow_root, drive_root, calib_root];
     roots.extend(markers.values().map(|m| m.func));
     let measured_graph = dis.reachable(&roots);
-    let filter = dis.dfilter(&measured_graph.functions);
 
     let qemu = Qemu::detect()?;
+    // The three traced runs (f32 on the M4F; the fixed point on the M4F and the M3) are
+    // independent: the fixed-point ones (build, disassembly, QEMU and parse each) start in
+    // their own threads while this one traces the f32 run, the longest (the counts come
+    // from the execution log, so the host's load does not change them).
     let t1 = Instant::now();
-    let (stats, profile, summary) =
-        run_qemu(&qemu, &M4F_RUN, &elf, &filter, &dis, &markers, keep_trace)?;
-    let t_qemu = t1.elapsed();
+    let (f32_run, t_qemu, fixed_runs) = std::thread::scope(|sc| {
+        let handles: Vec<_> = FIXED_CORES
+            .iter()
+            .map(|fc| {
+                let (qemu, tools) = (&qemu, &tools);
+                sc.spawn(move || run_fixed(qemu, tools, fc))
+            })
+            .collect();
+        let f32_run = trace_regions(
+            &qemu,
+            &M4F_RUN,
+            &elf,
+            &dis,
+            &measured_graph,
+            &markers,
+            keep_trace.as_deref(),
+        );
+        let t_qemu = t1.elapsed();
+        let fixed_runs: Vec<_> = handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err("a fixed-point run panicked".into()))
+            })
+            .collect();
+        (f32_run, t_qemu, fixed_runs)
+    });
+    let t_fixed = t1.elapsed();
+    let (stats, profile, summary) = f32_run?;
 
     // ---- results
     let base = stats.get("empty").cloned().unwrap_or_default();
@@ -234,27 +266,8 @@ fn run(
     // ---- the fixed-point path on the Cortex-M4F and the Cortex-M3
     let results = bench_dir().join("results");
     std::fs::create_dir_all(&results).map_err(|e| e.to_string())?;
-    let t2 = Instant::now();
     let mut fixed_json = serde_json::Map::new();
     let mut fixed_rows: Vec<(&'static str, Vec<Row>, String)> = Vec::new();
-    // the two cores' emulations and trace parses are independent: one thread each (the
-    // counts come from QEMU's icount, so the host's load does not change them)
-    let fixed_runs: Vec<_> = std::thread::scope(|sc| {
-        let handles: Vec<_> = FIXED_CORES
-            .iter()
-            .map(|fc| {
-                let (qemu, tools) = (&qemu, &tools);
-                sc.spawn(move || run_fixed(qemu, tools, fc))
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| Err("a fixed-point run panicked".into()))
-            })
-            .collect()
-    });
     for (fc, run) in FIXED_CORES.iter().zip(fixed_runs) {
         let (frows, prof, fsummary) = run?;
         let mut m = serde_json::Map::new();
@@ -272,7 +285,6 @@ fn run(
         std::fs::write(&prof_path, &prof).map_err(|e| e.to_string())?;
         fixed_rows.push((fc.key, frows, fsummary));
     }
-    let t_fixed = t2.elapsed();
 
     let json = serde_json::json!({
         "target": format!("{TARGET} (Cortex-M4F; instructions counted in QEMU {} netduinoplus2, cycles estimated from the Cortex-M4 TRM timings)", qemu.version_string),
@@ -617,9 +629,9 @@ fn run_fixed(qemu: &Qemu, tools: &Tools, fc: &FixedCore) -> Res<(Vec<Row>, Strin
     }
     roots.extend(markers.values().map(|m| m.func));
     let graph = dis.reachable(&roots);
-    let filter = dis.dfilter(&graph.functions);
     eprintln!("fixed point on {} ({}):", fc.key, fc.spec.machine);
-    let (stats, profile, summary) = run_qemu(qemu, &fc.spec, &elf, &filter, &dis, &markers, None)?;
+    let (stats, profile, summary) =
+        trace_regions(qemu, &fc.spec, &elf, &dis, &graph, &markers, None)?;
     if !summary.contains("measured=500") || !summary.contains("faults=0") {
         return Err(format!(
             "{}: the fixed-point run did not complete cleanly: {summary}",
@@ -892,11 +904,17 @@ struct Func {
 
 struct Disassembly {
     funcs: Vec<Func>,
-    /// index by (addr - base) / 2
+    /// Lowest instruction address (even).
     base: u32,
-    table: Vec<Option<usize>>,
+    /// Index into `insns` of the instruction at `base + 2 k` (Thumb instructions are
+    /// halfword aligned), [`NO_INSN`] where none starts: a dense map from PC to
+    /// instruction, looked up for every line of the execution log.
+    table: Vec<u32>,
     insns: Vec<Insn>,
 }
+
+/// No instruction starts at this halfword (in [`Disassembly::table`]).
+const NO_INSN: u32 = u32::MAX;
 
 #[derive(Clone, Copy, Debug)]
 struct Marker {
@@ -978,9 +996,9 @@ impl Disassembly {
         }
         let base = insns.iter().map(|i| i.addr).min().unwrap_or(0) & !1;
         let top = insns.iter().map(|i| i.addr + i.size).max().unwrap_or(0);
-        let mut table = vec![None; ((top - base) / 2 + 1) as usize];
+        let mut table = vec![NO_INSN; ((top - base) / 2 + 1) as usize];
         for (k, i) in insns.iter().enumerate() {
-            table[((i.addr - base) / 2) as usize] = Some(k);
+            table[((i.addr - base) / 2) as usize] = k as u32;
         }
         Ok(Self {
             funcs,
@@ -991,12 +1009,16 @@ impl Disassembly {
     }
 
     fn at(&self, pc: u32) -> Option<&Insn> {
+        self.index(pc).map(|k| &self.insns[k])
+    }
+
+    /// Index into `insns` of the instruction at `pc`.
+    fn index(&self, pc: u32) -> Option<usize> {
         let off = pc.checked_sub(self.base)? / 2;
-        self.table
-            .get(off as usize)
-            .copied()
-            .flatten()
-            .map(|k| &self.insns[k])
+        match self.table.get(off as usize) {
+            Some(&k) if k != NO_INSN => Some(k as usize),
+            _ => None,
+        }
     }
 
     fn function_named(&self, pred: impl Fn(&str) -> bool) -> Option<usize> {
@@ -1369,65 +1391,131 @@ fn address_regs(ops: &str) -> Vec<u8> {
 ///   floats/one double to/from two core registers or one float to/from one core
 ///   register"), between S registers or an immediate 1.
 fn timed(core: Core, i: &Insn, taken: bool, prev: &Prev) -> (u32, Class, Prev) {
-    let (table, class) = cycles_on(core, i, taken, false);
-    let b = base_mnemonic(&i.mnemonic);
-    let ops = i.operands.as_str();
-    let toks: Vec<&str> = ops.split(',').map(str::trim).collect();
-    let mut next = Prev::default();
-    let mut c = table;
-    match b.as_str() {
-        "ldr" | "ldrb" | "ldrh" | "ldrsb" | "ldrsh" => {
-            let writes_pc = ops.starts_with("pc");
-            if let Some(d) = prev.ldr_dest {
-                if !address_regs(ops).contains(&d) && d != u8::MAX {
-                    c -= 1;
+    let t = Timing::of(core, i);
+    let (c, next) = t.step(taken, prev);
+    (c, t.class, next)
+}
+
+/// [`timed`] split into what depends on the instruction alone, decoded once from its
+/// mnemonic and operands ([`Timing::of`]), and the little that depends on the executed
+/// predecessor ([`Timing::step`]): the trace parse runs the step for every executed
+/// instruction and the string analysis once per static instruction.
+#[derive(Clone, Copy, Debug)]
+struct Timing {
+    /// Timing-table cycles ([`cycles_on`], not after a load/store), not taken / taken.
+    table: [u32; 2],
+    class: Class,
+    access: Access,
+    /// An FP instruction (`v...`): it may wait for the previous one's late result.
+    fp: bool,
+    /// Single-precision registers it reads (bit n = `sn`, see [`fp_sources`]).
+    fp_reads: u32,
+    /// A multiply-accumulate's addend (its destination): a VADD/VSUB/VMUL/VNMUL/VCVT
+    /// result is forwarded to it without a stall; 0 for other instructions.
+    fp_forwarded: u32,
+    /// The state it leaves for the next instruction (depends on this one alone).
+    next: Prev,
+}
+
+/// The load/store pipelining cases of [`timed`].
+#[derive(Clone, Copy, Debug)]
+enum Access {
+    /// LDR/LDRB/LDRH/LDRSB/LDRSH; bit n: core register `rn` forms the address.
+    Load {
+        address_regs: u16,
+    },
+    /// STR/STRB/STRH with a register offset (else an immediate one).
+    Store {
+        reg_offset: bool,
+    },
+    /// VMOV of one float to or from a core register.
+    CoreVmov,
+    Other,
+}
+
+impl Timing {
+    fn of(core: Core, i: &Insn) -> Self {
+        let b = base_mnemonic(&i.mnemonic);
+        let ops = i.operands.as_str();
+        let toks: Vec<&str> = ops.split(',').map(str::trim).collect();
+        let dest_mask = toks.first().map(|t| fp_reg_mask(t)).unwrap_or(0);
+        let mut next = Prev::default();
+        let access = match b.as_str() {
+            "ldr" | "ldrb" | "ldrh" | "ldrsb" | "ldrsh" => {
+                if !ops.starts_with("pc") {
+                    next.ldr_dest = Some(toks.first().and_then(|t| core_reg(t)).unwrap_or(u8::MAX));
+                }
+                // core_reg() numbers are below 16
+                let address_regs = address_regs(ops).iter().fold(0u16, |m, &r| m | 1 << r);
+                Access::Load { address_regs }
+            }
+            "str" | "strb" | "strh" => Access::Store {
+                reg_offset: address_regs(ops).len() > 1,
+            },
+            // one float to/from one core register: 2 (two core registers: 2 already)
+            "vmov" if toks.iter().any(|t| core_reg(t).is_some()) => Access::CoreVmov,
+            _ => Access::Other,
+        };
+        let late = matches!(
+            b.as_str(),
+            "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr" | "vdiv" | "vsqrt"
+        ) || is_fp_mac(&b);
+        if late {
+            next.fp_late = dest_mask;
+            next.fp_bypass = matches!(
+                b.as_str(),
+                "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr"
+            );
+        }
+        let (not_taken, class) = cycles_on(core, i, false, false);
+        Self {
+            table: [not_taken, cycles_on(core, i, true, false).0],
+            class,
+            access,
+            fp: b.starts_with('v'),
+            fp_reads: fp_sources(&b, &toks),
+            fp_forwarded: if is_fp_mac(&b) { dest_mask } else { 0 },
+            next,
+        }
+    }
+
+    /// Cycles when executed after an instruction that left `prev`; the state for the
+    /// next one.
+    fn step(&self, taken: bool, prev: &Prev) -> (u32, Prev) {
+        let mut c = self.table[taken as usize];
+        match self.access {
+            Access::Load { address_regs } => {
+                // pipelined behind a single load unless that load's destination forms
+                // this one's address (u8::MAX: the destination is unknown)
+                if let Some(d) = prev.ldr_dest {
+                    if d != u8::MAX && address_regs & (1 << d) == 0 {
+                        c -= 1;
+                    }
                 }
             }
-            if !writes_pc {
-                next.ldr_dest = Some(toks.first().and_then(|t| core_reg(t)).unwrap_or(u8::MAX));
+            Access::Store { reg_offset } => {
+                c = if !reg_offset || prev.ldr_dest.is_some() {
+                    1
+                } else {
+                    2
+                };
+            }
+            Access::CoreVmov => c = 2,
+            Access::Other => {}
+        }
+        // FP result-use stall
+        if prev.fp_late != 0 && self.fp {
+            let mut hit = prev.fp_late & self.fp_reads;
+            if prev.fp_bypass {
+                // the addend of a multiply-accumulate is forwarded
+                hit &= !self.fp_forwarded;
+            }
+            if hit != 0 {
+                c += 1;
             }
         }
-        "str" | "strb" | "strh" => {
-            let reg_offset = address_regs(ops).len() > 1;
-            c = if !reg_offset || prev.ldr_dest.is_some() {
-                1
-            } else {
-                2
-            };
-        }
-        "vmov" => {
-            // one float to/from one core register: 2 (two core registers: 2 already)
-            let core_side = toks.iter().any(|t| core_reg(t).is_some());
-            if core_side {
-                c = 2;
-            }
-        }
-        _ => {}
+        (c, self.next)
     }
-    // FP result-use stall
-    if prev.fp_late != 0 && b.starts_with('v') {
-        let srcs = fp_sources(&b, &toks);
-        let mut hit = prev.fp_late & srcs;
-        if prev.fp_bypass && is_fp_mac(&b) {
-            // the addend (the destination register) is forwarded
-            hit &= !toks.first().map(|t| fp_reg_mask(t)).unwrap_or(0);
-        }
-        if hit != 0 {
-            c += 1;
-        }
-    }
-    let late = matches!(
-        b.as_str(),
-        "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr" | "vdiv" | "vsqrt"
-    ) || is_fp_mac(&b);
-    if late {
-        next.fp_late = toks.first().map(|t| fp_reg_mask(t)).unwrap_or(0);
-        next.fp_bypass = matches!(
-            b.as_str(),
-            "vadd" | "vsub" | "vmul" | "vnmul" | "vcvt" | "vcvtr"
-        );
-    }
-    (c, class, next)
 }
 
 fn is_fp_mac(b: &str) -> bool {
@@ -1502,8 +1590,178 @@ fn is_single_ls(class: Class) -> bool {
 }
 
 // ------------------------------------------------------------------------------------
+// trace filter
+// ------------------------------------------------------------------------------------
+
+/// The compiler's soft-float runtime routines (single and double precision): the
+/// `__aeabi_f*` / `__aeabi_d*` entry points, the integer-to-float conversions and
+/// compiler_builtins' `float` module.
+fn is_soft_float(name: &str) -> bool {
+    is_f64(name)
+        || name.starts_with("__aeabi_f")
+        || (name.starts_with("__aeabi_") && name.ends_with("2f"))
+        || name.contains("compiler_builtins::float::")
+        || (name.starts_with("__")
+            && (name.ends_with("sf3")
+                || name.ends_with("sf2")
+                || name.contains("sfsi")
+                || name.contains("sisf")
+                || name.contains("sfdi")
+                || name.contains("disf")))
+}
+
+/// The `-dfilter` of one traced run, and the branches that leave it.
+///
+/// QEMU logs every executed instruction inside the ranges, in a measured region or not,
+/// and a logged instruction costs QEMU about 20 times an unlogged one (formatting, one
+/// write and flush per line). The static call graph of the measured code reaches the
+/// soft-float routines through paths the measured regions do not take, while the
+/// firmware's unmeasured code calls them all the time: on the Cortex-M3 the f32 drive
+/// beside the fixed-point one runs about 17000 of their instructions per step: 152
+/// million log lines per run, 2.6 million without them. [`TraceFilter::narrowed`]
+/// leaves them out of the ranges. The counts stay exact as long as no measured region
+/// enters them, and the trace shows whether one does: without indirect branches in the
+/// graph (a condition of the narrowing) and without interrupts (assumed throughout), the
+/// logged code enters them only by a direct branch or call, so every instruction with
+/// such a target is flagged, and a region that executes one (taken or not) has the run
+/// repeated with the whole graph ([`trace_regions`]). Outside the regions a left-out
+/// line changes nothing: an instruction's timing depends only on the instruction
+/// executed just before it, and a region's first one follows its begin marker's return.
+struct TraceFilter {
+    /// The `-dfilter` argument.
+    ranges: String,
+    /// Per instruction of the disassembly: a direct branch or call into code the ranges
+    /// leave out (empty: nothing is left out).
+    leaves: Vec<bool>,
+}
+
+impl TraceFilter {
+    /// Every function of `graph`.
+    fn full(dis: &Disassembly, graph: &Graph) -> Self {
+        Self {
+            ranges: dis.dfilter(&graph.functions),
+            leaves: Vec::new(),
+        }
+    }
+
+    /// `graph` without its soft-float routines; `None` when it has none or has indirect
+    /// branches.
+    fn narrowed(dis: &Disassembly, graph: &Graph) -> Option<Self> {
+        let left_out: BTreeSet<usize> = graph
+            .functions
+            .iter()
+            .copied()
+            .filter(|&f| is_soft_float(&dis.funcs[f].name))
+            .collect();
+        if left_out.is_empty() || !graph.indirect.is_empty() {
+            return None;
+        }
+        let kept: BTreeSet<usize> = graph.functions.difference(&left_out).copied().collect();
+        // the branches of `Disassembly::reachable`, to a left-out function
+        let leaves = dis
+            .insns
+            .iter()
+            .map(|i| {
+                branch_target(&i.operands)
+                    .and_then(|t| dis.function_at(t))
+                    .is_some_and(|g| left_out.contains(&g))
+                    && matches!(
+                        base_mnemonic(&i.mnemonic).as_str(),
+                        "bl" | "b" | "blx" | "cbz" | "cbnz"
+                    )
+            })
+            .collect();
+        Some(Self {
+            ranges: dis.dfilter(&kept),
+            leaves,
+        })
+    }
+}
+
+// ------------------------------------------------------------------------------------
 // QEMU
 // ------------------------------------------------------------------------------------
+
+/// What the trace parse needs of one static instruction on one core, decoded once (on
+/// its first execution) by the functions that define the model.
+#[derive(Clone, Copy, Debug)]
+struct Weights {
+    /// [`cycles_on`], the timing table alone: `[taken][after a single load/store]`.
+    table: [[u32; 2]; 2],
+    /// A single load/store ([`is_single_ls`]; the class depends on the mnemonic alone).
+    single_ls: bool,
+    /// The pipeline model ([`timed`]).
+    timing: Timing,
+    /// [`slack`]: `[taken]`.
+    slack: [(u32, u32); 2],
+}
+
+impl Weights {
+    fn of(core: Core, i: &Insn) -> Self {
+        let table = |taken| {
+            [
+                cycles_on(core, i, taken, false).0,
+                cycles_on(core, i, taken, true).0,
+            ]
+        };
+        let timing = Timing::of(core, i);
+        Self {
+            table: [table(false), table(true)],
+            single_ls: is_single_ls(timing.class),
+            timing,
+            slack: [slack(core, i, false), slack(core, i, true)],
+        }
+    }
+}
+
+/// After a read shorter than this (bytes), [`BatchedPipe`] waits before the next one.
+const LOG_SHORT_READ: usize = 16 << 10;
+/// How long [`BatchedPipe`] lets the log accumulate after a short read.
+const LOG_BATCH_WAIT: Duration = Duration::from_micros(500);
+
+/// QEMU's execution log read from its pipe in batches. QEMU writes and flushes one line
+/// per executed instruction (about 50 kB per ms); a reader that keeps up is woken for
+/// every line, and those wake-ups cost more system time in both processes than the
+/// parse. After a short read this one waits [`LOG_BATCH_WAIT`], so the next read
+/// returns tens of kilobytes (the pipe holds 64 kB; measured on the f32 run: QEMU 27 s
+/// instead of 60 s, against 19 s logging to /dev/null).
+struct BatchedPipe<R> {
+    inner: R,
+    wait: bool,
+}
+
+impl<R: Read> Read for BatchedPipe<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.wait {
+            std::thread::sleep(LOG_BATCH_WAIT);
+        }
+        let n = self.inner.read(buf)?;
+        self.wait = n < LOG_SHORT_READ;
+        Ok(n)
+    }
+}
+
+/// The guest PC of one `-d exec` line, "Trace 0: 0x7f.. [00800408/08000400/00000110/ff000201]
+/// Reset": the second field in the brackets (the first is the block's cs_base), hex.
+fn trace_pc(line: &[u8]) -> Option<u32> {
+    let open = line.iter().position(|&c| c == b'[')?;
+    let rest = &line[open + 1..];
+    let s1 = rest.iter().position(|&c| c == b'/')?;
+    let rest = &rest[s1 + 1..];
+    let s2 = rest.iter().position(|&c| c == b'/')?;
+    parse_hex_u32(&rest[..s2])
+}
+
+/// Hex digits (either case) as a `u32`; `None` when empty, not hex, or over 32 bits.
+fn parse_hex_u32(digits: &[u8]) -> Option<u32> {
+    if digits.is_empty() {
+        return None;
+    }
+    digits.iter().try_fold(0u32, |v, &c| {
+        let d = (c as char).to_digit(16)?;
+        v.checked_mul(16)?.checked_add(d)
+    })
+}
 
 struct Qemu {
     one_insn_args: Vec<String>,
@@ -1686,15 +1944,66 @@ const M4F_RUN: RunSpec = RunSpec {
     profile_region: "drive_step",
 };
 
+/// What a traced run measured: per-region statistics (marker overhead not subtracted),
+/// the profile region's per-instruction profile, and the firmware's summary line.
+type Measured = (HashMap<&'static str, Stat>, Profile, String);
+
+/// How one QEMU run ended.
+enum Traced {
+    Done(Measured),
+    /// A measured region executed this instruction, a branch into code the trace filter
+    /// leaves out (the run was stopped).
+    Left(String),
+}
+
+/// Traces the regions of `elf`: with the soft-float routines left out of the trace
+/// filter when [`TraceFilter::narrowed`] allows it, else, or when a measured region turns
+/// out to branch to them, with the whole call graph `graph`. The figures are the same
+/// either way.
+fn trace_regions(
+    qemu: &Qemu,
+    spec: &RunSpec,
+    elf: &Path,
+    dis: &Disassembly,
+    graph: &Graph,
+    markers: &HashMap<u32, Marker>,
+    keep_trace: Option<&Path>,
+) -> Res<Measured> {
+    if let Some(narrow) = TraceFilter::narrowed(dis, graph) {
+        match run_qemu(qemu, spec, elf, &narrow, dis, markers, keep_trace)? {
+            Traced::Done(m) => return Ok(m),
+            Traced::Left(what) => eprintln!(
+                "a measured region executes `{what}`, a branch to a soft-float routine left out of the trace filter: tracing again with the whole call graph"
+            ),
+        }
+    }
+    match run_qemu(
+        qemu,
+        spec,
+        elf,
+        &TraceFilter::full(dis, graph),
+        dis,
+        markers,
+        keep_trace,
+    )? {
+        Traced::Done(m) => Ok(m),
+        Traced::Left(what) => Err(format!("{what}: left a filter that leaves nothing out")),
+    }
+}
+
+/// One QEMU run of `elf` with the execution log restricted to `filter`, parsed as it
+/// streams in: each executed instruction is weighted when the next PC (taken or not) is
+/// known and counted when it lies between a region's begin and end markers.
 fn run_qemu(
     qemu: &Qemu,
     spec: &RunSpec,
     elf: &Path,
-    filter: &str,
+    filter: &TraceFilter,
     dis: &Disassembly,
     markers: &HashMap<u32, Marker>,
-    keep_trace: Option<PathBuf>,
-) -> Res<(HashMap<&'static str, Stat>, Profile, String)> {
+    keep_trace: Option<&Path>,
+) -> Res<Traced> {
+    let started = Instant::now();
     let mut cmd = Command::new("qemu-system-arm");
     cmd.args([
         "-machine",
@@ -1712,7 +2021,7 @@ fn run_qemu(
     ])
     .arg(elf)
     .args(&qemu.one_insn_args)
-    .args(["-d", "exec,nochain", "-dfilter", filter])
+    .args(["-d", "exec,nochain", "-dfilter", &filter.ranges])
     .stdin(Stdio::null())
     .stdout(Stdio::piped())
     .stderr(Stdio::piped());
@@ -1728,34 +2037,61 @@ fn run_qemu(
         s
     });
     let stderr = child.stderr.take().ok_or("no stderr")?;
-    let mut reader = BufReader::with_capacity(1 << 20, stderr);
+    let mut reader = BufReader::with_capacity(
+        1 << 20,
+        BatchedPipe {
+            inner: stderr,
+            wait: false,
+        },
+    );
     let mut keep = match keep_trace {
         Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(&p).map_err(|e| format!("{}: {e}", p.display()))?,
+            std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?,
         )),
         None => None,
     };
 
-    let mut stats: HashMap<&'static str, Stat> = HashMap::new();
-    let mut profile = Profile::default();
-    let mut active: Option<&'static str> = None;
-    let (mut count_i, mut count_c) = (0u64, 0u64);
-    // the previous executed instruction, finalised when the next PC is known
-    let mut pending: Option<(u32, bool)> = None; // (pc, counted in region)
-    let mut after_ls = false;
-    let mut prev = Prev::default();
-    let mut count_t = 0u64;
-    let (mut count_down, mut count_up) = (0u64, 0u64);
-    let mut unknown_pcs = 0u64;
-    let mut other_lines = Vec::new();
-    let mut stderr_summary = String::new();
-    let mut line = Vec::with_capacity(256);
+    // per instruction of the disassembly (dense, by index): its weights (decoded on its
+    // first execution), the marker it is the entry of (index into `marker_list`), whether
+    // it lies in a marker function, its executions and est. cycles in the profile region
+    let n_insns = dis.insns.len();
+    let mut weights: Vec<Option<Weights>> = vec![None; n_insns];
+    let marker_list: Vec<Marker> = markers.values().copied().collect();
+    let mut marker_of = vec![u8::MAX; n_insns];
+    for (j, pc) in markers.keys().enumerate() {
+        if let Some(k) = dis.index(*pc) {
+            marker_of[k] = u8::try_from(j)
+                .ok()
+                .filter(|&j| j != u8::MAX)
+                .ok_or("too many markers")?;
+        }
+    }
     let mut marker_ranges: Vec<(u32, u32)> = markers
         .values()
         .map(|m| (dis.funcs[m.func].start, dis.funcs[m.func].end))
         .collect();
     marker_ranges.sort();
     let in_marker = |pc: u32| marker_ranges.iter().any(|&(s, e)| s <= pc && pc < e);
+    let in_marker_fn: Vec<bool> = dis.insns.iter().map(|i| in_marker(i.addr)).collect();
+    let mut by_insn: Vec<(u64, u64)> = vec![(0, 0); n_insns];
+
+    let mut stats: HashMap<&'static str, Stat> = HashMap::new();
+    let mut active: Option<&'static str> = None;
+    // the active region is the profiled one
+    let mut profiling = false;
+    let (mut count_i, mut count_c) = (0u64, 0u64);
+    // the previous executed instruction, finalised when the next PC is known:
+    // (pc, index in the disassembly, counted in a region)
+    let mut pending: Option<(u32, usize, bool)> = None;
+    let mut after_ls = false;
+    let mut prev = Prev::default();
+    let mut count_t = 0u64;
+    let (mut count_down, mut count_up) = (0u64, 0u64);
+    let mut unknown_pcs = 0u64;
+    let (mut lines, mut counted_lines) = (0u64, 0u64);
+    let mut other_lines = Vec::new();
+    let mut stderr_summary = String::new();
+    let mut line = Vec::with_capacity(256);
 
     loop {
         line.clear();
@@ -1778,52 +2114,43 @@ fn run_qemu(
             }
             continue;
         }
-        // "Trace 0: 0x7f.. [00800408/08000400/00000110/ff000201] Reset"
-        let Some(open) = line.iter().position(|&c| c == b'[') else {
+        let Some(pc) = trace_pc(&line) else {
             continue;
         };
-        let rest = &line[open + 1..];
-        let Some(s1) = rest.iter().position(|&c| c == b'/') else {
-            continue;
-        };
-        let rest = &rest[s1 + 1..];
-        let Some(s2) = rest.iter().position(|&c| c == b'/') else {
-            continue;
-        };
-        let pc = match std::str::from_utf8(&rest[..s2])
-            .ok()
-            .and_then(|h| u32::from_str_radix(h, 16).ok())
-        {
-            Some(p) => p,
-            None => continue,
-        };
+        lines += 1;
+        let k = dis.index(pc);
 
         // finalise the previous instruction now that its successor is known
-        if let Some((ppc, counted)) = pending.take() {
-            if let Some(i) = dis.at(ppc) {
-                let taken = pc != ppc + i.size;
-                let (t, class) = cycles_on(spec.core, i, taken, after_ls);
-                after_ls = is_single_ls(class);
-                let (c, _, next) = timed(spec.core, i, taken, &prev);
-                prev = next;
-                if counted {
-                    count_c += c as u64;
-                    count_t += t as u64;
-                    let (d, u) = slack(spec.core, i, taken);
-                    count_down += d as u64;
-                    count_up += u as u64;
-                    if active == Some(spec.profile_region) {
-                        let e = profile.by_pc.entry(ppc).or_default();
-                        e.0 += 1;
-                        e.1 += c as u64;
-                    }
+        if let Some((ppc, pk, counted)) = pending.take() {
+            let i = &dis.insns[pk];
+            let w = weights[pk].get_or_insert_with(|| Weights::of(spec.core, i));
+            let taken = pc != ppc + i.size;
+            let t = w.table[taken as usize][after_ls as usize];
+            after_ls = w.single_ls;
+            let (c, next) = w.timing.step(taken, &prev);
+            prev = next;
+            if counted {
+                count_c += c as u64;
+                count_t += t as u64;
+                let (d, u) = w.slack[taken as usize];
+                count_down += d as u64;
+                count_up += u as u64;
+                if profiling {
+                    let e = &mut by_insn[pk];
+                    e.0 += 1;
+                    e.1 += c as u64;
                 }
             }
         }
 
-        if let Some(m) = markers.get(&pc) {
+        let marker = match k {
+            Some(k) => marker_list.get(marker_of[k] as usize),
+            None => markers.get(&pc),
+        };
+        if let Some(m) = marker {
             if m.begin {
                 active = Some(m.region);
+                profiling = m.region == spec.profile_region;
                 count_i = 0;
                 count_c = 0;
                 count_t = 0;
@@ -1839,20 +2166,39 @@ fn run_qemu(
                     .or_default()
                     .add_slack(count_down, count_up);
                 active = None;
+                profiling = false;
             } else {
                 active = None;
+                profiling = false;
             }
-            pending = Some((pc, false));
+            pending = k.map(|k| (pc, k, false));
             continue;
         }
-        let counted = active.is_some() && !in_marker(pc);
+        let counted = active.is_some()
+            && !match k {
+                Some(k) => in_marker_fn[k],
+                None => in_marker(pc),
+            };
         if counted {
             count_i += 1;
-            if dis.at(pc).is_none() {
-                unknown_pcs += 1;
+            counted_lines += 1;
+            match k {
+                None => unknown_pcs += 1,
+                Some(k) if filter.leaves.get(k) == Some(&true) => {
+                    let i = &dis.insns[k];
+                    let what = format!(
+                        "{} {} in {}",
+                        i.mnemonic, i.operands, dis.funcs[i.func].name
+                    );
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    let _ = out_thread.join();
+                    return Ok(Traced::Left(what));
+                }
+                Some(_) => {}
             }
         }
-        pending = Some((pc, counted));
+        pending = k.map(|k| (pc, k, counted));
     }
     let status = child.wait().map_err(|e| e.to_string())?;
     let out = out_thread.join().unwrap_or_default();
@@ -1869,7 +2215,26 @@ fn run_qemu(
     if unknown_pcs > 0 {
         eprintln!("warning: {unknown_pcs} executed PCs not found in the disassembly");
     }
-    Ok((stats, profile, summary))
+    eprintln!(
+        "  {} on {}: {lines} instructions logged, {counted_lines} in the measured regions ({}), {:.1} s",
+        elf.file_name().unwrap_or_default().to_string_lossy(),
+        spec.machine,
+        if filter.leaves.is_empty() {
+            "whole call graph"
+        } else {
+            "soft-float routines left out"
+        },
+        started.elapsed().as_secs_f64()
+    );
+    let profile = Profile {
+        by_pc: by_insn
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.0 > 0)
+            .map(|(k, &e)| (dis.insns[k].addr, e))
+            .collect(),
+    };
+    Ok(Traced::Done((stats, profile, summary)))
 }
 
 // ------------------------------------------------------------------------------------
