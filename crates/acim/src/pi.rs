@@ -20,7 +20,7 @@ use crate::num::Num;
 use crate::params::MachineParams;
 
 /// Gains and limits of one PI controller (configuration, apart from state). Designed in
-/// f32 SI ([`PiConfig::current_loop`], [`PiConfig::speed_loop`]); the fixed-point copy is
+/// f32 SI ([`PiConfig::current_loop`], [`crate::speed_loop::SpeedLoopConfig`]); the fixed-point copy is
 /// converted from it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
