@@ -261,7 +261,7 @@ pub fn bench_regions_step(
         .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
     bench_end_observer_full_order();
 
-    // issue 15's overmodulating modulator alone (not in the drive's default step): this
+    // the overmodulating modulator alone (not in the drive's default step): this
     // step's command lengthened to 1.05 x the linear limit, at the measured bus
     let v = twin.telemetry().voltage;
     let rot = FastSinCos::eval(angle);

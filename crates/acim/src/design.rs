@@ -215,7 +215,7 @@ pub struct DriveConfig {
     /// [`FLUX_OPT_MIN_FRACTION`] of `flux_current`; it rises at once with the torque
     /// current and falls with [`FLUX_OPT_FALL_TAU_R`] rotor time constants.
     pub flux_optimisation: bool,
-    /// Low-frequency regeneration limit (issues 12 and 13), rad/s electrical; 0 = off. While
+    /// Low-frequency regeneration limit, rad/s electrical; 0 = off. While
     /// the drive holds a speed target of the rotor's sign, the regenerative torque current
     /// is limited so that the stator frequency w_s = p Omega + R_R i_sq / lambda stays on
     /// the rotor's side of the unobservable line w_s = 0 by at least this much:

@@ -2,7 +2,7 @@
 //! ([`acim::commissioning::Commissioning`]) run by the control loop on a nameplate the
 //! user types, and its result written into the settings.
 //!
-//! The sequence and its checks are the library's (issue 14): current-sensor offsets,
+//! The sequence and its checks are the library's: current-sensor offsets,
 //! DC steps for Rs and the inverter's voltage error, two standstill impedance tests for
 //! R_R, L_sigma and L_M, and a V/f no-load test (**the rotor turns**, up to 80 % of the
 //! rated frequency) for L_M at rated flux, the rated flux current, J and friction. It runs
