@@ -1303,6 +1303,9 @@ impl DriveDesign {
             RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d, m.rotor_time_constant());
         rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
         rs_running.standstill = cfg.rs_standstill_identification;
+        rs_running.max_frequency = crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
+            * m.stator_resistance()
+            / m.magnetizing_inductance();
         let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill

@@ -164,6 +164,7 @@ fn rs_running_step<N: Num>(
     rotor_flux: N,
     frame_held: bool,
     i_sq_ref: N,
+    low_frequency_only: bool,
 ) {
     rs.update_running(
         &c.rs,
@@ -180,6 +181,7 @@ fn rs_running_step<N: Num>(
             rotor_flux,
             frame_held,
             i_sq_ref,
+            low_frequency_only,
         },
     );
 }
@@ -1098,6 +1100,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
                 est.flux.rotor_flux,
                 frame_held,
                 self.refs.i_sq_ref,
+                !O::RS_RUNNING_AT_SPEED,
             );
         } else {
             est.rs.update(
@@ -1122,7 +1125,9 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         probe.begin(StepRegion::FluxSlip);
         // (also while a flying start magnetizes in the turning frame: the residual of a
         // speed error locks the frame onto the rotor as the flux builds)
-        let correction = if !frame_held && (flux_settled || magnetizing) {
+        let correction = if !O::ORIENTATION_CORRECTION {
+            N::ZERO
+        } else if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
         } else if weakened {
             // field weakening: the correction stays on (the orientation mode
@@ -1334,12 +1339,12 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         } else {
             false
         };
-        let (i_sq_min, i_sq_max, regen_limited) = if c.regen_min_frequency > N::ZERO && !r.far_side
-        {
-            regen_limit(c, r.speed_target, speed, fw)
-        } else {
-            (fw.i_sq_min, fw.i_sq_max, false)
-        };
+        let (i_sq_min, i_sq_max, regen_limited) =
+            if O::REGENERATION_LIMIT && c.regen_min_frequency > N::ZERO && !r.far_side {
+                regen_limit(c, r.speed_target, speed, fw)
+            } else {
+                (fw.i_sq_min, fw.i_sq_max, false)
+            };
         // the short-time overload rating (`thermal`): on the measured current, the
         // torque-current limits fold back to the continuous current when it is spent
         let (i_sq_min, i_sq_max) = if c.thermal.enabled {

@@ -74,6 +74,7 @@ pub mod supervisor;
 
 // the fixed-point arithmetic, and the paper's baseline observer
 pub mod fixed;
+pub mod flux_observer;
 pub mod full_order;
 
 pub use controller::Controller;

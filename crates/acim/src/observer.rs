@@ -381,6 +381,21 @@ pub trait SpeedObserver<N: Num = f32> {
     /// with an observer that does: without the term nothing would hold the point beyond
     /// the unobservable line.
     const FAR_SIDE_TERM: bool;
+    /// Whether the drive corrects the rotor-flux model's frame with the d-axis residual
+    /// (the orientation correction, [`crate::orientation`]): the paper's observer needs
+    /// it; an observer that estimates the flux itself gives a speed that does not depend
+    /// on the frame, and the correction would be a second, competing speed path.
+    const ORIENTATION_CORRECTION: bool = true;
+    /// Whether the drive applies its low-frequency regeneration limit
+    /// ([`crate::DriveConfig::regen_min_frequency`]) with this observer: off for an
+    /// observer whose gain is designed stable while regenerating near zero stator
+    /// frequency.
+    const REGENERATION_LIMIT: bool = true;
+    /// Whether the running Rs law adapts at any stator frequency above its low gate (the
+    /// paper's observer, eq. 19-20), or only below
+    /// [`crate::rs_estimator::RsRunningConfig::max_frequency`], where the resistive drop
+    /// is observable against inductance errors.
+    const RS_RUNNING_AT_SPEED: bool = true;
     /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
     /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).
     fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;

@@ -176,6 +176,11 @@ pub struct RsRunningConfig<N: Num = f32> {
     pub steady_filter: N::Gain,
     /// Adapt only with |i_sq* - its low-pass image| at most this, A.
     pub steady_band: N,
+    /// With [`RsRunningInputs::low_frequency_only`]: adapt only with |w_s| at most this,
+    /// rad/s electrical ([`RUNNING_MAX_FREQUENCY_FACTOR`] Rs/L_M, set by the drive's
+    /// design: above it the resistive drop is small against the voltage an inductance
+    /// error leaves, and the law would attribute that error to Rs).
+    pub max_frequency: N,
 }
 
 impl RsRunningConfig<f32> {
@@ -194,9 +199,19 @@ impl RsRunningConfig<f32> {
             flux_voltage: 1.0,
             steady_filter: (ts / tau_r.max(ts)).min(1.0),
             steady_band: RUNNING_STEADY_TORQUE_FRACTION * flux_current.abs(),
+            max_frequency: 2.0 * core::f32::consts::PI * 1000.0,
         }
     }
 }
+
+/// The running law's band with an observer that estimates the flux itself
+/// ([`RsRunningInputs::low_frequency_only`]): |w_s| up to this factor times Rs/L_M
+/// (rad/s electrical). At w_s = Rs/L_M the stator's resistive drop on the flux current
+/// equals the back-EMF of the flux; at 3 Rs/L_M a 15 % L_M error already leaves about
+/// half as much voltage in the residual as a 20 % Rs error, and beyond that the law
+/// would follow the inductance error. (Hinkkanen et al. 2010 observe the same: the
+/// resistance is observable at low speed only, and its adaptation is faded out above.)
+pub const RUNNING_MAX_FREQUENCY_FACTOR: f32 = 3.0;
 
 /// The estimate's lower clamp, a fraction of the nominal Rs.
 pub const RS_MIN_FACTOR: f32 = 0.5;
@@ -259,6 +274,10 @@ pub struct RsRunningInputs<N = f32> {
     pub frame_held: bool,
     /// The torque-current reference i_sq* of the last step, A (the steadiness gate).
     pub i_sq_ref: N,
+    /// Adapt while turning only with |w_s| at most [`RsRunningConfig::max_frequency`]
+    /// (an observer that estimates the flux itself; the paper's observer adapts at any
+    /// frequency above the low gate).
+    pub low_frequency_only: bool,
 }
 
 /// State of the stator-resistance estimator.
@@ -398,6 +417,7 @@ impl<N: Num> RsEstimator<N> {
             && !x.frame_held
             && steady
             && u.stator_frequency.abs() >= run.min_frequency
+            && (!x.low_frequency_only || u.stator_frequency.abs() <= run.max_frequency)
             && u.i_sq.abs() >= run.min_torque_current;
         self.adapting = cfg.adapt && (standstill || turning);
         if cfg.adapt && standstill && e.is_finite() {
@@ -577,6 +597,7 @@ mod tests {
                 rotor_flux: lambda,
                 frame_held: false,
                 i_sq_ref: i_sq,
+                low_frequency_only: false,
             },
         )
     }

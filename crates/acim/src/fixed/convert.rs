@@ -180,6 +180,7 @@ pub fn rs_running(cfg: &RsRunningConfig, b: &PerUnitBases) -> Option<RsRunningCo
         flux_voltage: Gain::from_f32(cfg.flux_voltage * b.frequency * b.flux / b.voltage)?,
         steady_filter: Gain::from_f32(cfg.steady_filter)?,
         steady_band: Q24(to_q24(cfg.steady_band / b.current)),
+        max_frequency: Q24(to_q24(cfg.max_frequency / b.frequency)),
     })
 }
 

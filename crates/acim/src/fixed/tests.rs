@@ -363,6 +363,7 @@ fn rs_running_law_matches_f32() {
             rotor_flux: lambda,
             frame_held: false,
             i_sq_ref: i_sq,
+            low_frequency_only: false,
         };
         let uq = RsEstimatorInputs {
             i_sd: q(i_sd, B.current),
@@ -376,6 +377,7 @@ fn rs_running_law_matches_f32() {
             rotor_flux: q(lambda, B.flux),
             frame_held: false,
             i_sq_ref: q(i_sq, B.current),
+            low_frequency_only: false,
         };
         let (mut f, mut x) = (
             RsEstimator::new(10.5f32),
