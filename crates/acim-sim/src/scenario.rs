@@ -204,6 +204,9 @@ pub enum ObserverKind {
     Reduced,
     /// Full-order adaptive (Kubota-type) observer, the paper's baseline.
     FullOrder,
+    /// Reduced-order flux observer with speed adaptation and a gain stable while
+    /// regenerating (`acim::flux_observer`, f32 only).
+    Flux,
 }
 
 /// The drive's modulator (`acim::Modulator`).
@@ -314,7 +317,8 @@ pub struct DriveSpec {
     pub load_torque_feedforward: Option<bool>,
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
-    /// "reduced" (the paper's observer) or "full-order" (the baseline, f32 only).
+    /// "reduced" (the paper's observer), "full-order" (the baseline, f32 only) or "flux"
+    /// (the reduced-order flux observer, f32 only).
     pub observer: ObserverKind,
     /// "linear" (the default) or "overmodulation" (through to six-step, f32 only).
     pub modulation: ModulationKind,
@@ -1384,6 +1388,23 @@ impl Scenario {
                     allowed: format!("a valid full-order design ({e:?})"),
                 },
             )?;
+        }
+        if d.observer == ObserverKind::Flux {
+            if d.arithmetic == Arithmetic::Fixed {
+                return err(
+                    "drive.observer",
+                    "\"flux\" runs in f32 only (drive.arithmetic = \"f32\")",
+                );
+            }
+            acim::flux_observer::FluxObserver::new(
+                &drive.machine,
+                drive.control_period,
+                drive.max_speed,
+            )
+            .map_err(|e| ScenarioError {
+                field: "drive.observer".into(),
+                allowed: format!("a valid flux-observer design ({e:?})"),
+            })?;
         }
         if d.modulation == ModulationKind::Overmodulation && d.arithmetic == Arithmetic::Fixed {
             return err(

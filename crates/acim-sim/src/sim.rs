@@ -11,6 +11,7 @@ use crate::scenario::{
     Arithmetic, ControlMode, ModulationKind, ObserverKind, Scenario, ScenarioError, Validated,
 };
 use acim::fixed::FixedDrive;
+use acim::flux_observer::FluxObserver;
 use acim::frames::FastSinCos;
 use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
@@ -395,10 +396,28 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
         (Arithmetic::Fixed, ObserverKind::Reduced) => {
             Box::new(FixedDrive::with_bases(v.drive, v.bases).map_err(bad("drive.arithmetic"))?)
         }
+        (Arithmetic::F32, ObserverKind::Flux) => {
+            let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
+            let observer =
+                FluxObserver::new(&v.drive.machine, v.drive.control_period, v.drive.max_speed)
+                    .map_err(|e| ScenarioError {
+                        field: "drive.observer".into(),
+                        allowed: format!("a valid flux-observer design ({e:?})"),
+                    })?;
+            let d: Drive<FastSinCos, f32, FluxObserver> =
+                Drive::with_parts(design, (), FastSinCos, observer, Svpwm).map_err(bad("drive"))?;
+            Box::new(d)
+        }
         (Arithmetic::Fixed, ObserverKind::FullOrder) => {
             return Err(ScenarioError {
                 field: "drive.observer".into(),
                 allowed: "\"full-order\" runs in f32 only".into(),
+            })
+        }
+        (Arithmetic::Fixed, ObserverKind::Flux) => {
+            return Err(ScenarioError {
+                field: "drive.observer".into(),
+                allowed: "\"flux\" runs in f32 only".into(),
             })
         }
     })
