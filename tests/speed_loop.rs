@@ -5,60 +5,10 @@
 //! to zero speed, a reversal against a load, and the short-time overload rating
 //! (`acim::thermal`).
 
-use acim_sim::scenario::Scenario;
-use acim_sim::sim::Row;
-
 /// Rated torque of the machine, N m.
 const RATED_NM: f32 = 14.6;
 
-/// The machine file with an ideal inverter and ideal sensors, and the given profiles.
-fn scenario(name: &str, duration_s: f32, profiles: &str) -> Scenario {
-    let machine = include_str!("../crates/acim-sim/machines/motulator-2k2.toml");
-    let text = format!(
-        "name = \"{name}\"\nduration_s = {duration_s}\n{machine}\ncurrent_full_scale_a = 20.0\n\
-         [inverter]\ndead_time_s = 0.0\ndevice_drop_v = 0.0\n\
-         [sensors]\nnoise_a = 0.0\ngain_error = [0.0, 0.0, 0.0]\noffset_a = [0.0, 0.0, 0.0]\n\
-         full_scale_a = 20.0\nadc_bits = 16\n{profiles}"
-    );
-    Scenario::from_file_text(&text).unwrap_or_else(|e| panic!("{name}: {e}"))
-}
-
-fn run(sc: &Scenario) -> (Vec<Row>, acim_sim::metrics::Metrics) {
-    let (r, m) = acim_sim::run_with_metrics(sc).unwrap();
-    (r.rows, m)
-}
-
-/// Speed target steps (t, rpm) and active load steps (t, N m; a ramp is ten steps).
-fn profiles(speeds: &[(f32, f32)], loads: &[(f32, f32, f32)]) -> String {
-    let mut s = String::new();
-    for (t, rpm) in speeds {
-        s += &format!("[[speed_profile]]\nt_s = {t}\nrpm = {rpm}\n");
-    }
-    for &(t, nm, ramp_s) in loads {
-        let n = if ramp_s > 0.0 { 10 } else { 1 };
-        for k in 0..n {
-            let tk = t + ramp_s * k as f32 / n as f32;
-            let nk = nm * (k + 1) as f32 / n as f32;
-            s += &format!("[[load_profile]]\nt_s = {tk}\nkind = \"active\"\ntorque_nm = {nk}\n");
-        }
-    }
-    s
-}
-
-/// Largest |reference - speed| from `t0`, and the time after `t0` of the last sample
-/// more than `band` rpm off.
-fn excursion(rows: &[Row], t0: f32, band: f32) -> (f32, f32) {
-    let after = rows.iter().filter(|r| r.t_s >= t0);
-    let peak = after
-        .clone()
-        .map(|r| (r.speed_ref_rpm - r.speed_rpm).abs())
-        .fold(0.0, f32::max);
-    let last = after
-        .filter(|r| (r.speed_ref_rpm - r.speed_rpm).abs() > band)
-        .map(|r| r.t_s)
-        .fold(t0, f32::max);
-    (peak, last - t0)
-}
+use acim_tests::peer::{excursion, profiles, run, scenario};
 
 /// A rated-load step at 750 rpm: the rotor slows by at most 151 rpm and is back within
 /// 1 % (7.5 rpm) in at most 0.18 s (motulator's sensorless drive on the same machine,

@@ -1,0 +1,137 @@
+//! The reduced-order flux observer (`acim::flux_observer`, `drive.observer = "flux"`) in
+//! the closed loop on motulator's 2.2 kW machine configured from its nameplate, ideal
+//! plant and sensors, as in the side-by-side benchmark (`benches/peer/`): the cases where
+//! the paper's observer needs its regeneration limit or loses the rotor (rated-load
+//! steps at low speed, regenerating loads at 15-45 rpm with no limit at all), and the
+//! controller's parameter errors of the benchmark.
+
+use acim_sim::sim::Row;
+use acim_tests::peer::{excursion, profiles, run, scenario};
+
+/// Rated torque of the machine, N m.
+const RATED_NM: f32 = 14.6;
+
+/// The benchmark's case with the flux observer and `extra` TOML (e.g. a `[controller]`).
+fn flux(name: &str, duration_s: f32, profiles: &str, extra: &str) -> Vec<Row> {
+    let sc = scenario(name, duration_s, &format!("{profiles}{extra}"))
+        .with_overrides(&["drive.observer=\"flux\"".to_string()])
+        .unwrap();
+    let (rows, m) = run(&sc);
+    assert_eq!(m.fault, None, "{name}");
+    rows
+}
+
+/// Largest |speed - target| over the last second, rpm.
+fn last_second_error(rows: &[Row], target: f32) -> f32 {
+    let end = rows.last().unwrap().t_s;
+    rows.iter()
+        .filter(|r| r.t_s >= end - 1.0)
+        .map(|r| (r.speed_rpm - target).abs())
+        .fold(0.0, f32::max)
+}
+
+/// The controller's model with L_M, R_R and Rs scaled (inverse-Gamma data of the machine
+/// file, written as a T model with Lr = Lm).
+fn controller(l_m: f32, r_r: f32, r_s: f32) -> String {
+    let (l_m, l_s) = (0.224 * l_m, 0.021);
+    format!(
+        "[controller]\nrs_ohm = {}\nrr_ohm = {}\nls_h = {}\nlr_h = {l_m}\nlm_h = {l_m}\n\
+         pole_pairs = 2\ninertia_kgm2 = 0.015\nfriction_nms = 0.0\n",
+        3.7 * r_s,
+        2.1 * r_r,
+        l_m + l_s
+    )
+}
+
+/// A rated-load step at 750, 75 and 30 rpm: at 750 rpm the dip at most 151 rpm and back
+/// within 1 % in 0.18 s (the peer's figures; measured 80 rpm and 0.05 s); at 75 and 30
+/// rpm, where the step throws the paper's observer through w_s = 0 and the rotor runs
+/// away, held with a dip under 151 rpm (measured 81 and 82), back within 15 rpm in at
+/// most 0.5 s (0.18 and 0.33 s).
+#[test]
+fn rated_load_steps_are_caught_down_to_30_rpm() {
+    for (rpm, back_s) in [(750.0f32, 0.18f32), (75.0, 0.5), (30.0, 0.5)] {
+        let rows = flux(
+            &format!("step-{rpm}"),
+            4.0,
+            &profiles(&[(0.2, rpm)], &[(2.5, RATED_NM, 0.0)]),
+            "",
+        );
+        let band = if rpm >= 750.0 { 7.5 } else { 15.0 };
+        let (dip, back) = excursion(&rows, 2.5, band);
+        assert!(
+            dip <= 151.0 && back <= back_s,
+            "{rpm} rpm: dip {dip}, back {back} s"
+        );
+        assert!(last_second_error(&rows, rpm) < 2.0, "{rpm} rpm");
+    }
+}
+
+/// Regenerating (overhauling) load of 25, 50 and 100 % of rated, ramped in over 4 s at
+/// 15 rpm and 45 rpm: the rotor held within 30 rpm of the target over the last second,
+/// with no regeneration limit (the flux observer has none) (measured 7, 5, 0.2 rpm off at
+/// 15 rpm; 10, 3, 12 at 45 rpm: the running Rs law's small errors near w_s = 0).
+#[test]
+fn regenerating_loads_are_held_at_low_speed_without_a_limit() {
+    for rpm in [15.0f32, 45.0] {
+        for frac in [0.25f32, 0.5, 1.0] {
+            let rows = flux(
+                &format!("regen-{frac}-{rpm}"),
+                8.0,
+                &profiles(&[(1.2, rpm)], &[(2.0, -frac * RATED_NM, 4.0)]),
+                "",
+            );
+            let err = last_second_error(&rows, rpm);
+            assert!(err <= 30.0, "{rpm} rpm, {frac} of rated: {err} rpm off");
+            assert!(
+                rows.iter().all(|r| !r.speed_target_limited),
+                "{rpm} rpm {frac}: limited"
+            );
+        }
+    }
+}
+
+/// A reversal +750 -> -750 rpm against half the rated load: within 20 rpm of the ramp
+/// (the peer: 18 rpm; measured 3 rpm).
+#[test]
+fn a_reversal_against_a_load_follows_the_ramp() {
+    let rows = flux(
+        "reversal",
+        6.0,
+        &profiles(
+            &[(0.2, 750.0), (3.0, -750.0)],
+            &[(2.0, 0.5 * RATED_NM, 0.0)],
+        ),
+        "",
+    );
+    let (worst, _) = excursion(&rows, 3.0, 0.0);
+    assert!(worst <= 20.0, "{worst} rpm");
+}
+
+/// The controller's L_M 15 % low and high at 750 rpm, Rs 20 % low and high at 75 rpm,
+/// rated load motoring and regenerating: held within 30 rpm (the running Rs law adapts
+/// only at low stator frequency, so an inductance error at speed does not pull it to its
+/// bound: with the paper's observer the L_M cases trip `EstimatorOutOfRange`). Measured
+/// 23-30 rpm off for L_M (the speed error an L_M error leaves in any model-based
+/// estimator), under 1 rpm for Rs.
+#[test]
+fn parameter_errors_are_held() {
+    let cases = [
+        (750.0f32, controller(0.85, 1.0, 1.0)),
+        (750.0, controller(1.15, 1.0, 1.0)),
+        (75.0, controller(1.0, 1.0, 0.8)),
+        (75.0, controller(1.0, 1.0, 1.2)),
+    ];
+    for (rpm, ctl) in cases {
+        for sign in [1.0f32, -1.0] {
+            let rows = flux(
+                "err",
+                6.0,
+                &profiles(&[(1.2, rpm)], &[(3.0, sign * RATED_NM, 1.0)]),
+                &ctl,
+            );
+            let err = last_second_error(&rows, rpm);
+            assert!(err <= 31.0, "{rpm} rpm, load {sign}, {ctl}: {err} rpm off");
+        }
+    }
+}
