@@ -53,6 +53,11 @@ CURRENT_LIMIT = 1.5 * math.sqrt(2.0) * NP["current_a"]
 # reference step comes after it, at the same instant for both drives
 T_REF = 1.2
 HOLD_TOL_MOTORING = 5.0  # rpm: the project's drift threshold
+# our --set overrides for every case (environment PEER_SETS, space-separated), e.g.
+# PEER_SETS="drive.observer=flux" to benchmark another observer
+EXTRA_SETS = os.environ.get("PEER_SETS", "").split()
+# our runs with the reduced-order flux observer
+FLUX_SETS = ["drive.observer=flux"]
 HOLD_TOL = 30.0  # rpm: regenerating loads and parameter errors
 
 
@@ -159,11 +164,11 @@ class Case:
         out += ["[[windows]]", 'name = "last-second"', f"from_s = {self.duration - 1.0}", f"to_s = {self.duration}", ""]
         return "\n".join(out)
 
-    def run_ours(self, sim, tmp):
+    def run_ours(self, sim, tmp, extra=()):
         path = Path(tmp) / f"{self.name}.toml"
         path.write_text(self.our_toml())
         cmd = [sim, "run", str(path), "--out", str(tmp), "-q"]
-        for s in self.sets:
+        for s in self.sets + EXTRA_SETS + list(extra):
             cmd += ["--set", s]
         t0 = time.perf_counter()
         p = subprocess.run(cmd, capture_output=True, text=True)
@@ -618,16 +623,17 @@ def write_page(results, times, versions, ref_checks):
     errs_off = [c.name for c in cases_param_errors() if c.group == "errors-rsoff"]
     add("## Overview")
     add("")
-    add("| cases | motulator | this drive |")
-    add("|---|---|---|")
-    add(f"| rated-load steps at 750, 75, 30 rpm (back in control: within 1 % of the reference at the end) | {count(results, steps, 0)} | {count(results, steps, 1)} |")
-    add(f"| rated motoring load ramped in at 45, 30, 15, 0 rpm (within +/-{HOLD_TOL_MOTORING:.0f} rpm) | {count(results, motoring, 0)} | {count(results, motoring, 1)} |")
-    add(f"| overhauling 25/50/100 % load at 15-75 rpm (within +/-{HOLD_TOL:.0f} rpm) | {count(results, regen, 0)} | regeneration limit on: {count(results, regen, 1)}; off: {count(results, regen_off, 1)} |")
-    add(f"| controller parameter errors (within +/-{HOLD_TOL:.0f} rpm) | {count(results, errs, 0)} | {count(results, errs, 1)}; Rs estimation off: {count(results, errs_off, 1)} |")
+    add("| cases | motulator | this drive (the paper's observer, the default) | this drive, flux observer |")
+    add("|---|---|---|---|")
+    add(f"| rated-load steps at 750, 75, 30 rpm (back in control: within 1 % of the reference at the end) | {count(results, steps, 0)} | {count(results, steps, 1)} | {count(results, steps, 2)} |")
+    add(f"| rated motoring load ramped in at 45, 30, 15, 0 rpm (within +/-{HOLD_TOL_MOTORING:.0f} rpm) | {count(results, motoring, 0)} | {count(results, motoring, 1)} | {count(results, motoring, 2)} |")
+    add(f"| overhauling 25/50/100 % load at 15-75 rpm (within +/-{HOLD_TOL:.0f} rpm) | {count(results, regen, 0)} | regeneration limit on: {count(results, regen, 1)}; off: {count(results, regen_off, 1)} | {count(results, regen, 2)} (no limit) |")
+    add(f"| controller parameter errors (within +/-{HOLD_TOL:.0f} rpm) | {count(results, errs, 0)} | {count(results, errs, 1)}; Rs estimation off: {count(results, errs_off, 1)} | {count(results, errs, 2)}; Rs estimation off: {count(results, errs_off, 2)} |")
     add("")
     add(
         "The step rows count a run as held when it is back within 1 % of the reference by the end. "
-        "Details, definitions and every number follow."
+        "Details, definitions and every number follow; the flux observer's runs are in the section "
+        "[with the flux observer](#this-drive-with-the-flux-observer)."
     )
     add("")
 
@@ -652,7 +658,7 @@ def write_page(results, times, versions, ref_checks):
     for c in cases_steps():
         if c.name not in results:
             continue
-        mo, ou = results[c.name]
+        mo, ou = results[c.name][:2]
 
         def back(m):
             if not m["running"]:
@@ -688,7 +694,7 @@ def write_page(results, times, versions, ref_checks):
     add("|---|---|---|")
     for c in cases_motoring_ramps():
         if c.name in results:
-            mo, ou = results[c.name]
+            mo, ou = results[c.name][:2]
             add(f"| {c.target:.0f} | {cell_hold(mo)} | {cell_hold(ou)} |")
     add("")
 
@@ -733,12 +739,12 @@ def write_page(results, times, versions, ref_checks):
     add("|---|---|---|")
     for c in cases_reversal():
         if c.name in results:
-            mo, ou = results[c.name]
+            mo, ou = results[c.name][:2]
             f = lambda m: (f"max tracking error {fmt(m['track_max'])} rpm; max est. error {fmt(m['est_err'])} rpm" if m["running"] else stopped(m))
             add(f"| {c.label}: load from 3.0 s, reversal from {c.event} s, errors from then to the end | {f(mo)} | {f(ou)} |")
     for c in cases_ramp():
         if c.name in results:
-            mo, ou = results[c.name]
+            mo, ou = results[c.name][:2]
             f = lambda m: (f"rms error {fmt(m['rms'], 2)} rpm; max {fmt(m['track_max'], 2)} rpm" if m["running"] else stopped(m))
             add(f"| {c.label}, {RAMP_RPM_S:.0f} rpm/s ({c.event}-{c.ramp_end} s; reference - speed during the ramp) | {f(mo)} | {f(ou)} |")
     add("")
@@ -762,7 +768,7 @@ def write_page(results, times, versions, ref_checks):
     add("|---|---|---|---|---|---|")
     for c in cases_param_errors():
         if c.group == "errors" and c.name in results and c.name + "-rsoff" in results:
-            mo, ou = results[c.name]
+            mo, ou = results[c.name][:2]
             off = results[c.name + "-rsoff"][1]
             label, rpm, what = c.label.split("|")
             add(f"| {label} | {rpm} | {what} | {cell_hold(mo, c.target)} | {cell_hold(ou, c.target)} | {cell_hold(off, c.target)} |")
@@ -777,6 +783,41 @@ def write_page(results, times, versions, ref_checks):
         if (FIGURES / f"{name}.png").exists():
             add(f"![{title}](figures/peer/{name}.png)")
             add("")
+    # -- the flux observer
+    add("## This drive with the flux observer")
+    add("")
+    add(
+        "Every case again with our other speed observer, `--set drive.observer=flux` "
+        "(`acim::flux_observer`): a reduced-order flux observer with speed adaptation of the same "
+        "structure and gain as motulator's, giving the speed to our indirect field orientation; with it "
+        "the drive has no regeneration limit and no orientation correction, and the running Rs law adapts "
+        "only at low stator frequency (below 3 Rs/L_M), where Rs is observable against inductance errors. "
+        "Cells: steps, peak dip / back within 1 % (s); holds, held or not with the last second's mean / "
+        "peak-to-peak speed (rpm); the reversal and the ramp, the largest tracking error (rpm)."
+    )
+    add("")
+    add("| case | motulator | this drive, paper's observer | this drive, flux observer |")
+    add("|---|---|---|---|")
+
+    def cell_any(m):
+        if m is None:
+            return ""
+        if m.get("dip") is not None:
+            if not m["running"]:
+                return stopped(m)
+            back = "not back" if m["back"] is None else fmt(m["back"], 3)
+            return f"{fmt(m['dip'])} / {back}"
+        if m.get("track_max") is not None:
+            return stopped(m) if not m["running"] else f"{fmt(m['track_max'])}"
+        return cell_hold(m)
+
+    for c in all_cases():
+        if c.name not in results or c.name.endswith("-nolimit"):
+            continue
+        mo, ou, fl = results[c.name]
+        add(f"| {c.name} | {cell_any(mo)} | {cell_any(ou)} | {cell_any(fl)} |")
+    add("")
+
     add("## Where the two are not alike")
     add("")
     L += NOT_ALIKE
@@ -805,7 +846,9 @@ NOT_ALIKE = [
     "the speed rises. Ours: indirect field orientation (the slip from the current model with R_R and L_M) "
     "with the paper's reduced-order observer of speed and load torque, an orientation correction from the "
     "d-axis residual and, past the regeneration limit, a far-side mode. The L_M rows above show the "
-    "difference most.",
+    "difference most. Our flux observer (`drive.observer = \"flux\"`, its own section above) has motulator's "
+    "structure and gain, with a load-torque observer added and the voltage taken over the period it acted "
+    "in; it gives the speed to our indirect field orientation (motulator orients on its observer's flux).",
     "- **Rs adaptation.** motulator 0.5.0 has none; ours identifies Rs at standstill at each start and "
     "adapts it while running (default). Our start also identifies the inverter's voltage error (here "
     "zero) and calibrates the current sensors' gains; motulator starts at once.",
@@ -845,14 +888,14 @@ def figure(case, series, path, title, zoom_s):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    mo, ou = series
+    mo, ou, fl = series
     fig, ax = plt.subplots(2, 1, figsize=(8, 6.5))
     t0 = max(0.0, min(s for s, _ in case.speed) - 0.2)
     spans = ((t0, case.duration), (case.event - 0.2, min(case.duration, case.event + zoom_s)))
     for a, (lo, hi) in zip(ax, spans):
         tr = [x for x in ou.t if lo <= x <= hi]
         a.plot(tr, [case.ref_rpm(x) for x in tr], "k--", lw=1, label="reference")
-        for s, lab, col in ((mo, "motulator 0.5.0", "tab:orange"), (ou, "this drive", "tab:blue")):
+        for s, lab, col in ((mo, "motulator 0.5.0", "tab:orange"), (ou, "this drive", "tab:blue"), (fl, "this drive, flux observer", "tab:green")):
             end = s.stop_t if s.stop_t is not None else math.inf
             idx = [i for i, x in enumerate(s.t) if lo <= x <= hi and x <= end]
             a.plot([s.t[i] for i in idx], [s.w[i] for i in idx], color=col, lw=1.4, label=f"{lab}: speed")
@@ -935,15 +978,24 @@ def main():
                     times["n_motulator"] += 1
                 mo_m = analyse(c, mo)
             ou_m = analyse(c, ours)
+            # the same case with our other speed observer, the reduced-order flux observer
+            # (`drive.observer = "flux"`, which has no regeneration limit)
+            try:
+                flux = c.run_ours(sim, tmp, FLUX_SETS)
+            except RuntimeError as e:
+                problems.append(str(e))
+                print(f"{c.name}: our run with the flux observer failed", file=sys.stderr)
+                continue
+            fl_m = analyse(c, flux)
             chk = check_reference(c, ours)
             if chk is not None:
                 ref_checks[c.name] = chk
                 if chk > 1.0:
                     problems.append(f"{c.name}: our drive's reference is {chk:.2f} rpm off the benchmark's ramp")
-            results[c.name] = (mo_m, ou_m)
+            results[c.name] = (mo_m, ou_m, fl_m)
             if c.name in FIGURE_CASES:
-                series[c.name] = (mo, ours)
-            print(f"{c.name:28} ours: {summary(ou_m)}" + ("" if mo_m is None else f"   motulator: {summary(mo_m)}"), flush=True)
+                series[c.name] = (mo, ours, flux)
+            print(f"{c.name:28} ours: {summary(ou_m)}   flux observer: {summary(fl_m)}" + ("" if mo_m is None else f"   motulator: {summary(mo_m)}"), flush=True)
     print(
         f"our side: {times['n']} runs, {times['sim_s']:.0f} s simulated in {times['ours_sim']:.1f} s "
         f"({times['ours']:.1f} s with reading the CSVs)"
