@@ -94,10 +94,11 @@ ADC_REGS = {0x0: "ISR", 0x4: "IER", 0x8: "CR", 0xC: "CFGR", 0x10: "CFGR2", 0x14:
             0x18: "SMPR2", 0x4C: "JSQR"}
 TIM1_BREAK_FLAGS = (1 << 7) | (1 << 8) | (1 << 13)
 # the last 4 KiB of flash (Unicorn maps whole 4 KiB pages) are modelled as flash memory:
-# programmed only through FLASH_KEYR/CR/SR; its upper 2 KiB page (bank 2, page 127) is the
-# firmware's settings page (firmware/board-core/src/settings.rs)
+# programmed only through FLASH_KEYR/CR/SR; its two 2 KiB pages (bank 2, pages 126 and 127)
+# are the firmware's settings pages A and B (firmware/board-core/src/settings.rs, store.rs)
 FLASH_TOP = 0x0807_F000
-SETTINGS_ADDR = 0x0807_F800
+SETTINGS_ADDR = 0x0807_F000
+SETTINGS_PAGE_B = 0x0807_F800
 FLASH_KEYS = (0x4567_0123, 0xCDEF_89AB)
 FLASH_LOCK = 1 << 31
 FLASH_BSY = 1 << 16
@@ -242,26 +243,27 @@ class Machine:
     """The emulated MCU with its peripherals, running one ELF."""
 
     def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0,
-                 settings_page=None, current_offset_counts=0, tx_bytes_per_period=None,
+                 settings_pages=None, current_offset_counts=0, tx_bytes_per_period=None,
                  torn=()):
-        """`settings_page`: the 2 KiB settings page's contents at power-up (default erased),
-        e.g. another Machine's `settings_page()` after a `save`: a reboot with that flash.
+        """`settings_pages`: the two 2 KiB settings pages' contents (A, then B: 4 KiB) at
+        power-up (default erased), e.g. another Machine's `settings_pages()` after a `save`:
+        a reboot with that flash.
         `current_offset_counts`: added to every phase-current sample (an amplifier whose
         bias is off). `tx_bytes_per_period`: the UART transmitter's pace (115 200 baud
         carries 2.3 bytes per 200 us period; None: it takes every byte at once).
-        `torn`: offsets (from 0x0807_F800) of settings-page double words a power cut left
-        half written: reading one is an ECC double error (FLASH_ECCR.ECCD, NMI)."""
+        `torn`: offsets (from 0x0807_F000, page A's start) of settings-page double words a
+        power cut left half written: reading one is an ECC double error (FLASH_ECCR.ECCD, NMI)."""
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
         self.flash_top = bytearray(b"\xff" * 0x1000)
-        if settings_page is not None:
-            if len(settings_page) != 0x800:
-                raise ValueError("settings_page must be 2048 bytes")
-            self.flash_top[0x800:] = settings_page
+        if settings_pages is not None:
+            if len(settings_pages) != 0x1000:
+                raise ValueError("settings_pages must be 4096 bytes (pages A and B)")
+            self.flash_top[:] = settings_pages
         self._flash_key = 0          # unlock sequence position
         # double words (offsets in flash_top) with an ECC double error; reading one sets
         # FLASH_ECCR and raises the NMI (RM0440 3.3.4)
-        self.flash_torn = {0x800 + o for o in torn}
+        self.flash_torn = set(torn)
         self.nmi_pending = False
         self._ecc_replay = None
         self.flash_ops = 0           # erase and double-word program operations begun
@@ -548,8 +550,8 @@ class Machine:
         return True
 
     def torn_offsets(self):
-        """The settings page's torn double words (offsets from 0x0807_F800)."""
-        return sorted(o - 0x800 for o in self.flash_torn if o >= 0x800)
+        """The settings pages' torn double words (offsets from 0x0807_F000)."""
+        return sorted(self.flash_torn)
 
     def _flash_sr(self, bits):
         self.regs[(0x4002_2000, 0x10)] = self.reg(0x4002_2000, 0x10) | bits
@@ -626,9 +628,14 @@ class Machine:
             value &= ~(1 << 16)                          # STRT clears when done
         self.regs[(b, 0x14)] = value
 
-    def settings_page(self):
-        """The settings page (2 KiB at 0x0807_F800) as the flash holds it now."""
-        return bytes(self.flash_top[0x800:])
+    def settings_pages(self):
+        """The settings pages A and B (4 KiB at 0x0807_F000) as the flash holds them now."""
+        return bytes(self.flash_top)
+
+    def settings_page(self, page):
+        """Settings page `page` ("A" or "B", 2 KiB) as the flash holds it now."""
+        o = {"A": 0, "B": 0x800}[page]
+        return bytes(self.flash_top[o:o + 0x800])
 
     def _calibrated(self):
         return any(e[0] == "ADCAL" for e in self.events)

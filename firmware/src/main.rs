@@ -43,7 +43,8 @@ use {
     acim_firmware_core::convert::Converter,
     acim_firmware_core::dispatch::{self, Dispatch, Platform, Rebuild, Reply, Sent},
     acim_firmware_core::protocol::{self, RequestAssembler},
-    acim_firmware_core::settings::{self, LoadError, Settings},
+    acim_firmware_core::settings::{self, Settings},
+    acim_firmware_core::store,
     acim_firmware_core::telemetry::{self, TelemetrySample},
     control_isr::{IsrState, CMD_Q, TEL_Q},
     core::sync::atomic::Ordering,
@@ -195,20 +196,17 @@ fn main() -> ! {
     }
 
     let sincos = board_cfg::sincos(dp.CORDIC, &mut rcc);
-    // settings from the reserved flash page; anything but an intact, valid record of this
-    // version: the defaults, reported after the ready line (the drive starts Idle anyway)
-    let record = flash::read_record();
-    // a double word torn by a power cut during a save (ECC double error, NMI handled)
-    let torn = flash::take_ecc_error();
-    let (settings, load) = match Settings::decode(&record) {
-        Ok(s) if !torn => (s, Ok(())),
-        Ok(_) => (Settings::defaults(), Err(LoadError::Crc)),
-        Err(e) => (Settings::defaults(), Err(e)),
-    };
-    match load {
-        Ok(()) => defmt::info!("settings loaded from flash"),
-        Err(LoadError::Blank) => defmt::info!("no saved settings: defaults"),
-        Err(e) => defmt::warn!("saved settings refused ({}): defaults", e),
+    // settings from the two reserved flash pages: the valid record with the newest
+    // sequence number, else the defaults; a torn (ECC double error, its NMI handled) or
+    // refused page is reported after the ready line (the drive starts Idle anyway)
+    let boot = store::load(&mut flash::Pages { poll: &mut || {} });
+    let settings = boot.settings;
+    match boot.from {
+        Some((page, seq)) => defmt::info!("settings loaded from flash page {} (seq {})", page, seq),
+        None => defmt::info!("no valid saved settings: defaults"),
+    }
+    if boot.warning() {
+        defmt::warn!("a settings page is torn or refused (reported on the UART)");
     }
     let (cfg, drive) = match build_drive(&settings, sincos) {
         Ok(d) => d,
@@ -350,24 +348,7 @@ fn main() -> ! {
     const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
     raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
-    if torn {
-        say(
-            &mut out,
-            b"warn settings page: flash ECC error (a save cut by a power loss?)\r\n",
-        );
-    }
-    match load {
-        Ok(()) => say(&mut out, b"settings loaded from flash\r\n"),
-        Err(LoadError::Blank) => say(&mut out, b"settings: defaults (nothing saved)\r\n"),
-        Err(e) => {
-            say(&mut out, b"warn settings in flash refused: ");
-            say(&mut out, e.as_str().as_bytes());
-            if let LoadError::Invalid(se) = e {
-                dispatch::setting_error(&mut out, &se);
-            }
-            say(&mut out, b"; defaults in use, drive idle\r\n");
-        }
-    }
+    boot.report(&mut out);
 
     // after a receive overrun: the rest of the cut line is dropped (up to its end)
     let mut rx_discard = false;
@@ -704,11 +685,24 @@ impl Platform for Fw {
         // the watchdog keeps being fed (and a stopped interrupt still switches off) while
         // the flash is busy
         let alive = &mut self.alive;
-        match flash::write_record(&s.encode(), &mut || alive.poll()) {
-            Ok(()) => Ok("saved to flash"),
+        let mut pages = flash::Pages {
+            poll: &mut || alive.poll(),
+        };
+        match store::save(&mut pages, s) {
+            Ok(p) => {
+                defmt::info!("settings saved to page {} (seq {})", p.page, p.seq);
+                Ok(match p.page {
+                    store::Page::A => "saved to flash (page A)",
+                    store::Page::B => "saved to flash (page B)",
+                })
+            }
             Err(e) => {
-                defmt::error!("settings save failed: {}", e.as_str());
-                Err(e.as_str())
+                let why = match e {
+                    store::SaveError::Flash(e) => e.as_str(),
+                    store::SaveError::Verify => flash::FlashError::Verify.as_str(),
+                };
+                defmt::error!("settings save failed: {}", why);
+                Err(why)
             }
         }
     }
@@ -839,9 +833,10 @@ unsafe fn MemoryManagement() {
 }
 
 #[cfg(target_os = "none")]
-/// NMI: a flash ECC double error in the settings page (a save torn by a power cut) is
-/// cleared and noted, and the read carries on (the record's CRC refuses it); anything
-/// else switches off, then waits for the watchdog.
+/// NMI: a flash ECC double error in a settings page (a save torn by a power cut) is
+/// cleared and noted for that page, and the read carries on (the page is then refused as
+/// torn, and the other page's record used); anything else switches off, then waits for
+/// the watchdog.
 #[exception]
 unsafe fn NonMaskableInt() {
     if flash::ecc_error_in_settings() {

@@ -69,4 +69,40 @@ fn main() {
         POWER_STAGE.bias_counts()
     );
     println!("| watchdog | {} ms |", board::WATCHDOG_TIMEOUT_MS);
+    println!();
+    save_and_power_cycle();
+}
+
+/// The settings store's check, the same on every board: the two flash pages written
+/// alternately (`acim_firmware_core::store`).
+fn save_and_power_cycle() {
+    use acim_firmware_core::store::Page;
+    println!("## Save and power-cycle (every board)");
+    println!();
+    println!(
+        "The settings live in two flash pages written alternately: A at 0x{:08X} and B at \
+         0x{:08X} (bank 2 pages {} and {}).",
+        Page::A.addr(),
+        Page::B.addr(),
+        Page::A.number(),
+        Page::B.number()
+    );
+    println!();
+    println!("1. Before the first `save`, read FLASH_OPTR (STM32CubeProgrammer): DBANK = 1, BFB2 = 0. \
+              `err save failed: flash in single-bank mode` or `... bank swap option set` means one of \
+              them is not; the firmware then never erases anything.");
+    println!("2. `set current_limit <a value of yours>`, `save`: `ok saved to flash (page A)` on a fresh \
+              board, then the pages alternate (the next `save` says page B). `err save failed: \
+              read-back differs` means the page did not program: the board keeps the settings it \
+              had; do not trust that flash.");
+    println!(
+        "3. Power-cycle the NUCLEO (unplug USB): the boot prints `settings loaded from flash \
+              (page A, seq 1)` and `get current_limit` shows your value. `settings: defaults \
+              (nothing saved)` means nothing reached the flash."
+    );
+    println!("4. The power cut (optional, no power stage connected): send `save` and unplug USB at once \
+              (the erase takes 20-40 ms, so try several times). Every boot must print `ready` and \
+              either load the new settings or warn `warn settings: page B torn (flash ECC error), \
+              using page A (seq n)` and load the ones saved before. A board that stays silent, or \
+              boots on the defaults although a record was saved before, is a defect.");
 }

@@ -20,7 +20,10 @@
 //!   telemetry extension), shared with the host tools (docs/protocol.md);
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
 //! - [`settings`]: the serial-settable limits and machine parameters, their flash record
-//!   (version, CRC) and validation by the library's constructors;
+//!   (version, sequence number, CRC) and validation by the library's constructors;
+//! - [`store`]: the settings' two flash pages written alternately (the newest valid record
+//!   wins at boot; a save never erases the record it replaces before the new one
+//!   verifies), over a flash trait, host-tested with a power cut at every operation;
 //! - [`sim`]: the motor model behind this board's ADC, for the self-test;
 //! - [`control`]: the per-period control loop (conversion, faults, drive step, telemetry)
 //!   that the firmware's interrupt calls, generic over the sin/cos provider;
@@ -45,5 +48,6 @@ pub mod protocol;
 pub mod settings;
 pub mod sim;
 pub mod stage;
+pub mod store;
 pub mod telemetry;
 pub mod timing;
