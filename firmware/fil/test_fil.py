@@ -618,6 +618,61 @@ class Settings(unittest.TestCase):
         self.assertEqual(self.get(m2, "current_limit"), default_limit)
 
 
+class Profiles(unittest.TestCase):
+    """Board profiles (firmware/board-core/src/profile.rs): each profile's ELF boots on the
+    emulated MCU with its board's measurement chain and ADC plan (fil.BOARDS: the model
+    decodes the firmware's JSQR, so a wrong channel reads 0 and the offset calibration
+    refuses it), reaches `ready`, starts (MOE set, magnetizing, no fault) and stops, with
+    its gate polarity, idle levels and enables as the profile says."""
+
+    # (ELF, fil.BOARDS key, DC bus in V: inside the profile's window)
+    CASES = [("power-stage", "generic", 325.0),
+             ("x-nucleo-ihm16m1", "x-nucleo-ihm16m1", 40.0),
+             ("steval-ihm023v3", "steval-ihm023v3", 325.0)]
+    TIM1, GPIOB = 0x4001_2C00, 0x4800_0400
+
+    def test_every_profile_boots_and_starts(self):
+        for elf, board, bus in self.CASES:
+            with self.subTest(profile=board):
+                m = fil.Machine(fil.default_elf(elf), board=board, dc_bus=bus)
+                m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+                self.assertIsNone(m.halted)
+                self.assertIn("acim-firmware ready", m.output())
+                ccer, cr2 = m.reg(self.TIM1, 0x20), m.reg(self.TIM1, 0x04)
+                enables = (m.reg(self.GPIOB, 0x14) >> 13) & 0b111
+                if board == "steval-ihm023v3":
+                    # the L6390's LIN is active low: inverted low sides, idling high (off)
+                    self.assertEqual(ccer & 0xAAA, (1 << 3) | (1 << 7) | (1 << 11), hex(ccer))
+                    self.assertEqual(cr2 & 0x3F00, (1 << 9) | (1 << 11) | (1 << 13), hex(cr2))
+                else:
+                    self.assertEqual(ccer & 0xAAA, 0, hex(ccer))
+                    self.assertEqual(cr2 & 0x3F00, 0, hex(cr2))
+                if board == "x-nucleo-ihm16m1":
+                    # no complementary outputs (PB0/PB1 are current inputs), the enables
+                    # PB13-15 outputs and low, the fault input PB12 on TIM1_BKIN (AF6)
+                    self.assertEqual(ccer & 0x444, 0, hex(ccer))
+                    self.assertEqual((m.reg(self.GPIOB, 0x0) >> 26) & 0x3F, 0b010101)
+                    self.assertEqual(enables, 0)
+                    self.assertEqual((m.reg(self.GPIOB, 0x0) >> 24) & 0b11, 0b10)
+                    self.assertEqual((m.reg(self.GPIOB, 0x24) >> 16) & 0xF, 6)
+                else:
+                    self.assertEqual(ccer & 0x444, 0x444, hex(ccer))
+                self.assertFalse(m.moe())
+                command(m, "speed 100")
+                self.assertIn("ok", command(m, "start", 40))
+                state, fault = state_fault(m)
+                self.assertEqual(fault, 0, board)
+                self.assertIn(state, (1, 2), board)
+                self.assertTrue(m.moe(), board)
+                if board == "x-nucleo-ihm16m1":
+                    self.assertEqual((m.reg(self.GPIOB, 0x14) >> 13) & 0b111, 0b111)
+                command(m, "stop", 5)
+                self.assertFalse(m.moe(), board)
+                self.assertEqual((m.reg(self.GPIOB, 0x14) >> 13) & 0b111, 0, board)
+                print(f"\nprofile {board}: ready, started (state {state}), stopped",
+                      file=sys.stderr)
+
+
 class BitExact(unittest.TestCase):
     """Issue 11 item 3: the same closed loop on the host and in the emulated self-test
     firmware (built with `--features selftest,soft-sincos`: the library's FastSinCos in

@@ -101,6 +101,29 @@ static mut CMD_QUEUE: Queue<ControlCommand, CMD_Q> = Queue::new();
 #[cfg(target_os = "none")]
 static mut REPLY_QUEUE: Queue<CommandReply, CMD_Q> = Queue::new();
 
+#[cfg(all(target_os = "none", not(feature = "selftest")))]
+/// The HAL's pin types above are fixed per build: the selected profile must use them.
+const _: () = {
+    use acim_firmware_core::profile::{pa, pb, pc, GateDrive};
+    let b = &board::BOARD;
+    if cfg!(feature = "x-nucleo-ihm16m1") {
+        assert!(b.fault.pin.is(pb(12)) && b.senses_on([pa(0), pa(1), pb(0), pb(1)]));
+        assert!(!b.gates.complementary());
+    } else {
+        assert!(b.fault.pin.is(pa(6)) && b.senses_on([pa(0), pa(1), pc(0), pc(1)]));
+        match b.gates.drive {
+            GateDrive::Complementary { low_side, .. } => {
+                assert!(low_side[0].is(pa(7)) && low_side[1].is(pb(0)) && low_side[2].is(pb(1)))
+            }
+            GateDrive::InputEnable { .. } => panic!("input/enable drive: only the IHM16M1 set-up"),
+        }
+    }
+    assert!(
+        b.fault.active_low,
+        "the break is set up active low with a pull-up"
+    );
+};
+
 #[cfg(target_os = "none")]
 /// The board's name in the `version` reply: `acim-firmware <MODE>`.
 const BOARD_NAME: &str = if cfg!(feature = "selftest") {
@@ -172,6 +195,7 @@ fn main() -> ! {
     #[cfg(not(feature = "selftest"))]
     let gpiob = dp.GPIOB.split(&mut rcc);
     #[cfg(not(feature = "selftest"))]
+    #[cfg_attr(feature = "x-nucleo-ihm16m1", allow(unused_variables))]
     let gpioc = dp.GPIOC.split(&mut rcc);
     let mut led = gpioa.pa5.into_push_pull_output();
 
@@ -227,7 +251,14 @@ fn main() -> ! {
     #[cfg(not(feature = "selftest"))]
     let irq = {
         use stm32g4xx_hal::pwm::{Polarity, PwmAdvExt};
-        // TIM1: centre-aligned, ARR = 17000 (5 kHz), dead time, break on PA6 (active low)
+        // the board's gate enables (if any) driven off before TIM1 drives anything
+        hw::gate_enable_init();
+        // TIM1: centre-aligned, ARR = 17000 (5 kHz), dead time, break on the board's fault
+        // pin (active low: PA6 on the generic stage, PB12 on the X-NUCLEO-IHM16M1)
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let fault = gpioa.pa6;
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let fault = gpiob.pb12;
         let pins = (
             gpioa.pa8.into_alternate(),
             gpioa.pa9.into_alternate(),
@@ -243,8 +274,7 @@ fn main() -> ! {
             // the fault line is active low (open drain on the power stage): pulled up, so a
             // missing pull on the board reads as "no fault" only while it is driven
             .with_break_pin(
-                gpioa
-                    .pa6
+                fault
                     .into_alternate()
                     .internal_resistor(stm32g4xx_hal::gpio::Pull::Up),
                 Polarity::ActiveLow,
@@ -252,28 +282,32 @@ fn main() -> ! {
             .finalize();
         // the HAL leaves MOE set: clear it before any channel is enabled
         hw::tim1_safe_state();
-        let mut c1 = c1.into_complementary(gpioa.pa7.into_alternate());
-        let mut c2 = c2.into_complementary(gpiob.pb0.into_alternate());
-        let mut c3 = c3.into_complementary(gpiob.pb1.into_alternate());
+        // complementary outputs on PA7, PB0, PB1 (the profile's low sides); an
+        // input/enable driver (X-NUCLEO-IHM16M1) has none: PB0/PB1 are its current inputs
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let (mut c1, mut c2, mut c3) = (
+            c1.into_complementary(gpioa.pa7.into_alternate()),
+            c2.into_complementary(gpiob.pb0.into_alternate()),
+            c3.into_complementary(gpiob.pb1.into_alternate()),
+        );
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let (mut c1, mut c2, mut c3) = (c1, c2, c3);
         c1.enable();
         c2.enable();
         c3.enable();
+        hw::tim1_polarity();
         hw::tim1_start(board::PWM_ARR, board::PWM_ARR - board::SAMPLE_LEAD_TICKS);
 
-        // ADC pins in analog mode; ADC1: U current (IN1), bus (IN6); ADC2: V (IN7), W (IN2)
+        // ADC pins in analog mode (the profile's plan; generic: ADC1 U current (IN1), bus
+        // (IN6); ADC2 V (IN7), W (IN2))
         let _ia = gpioa.pa0.into_analog();
         let _ic = gpioa.pa1.into_analog();
-        let _vbus = gpioc.pc0.into_analog();
-        let _ib = gpioc.pc1.into_analog();
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let (_vbus, _ib) = (gpioc.pc0.into_analog(), gpioc.pc1.into_analog());
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let (_iv, _iw) = (gpiob.pb1.into_analog(), gpiob.pb0.into_analog());
         let mut delay = cp.SYST.delay(&rcc.clocks);
-        let adc_ok = hw::adc_init(
-            &hw::InjectedChannels {
-                adc1: [1, 6],
-                adc2: [7, 2],
-                slow: 6,
-            },
-            |us| delay.delay_us(us),
-        );
+        let adc_ok = hw::adc_init(&hw::InjectedChannels::of_board(), |us| delay.delay_us(us));
         if !adc_ok {
             panic!("ADC power-up or calibration timed out");
         }

@@ -7,6 +7,8 @@
 //! - [`clock`]: the core clock checked from the registers read back after set-up;
 //! - [`board`]: the board description (power stage gains, pin map, PWM and ADC timing) and
 //!   the drive configuration derived from it;
+//! - [`profile`]: the board profiles as `const` data (gate pins and polarity, enables,
+//!   fault input, ADC plan, measurement chain, ratings), checked at compile time;
 //! - [`convert`]: ADC counts to amperes and volts, offset calibration, duty to compare
 //!   counts: the one place where raw numbers become SI units;
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
@@ -44,6 +46,7 @@ pub mod commission;
 pub mod control;
 pub mod convert;
 pub mod dispatch;
+pub mod profile;
 pub mod protocol;
 pub mod settings;
 pub mod sim;
