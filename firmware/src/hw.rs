@@ -1,5 +1,7 @@
 //! The one module with direct register access: what stm32g4xx-hal 0.1.0 does not offer.
 //!
+//! - The board profile's gate enables (GPIO BSRR/MODER; only boards that have them) and
+//!   TIM1 output polarity (`acim_firmware_core::board::BOARD`).
 //! - TIM1: safe off-state (MOE, OSSI/OSSR, idle levels), TRGO2 = OC4REF as the ADC
 //!   trigger at the sampling instant, one update event per period (RCR), compare writes,
 //!   main-output control and the break flag.
@@ -104,8 +106,9 @@ fn adc2() -> &'static pac::adc1::RegisterBlock {
     unsafe { &*pac::ADC2::ptr() }
 }
 
-/// Disables TIM1's main output: all six switches off (idle levels, low) after the dead
-/// time, from any context. Used by the panic and HardFault handlers.
+/// Disables TIM1's main output: all switches off (each output at its off level; a board's
+/// gate enables dropped first) after the dead time, from any context. Used by the panic,
+/// fault and NMI handlers and the main loop's interrupt watch.
 #[inline(always)]
 pub fn emergency_off() {
     // SAFETY: a read-modify-write of BDTR clearing MOE only; called with interrupts
