@@ -284,6 +284,7 @@ class Machine:
         self._ecc_replay = None
         self.flash_ops = 0           # erase and double-word program operations begun
         self.cut_at_op = None        # power cut during this flash operation (1-based)
+        self.cut_completes = False   # ... or right after it completed (nothing torn)
         self._flash_half = None      # first word of a double word being programmed
         self.uc.mmio_map(FLASH_TOP, 0x1000, self._flash_mem_read, None,
                          self._flash_mem_write, None)
@@ -564,6 +565,10 @@ class Machine:
         self.flash_ops += 1
         if self.cut_at_op != self.flash_ops:
             return False
+        if self.cut_completes:
+            self.halted = f"power cut after flash operation {self.flash_ops}"
+            self.uc.emu_stop()
+            return True
         o, n = region
         for dw in range(o, o + n, 8):
             self.flash_torn.add(dw)

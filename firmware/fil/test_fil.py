@@ -550,17 +550,16 @@ class Settings(unittest.TestCase):
         self.assertFalse([e for e in m.events if e[0] == "FLASH erase"], m.events)
         self.assertEqual(m.settings_pages(), b"\xff" * 4096)
 
-    def test_a_power_cut_at_every_flash_operation_of_a_save_keeps_the_old_settings(self):
+    def test_a_power_cut_at_every_flash_operation_of_a_save_loads_the_old_or_the_new_settings(self):
         """N2, N10: a power cut during `save` leaves torn double words (ECC double errors);
         the next boot's read raised an NMI whose handler looped (the board hung silently),
         and with one page the settings saved before were lost. Two saves (current_limit 4
         on page A, seq 1; 3.8 on page B, seq 2), then a third (3.5) cut during each of its
         flash operations (the erase of page A, then each double word), then a boot with
         that flash: it must reach `ready`, report page A torn, and load the settings saved
-        before (3.8 from page B, seq 2): never the defaults. Every cut in this model tears
-        the operation's double words, so the new record never verifies: the old settings
-        are the right answer for each (a cut after the last double word would load the
-        new ones: the host property test covers that case)."""
+        before (3.8 from page B, seq 2): never the defaults (a cut during an operation tears
+        its double words, so the new record is never complete). Then a cut right after
+        the erase (the old settings) and right after the last double word (the new ones)."""
         m = self.boot()
         self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
         self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
@@ -600,6 +599,25 @@ class Settings(unittest.TestCase):
                 m3 = self.boot(m2.settings_pages())
                 self.assertIn("settings loaded from flash (page A, seq 3)", m3.output())
                 self.assertEqual(self.get(m3, "current_limit"), 3.6)
+        # a cut right after an operation completed: after the erase (page A blank: the old
+        # settings, no warning) and after the last double word (the new record complete,
+        # not yet read back: the new settings, page A seq 3)
+        for op, loaded, line in ((1, 3.8, "settings loaded from flash (page B, seq 2)"),
+                                 (ops, 3.5, "settings loaded from flash (page A, seq 3)")):
+            with self.subTest(cut_after_operation=op):
+                m = self.boot(good)
+                command(m, "set current_limit 3.5")
+                m.flash_ops, m.cut_at_op, m.cut_completes = 0, op, True
+                command(m, "save", 20)
+                self.assertTrue(m.halted and m.halted.startswith("power cut after"), m.halted)
+                self.assertEqual(m.torn_offsets(), [])
+                m2 = self.boot(m.settings_pages())
+                self.assertIn(line, m2.output())
+                got = self.get(m2, "current_limit")
+                print(f"\ncut after flash operation {op}: loaded current_limit {got} "
+                      f"({'old' if got == 3.8 else 'new' if got == 3.5 else 'neither'})",
+                      file=sys.stderr)
+                self.assertEqual(got, loaded)
 
     def test_a_power_cut_during_the_first_save_boots_on_defaults(self):
         """Nothing was ever saved: a cut during the first save's erase boots on the
