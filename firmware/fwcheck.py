@@ -5,12 +5,13 @@ usage: fwcheck.py ELF ISR_SYMBOL BIN_DIR [--warn-only] [--allow-flash=REGEX]
 
 - flash (everything loaded from flash) <= 128 KiB, static RAM (.data + .bss + .uninit +
   .ccmram_uninit) <= 16 KiB. The flash budget was 96 KiB while the settings were meant
-  for the last page of a 128 KiB part; the settings page needs the 512 KiB part (below),
+  for the last page of a 128 KiB part; the settings pages need the 512 KiB part (below),
   so the image is bounded by bank 1 instead: 128 KiB keeps half of it free. The part is the NUCLEO-G474RE's STM32G474RE (512 KiB,
-  dual-bank, 2 KiB pages): the settings page (board-core/src/settings.rs SETTINGS_ADDR,
-  bank 2 page 127) exists only on the 512 KiB parts (xE), not on the xB (128 KiB) or xC
-  (256 KiB). Checked: the page lies inside that part's flash, in bank 2, on a page
-  boundary that matches its page number, and above everything the image loads;
+  dual-bank, 2 KiB pages): the settings pages A and B (board-core/src/settings.rs
+  SETTINGS_ADDR, bank 2 pages 126 and 127) exist only on the 512 KiB parts (xE), not on the
+  xB (128 KiB) or xC (256 KiB). Checked: both pages lie inside that part's flash, in bank
+  2, on a page boundary that matches their page numbers, and above everything the image
+  loads;
 - the ISR lies in CCM SRAM (0x1000_0000 .. 0x1000_8000);
 - call graph from the ISR (direct `bl`/`b` targets in the disassembly, through linker
   thunks): fails if any reachable function is a panic routine or an f64 routine, or lies
@@ -209,12 +210,14 @@ def settings_constants():
     def const(name):
         m = re.search(rf"pub const {name}: \w+ = ([0-9_xXa-fA-F]+);", src)
         return int(m.group(1).replace("_", ""), 0)
-    return const("SETTINGS_ADDR"), const("SETTINGS_PAGE_BYTES"), const("SETTINGS_PAGE_NUMBER")
+    return (const("SETTINGS_ADDR"), const("SETTINGS_PAGE_BYTES"), const("SETTINGS_PAGE_NUMBER"),
+            const("SETTINGS_PAGES"))
 
 
 def check_settings_page(elf, bindir):
-    """The settings page exists on the part and nothing the image loads reaches it."""
-    addr, size, page = settings_constants()
+    """The settings pages (A and B) exist on the part and nothing the image loads reaches
+    them."""
+    addr, size, page, pages = settings_constants()
     import struct
     data = open(elf, "rb").read()
     phoff, = struct.unpack_from("<I", data, 28)
@@ -225,17 +228,20 @@ def check_settings_page(elf, bindir):
         if typ == 1 and filesz:                        # PT_LOAD: what the flash holds
             end = max(end, pa + filesz)
     problems = []
-    if not FLASH_BASE + BANK_BYTES <= addr and addr + size <= FLASH_BASE + PART_FLASH:
-        problems.append(f"0x{addr:08x} is not in bank 2 of the {PART} (512 KiB)")
+    top = addr + pages * size
+    if not (FLASH_BASE + BANK_BYTES <= addr and top <= FLASH_BASE + PART_FLASH):
+        problems.append(f"0x{addr:08x}..0x{top:08x} is not in bank 2 of the {PART} (512 KiB)")
     if size != PAGE_BYTES or addr != FLASH_BASE + BANK_BYTES + page * PAGE_BYTES:
         problems.append(f"0x{addr:08x} is not bank 2 page {page}")
+    if pages != 2 or page + pages > BANK_BYTES // PAGE_BYTES:
+        problems.append(f"pages {page}..{page + pages - 1}: not two pages of bank 2")
     if end > addr:
-        problems.append(f"the image ends at 0x{end:08x}, above the settings page")
+        problems.append(f"the image ends at 0x{end:08x}, above the settings pages")
     for p in problems:
-        print(f"  FAIL: settings page: {p}")
+        print(f"  FAIL: settings pages: {p}")
     if not problems:
-        print(f"  settings page 0x{addr:08x} (bank 2 page {page}) exists on the {PART}; "
-              f"image ends at 0x{end:08x}")
+        print(f"  settings pages A 0x{addr:08x}, B 0x{addr + size:08x} (bank 2 pages {page} and "
+              f"{page + 1}) exist on the {PART}; image ends at 0x{end:08x}")
     return not problems
 
 

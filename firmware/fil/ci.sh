@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Firmware-in-the-loop suite: installs the emulator (Unicorn, pinned), builds both firmware
-# ELFs if they are missing (firmware/check.sh leaves them in target/) and the self-test with
+# ELFs and the board profiles' if they are missing (firmware/check.sh leaves them in
+# target/) and the self-test with
 # the software sin/cos (for the host/target bit-exactness test), runs the tests.
 #
 #   bash firmware/fil/ci.sh          (FIL_UPDATE=1 rewrites golden-boot-writes.txt and isr-budget.json)
@@ -13,6 +14,13 @@ OUT="${CARGO_TARGET_DIR:-$PWD/target}/thumbv7em-none-eabihf/firmware"
 if [ ! -f "$OUT/acim-firmware-power-stage.elf" ] || [ ! -f "$OUT/acim-firmware-selftest.elf" ]; then
   bash firmware/check.sh
 fi
+# the board profiles' ELFs (check.sh builds them too; a relink each if only they are missing)
+for profile in x-nucleo-ihm16m1 steval-ihm023v3; do
+  if [ ! -f "$OUT/acim-firmware-$profile.elf" ]; then
+    cargo build --profile firmware -p acim-firmware --target thumbv7em-none-eabihf --features "$profile"
+    cp "$OUT/acim-firmware" "$OUT/acim-firmware-$profile.elf"
+  fi
+done
 # the bit-exactness test's third ELF: the self-test with the software sin/cos (always
 # rebuilt: cargo relinks only if something changed since the last build of these features)
 cargo build --profile firmware -p acim-firmware --target thumbv7em-none-eabihf --features selftest,soft-sincos

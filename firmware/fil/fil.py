@@ -54,6 +54,20 @@ HARDFAULT_VECTOR = 3
 # board description (firmware/board-core/src/board.rs, POWER_STAGE)
 SHUNT_OHM, AMP_GAIN, AMP_BIAS_V, CURRENT_SIGN = 0.033, 5.0, 1.65, -1.0
 DIV_TOP, DIV_BOTTOM, VREF, COUNTS = 990_000.0, 6_800.0, 3.3, 4096
+# the board profiles' measurement chains and ADC channel plans (firmware/board-core/src/
+# profile.rs): (ADC, channel) -> signal. The ADC model decodes the firmware's JSQR writes
+# through this map, so a profile whose firmware programs the wrong channels reads nothing
+# (0 counts: the offset calibration refuses it).
+GENERIC_BOARD = dict(shunt=SHUNT_OHM, gain=AMP_GAIN, bias=AMP_BIAS_V, sign=CURRENT_SIGN,
+                     top=DIV_TOP, bottom=DIV_BOTTOM,
+                     channels={(1, 1): "U", (1, 6): "bus", (2, 7): "V", (2, 2): "W"})
+BOARDS = {
+    "generic": GENERIC_BOARD,
+    "x-nucleo-ihm16m1": dict(shunt=0.33, gain=1.53, bias=1.65, sign=-1.0, top=169_000.0,
+                             bottom=9_310.0,
+                             channels={(2, 2): "U", (1, 12): "V", (1, 15): "W", (2, 1): "bus"}),
+    "steval-ihm023v3": GENERIC_BOARD,
+}
 
 GPR = [UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4,
        UC_ARM_REG_R5, UC_ARM_REG_R6, UC_ARM_REG_R7, UC_ARM_REG_R8, UC_ARM_REG_R9,
@@ -94,10 +108,11 @@ ADC_REGS = {0x0: "ISR", 0x4: "IER", 0x8: "CR", 0xC: "CFGR", 0x10: "CFGR2", 0x14:
             0x18: "SMPR2", 0x4C: "JSQR"}
 TIM1_BREAK_FLAGS = (1 << 7) | (1 << 8) | (1 << 13)
 # the last 4 KiB of flash (Unicorn maps whole 4 KiB pages) are modelled as flash memory:
-# programmed only through FLASH_KEYR/CR/SR; its upper 2 KiB page (bank 2, page 127) is the
-# firmware's settings page (firmware/board-core/src/settings.rs)
+# programmed only through FLASH_KEYR/CR/SR; its two 2 KiB pages (bank 2, pages 126 and 127)
+# are the firmware's settings pages A and B (firmware/board-core/src/settings.rs, store.rs)
 FLASH_TOP = 0x0807_F000
-SETTINGS_ADDR = 0x0807_F800
+SETTINGS_ADDR = 0x0807_F000
+SETTINGS_PAGE_B = 0x0807_F800
 FLASH_KEYS = (0x4567_0123, 0xCDEF_89AB)
 FLASH_LOCK = 1 << 31
 FLASH_BSY = 1 << 16
@@ -242,30 +257,34 @@ class Machine:
     """The emulated MCU with its peripherals, running one ELF."""
 
     def __init__(self, elf, pwr_gated_writes=False, load=None, dc_bus=325.0,
-                 settings_page=None, current_offset_counts=0, tx_bytes_per_period=None,
-                 torn=()):
-        """`settings_page`: the 2 KiB settings page's contents at power-up (default erased),
-        e.g. another Machine's `settings_page()` after a `save`: a reboot with that flash.
+                 settings_pages=None, current_offset_counts=0, tx_bytes_per_period=None,
+                 torn=(), board="generic"):
+        """`settings_pages`: the two 2 KiB settings pages' contents (A, then B: 4 KiB) at
+        power-up (default erased), e.g. another Machine's `settings_pages()` after a `save`:
+        a reboot with that flash.
         `current_offset_counts`: added to every phase-current sample (an amplifier whose
         bias is off). `tx_bytes_per_period`: the UART transmitter's pace (115 200 baud
         carries 2.3 bytes per 200 us period; None: it takes every byte at once).
-        `torn`: offsets (from 0x0807_F800) of settings-page double words a power cut left
-        half written: reading one is an ECC double error (FLASH_ECCR.ECCD, NMI)."""
+        `torn`: offsets (from 0x0807_F000, page A's start) of settings-page double words a
+        power cut left half written: reading one is an ECC double error (FLASH_ECCR.ECCD, NMI).
+        `board`: the power board's measurement chain and ADC plan (a key of BOARDS)."""
+        self.board = BOARDS[board]
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
         self.flash_top = bytearray(b"\xff" * 0x1000)
-        if settings_page is not None:
-            if len(settings_page) != 0x800:
-                raise ValueError("settings_page must be 2048 bytes")
-            self.flash_top[0x800:] = settings_page
+        if settings_pages is not None:
+            if len(settings_pages) != 0x1000:
+                raise ValueError("settings_pages must be 4096 bytes (pages A and B)")
+            self.flash_top[:] = settings_pages
         self._flash_key = 0          # unlock sequence position
         # double words (offsets in flash_top) with an ECC double error; reading one sets
         # FLASH_ECCR and raises the NMI (RM0440 3.3.4)
-        self.flash_torn = {0x800 + o for o in torn}
+        self.flash_torn = set(torn)
         self.nmi_pending = False
         self._ecc_replay = None
         self.flash_ops = 0           # erase and double-word program operations begun
         self.cut_at_op = None        # power cut during this flash operation (1-based)
+        self.cut_completes = False   # ... or right after it completed (nothing torn)
         self._flash_half = None      # first word of a double word being programmed
         self.uc.mmio_map(FLASH_TOP, 0x1000, self._flash_mem_read, None,
                          self._flash_mem_write, None)
@@ -451,6 +470,14 @@ class Machine:
         if base == 0x4001_2C00:
             self._tim1_write(off4, value)
             return
+        if base in (0x4800_0000, 0x4800_0400, 0x4800_0800) and off4 in (0x18, 0x28):
+            # GPIO BSRR (set low half, reset high half) / BRR (reset): the pins' ODR
+            odr = self.reg(base, 0x14)
+            if off4 == 0x18:
+                odr = (odr | (value & 0xFFFF)) & ~(value >> 16)
+            else:
+                odr &= ~(value & 0xFFFF)
+            self.regs[(base, 0x14)] = odr
         if base == 0x4000_1000 and off4 == 0x10:        # TIM6_SR rc_w0
             value = self.reg(base, off4) & value
         if base == 0x4002_0C00 and off4 == 0x4:         # CORDIC WDATA: sine of x pi
@@ -538,6 +565,10 @@ class Machine:
         self.flash_ops += 1
         if self.cut_at_op != self.flash_ops:
             return False
+        if self.cut_completes:
+            self.halted = f"power cut after flash operation {self.flash_ops}"
+            self.uc.emu_stop()
+            return True
         o, n = region
         for dw in range(o, o + n, 8):
             self.flash_torn.add(dw)
@@ -548,8 +579,8 @@ class Machine:
         return True
 
     def torn_offsets(self):
-        """The settings page's torn double words (offsets from 0x0807_F800)."""
-        return sorted(o - 0x800 for o in self.flash_torn if o >= 0x800)
+        """The settings pages' torn double words (offsets from 0x0807_F000)."""
+        return sorted(self.flash_torn)
 
     def _flash_sr(self, bits):
         self.regs[(0x4002_2000, 0x10)] = self.reg(0x4002_2000, 0x10) | bits
@@ -626,9 +657,14 @@ class Machine:
             value &= ~(1 << 16)                          # STRT clears when done
         self.regs[(b, 0x14)] = value
 
-    def settings_page(self):
-        """The settings page (2 KiB at 0x0807_F800) as the flash holds it now."""
-        return bytes(self.flash_top[0x800:])
+    def settings_pages(self):
+        """The settings pages A and B (4 KiB at 0x0807_F000) as the flash holds them now."""
+        return bytes(self.flash_top)
+
+    def settings_page(self, page):
+        """Settings page `page` ("A" or "B", 2 KiB) as the flash holds it now."""
+        o = {"A": 0, "B": 0x800}[page]
+        return bytes(self.flash_top[o:o + 0x800])
 
     def _calibrated(self):
         return any(e[0] == "ADCAL" for e in self.events)
@@ -651,7 +687,8 @@ class Machine:
         return [self.reg(0x4001_2C00, o) / arr for o in (0x34, 0x38, 0x3C)]
 
     def _counts(self, amps):
-        v = AMP_BIAS_V + CURRENT_SIGN * amps * SHUNT_OHM * AMP_GAIN
+        b = self.board
+        v = b["bias"] + b["sign"] * amps * b["shunt"] * b["gain"]
         c = int(round(v / VREF * COUNTS)) + self.current_offset_counts
         return max(0, min(COUNTS - 1, c))
 
@@ -667,12 +704,16 @@ class Machine:
         self.load.period(self.duties(), self.moe(), self.dc_bus)
         self.moe_history.append((self.periods, self.moe()))
         if running:
+            b = self.board
             ia, ib, ic = (self._counts(x) for x in self.load.i)
-            bus = int(round(self.dc_bus * DIV_BOTTOM / (DIV_TOP + DIV_BOTTOM) / VREF * COUNTS))
-            for adc, (j1, j2) in ((0x5000_0000, (ia, bus)), (0x5000_0100, (ib, ic))):
+            bus = int(round(self.dc_bus * b["bottom"] / (b["top"] + b["bottom"]) / VREF * COUNTS))
+            value = {"U": ia, "V": ib, "W": ic, "bus": min(bus, COUNTS - 1)}
+            for n, adc in ((1, 0x5000_0000), (2, 0x5000_0100)):
                 if self.reg(adc, 8) & (1 << 3):          # JADSTART
-                    self.regs[(adc, 0x80)] = j1
-                    self.regs[(adc, 0x84)] = j2
+                    jsqr = self.reg(adc, 0x4C)           # JSQ1 bits 13:9, JSQ2 bits 19:15
+                    for rank, ch in ((0, (jsqr >> 9) & 0x1F), (1, (jsqr >> 15) & 0x1F)):
+                        signal = b["channels"].get((n, ch))
+                        self.regs[(adc, 0x80 + 4 * rank)] = value[signal] if signal else 0
                     self.regs[(adc, 0)] = self.reg(adc, 0) | (1 << 6) | (1 << 5)
         if self.reg(0x4000_1000, 0) & 1:                 # TIM6 running (self-test)
             self.regs[(0x4000_1000, 0x10)] = self.reg(0x4000_1000, 0x10) | 1

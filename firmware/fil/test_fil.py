@@ -443,11 +443,12 @@ class Logs(unittest.TestCase):
 
 
 class Settings(unittest.TestCase):
-    """Issue 11 item 4: settings over the serial link, kept in the reserved flash page
-    (self-test build: the same main loop and flash code, a 20-period boot)."""
+    """Issue 11 item 4: settings over the serial link, kept in the two reserved flash pages
+    written alternately (self-test build: the same main loop and flash code, a 20-period
+    boot)."""
 
-    def boot(self, page=None):
-        m = fil.Machine(fil.default_elf("selftest"), settings_page=page)
+    def boot(self, pages=None, torn=()):
+        m = fil.Machine(fil.default_elf("selftest"), settings_pages=pages, torn=torn)
         # ready after the drive's switches-off offset measurement (500 periods)
         m.run_until(lambda m: "ready" in m.output(), 600)
         m.run(5)
@@ -485,63 +486,91 @@ class Settings(unittest.TestCase):
                       command(m, "set stator_resistance 0"))
         self.assertIn("err unknown setting", command(m, "set bogus 1"))
         self.assertEqual(self.get(m, "flux_current"), 1.5)
-        erased = m.settings_page()
-        self.assertEqual(erased, b"\xff" * 2048)
-        self.assertIn("ok saved to flash", command(m, "save", 20))
-        page = m.settings_page()
-        self.assertEqual(page[:4], b"ACIM")
+        self.assertEqual(m.settings_pages(), b"\xff" * 4096)
+        # the first save: page A, sequence number 1; page B is not touched
+        self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
+        page_a = m.settings_page("A")
+        self.assertEqual(page_a[:4], b"ACIM")
+        self.assertEqual(int.from_bytes(page_a[8:12], "little"), 1)
+        self.assertEqual(m.settings_page("B"), b"\xff" * 2048)
         erases = [e for e in m.events if e[0] == "FLASH erase"]
         self.assertEqual(erases, [("FLASH erase", fil.SETTINGS_ADDR, 2048)])
         self.assertFalse([e for e in m.events if e[0].startswith("FLASH") and e[0] not in
                           ("FLASH erase", "FLASH program")], m.events)
         self.assertTrue(m.reg(0x4002_2000, 0x14) & fil.FLASH_LOCK, "flash left unlocked")
         # reboot with that flash: the values are back, and the drive runs with them
-        m2 = self.boot(page)
-        self.assertIn("settings loaded from flash", m2.output())
+        m2 = self.boot(m.settings_pages())
+        self.assertIn("settings loaded from flash (page A, seq 1)", m2.output())
         self.assertEqual(self.get(m2, "current_limit"), 4.0)
         self.assertEqual(self.get(m2, "stator_resistance"), 11.25)
         self.assertEqual(state_fault(m2), (0, 0))
-        # one corrupted byte: defaults, a warning, Idle
-        bad = bytearray(page)
+        # the next save goes to page B (seq 2), erasing only B; A keeps the record before
+        self.assertIn("ok current_limit applied", command(m2, "set current_limit 3.8"))
+        self.assertIn("ok saved to flash (page B)", command(m2, "save", 20))
+        self.assertEqual([e for e in m2.events if e[0] == "FLASH erase"],
+                         [("FLASH erase", fil.SETTINGS_PAGE_B, 2048)])
+        self.assertEqual(m2.settings_page("A"), page_a)
+        self.assertEqual(int.from_bytes(m2.settings_page("B")[8:12], "little"), 2)
+        m3 = self.boot(m2.settings_pages())
+        self.assertIn("settings loaded from flash (page B, seq 2)", m3.output())
+        self.assertEqual(self.get(m3, "current_limit"), 3.8)
+        # one corrupted byte in the only record: defaults, a warning naming the page, Idle
+        bad = bytearray(m.settings_pages())
         bad[20] ^= 0x01
-        m3 = self.boot(bytes(bad))
-        self.assertIn("warn settings in flash refused: CRC mismatch", m3.output())
-        self.assertIn("defaults in use, drive idle", m3.output())
-        self.assertEqual(self.get(m3, "current_limit"), default_limit)
-        self.assertEqual(state_fault(m3), (0, 0))
+        m4 = self.boot(bytes(bad))
+        self.assertIn("warn settings in flash refused: page A refused: CRC mismatch",
+                      m4.output())
+        self.assertIn("defaults in use, drive idle", m4.output())
+        self.assertEqual(self.get(m4, "current_limit"), default_limit)
+        self.assertEqual(state_fault(m4), (0, 0))
+        # the newest record corrupted: the one before it, with a warning
+        bad = bytearray(m2.settings_pages())
+        bad[0x800 + 20] ^= 0x01
+        m5 = self.boot(bytes(bad))
+        self.assertIn("warn settings: page B refused: CRC mismatch (corrupted record), "
+                      "using page A (seq 1)", m5.output())
+        self.assertEqual(self.get(m5, "current_limit"), 4.0)
         # another format version (CRC made to match): refused too
         import zlib
-        other = bytearray(page)
-        other[4:6] = (2).to_bytes(2, "little")
-        other[64:68] = zlib.crc32(bytes(other[:64])).to_bytes(4, "little")
-        m4 = self.boot(bytes(other))
-        self.assertIn("warn settings in flash refused: record of another format version",
-                      m4.output())
-        self.assertEqual(self.get(m4, "current_limit"), default_limit)
+        other = bytearray(m.settings_pages())
+        other[4:6] = (3).to_bytes(2, "little")
+        other[68:72] = zlib.crc32(bytes(other[:68])).to_bytes(4, "little")
+        m6 = self.boot(bytes(other))
+        self.assertIn("page A refused: record of another format version", m6.output())
+        self.assertEqual(self.get(m6, "current_limit"), default_limit)
 
     def test_save_is_refused_with_the_bank_swap_option(self):
         """N9: BKER selects the physical bank; with FLASH_OPTR.BFB2 set the banks may be
-        swapped, and the erase of "bank 2, page 127" could hit the running program. The
-        save is refused and nothing is erased."""
+        swapped, and the erase of a bank 2 page could hit the running program. The save
+        is refused and nothing is erased."""
         m = self.boot()
         m.regs[(0x4002_2000, 0x20)] |= 1 << 20              # OPTR.BFB2
         self.assertIn("err save failed: bank swap option set (OPTR.BFB2 = 1)",
                       command(m, "save", 20))
         self.assertFalse([e for e in m.events if e[0] == "FLASH erase"], m.events)
-        self.assertEqual(m.settings_page(), b"\xff" * 2048)
+        self.assertEqual(m.settings_pages(), b"\xff" * 4096)
 
-    def test_a_power_cut_at_every_flash_operation_of_a_save_still_boots(self):
-        """N2: a power cut during `save` leaves torn double words (ECC double errors); the
-        next boot's read of the page raised an NMI whose handler looped with the watchdog
-        not yet started: the board hung silently for good. A cut during each of the
-        save's flash operations (the erase, then each double word), then a boot with that
-        flash: it must reach `ready`, report the torn page, and run on defaults."""
+    def test_a_power_cut_at_every_flash_operation_of_a_save_loads_the_old_or_the_new_settings(self):
+        """N2, N10: a power cut during `save` leaves torn double words (ECC double errors);
+        the next boot's read raised an NMI whose handler looped (the board hung silently),
+        and with one page the settings saved before were lost. Two saves (current_limit 4
+        on page A, seq 1; 3.8 on page B, seq 2), then a third (3.5) cut during each of its
+        flash operations (the erase of page A, then each double word), then a boot with
+        that flash: it must reach `ready`, report page A torn, and load the settings saved
+        before (3.8 from page B, seq 2): never the defaults (a cut during an operation tears
+        its double words, so the new record is never complete). Then a cut right after
+        the erase (the old settings) and right after the last double word (the new ones)."""
         m = self.boot()
         self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
-        self.assertIn("ok saved to flash", command(m, "save", 20))
-        good = m.settings_page()
+        self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
+        self.assertIn("ok current_limit applied", command(m, "set current_limit 3.8"))
+        self.assertIn("ok saved to flash (page B)", command(m, "save", 20))
+        good = m.settings_pages()
+        m.flash_ops = 0
+        self.assertIn("ok current_limit applied", command(m, "set current_limit 3.5"))
+        self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
         ops = m.flash_ops
-        self.assertGreaterEqual(ops, 2)
+        self.assertEqual(ops, 1 + 9, "an erase and nine double words")
         for op in range(1, ops + 1):
             with self.subTest(cut_during_operation=op):
                 m = self.boot(good)
@@ -549,17 +578,117 @@ class Settings(unittest.TestCase):
                 m.flash_ops, m.cut_at_op = 0, op
                 command(m, "save", 20)
                 self.assertTrue(m.halted and m.halted.startswith("power cut"), m.halted)
+                # the page the save wrote is A; B (the settings before) is untouched
+                self.assertEqual(m.settings_page("B"), good[0x800:])
                 torn = m.torn_offsets()
-                self.assertTrue(torn)
-                m2 = fil.Machine(fil.default_elf("selftest"), settings_page=m.settings_page(),
-                                 torn=torn)
-                m2.run_until(lambda m: "ready" in m.output(), 600)
-                self.assertIsNone(m2.halted)
+                self.assertTrue(torn and all(o < 0x800 for o in torn), torn)
+                m2 = self.boot(m.settings_pages(), torn)
                 self.assertIn("ready", m2.output(), "the boot hung on the torn page")
                 self.assertTrue([e for e in m2.events if e[0] == "FLASH ECC double error"])
-                self.assertIn("flash ECC error", m2.output())
-                self.assertIn(self.get(m2, "current_limit"), (4.0, 3.5, 4.67))
+                self.assertIn("warn settings: page A torn (flash ECC error), using page B "
+                              "(seq 2)", m2.output())
+                loaded = self.get(m2, "current_limit")
+                print(f"\ncut during flash operation {op}: loaded current_limit {loaded} "
+                      f"({'old' if loaded == 3.8 else 'new' if loaded == 3.5 else 'neither'})",
+                      file=sys.stderr)
+                self.assertEqual(loaded, 3.8, "the settings saved before")
                 self.assertEqual(state_fault(m2), (0, 0))
+                # and the next save works, to the torn page again (seq 3)
+                self.assertIn("ok current_limit applied", command(m2, "set current_limit 3.6"))
+                self.assertIn("ok saved to flash (page A)", command(m2, "save", 20))
+                m3 = self.boot(m2.settings_pages())
+                self.assertIn("settings loaded from flash (page A, seq 3)", m3.output())
+                self.assertEqual(self.get(m3, "current_limit"), 3.6)
+        # a cut right after an operation completed: after the erase (page A blank: the old
+        # settings, no warning) and after the last double word (the new record complete,
+        # not yet read back: the new settings, page A seq 3)
+        for op, loaded, line in ((1, 3.8, "settings loaded from flash (page B, seq 2)"),
+                                 (ops, 3.5, "settings loaded from flash (page A, seq 3)")):
+            with self.subTest(cut_after_operation=op):
+                m = self.boot(good)
+                command(m, "set current_limit 3.5")
+                m.flash_ops, m.cut_at_op, m.cut_completes = 0, op, True
+                command(m, "save", 20)
+                self.assertTrue(m.halted and m.halted.startswith("power cut after"), m.halted)
+                self.assertEqual(m.torn_offsets(), [])
+                m2 = self.boot(m.settings_pages())
+                self.assertIn(line, m2.output())
+                got = self.get(m2, "current_limit")
+                print(f"\ncut after flash operation {op}: loaded current_limit {got} "
+                      f"({'old' if got == 3.8 else 'new' if got == 3.5 else 'neither'})",
+                      file=sys.stderr)
+                self.assertEqual(got, loaded)
+
+    def test_a_power_cut_during_the_first_save_boots_on_defaults(self):
+        """Nothing was ever saved: a cut during the first save's erase boots on the
+        defaults and says the page is torn (a cut between operations, the page erased, is
+        the blank case of `test_set_save_reboot_and_a_corrupted_page`)."""
+        m = self.boot()
+        default_limit = self.get(m, "current_limit")
+        command(m, "set current_limit 3.5")
+        m.flash_ops, m.cut_at_op = 0, 1
+        command(m, "save", 20)
+        self.assertTrue(m.halted and m.halted.startswith("power cut"), m.halted)
+        m2 = self.boot(m.settings_pages(), m.torn_offsets())
+        self.assertIn("warn settings in flash refused: page A torn (flash ECC error)",
+                      m2.output())
+        self.assertIn("warn settings: defaults in use, drive idle", m2.output())
+        self.assertEqual(self.get(m2, "current_limit"), default_limit)
+
+
+class Profiles(unittest.TestCase):
+    """Board profiles (firmware/board-core/src/profile.rs): each profile's ELF boots on the
+    emulated MCU with its board's measurement chain and ADC plan (fil.BOARDS: the model
+    decodes the firmware's JSQR, so a wrong channel reads 0 and the offset calibration
+    refuses it), reaches `ready`, starts (MOE set, magnetizing, no fault) and stops, with
+    its gate polarity, idle levels and enables as the profile says."""
+
+    # (ELF, fil.BOARDS key, DC bus in V: inside the profile's window)
+    CASES = [("power-stage", "generic", 325.0),
+             ("x-nucleo-ihm16m1", "x-nucleo-ihm16m1", 40.0),
+             ("steval-ihm023v3", "steval-ihm023v3", 325.0)]
+    TIM1, GPIOB = 0x4001_2C00, 0x4800_0400
+
+    def test_every_profile_boots_and_starts(self):
+        for elf, board, bus in self.CASES:
+            with self.subTest(profile=board):
+                m = fil.Machine(fil.default_elf(elf), board=board, dc_bus=bus)
+                m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+                self.assertIsNone(m.halted)
+                self.assertIn("acim-firmware ready", m.output())
+                ccer, cr2 = m.reg(self.TIM1, 0x20), m.reg(self.TIM1, 0x04)
+                enables = (m.reg(self.GPIOB, 0x14) >> 13) & 0b111
+                if board == "steval-ihm023v3":
+                    # the L6390's LIN is active low: inverted low sides, idling high (off)
+                    self.assertEqual(ccer & 0xAAA, (1 << 3) | (1 << 7) | (1 << 11), hex(ccer))
+                    self.assertEqual(cr2 & 0x3F00, (1 << 9) | (1 << 11) | (1 << 13), hex(cr2))
+                else:
+                    self.assertEqual(ccer & 0xAAA, 0, hex(ccer))
+                    self.assertEqual(cr2 & 0x3F00, 0, hex(cr2))
+                if board == "x-nucleo-ihm16m1":
+                    # no complementary outputs (PB0/PB1 are current inputs), the enables
+                    # PB13-15 outputs and low, the fault input PB12 on TIM1_BKIN (AF6)
+                    self.assertEqual(ccer & 0x444, 0, hex(ccer))
+                    self.assertEqual((m.reg(self.GPIOB, 0x0) >> 26) & 0x3F, 0b010101)
+                    self.assertEqual(enables, 0)
+                    self.assertEqual((m.reg(self.GPIOB, 0x0) >> 24) & 0b11, 0b10)
+                    self.assertEqual((m.reg(self.GPIOB, 0x24) >> 16) & 0xF, 6)
+                else:
+                    self.assertEqual(ccer & 0x444, 0x444, hex(ccer))
+                self.assertFalse(m.moe())
+                command(m, "speed 100")
+                self.assertIn("ok", command(m, "start", 40))
+                state, fault = state_fault(m)
+                self.assertEqual(fault, 0, board)
+                self.assertIn(state, (1, 2), board)
+                self.assertTrue(m.moe(), board)
+                if board == "x-nucleo-ihm16m1":
+                    self.assertEqual((m.reg(self.GPIOB, 0x14) >> 13) & 0b111, 0b111)
+                command(m, "stop", 5)
+                self.assertFalse(m.moe(), board)
+                self.assertEqual((m.reg(self.GPIOB, 0x14) >> 13) & 0b111, 0, board)
+                print(f"\nprofile {board}: ready, started (state {state}), stopped",
+                      file=sys.stderr)
 
 
 class BitExact(unittest.TestCase):

@@ -1,26 +1,31 @@
-//! The settings page in flash (RM0440 section 3.3.6-3.3.8): read the record, and erase and
-//! program it (unlock with the two KEYR keys, page erase PER/BKER/PNB/STRT, double-word
-//! programming with PG, BSY wait, errors checked, lock, data cache reset, read back).
+//! The two settings pages in flash (RM0440 section 3.3.6-3.3.8): read a page's record,
+//! and erase and program one page (unlock with the two KEYR keys, page erase
+//! PER/BKER/PNB/STRT, double-word programming with PG, BSY wait, errors checked, lock, data
+//! cache reset). Which page a save writes, the read-back and the boot's choice are
+//! `acim_firmware_core::store` (host-tested with a power cut at every operation); this
+//! module is its [`store::PageFlash`].
 //!
-//! Only the reserved page `settings::SETTINGS_ADDR` (bank 2, page 127 of the 512 KiB
-//! STM32G474xE; memory.x keeps the program out of it, fwcheck.py checks that it exists
-//! on that part and lies above the image) is ever erased, and only with the factory bank
-//! mapping (FLASH_OPTR.BFB2 = 0: no bank swap). Writing needs the factory dual-bank mode
-//! (FLASH_OPTR.DBANK = 1): then the erase runs in bank 2 while the program (bank 1) and the
-//! control interrupt (CCM SRAM) keep running; in single-bank mode the pages are 4 KiB and
-//! an erase would stall every flash fetch for up to 40 ms, so `save` is refused.
+//! Only the two reserved pages (`settings::SETTINGS_ADDR`: bank 2, pages 126 and 127 of
+//! the 512 KiB STM32G474xE; memory.x keeps the program out of them, fwcheck.py checks that
+//! they exist on that part and lie above the image) are ever erased, one per save, and only
+//! with the factory bank mapping (FLASH_OPTR.BFB2 = 0: no bank swap). Writing needs the
+//! factory dual-bank mode (FLASH_OPTR.DBANK = 1): then the erase runs in bank 2 while the
+//! program (bank 1) and the control interrupt (CCM SRAM) keep running; in single-bank mode
+//! the pages are 4 KiB and an erase would stall every flash fetch for up to 40 ms, so
+//! `save` is refused.
 //!
 //! Called from the main loop only (never from an interrupt), while the drive is Idle.
 
 use acim_firmware_core::settings::{
-    RECORD_LEN, SETTINGS_ADDR, SETTINGS_PAGE_BYTES, SETTINGS_PAGE_NUMBER,
+    RECORD_LEN, SETTINGS_ADDR, SETTINGS_PAGES, SETTINGS_PAGE_BYTES,
 };
-use core::sync::atomic::{AtomicBool, Ordering};
+use acim_firmware_core::store::{self, Page, PageRead};
+use core::sync::atomic::{AtomicU8, Ordering};
 use stm32g4xx_hal::pac;
 
-/// A flash ECC double error was found in the settings page (by the NMI handler,
-/// [`ecc_error_in_settings`]) since the last [`take_ecc_error`].
-static ECC_IN_SETTINGS: AtomicBool = AtomicBool::new(false);
+/// Flash ECC double errors found in the settings pages (by the NMI handler,
+/// [`ecc_error_in_settings`]): bit 0 page A, bit 1 page B, until [`take_ecc_error`].
+static ECC_IN_SETTINGS: AtomicU8 = AtomicU8::new(0);
 
 /// FLASH_ECCR: ECCD (double error, rc_w1), BK_ECC, ADDR_ECC (offset in the bank).
 const ECCR_ECCD: u32 = 1 << 31;
@@ -29,30 +34,31 @@ const ECCR_ADDR_ECC: u32 = 0x7_FFFF;
 /// Bank 2's start in dual-bank mode (256 KiB banks).
 const BANK2: u32 = 0x0804_0000;
 
-/// Called by the NMI handler: if the NMI is a flash ECC double error inside the settings
-/// page (a double word torn by a power cut during `save`), clears ECCD, notes it, and
-/// returns true: the handler returns and the read carries on with whatever the word
-/// holds, which the record's CRC then refuses (review N2: the board hung in the NMI
-/// handler at every boot, before the watchdog and the UART). Any other NMI: false.
+/// Called by the NMI handler: if the NMI is a flash ECC double error inside a settings
+/// page (a double word torn by a power cut during `save`), clears ECCD, notes the page,
+/// and returns true: the handler returns and the read carries on with whatever the word
+/// holds; the page is then refused as torn, whatever its CRC says (review N2: the board
+/// hung in the NMI handler at every boot, before the watchdog and the UART). Any other
+/// NMI: false.
 pub fn ecc_error_in_settings() -> bool {
     let f = flash();
     let eccr = f.eccr().read().bits();
     let addr = BANK2 + (eccr & ECCR_ADDR_ECC);
-    if eccr & ECCR_ECCD == 0
-        || eccr & ECCR_BK_ECC == 0
-        || !(SETTINGS_ADDR..SETTINGS_ADDR + SETTINGS_PAGE_BYTES).contains(&addr)
-    {
+    let end = SETTINGS_ADDR + SETTINGS_PAGES * SETTINGS_PAGE_BYTES;
+    if eccr & ECCR_ECCD == 0 || eccr & ECCR_BK_ECC == 0 || !(SETTINGS_ADDR..end).contains(&addr) {
         return false;
     }
     // SAFETY: ECCD is rc_w1; the other bits written as read (ECCCIE kept, ECCC not set)
     f.eccr().write(|w| unsafe { w.bits(eccr & !(1 << 30)) });
-    ECC_IN_SETTINGS.store(true, Ordering::Relaxed);
+    let page = (addr - SETTINGS_ADDR) / SETTINGS_PAGE_BYTES;
+    ECC_IN_SETTINGS.fetch_or(1 << page, Ordering::Relaxed);
     true
 }
 
-/// Whether an ECC double error in the settings page was found since the last call.
-pub fn take_ecc_error() -> bool {
-    ECC_IN_SETTINGS.swap(false, Ordering::Relaxed)
+/// Whether an ECC double error in `page` was found since the last call for it.
+fn take_ecc_error(page: Page) -> bool {
+    let bit = 1u8 << page.index();
+    ECC_IN_SETTINGS.fetch_and(!bit, Ordering::Relaxed) & bit != 0
 }
 
 /// Why a save failed.
@@ -106,17 +112,39 @@ fn flash() -> &'static pac::flash::RegisterBlock {
     unsafe { &*pac::FLASH::ptr() }
 }
 
-/// The record area of the settings page, as stored.
+/// The record area of a settings page as stored, and whether reading it met an ECC
+/// double error (its NMI returns, [`ecc_error_in_settings`]).
 #[inline(never)]
-pub fn read_record() -> [u8; RECORD_LEN] {
-    let mut r = [0u8; RECORD_LEN];
-    for (i, chunk) in r.chunks_exact_mut(4).enumerate() {
-        // SAFETY: an aligned word inside the reserved flash page (always readable;
-        // erased flash reads 0xFF).
-        let w = unsafe { core::ptr::read_volatile((SETTINGS_ADDR as *const u32).add(i)) };
+pub fn read_page(page: Page) -> PageRead {
+    take_ecc_error(page);
+    let mut record = [0u8; RECORD_LEN];
+    for (i, chunk) in record.chunks_exact_mut(4).enumerate() {
+        // SAFETY: an aligned word inside a reserved flash page (always readable; erased
+        // flash reads 0xFF; a torn double word raises the NMI, which returns for it).
+        let w = unsafe { core::ptr::read_volatile((page.addr() as *const u32).add(i)) };
         chunk.copy_from_slice(&w.to_le_bytes());
     }
-    r
+    PageRead {
+        record,
+        ecc_error: take_ecc_error(page),
+    }
+}
+
+/// The settings pages for `acim_firmware_core::store`: `poll` runs while the flash is busy
+/// (the main loop's watchdog and interrupt watch).
+pub struct Pages<'a> {
+    /// Called in every BSY wait.
+    pub poll: &'a mut dyn FnMut(),
+}
+
+impl store::PageFlash for Pages<'_> {
+    type Error = FlashError;
+    fn read(&mut self, page: Page) -> PageRead {
+        read_page(page)
+    }
+    fn write(&mut self, page: Page, record: &[u8; RECORD_LEN]) -> Result<(), FlashError> {
+        write_page(page, record, self.poll)
+    }
 }
 
 /// Waits for BSY to clear, calling `poll` (the main loop's watchdog and interrupt watch)
@@ -133,9 +161,13 @@ fn wait_idle(f: &pac::flash::RegisterBlock, poll: &mut dyn FnMut()) -> Result<u3
     Err(FlashError::Timeout)
 }
 
-/// Erases the settings page and programs `record` at its start, then reads it back;
-/// `poll` runs while the flash is busy.
-pub fn write_record(record: &[u8; RECORD_LEN], poll: &mut dyn FnMut()) -> Result<(), FlashError> {
+/// Erases settings page `page` and programs `record` at its start (the other page is not
+/// touched; `store::save` reads it back); `poll` runs while the flash is busy.
+fn write_page(
+    page: Page,
+    record: &[u8; RECORD_LEN],
+    poll: &mut dyn FnMut(),
+) -> Result<(), FlashError> {
     let f = flash();
     let optr = f.optr().read();
     if !optr.dbank().bit_is_set() {
@@ -156,7 +188,7 @@ pub fn write_record(record: &[u8; RECORD_LEN], poll: &mut dyn FnMut()) -> Result
     if f.cr().read().lock().bit_is_set() {
         return Err(FlashError::Locked);
     }
-    let result = erase_and_program(f, record, poll);
+    let result = erase_and_program(f, page, record, poll);
     f.cr()
         .modify(|_, w| w.pg().clear_bit().per().clear_bit().lock().set_bit());
     // the flash data cache may hold the page's old words: reset it (DCEN off around DCRST)
@@ -164,31 +196,21 @@ pub fn write_record(record: &[u8; RECORD_LEN], poll: &mut dyn FnMut()) -> Result
     f.acr().modify(|_, w| w.dcrst().set_bit());
     f.acr()
         .modify(|_, w| w.dcrst().clear_bit().dcen().set_bit());
-    result?;
-    if read_record() != *record {
-        return Err(FlashError::Verify);
-    }
-    Ok(())
+    result
 }
 
 fn erase_and_program(
     f: &pac::flash::RegisterBlock,
+    page: Page,
     record: &[u8; RECORD_LEN],
     poll: &mut dyn FnMut(),
 ) -> Result<(), FlashError> {
     // SAFETY: writing 1 clears a status flag (rc_w1); no other effect
     f.sr().write(|w| unsafe { w.bits(SR_ERRORS | SR_EOP) });
-    // page erase: bank 2, page 127 (the reserved page), then start
+    // page erase: bank 2, page 126 or 127 (a reserved page), then start
     f.cr().modify(|_, w| {
-        // SAFETY: PNB is a 7-bit page number; 127 is the reserved page
-        unsafe {
-            w.per()
-                .set_bit()
-                .bker()
-                .bank2()
-                .pnb()
-                .bits(SETTINGS_PAGE_NUMBER)
-        }
+        // SAFETY: PNB is a 7-bit page number; Page::number is 126 or 127, a reserved page
+        unsafe { w.per().set_bit().bker().bank2().pnb().bits(page.number()) }
     });
     f.cr().modify(|_, w| w.strt().set_bit());
     let sr = wait_idle(f, poll)?;
@@ -201,7 +223,7 @@ fn erase_and_program(
     for (i, dw) in record.chunks_exact(8).enumerate() {
         let lo = u32::from_le_bytes([dw[0], dw[1], dw[2], dw[3]]);
         let hi = u32::from_le_bytes([dw[4], dw[5], dw[6], dw[7]]);
-        let addr = (SETTINGS_ADDR as *mut u32).wrapping_add(2 * i);
+        let addr = (page.addr() as *mut u32).wrapping_add(2 * i);
         // SAFETY: an 8-byte aligned double word inside the erased, unlocked reserved
         // page, with PG set: the documented programming sequence (RM0440 3.3.7).
         unsafe {

@@ -1,5 +1,7 @@
 //! The one module with direct register access: what stm32g4xx-hal 0.1.0 does not offer.
 //!
+//! - The board profile's gate enables (GPIO BSRR/MODER; only boards that have them) and
+//!   TIM1 output polarity (`acim_firmware_core::board::BOARD`).
 //! - TIM1: safe off-state (MOE, OSSI/OSSR, idle levels), TRGO2 = OC4REF as the ADC
 //!   trigger at the sampling instant, one update event per period (RCR), compare writes,
 //!   main-output control and the break flag.
@@ -17,9 +19,74 @@
 //! HAL's TIM1/TIM6 objects do not touch these registers after their set-up. Register
 //! pointers come from the PAC and are valid for the whole program.
 
+use acim_firmware_core::board::BOARD;
 use acim_firmware_core::convert::{duty_to_compare, RawSample};
+use acim_firmware_core::profile::Signal;
 use acim_firmware_core::stage::PowerStageIo;
 use stm32g4xx_hal::pac;
+
+/// The board's gate-enable pins as (GPIO base address, pin mask), if it has them (the
+/// X-NUCLEO-IHM16M1's EN1..3): all on one port (checked below).
+const ENABLE: Option<(u32, u32)> = match BOARD.gates.enable() {
+    Some([a, b, c]) => {
+        assert!(
+            a.port as u8 == b.port as u8 && b.port as u8 == c.port as u8,
+            "the enable pins must share a port"
+        );
+        Some((a.gpio_base(), (1 << a.n) | (1 << b.n) | (1 << c.n)))
+    }
+    None => None,
+};
+
+/// Drives the board's gate-enable pins (none on boards without them): on only together
+/// with MOE, so that a phase input at its idle level (low: the low side on, for an
+/// input/enable driver) never reaches a switch while the outputs are meant off.
+#[inline(always)]
+fn gate_enable(on: bool) {
+    if let Some((base, mask)) = ENABLE {
+        // SAFETY: BSRR is a write-only set/reset register: one store sets (low half) or
+        // resets (high half) exactly these pins, atomically, from any context; no other
+        // code drives them (main configures them once, before TIM1).
+        unsafe {
+            let bsrr = (base + 0x18) as *mut u32;
+            core::ptr::write_volatile(bsrr, if on { mask } else { mask << 16 });
+        }
+    }
+}
+
+/// The gate-enable pins as push-pull outputs, driven low (disabled) first, before TIM1 is
+/// set up (boards without enables: nothing).
+pub fn gate_enable_init() {
+    if let Some((base, mask)) = ENABLE {
+        gate_enable(false);
+        // SAFETY: start-up, single-threaded: a read-modify-write of this port's MODER
+        // (0b01, general-purpose output, for the enable pins only); the HAL never takes
+        // these pins. OTYPER stays push-pull (reset value).
+        unsafe {
+            let moder = base as *mut u32;
+            let mut v = core::ptr::read_volatile(moder);
+            for n in 0..16 {
+                if mask & (1 << n) != 0 {
+                    v = (v & !(0b11 << (2 * n))) | (0b01 << (2 * n));
+                }
+            }
+            core::ptr::write_volatile(moder, v);
+        }
+    }
+}
+
+/// The board's output polarity (CCxP/CCxNP in TIM1_CCER; the L6390's active-low LIN),
+/// after the HAL enabled the channels. Nothing to write for active-high inputs.
+pub fn tim1_polarity() {
+    let bits = BOARD.gates.ccer_polarity();
+    if bits != 0 {
+        // SAFETY: a read-modify-write adding polarity bits only, at start-up with MOE
+        // clear (the outputs at their idle levels)
+        tim1()
+            .ccer()
+            .modify(|r, w| unsafe { w.bits(r.bits() | bits) });
+    }
+}
 
 #[inline(always)]
 fn tim1() -> &'static pac::tim1::RegisterBlock {
@@ -39,20 +106,23 @@ fn adc2() -> &'static pac::adc1::RegisterBlock {
     unsafe { &*pac::ADC2::ptr() }
 }
 
-/// Disables TIM1's main output: all six switches off (idle levels, low) after the dead
-/// time, from any context. Used by the panic and HardFault handlers.
+/// Disables TIM1's main output: all switches off (each output at its off level; a board's
+/// gate enables dropped first) after the dead time, from any context. Used by the panic,
+/// fault and NMI handlers and the main loop's interrupt watch.
 #[inline(always)]
 pub fn emergency_off() {
     // SAFETY: a read-modify-write of BDTR clearing MOE only; called with interrupts
     // disabled or from HardFault, so nothing interleaves. Clearing MOE is always safe
     // (and harmless if TIM1 was never enabled: the register then reads as 0).
     let t = unsafe { &*pac::TIM1::ptr() };
+    gate_enable(false);
     t.bdtr().modify(|_, w| w.moe().clear_bit());
 }
 
 /// Right after the HAL's `finalize` (which sets MOE): main output off, off-state
 /// selection so that a disabled output drives the idle level (switch off) instead of
-/// floating, idle levels low for all six outputs.
+/// floating, idle levels at each output's off level (the board profile's: low for
+/// active-high inputs, high for active-low ones).
 pub fn tim1_safe_state() {
     let t = tim1();
     // SAFETY (bits): BKF is a 4-bit filter code (board::BREAK_FILTER, checked < 16)
@@ -66,20 +136,11 @@ pub fn tim1_safe_state() {
             .bkf()
             .bits(acim_firmware_core::board::BREAK_FILTER)
     });
-    t.cr2().modify(|_, w| {
-        w.ois1()
-            .clear_bit()
-            .ois1n()
-            .clear_bit()
-            .ois2()
-            .clear_bit()
-            .ois2n()
-            .clear_bit()
-            .ois3()
-            .clear_bit()
-            .ois3n()
-            .clear_bit()
-    });
+    // OIS1..OIS3N are CR2 bits 8..13
+    let idle = BOARD.gates.idle_bits();
+    // SAFETY: only the six idle-state bits change
+    t.cr2()
+        .modify(|r, w| unsafe { w.bits((r.bits() & !0x3F00) | idle) });
 }
 
 /// Sampling trigger and period structure, then (re)starts the counter:
@@ -239,6 +300,7 @@ impl PowerStageIo for Tim1Adc {
         // break is active, and a latched pulse must not be armed over
         if !break_flag() {
             tim1().bdtr().modify(|_, w| w.moe().set_bit());
+            gate_enable(true);
         }
     }
     /// Compare values (preloaded: act from the next period). Never touches MOE.
@@ -260,6 +322,7 @@ impl PowerStageIo for Tim1Adc {
     #[inline(always)]
     fn switch_off(&mut self) {
         let t = tim1();
+        gate_enable(false);
         t.bdtr().modify(|_, w| w.moe().clear_bit());
         let half = (self.arr / 2) as u32;
         // SAFETY: any 16-bit count
@@ -358,8 +421,20 @@ pub struct InjectedChannels {
     pub adc1: [u8; 2],
     /// ADC2 rank 1, rank 2.
     pub adc2: [u8; 2],
-    /// The bus divider's channel (ADC1 rank 2): the longer sampling time.
-    pub slow: u8,
+    /// The bus divider's channel and ADC (1 or 2): the longer sampling time.
+    pub slow: (u8, u8),
+}
+
+impl InjectedChannels {
+    /// The board profile's plan.
+    pub const fn of_board() -> Self {
+        let a = BOARD.adc;
+        Self {
+            adc1: [a.adc1[0].channel, a.adc1[1].channel],
+            adc2: [a.adc2[0].channel, a.adc2[1].channel],
+            slow: a.bus(),
+        }
+    }
 }
 
 /// Powers up, calibrates and enables ADC1 and ADC2 (independent mode, synchronous clock
@@ -381,7 +456,7 @@ pub fn adc_init(ch: &InjectedChannels, mut delay_us: impl FnMut(u32)) -> bool {
         .modify(|_, w| unsafe { w.ckmode().bits(0b11).dual().bits(0) });
 
     let mut ok = true;
-    for (adc, chans) in [(adc1(), ch.adc1), (adc2(), ch.adc2)] {
+    for (number, adc, chans) in [(1, adc1(), ch.adc1), (2, adc2(), ch.adc2)] {
         adc.cr().modify(|_, w| w.deeppwd().clear_bit());
         adc.cr().modify(|_, w| w.advregen().set_bit());
         delay_us(30); // t_ADCVREG_STUP = 20 us
@@ -399,7 +474,7 @@ pub fn adc_init(ch: &InjectedChannels, mut delay_us: impl FnMut(u32)) -> bool {
         // sampling times: 24.5 cycles (0.58 us) on the current channels, longer on the
         // bus divider's channel (ch.slow: its source impedance, review D11)
         for c in chans {
-            let smp = if c == ch.slow {
+            let smp = if (c, number) == ch.slow {
                 acim_firmware_core::board::BUS_SMP
             } else {
                 0b011
@@ -474,18 +549,25 @@ pub fn adc_sequence_pending() -> bool {
     adc1().isr().read().jeos().bit_is_set()
 }
 
-/// The injected results: ADC1 = (U current, DC bus), ADC2 = (V current, W current).
+/// The injected results, read as ADC1 rank 1, ADC2 rank 1, ADC2 rank 2, ADC1 rank 2 and
+/// sorted by the board's ADC plan (the generic stage: U, V, W, DC bus in that order).
 #[inline(always)]
 pub fn adc_read() -> RawSample {
+    const U: usize = BOARD.adc.slot(Signal::CurrentU);
+    const V: usize = BOARD.adc.slot(Signal::CurrentV);
+    const W: usize = BOARD.adc.slot(Signal::CurrentW);
+    const BUS: usize = BOARD.adc.slot(Signal::Bus);
     let a1 = adc1();
     let a2 = adc2();
+    let r = [
+        a1.jdr1().read().jdata().bits(),
+        a2.jdr1().read().jdata().bits(),
+        a2.jdr2().read().jdata().bits(),
+        a1.jdr2().read().jdata().bits(),
+    ];
     RawSample {
-        currents: [
-            a1.jdr1().read().jdata().bits(),
-            a2.jdr1().read().jdata().bits(),
-            a2.jdr2().read().jdata().bits(),
-        ],
-        dc_bus: a1.jdr2().read().jdata().bits(),
+        currents: [r[U], r[V], r[W]],
+        dc_bus: r[BUS],
     }
 }
 

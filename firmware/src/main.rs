@@ -43,7 +43,8 @@ use {
     acim_firmware_core::convert::Converter,
     acim_firmware_core::dispatch::{self, Dispatch, Platform, Rebuild, Reply, Sent},
     acim_firmware_core::protocol::{self, RequestAssembler},
-    acim_firmware_core::settings::{self, LoadError, Settings},
+    acim_firmware_core::settings::{self, Settings},
+    acim_firmware_core::store,
     acim_firmware_core::telemetry::{self, TelemetrySample},
     control_isr::{IsrState, CMD_Q, TEL_Q},
     core::sync::atomic::Ordering,
@@ -99,6 +100,29 @@ static mut TEL_QUEUE: Queue<TelemetrySample, TEL_Q> = Queue::new();
 static mut CMD_QUEUE: Queue<ControlCommand, CMD_Q> = Queue::new();
 #[cfg(target_os = "none")]
 static mut REPLY_QUEUE: Queue<CommandReply, CMD_Q> = Queue::new();
+
+#[cfg(all(target_os = "none", not(feature = "selftest")))]
+/// The HAL's pin types above are fixed per build: the selected profile must use them.
+const _: () = {
+    use acim_firmware_core::profile::{pa, pb, pc, GateDrive};
+    let b = &board::BOARD;
+    if cfg!(feature = "x-nucleo-ihm16m1") {
+        assert!(b.fault.pin.is(pb(12)) && b.senses_on([pa(0), pa(1), pb(0), pb(1)]));
+        assert!(!b.gates.complementary());
+    } else {
+        assert!(b.fault.pin.is(pa(6)) && b.senses_on([pa(0), pa(1), pc(0), pc(1)]));
+        match b.gates.drive {
+            GateDrive::Complementary { low_side, .. } => {
+                assert!(low_side[0].is(pa(7)) && low_side[1].is(pb(0)) && low_side[2].is(pb(1)))
+            }
+            GateDrive::InputEnable { .. } => panic!("input/enable drive: only the IHM16M1 set-up"),
+        }
+    }
+    assert!(
+        b.fault.active_low,
+        "the break is set up active low with a pull-up"
+    );
+};
 
 #[cfg(target_os = "none")]
 /// The board's name in the `version` reply: `acim-firmware <MODE>`.
@@ -171,6 +195,7 @@ fn main() -> ! {
     #[cfg(not(feature = "selftest"))]
     let gpiob = dp.GPIOB.split(&mut rcc);
     #[cfg(not(feature = "selftest"))]
+    #[cfg_attr(feature = "x-nucleo-ihm16m1", allow(unused_variables))]
     let gpioc = dp.GPIOC.split(&mut rcc);
     let mut led = gpioa.pa5.into_push_pull_output();
 
@@ -195,20 +220,17 @@ fn main() -> ! {
     }
 
     let sincos = board_cfg::sincos(dp.CORDIC, &mut rcc);
-    // settings from the reserved flash page; anything but an intact, valid record of this
-    // version: the defaults, reported after the ready line (the drive starts Idle anyway)
-    let record = flash::read_record();
-    // a double word torn by a power cut during a save (ECC double error, NMI handled)
-    let torn = flash::take_ecc_error();
-    let (settings, load) = match Settings::decode(&record) {
-        Ok(s) if !torn => (s, Ok(())),
-        Ok(_) => (Settings::defaults(), Err(LoadError::Crc)),
-        Err(e) => (Settings::defaults(), Err(e)),
-    };
-    match load {
-        Ok(()) => defmt::info!("settings loaded from flash"),
-        Err(LoadError::Blank) => defmt::info!("no saved settings: defaults"),
-        Err(e) => defmt::warn!("saved settings refused ({}): defaults", e),
+    // settings from the two reserved flash pages: the valid record with the newest
+    // sequence number, else the defaults; a torn (ECC double error, its NMI handled) or
+    // refused page is reported after the ready line (the drive starts Idle anyway)
+    let boot = store::load(&mut flash::Pages { poll: &mut || {} });
+    let settings = boot.settings;
+    match boot.from {
+        Some((page, seq)) => defmt::info!("settings loaded from flash page {} (seq {})", page, seq),
+        None => defmt::info!("no valid saved settings: defaults"),
+    }
+    if boot.warning() {
+        defmt::warn!("a settings page is torn or refused (reported on the UART)");
     }
     let (cfg, drive) = match build_drive(&settings, sincos) {
         Ok(d) => d,
@@ -229,7 +251,14 @@ fn main() -> ! {
     #[cfg(not(feature = "selftest"))]
     let irq = {
         use stm32g4xx_hal::pwm::{Polarity, PwmAdvExt};
-        // TIM1: centre-aligned, ARR = 17000 (5 kHz), dead time, break on PA6 (active low)
+        // the board's gate enables (if any) driven off before TIM1 drives anything
+        hw::gate_enable_init();
+        // TIM1: centre-aligned, ARR = 17000 (5 kHz), dead time, break on the board's fault
+        // pin (active low: PA6 on the generic stage, PB12 on the X-NUCLEO-IHM16M1)
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let fault = gpioa.pa6;
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let fault = gpiob.pb12;
         let pins = (
             gpioa.pa8.into_alternate(),
             gpioa.pa9.into_alternate(),
@@ -245,8 +274,7 @@ fn main() -> ! {
             // the fault line is active low (open drain on the power stage): pulled up, so a
             // missing pull on the board reads as "no fault" only while it is driven
             .with_break_pin(
-                gpioa
-                    .pa6
+                fault
                     .into_alternate()
                     .internal_resistor(stm32g4xx_hal::gpio::Pull::Up),
                 Polarity::ActiveLow,
@@ -254,28 +282,32 @@ fn main() -> ! {
             .finalize();
         // the HAL leaves MOE set: clear it before any channel is enabled
         hw::tim1_safe_state();
-        let mut c1 = c1.into_complementary(gpioa.pa7.into_alternate());
-        let mut c2 = c2.into_complementary(gpiob.pb0.into_alternate());
-        let mut c3 = c3.into_complementary(gpiob.pb1.into_alternate());
+        // complementary outputs on PA7, PB0, PB1 (the profile's low sides); an
+        // input/enable driver (X-NUCLEO-IHM16M1) has none: PB0/PB1 are its current inputs
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let (mut c1, mut c2, mut c3) = (
+            c1.into_complementary(gpioa.pa7.into_alternate()),
+            c2.into_complementary(gpiob.pb0.into_alternate()),
+            c3.into_complementary(gpiob.pb1.into_alternate()),
+        );
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let (mut c1, mut c2, mut c3) = (c1, c2, c3);
         c1.enable();
         c2.enable();
         c3.enable();
+        hw::tim1_polarity();
         hw::tim1_start(board::PWM_ARR, board::PWM_ARR - board::SAMPLE_LEAD_TICKS);
 
-        // ADC pins in analog mode; ADC1: U current (IN1), bus (IN6); ADC2: V (IN7), W (IN2)
+        // ADC pins in analog mode (the profile's plan; generic: ADC1 U current (IN1), bus
+        // (IN6); ADC2 V (IN7), W (IN2))
         let _ia = gpioa.pa0.into_analog();
         let _ic = gpioa.pa1.into_analog();
-        let _vbus = gpioc.pc0.into_analog();
-        let _ib = gpioc.pc1.into_analog();
+        #[cfg(not(feature = "x-nucleo-ihm16m1"))]
+        let (_vbus, _ib) = (gpioc.pc0.into_analog(), gpioc.pc1.into_analog());
+        #[cfg(feature = "x-nucleo-ihm16m1")]
+        let (_iv, _iw) = (gpiob.pb1.into_analog(), gpiob.pb0.into_analog());
         let mut delay = cp.SYST.delay(&rcc.clocks);
-        let adc_ok = hw::adc_init(
-            &hw::InjectedChannels {
-                adc1: [1, 6],
-                adc2: [7, 2],
-                slow: 6,
-            },
-            |us| delay.delay_us(us),
-        );
+        let adc_ok = hw::adc_init(&hw::InjectedChannels::of_board(), |us| delay.delay_us(us));
         if !adc_ok {
             panic!("ADC power-up or calibration timed out");
         }
@@ -350,24 +382,7 @@ fn main() -> ! {
     const _: () = assert!(board::PWM_FREQUENCY_HZ == 5000, "FIRMWARE_HELLO says 5000");
     raw(&mut out, &protocol::FIRMWARE_HELLO);
     say(&mut out, b"acim-firmware ready (help for commands)\r\n");
-    if torn {
-        say(
-            &mut out,
-            b"warn settings page: flash ECC error (a save cut by a power loss?)\r\n",
-        );
-    }
-    match load {
-        Ok(()) => say(&mut out, b"settings loaded from flash\r\n"),
-        Err(LoadError::Blank) => say(&mut out, b"settings: defaults (nothing saved)\r\n"),
-        Err(e) => {
-            say(&mut out, b"warn settings in flash refused: ");
-            say(&mut out, e.as_str().as_bytes());
-            if let LoadError::Invalid(se) = e {
-                dispatch::setting_error(&mut out, &se);
-            }
-            say(&mut out, b"; defaults in use, drive idle\r\n");
-        }
-    }
+    boot.report(&mut out);
 
     // after a receive overrun: the rest of the cut line is dropped (up to its end)
     let mut rx_discard = false;
@@ -704,11 +719,24 @@ impl Platform for Fw {
         // the watchdog keeps being fed (and a stopped interrupt still switches off) while
         // the flash is busy
         let alive = &mut self.alive;
-        match flash::write_record(&s.encode(), &mut || alive.poll()) {
-            Ok(()) => Ok("saved to flash"),
+        let mut pages = flash::Pages {
+            poll: &mut || alive.poll(),
+        };
+        match store::save(&mut pages, s) {
+            Ok(p) => {
+                defmt::info!("settings saved to page {} (seq {})", p.page, p.seq);
+                Ok(match p.page {
+                    store::Page::A => "saved to flash (page A)",
+                    store::Page::B => "saved to flash (page B)",
+                })
+            }
             Err(e) => {
-                defmt::error!("settings save failed: {}", e.as_str());
-                Err(e.as_str())
+                let why = match e {
+                    store::SaveError::Flash(e) => e.as_str(),
+                    store::SaveError::Verify => flash::FlashError::Verify.as_str(),
+                };
+                defmt::error!("settings save failed: {}", why);
+                Err(why)
             }
         }
     }
@@ -839,9 +867,10 @@ unsafe fn MemoryManagement() {
 }
 
 #[cfg(target_os = "none")]
-/// NMI: a flash ECC double error in the settings page (a save torn by a power cut) is
-/// cleared and noted, and the read carries on (the record's CRC refuses it); anything
-/// else switches off, then waits for the watchdog.
+/// NMI: a flash ECC double error in a settings page (a save torn by a power cut) is
+/// cleared and noted for that page, and the read carries on (the page is then refused as
+/// torn, and the other page's record used); anything else switches off, then waits for
+/// the watchdog.
 #[exception]
 unsafe fn NonMaskableInt() {
     if flash::ecc_error_in_settings() {

@@ -1,5 +1,7 @@
 //! Prints the bring-up numbers of this board description as Markdown: the two bus
-//! profiles and the timing limits, from the same constants the firmware is built with.
+//! profiles and the timing limits, then a section per board profile (pins, idle levels,
+//! scaling, and its bring-up checklist), from the same constants the firmware is built
+//! with.
 //! `firmware/check.sh` writes the output to `firmware/bringup.md` (CI checks it is
 //! current), so the README's first-power-up checklist never quotes a typed number.
 //!
@@ -8,6 +10,7 @@
 //! ```
 
 use acim_firmware_core::board::{self, BusProfile, LOW_VOLTAGE, MAINS, POWER_STAGE};
+use acim_firmware_core::profile::{self, BoardProfile, GateDrive, Pin, Port, Signal};
 
 fn row(p: &BusProfile) -> String {
     let cfg = board::drive_config_for(p);
@@ -69,4 +72,218 @@ fn main() {
         POWER_STAGE.bias_counts()
     );
     println!("| watchdog | {} ms |", board::WATCHDOG_TIMEOUT_MS);
+    println!();
+    for p in profile::ALL {
+        profile_section(&p);
+    }
+    save_and_power_cycle();
+}
+
+fn pin(p: Pin) -> String {
+    let port = match p.port {
+        Port::A => 'A',
+        Port::B => 'B',
+        Port::C => 'C',
+    };
+    format!("P{port}{}", p.n)
+}
+
+fn signal(s: Signal) -> &'static str {
+    match s {
+        Signal::CurrentU => "phase U current",
+        Signal::CurrentV => "phase V current",
+        Signal::CurrentW => "phase W current",
+        Signal::Bus => "DC-bus divider",
+    }
+}
+
+/// One board profile's section: its pins and numbers, then the bring-up checklist with
+/// what to measure at each step and what a wrong reading means.
+fn profile_section(b: &BoardProfile) {
+    let s = &b.stage;
+    let feature = if b.key == "generic" {
+        "the default build (no feature)".to_string()
+    } else {
+        format!("`--features {}`", b.key)
+    };
+    println!("## Board profile `{}`", b.key);
+    println!();
+    println!(
+        "{}. Build: {feature}; first power-up: add `low-voltage` (`--features {}low-voltage`).",
+        s.name,
+        if b.key == "generic" {
+            String::new()
+        } else {
+            format!("{},", b.key)
+        }
+    );
+    println!();
+    println!("| signal | pin | off level (idle, MOE = 0) |");
+    println!("|---|---|---|");
+    let lvl = |active_low: bool| {
+        if active_low {
+            "high (active-low input)"
+        } else {
+            "low (active-high input)"
+        }
+    };
+    for (i, ph) in ["U", "V", "W"].iter().enumerate() {
+        let hs = b.gates.high_side[i];
+        match b.gates.drive {
+            GateDrive::Complementary {
+                low_side,
+                low_active_low,
+            } => {
+                println!(
+                    "| phase {ph} high side (TIM1_CH{}) | {} | {} |",
+                    i + 1,
+                    pin(hs),
+                    lvl(b.gates.high_active_low)
+                );
+                println!(
+                    "| phase {ph} low side (TIM1_CH{}N) | {} | {} |",
+                    i + 1,
+                    pin(low_side[i]),
+                    lvl(low_active_low)
+                );
+            }
+            GateDrive::InputEnable { enable } => {
+                println!(
+                    "| phase {ph} input (TIM1_CH{}) | {} | low |",
+                    i + 1,
+                    pin(hs)
+                );
+                println!(
+                    "| phase {ph} enable (GPIO, on only with MOE) | {} | low (phase off) |",
+                    pin(enable[i])
+                );
+            }
+        }
+    }
+    println!(
+        "| fault (TIM1_BKIN, AF6, pull-up, filter code {}) | {} | active {} |",
+        b.fault.filter,
+        pin(b.fault.pin),
+        if b.fault.active_low { "low" } else { "high" }
+    );
+    for (adc, plan) in [(1, b.adc.adc1), (2, b.adc.adc2)] {
+        for (rank, input) in plan.iter().enumerate() {
+            println!(
+                "| {} (ADC{adc}_IN{}, rank {}) | {} | analog |",
+                signal(input.signal),
+                input.channel,
+                rank + 1,
+                pin(input.pin)
+            );
+        }
+    }
+    println!();
+    let cfg_lv = board::drive_config_with(b, &b.low_voltage);
+    let cfg = board::drive_config_with(b, &b.bus);
+    let lv = &b.low_voltage;
+    let test_v = 0.5 * (lv.dc_bus_min + lv.dc_bus_max);
+    println!("| quantity | value |");
+    println!("|---|---|");
+    println!("| current sense | {:.3} ohm x {:.2}, bias {:.2} V = {:.0} counts, {:.1} counts/A, +/- {:.2} A full scale |",
+        s.shunt_ohm, s.amplifier_gain, s.amplifier_bias_v, s.bias_counts(), 1.0 / s.amps_per_count().abs(), s.current_full_scale());
+    println!(
+        "| bus divider | {:.0} k / {:.2} k: {:.1} V full scale, {:.1} V = {:.0} counts |",
+        s.divider_top_ohm / 1e3,
+        s.divider_bottom_ohm / 1e3,
+        s.bus_full_scale(),
+        test_v,
+        test_v / s.volts_per_count()
+    );
+    println!(
+        "| ratings | bus {:.0}-{:.0} V, {:.1} A peak |",
+        b.ratings.bus_min_v, b.ratings.bus_max_v, b.ratings.current_peak_a
+    );
+    println!(
+        "| bus profile | {}: {:.0}-{:.0} V, limit {:.2} A, trip {:.2} A |",
+        b.bus.name, b.bus.dc_bus_min, b.bus.dc_bus_max, cfg.current_limit, cfg.overcurrent_trip
+    );
+    println!(
+        "| first power-up | {}: {:.0}-{:.0} V, limit {:.2} A, trip {:.2} A, {:.0} rpm |",
+        lv.name,
+        lv.dc_bus_min,
+        lv.dc_bus_max,
+        cfg_lv.current_limit,
+        cfg_lv.overcurrent_trip,
+        lv.max_speed_rpm
+    );
+    println!(
+        "| TIM1 CCER polarity bits / CR2 idle bits | 0x{:03X} / 0x{:04X} |",
+        b.gates.ccer_polarity(),
+        b.gates.idle_bits()
+    );
+    println!();
+    println!("Checklist (stop at the first wrong reading; each step says what it means):");
+    println!();
+    let idle_check = match b.gates.drive {
+        GateDrive::Complementary { low_active_low: true, .. } =>
+            "high sides low, **low sides (LIN) high**. A low side low while idle means the polarity is wrong (CCxNP/OISxN): every low side would conduct; do not apply the bus.",
+        GateDrive::Complementary { .. } =>
+            "all six gate inputs low. A gate high while idle means an inverted input or a wrong pin: that switch would conduct with the bus applied.",
+        GateDrive::InputEnable { .. } =>
+            "inputs low and **enables low** (phases high-impedance). An enable high while idle would switch the low sides on (input low selects the low side): wrong pin or wiring.",
+    };
+    println!("1. **Gates idle, no DC bus** (logic supply only): after `ready`, scope or meter every gate input: {idle_check} Pull the fault line ({}) to its active level: `status` shows fault 16 until `reset`; if it does not, the break pin or its pull is wrong.", pin(b.fault.pin));
+    let inputs = [b.adc.adc1[0], b.adc.adc1[1], b.adc.adc2[0], b.adc.adc2[1]];
+    let currents: Vec<String> = [Signal::CurrentU, Signal::CurrentV, Signal::CurrentW]
+        .iter()
+        .map(|&sig| pin(inputs.iter().find(|i| i.signal == sig).unwrap().pin))
+        .collect();
+    println!("2. **Offsets**: the boot measures each current input with the switches off and stops with `fatal current offset calibration failed: phase X ...` beyond {:.0} counts of {:.0} (the bias {:.2} V). Meter each amplifier output ({}, {}, {}): about {:.2} V. A different bias means the profile's `amplifier_bias_v` is wrong; 0 V or 3.3 V means a wrong pin or an unpowered amplifier.",
+        board::OFFSET_TOLERANCE_COUNTS, s.bias_counts(), s.amplifier_bias_v,
+        currents[0], currents[1], currents[2], s.amplifier_bias_v);
+    println!("3. **Bus reading and open-loop V/f at low voltage**: a current-limited supply at about {:.0} V (inside {:.0}-{:.0} V, limit near {:.1} A); `stream on`: the bus field reads the supply within 2 %. Off by a constant factor: the divider values are wrong; full scale: a wrong pin. Then `speed 60`, `vf`: the motor turns slowly, a current probe shows sinusoidal phase currents below {:.1} A. An immediate over-current trip means the current sign or gain is wrong; vibration without turning, a phase swapped.",
+        test_v, lv.dc_bus_min, lv.dc_bus_max, cfg_lv.overcurrent_trip, cfg_lv.current_limit);
+    println!("4. **Current loop on a locked rotor**: lock the shaft, `start`: while magnetizing the drive holds the flux current ({:.2} A) as DC; a clamp meter on one phase and the telemetry's `i_d` agree within 5 %, `i_q` near 0. A ratio between them is the gain error (shunt or amplifier gain of the profile); a current growing until the trip, the sign (`current_sign`). `stop`.",
+        cfg_lv.flux_current);
+    println!("5. **Sensorless start**: free shaft, `speed 60`, `start`: state 1 then 2, `speed_est` follows 60 rpm. Fault 11 (loss of control) or 7 (stall) with good steps 2-4 means the machine parameters: commission first (step 6).");
+    println!("6. **Commissioning**: load uncoupled, `commission <P W> <V> <A> <Hz> <rpm>` from the nameplate (the rotor turns in its last test); each identified value comes with its error bound; `commission apply`. A refused result names the check that failed.");
+    println!("7. **Save and power-cycle**: `save`, power-cycle, the boot loads the saved set (the section below).");
+    if b.key == "x-nucleo-ihm16m1" {
+        println!();
+        println!("The STSPIN830 makes its own dead time: TIM1's dead time only delays each input's rising edge. Its enables follow MOE (set with it, dropped before it in every switch-off path); a system break that clears MOE in hardware leaves them on until the handler runs: the inputs then idle low (low sides on, a braking zero vector, no shoot-through).");
+    }
+    if b.key == "steval-ihm023v3" {
+        println!();
+        println!("The L6390's LIN has an internal pull-up (off when floating) and HIN a pull-down; before the firmware drives them (reset, boot) the gates are off either way. Check the STEVAL-IHM028V2's IPM input table before using this profile with it.");
+    }
+    println!();
+}
+
+/// The settings store's check, the same on every board: the two flash pages written
+/// alternately (`acim_firmware_core::store`).
+fn save_and_power_cycle() {
+    use acim_firmware_core::store::Page;
+    println!("## Save and power-cycle (every board)");
+    println!();
+    println!(
+        "The settings live in two flash pages written alternately: A at 0x{:08X} and B at \
+         0x{:08X} (bank 2 pages {} and {}).",
+        Page::A.addr(),
+        Page::B.addr(),
+        Page::A.number(),
+        Page::B.number()
+    );
+    println!();
+    println!("1. Before the first `save`, read FLASH_OPTR (STM32CubeProgrammer): DBANK = 1, BFB2 = 0. \
+              `err save failed: flash in single-bank mode` or `... bank swap option set` means one of \
+              them is not; the firmware then never erases anything.");
+    println!("2. `set current_limit <a value of yours>`, `save`: `ok saved to flash (page A)` on a fresh \
+              board, then the pages alternate (the next `save` says page B). `err save failed: \
+              read-back differs` means the page did not program: the board keeps the settings it \
+              had; do not trust that flash.");
+    println!(
+        "3. Power-cycle the NUCLEO (unplug USB): the boot prints `settings loaded from flash \
+              (page A, seq 1)` and `get current_limit` shows your value. `settings: defaults \
+              (nothing saved)` means nothing reached the flash."
+    );
+    println!("4. The power cut (optional, no power stage connected): send `save` and unplug USB at once \
+              (the erase takes 20-40 ms, so try several times). Every boot must print `ready` and \
+              either load the new settings or warn `warn settings: page B torn (flash ECC error), \
+              using page A (seq n)` and load the ones saved before. A board that stays silent, or \
+              boots on the defaults although a record was saved before, is a defect.");
 }

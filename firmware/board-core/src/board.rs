@@ -1,6 +1,8 @@
-//! Board description: NUCLEO-G474RE + a generic three-shunt IGBT inverter for a 230 V
-//! induction motor. Every number that depends on the hardware lives here, next to the pin
-//! map, so that adapting the firmware to another power stage is an edit of this file.
+//! Board description: NUCLEO-G474RE + a power stage. What differs between power stages
+//! (pins, gate polarity, enables, fault input, ADC plan, measurement chain, ratings) is a
+//! board profile ([`crate::profile`], selected by a cargo feature: [`BOARD`]); the timing
+//! and protection constants common to them live here. The default profile, and the pin map
+//! below, is a generic three-shunt IGBT inverter for a 230 V induction motor.
 //!
 //! **The power-stage values below are assumptions, not measurements: check them against the
 //! schematic of the power stage actually connected before applying the DC bus.** They
@@ -32,6 +34,7 @@
 //! 3.3 V compatible (the G474 pins above are 3.3 V; PA0/PA1/PC0/PC1 are not 5 V tolerant
 //! in analog mode).
 
+use crate::profile::{self, BoardProfile};
 use acim::{CurrentSensing, DriveConfig};
 
 /// Core clock after `freeze` (PLL from HSI16: 16 MHz / 4 * 85 / 2), Hz. Also TIM1's clock.
@@ -143,19 +146,21 @@ impl PowerStage {
     }
 }
 
-/// The assumed power stage (see the module documentation: **values to be checked**).
-pub const POWER_STAGE: PowerStage = PowerStage {
-    name: "generic 3-shunt IGBT inverter, 230 VAC / 325 VDC (STEVAL-IHM028V2 class), values unverified",
-    shunts: 3,
-    shunt_ohm: 0.033,
-    amplifier_gain: 5.0,
-    amplifier_bias_v: 1.65,
-    current_sign: -1.0,
-    divider_top_ohm: 990_000.0,
-    divider_bottom_ohm: 6_800.0,
-    adc_vref: 3.3,
-    adc_counts: 4096,
+/// The board profile this build is for ([`crate::profile`]): the generic stage by
+/// default, another with the `acim-firmware` feature of its name.
+pub const BOARD: BoardProfile = if cfg!(feature = "x-nucleo-ihm16m1") {
+    profile::X_NUCLEO_IHM16M1
+} else if cfg!(feature = "steval-ihm023v3") {
+    profile::STEVAL_IHM023V3
+} else {
+    profile::GENERIC
 };
+#[cfg(all(feature = "x-nucleo-ihm16m1", feature = "steval-ihm023v3"))]
+compile_error!("select one board profile feature");
+
+/// The power stage's measurement chain (see the module documentation: **values to be
+/// checked**): [`BOARD`]'s.
+pub const POWER_STAGE: PowerStage = BOARD.stage;
 
 /// Offset calibration: number of samples averaged with the switches off (0.2 s at 5 kHz).
 pub const OFFSET_CALIBRATION_SAMPLES: u32 = 1024;
@@ -211,11 +216,12 @@ pub const LOW_VOLTAGE: BusProfile = BusProfile {
     max_speed_rpm: 300.0,
 };
 
-/// The profile this build uses.
+/// The bus profile this build uses: the board's first-power-up profile with the
+/// `low-voltage` feature, else its default ([`MAINS`] on the generic stage).
 pub const PROFILE: BusProfile = if cfg!(feature = "low-voltage") {
-    LOW_VOLTAGE
+    BOARD.low_voltage
 } else {
-    MAINS
+    BOARD.bus
 };
 
 /// Independent watchdog timeout, ms (the main loop feeds it only while the control
@@ -231,7 +237,7 @@ pub const ISR_STALL_PERIODS: u32 = 3;
 /// TIM1 break input filter, BDTR.BKF (RM0440: 0b1000 = f_DTS / 8, N = 6: a fault pulse
 /// must last 6 samples at 21.25 MHz, 282 ns, to clear MOE). Long enough against gate-drive
 /// noise on the fault line, short against an IGBT's short-circuit withstand time (5-10 us).
-pub const BREAK_FILTER: u8 = 0b1000;
+pub const BREAK_FILTER: u8 = BOARD.fault.filter;
 const _: () = assert!(BREAK_FILTER < 16);
 
 /// ADC sampling time code of the bus divider's channel (0b110 = 247.5 cycles, 5.8 us at
@@ -253,6 +259,11 @@ pub fn drive_config() -> DriveConfig {
 
 /// The drive configuration for this board with the bus profile `p`.
 pub fn drive_config_for(p: &BusProfile) -> DriveConfig {
+    drive_config_with(&BOARD, p)
+}
+
+/// The drive configuration for board `b` with the bus profile `p`.
+pub fn drive_config_with(b: &BoardProfile, p: &BusProfile) -> DriveConfig {
     let mut cfg = DriveConfig::paper_defaults();
     cfg.dc_bus_min = p.dc_bus_min;
     cfg.dc_bus_max = p.dc_bus_max;
@@ -261,13 +272,13 @@ pub fn drive_config_for(p: &BusProfile) -> DriveConfig {
     cfg.max_speed = p.max_speed_rpm * acim::math::RPM_TO_RAD_S;
     cfg.control_period = CONTROL_PERIOD_S;
     cfg.dead_time = DEAD_TIME_NS as f32 * 1e-9;
-    cfg.current_sensing = if POWER_STAGE.shunts >= 3 {
+    cfg.current_sensing = if b.stage.shunts >= 3 {
         CurrentSensing::ThreePhase
     } else {
         CurrentSensing::TwoPhase
     };
     // the trip level must stay inside the measurable range (saturation also trips)
-    let fs = POWER_STAGE.current_full_scale();
+    let fs = b.stage.current_full_scale();
     if cfg.overcurrent_trip > 0.9 * fs {
         cfg.overcurrent_trip = 0.9 * fs;
     }

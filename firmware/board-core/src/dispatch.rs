@@ -256,7 +256,7 @@ impl Dispatch {
             }
             Command::Defaults(low_voltage) => {
                 let profile = if low_voltage {
-                    crate::board::LOW_VOLTAGE
+                    crate::board::BOARD.low_voltage
                 } else {
                     crate::board::PROFILE
                 };

@@ -7,6 +7,8 @@
 //! - [`clock`]: the core clock checked from the registers read back after set-up;
 //! - [`board`]: the board description (power stage gains, pin map, PWM and ADC timing) and
 //!   the drive configuration derived from it;
+//! - [`profile`]: the board profiles as `const` data (gate pins and polarity, enables,
+//!   fault input, ADC plan, measurement chain, ratings), checked at compile time;
 //! - [`convert`]: ADC counts to amperes and volts, offset calibration, duty to compare
 //!   counts: the one place where raw numbers become SI units;
 //! - [`command`]: the bounded command parser (start, stop, speed, reset, params, ...);
@@ -20,7 +22,10 @@
 //!   telemetry extension), shared with the host tools (docs/protocol.md);
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
 //! - [`settings`]: the serial-settable limits and machine parameters, their flash record
-//!   (version, CRC) and validation by the library's constructors;
+//!   (version, sequence number, CRC) and validation by the library's constructors;
+//! - [`store`]: the settings' two flash pages written alternately (the newest valid record
+//!   wins at boot; a save never erases the record it replaces before the new one
+//!   verifies), over a flash trait, host-tested with a power cut at every operation;
 //! - [`sim`]: the motor model behind this board's ADC, for the self-test;
 //! - [`control`]: the per-period control loop (conversion, faults, drive step, telemetry)
 //!   that the firmware's interrupt calls, generic over the sin/cos provider;
@@ -41,9 +46,11 @@ pub mod commission;
 pub mod control;
 pub mod convert;
 pub mod dispatch;
+pub mod profile;
 pub mod protocol;
 pub mod settings;
 pub mod sim;
 pub mod stage;
+pub mod store;
 pub mod telemetry;
 pub mod timing;

@@ -6,42 +6,52 @@
 //! [`MachineParams::new`] and [`DriveDesign::new`], plus this board's measurement limits
 //! (a trip and a bus maximum the ADC can still see). Errors name the field and the rule.
 //!
-//! The flash record ([`RECORD_LEN`] bytes at the start of the reserved page
-//! [`SETTINGS_ADDR`], little endian):
+//! The flash record ([`RECORD_LEN`] bytes at the start of each of the two reserved pages,
+//! little endian; [`crate::store`] writes them alternately):
 //!
 //! | offset | content |
 //! |---|---|
 //! | 0 | magic `b"ACIM"` |
 //! | 4 | format version ([`SETTINGS_VERSION`], u16) |
 //! | 6 | number of values ([`FIELD_COUNT`], u16) |
-//! | 8 | the values in [`FIELDS`] order, f32 each |
-//! | 8 + 4 n | CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`) of all bytes before it |
+//! | 8 | sequence number (u32; one more at every save, wrapping: [`crate::store`]) |
+//! | 12 | the values in [`FIELDS`] order, f32 each |
+//! | 12 + 4 n | CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`) of all bytes before it |
 //! | ... | zero padding to a whole number of 64-bit flash double words |
 //!
-//! A blank page (erased flash reads 0xFF) means "nothing saved": the defaults, silently.
-//! Any other record that fails the magic, version, length, CRC or validation is refused
-//! as a whole with a [`LoadError`]; the firmware then runs the defaults and reports it.
+//! A blank page (erased flash reads 0xFF) holds nothing. Any other record that fails the
+//! magic, version, length, CRC or validation is refused as a whole with a [`LoadError`];
+//! [`crate::store`] then uses the other page's record, or the defaults, and says so.
 
 use crate::board::{self, POWER_STAGE};
 use acim::math::{sqrt, RAD_S_TO_RPM, RPM_TO_RAD_S};
 use acim::{ConfigError, DriveConfig, DriveDesign, MachineData, MachineParams, ParamError};
 
-/// Start of the flash page reserved for the settings: the last 2 KiB page of the
-/// STM32G474RE's 512 KiB (bank 2, page 127, in the factory dual-bank mode). memory.x
-/// ends the program's FLASH region here.
-pub const SETTINGS_ADDR: u32 = 0x0807_F800;
-/// Size of the reserved page, bytes.
+/// Start of the two flash pages reserved for the settings (A, then B): the last 4 KiB of
+/// the STM32G474RE's 512 KiB (bank 2, pages 126 and 127, in the factory dual-bank mode).
+/// memory.x ends the program's FLASH region here.
+pub const SETTINGS_ADDR: u32 = 0x0807_F000;
+/// Size of one reserved page, bytes.
 pub const SETTINGS_PAGE_BYTES: u32 = 2048;
-/// Page number of the reserved page within its bank (dual-bank mode).
-pub const SETTINGS_PAGE_NUMBER: u8 = 127;
+/// Number of reserved pages (A and B, written alternately).
+pub const SETTINGS_PAGES: u32 = 2;
+/// Page number of the first reserved page (A) within its bank (dual-bank mode); B is the
+/// next one.
+pub const SETTINGS_PAGE_NUMBER: u8 = 126;
 /// Version of the record layout; a record of another version is refused.
-pub const SETTINGS_VERSION: u16 = 1;
+pub const SETTINGS_VERSION: u16 = 2;
 /// First bytes of a record.
 pub const MAGIC: [u8; 4] = *b"ACIM";
 /// Number of settable values.
 pub const FIELD_COUNT: usize = 14;
 /// Length of the record, bytes (a multiple of 8: whole flash double words).
-pub const RECORD_LEN: usize = (8 + 4 * FIELD_COUNT + 4).div_ceil(8) * 8;
+pub const RECORD_LEN: usize = (VALUES + 4 * FIELD_COUNT + 4).div_ceil(8) * 8;
+/// Offset of the sequence number in a record.
+const SEQ: usize = 8;
+/// Offset of the first value in a record.
+const VALUES: usize = 12;
+/// Offset of the CRC in a record.
+const CRC: usize = VALUES + 4 * FIELD_COUNT;
 
 /// One settable value: its name on the serial link (the field name of [`DriveConfig`] or
 /// [`MachineData`]) and its unit.
@@ -301,23 +311,28 @@ impl Settings {
         Ok(cfg)
     }
 
-    /// The flash record.
-    pub fn encode(&self) -> [u8; RECORD_LEN] {
+    /// The flash record, with sequence number `seq`.
+    pub fn encode(&self, seq: u32) -> [u8; RECORD_LEN] {
         let mut r = [0u8; RECORD_LEN];
         r[0..4].copy_from_slice(&MAGIC);
         r[4..6].copy_from_slice(&SETTINGS_VERSION.to_le_bytes());
         r[6..8].copy_from_slice(&(FIELD_COUNT as u16).to_le_bytes());
+        r[SEQ..SEQ + 4].copy_from_slice(&seq.to_le_bytes());
         for (i, v) in self.values.iter().enumerate() {
-            r[8 + 4 * i..12 + 4 * i].copy_from_slice(&v.to_le_bytes());
+            r[VALUES + 4 * i..VALUES + 4 + 4 * i].copy_from_slice(&v.to_le_bytes());
         }
-        let end = 8 + 4 * FIELD_COUNT;
-        let crc = crc32(&r[..end]);
-        r[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+        let crc = crc32(&r[..CRC]);
+        r[CRC..CRC + 4].copy_from_slice(&crc.to_le_bytes());
         r
     }
 
     /// Reads a record (at least [`RECORD_LEN`] bytes of the page); never panics.
     pub fn decode(page: &[u8]) -> Result<Settings, LoadError> {
+        Self::decode_record(page).map(|(s, _)| s)
+    }
+
+    /// Reads a record and its sequence number; never panics.
+    pub fn decode_record(page: &[u8]) -> Result<(Settings, u32), LoadError> {
         let r = page.get(..RECORD_LEN).ok_or(LoadError::Short)?;
         if r.iter().all(|&b| b == 0xFF) {
             return Err(LoadError::Blank);
@@ -334,18 +349,17 @@ impl Settings {
         if u16_at(6) as usize != FIELD_COUNT {
             return Err(LoadError::Length);
         }
-        let end = 8 + 4 * FIELD_COUNT;
-        if crc32(&r[..end]) != u32_at(end) {
+        if crc32(&r[..CRC]) != u32_at(CRC) {
             return Err(LoadError::Crc);
         }
         let mut s = Settings {
             values: [0.0; FIELD_COUNT],
         };
         for (i, v) in s.values.iter_mut().enumerate() {
-            *v = f32::from_bits(u32_at(8 + 4 * i));
+            *v = f32::from_bits(u32_at(VALUES + 4 * i));
         }
         s.drive_config().map_err(LoadError::Invalid)?;
-        Ok(s)
+        Ok((s, u32_at(SEQ)))
     }
 }
 
@@ -762,8 +776,9 @@ mod tests {
             .unwrap()
             .set(idx("stator_resistance"), 11.25)
             .unwrap();
-        let rec = s.encode();
+        let rec = s.encode(0xFFFF_FFFE);
         assert_eq!(&rec[..4], b"ACIM");
+        assert_eq!(Settings::decode_record(&rec), Ok((s, 0xFFFF_FFFE)));
         let back = Settings::decode(&rec).unwrap();
         assert_eq!(back, s);
         assert_eq!(back.get(idx("current_limit")), 4.0);
@@ -777,8 +792,8 @@ mod tests {
 
     #[test]
     fn every_corrupted_byte_is_refused() {
-        let rec = Settings::defaults().encode();
-        let used = 8 + 4 * FIELD_COUNT + 4;
+        let rec = Settings::defaults().encode(41);
+        let used = CRC + 4;
         for i in 0..used {
             for flip in [0x01u8, 0x80, 0xFF] {
                 let mut bad = rec;
@@ -803,13 +818,15 @@ mod tests {
         assert_eq!(Settings::decode(&[0xFF; 80]), Err(LoadError::Blank));
         assert_eq!(Settings::decode(&[0xFF; 8]), Err(LoadError::Short));
         assert_eq!(Settings::decode(&[0u8; 80]), Err(LoadError::BadMagic));
-        // another version, with a CRC that matches it: still refused
-        let mut rec = Settings::defaults().encode();
-        rec[4..6].copy_from_slice(&2u16.to_le_bytes());
-        let end = 8 + 4 * FIELD_COUNT;
-        let crc = crc32(&rec[..end]);
-        rec[end..end + 4].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(Settings::decode(&rec), Err(LoadError::Version(2)));
+        // another version, with a CRC that matches it: still refused (version 1, the
+        // single-page record without a sequence number, included)
+        for other in [1u16, 3] {
+            let mut rec = Settings::defaults().encode(7);
+            rec[4..6].copy_from_slice(&other.to_le_bytes());
+            let crc = crc32(&rec[..CRC]);
+            rec[CRC..CRC + 4].copy_from_slice(&crc.to_le_bytes());
+            assert_eq!(Settings::decode(&rec), Err(LoadError::Version(other)));
+        }
     }
 
     #[test]
@@ -817,7 +834,7 @@ mod tests {
         // a record written by a build with other limits: CRC good, value out of range
         let mut s = Settings::defaults();
         s.values[idx("flux_current")] = 50.0;
-        let e = Settings::decode(&s.encode()).unwrap_err();
+        let e = Settings::decode(&s.encode(1)).unwrap_err();
         assert_eq!(
             e,
             LoadError::Invalid(SettingError {
@@ -1069,9 +1086,10 @@ mod tests {
         }
     }
 
-    /// The linker never places code or data in the settings page.
+    /// The linker never places code or data in the settings pages, and both are the last
+    /// two 2 KiB pages of bank 2 of the 512 KiB part (the factory dual-bank mode).
     #[test]
-    fn memory_x_leaves_the_settings_page_out() {
+    fn memory_x_leaves_the_settings_pages_out() {
         let mx = include_str!("../../../memory.x");
         let line = mx
             .lines()
@@ -1088,13 +1106,15 @@ mod tests {
             .unwrap();
         assert_eq!(0x0800_0000 + kib * 1024, SETTINGS_ADDR, "{line}");
         assert_eq!(
-            SETTINGS_ADDR + SETTINGS_PAGE_BYTES,
+            SETTINGS_ADDR + SETTINGS_PAGES * SETTINGS_PAGE_BYTES,
             0x0800_0000 + 512 * 1024
         );
         assert_eq!(
             SETTINGS_ADDR,
             0x0804_0000 + SETTINGS_PAGE_NUMBER as u32 * SETTINGS_PAGE_BYTES
         );
+        // bank 2 has 128 pages of 2 KiB (PNB is 7 bits): both page numbers exist
+        assert!(SETTINGS_PAGE_NUMBER as u32 + SETTINGS_PAGES <= 128);
     }
 
     #[test]
