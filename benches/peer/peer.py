@@ -791,7 +791,7 @@ def write_page(results, times, versions, ref_checks):
         "(`acim::flux_observer`): a reduced-order flux observer with speed adaptation of the same "
         "structure and gain as motulator's, giving the speed to our indirect field orientation; with it "
         "the drive has no regeneration limit and no orientation correction, and the running Rs law adapts "
-        "only at low stator frequency (below 3 Rs/L_M), where Rs is observable against inductance errors. "
+        "only at low stator frequency (below Rs/L_M), where Rs is observable against inductance errors. "
         "Cells: steps, peak dip / back within 1 % (s); holds, held or not with the last second's mean / "
         "peak-to-peak speed (rpm); the reversal and the ramp, the largest tracking error (rpm)."
     )

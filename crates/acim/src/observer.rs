@@ -394,7 +394,7 @@ pub trait SpeedObserver<N: Num = f32> {
     /// Whether the running Rs law adapts at any stator frequency above its low gate (the
     /// paper's observer, eq. 19-20), or only below
     /// [`crate::rs_estimator::RsRunningConfig::max_frequency`], where the resistive drop
-    /// is observable against inductance errors.
+    /// is observable against inductance errors (Rs/L_M).
     const RS_RUNNING_AT_SPEED: bool = true;
     /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
     /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).

@@ -206,12 +206,15 @@ impl RsRunningConfig<f32> {
 
 /// The running law's band with an observer that estimates the flux itself
 /// ([`RsRunningInputs::low_frequency_only`]): |w_s| up to this factor times Rs/L_M
-/// (rad/s electrical). At w_s = Rs/L_M the stator's resistive drop on the flux current
-/// equals the back-EMF of the flux; at 3 Rs/L_M a 15 % L_M error already leaves about
-/// half as much voltage in the residual as a 20 % Rs error, and beyond that the law
-/// would follow the inductance error. (Hinkkanen et al. 2010 observe the same: the
-/// resistance is observable at low speed only, and its adaptation is faded out above.)
-pub const RUNNING_MAX_FREQUENCY_FACTOR: f32 = 3.0;
+/// (rad/s electrical). At w_s = Rs/L_M the stator's resistive drop on the flux current,
+/// Rs i_d, equals the back-EMF of the flux, w_s L_M i_d: below it a given fraction of
+/// error in Rs leaves more voltage in the residual than the same fraction in L_M, above
+/// it less, and the law would follow the inductance error (measured with the flux
+/// observer: at 3 Rs/L_M, L_M -10 % on the paper's machine pulled Rs_hat +18 % during
+/// a ramp to 1200 rpm and the drive lost the rotor; at Rs/L_M it held, Rs_hat +5 %).
+/// (Hinkkanen et al. 2010 observe the same: the resistance is observable at low speed
+/// only.)
+pub const RUNNING_MAX_FREQUENCY_FACTOR: f32 = 1.0;
 
 /// The estimate's lower clamp, a fraction of the nominal Rs.
 pub const RS_MIN_FACTOR: f32 = 0.5;
