@@ -199,3 +199,99 @@ fn inductance_errors_neither_lose_the_rotor_nor_pull_rs() {
         );
     }
 }
+
+/// A 4 kW, 400 V, 8.2 A, 50 Hz, 1440 rpm, 4-pole motor on a 540 V board (T model Rs
+/// 1.4 ohm, Rr 1.1 ohm, Ls = Lr = 0.188 H, Lm 0.18 H; its inverse-Gamma data computed
+/// from them).
+const MOTOR_4KW: &str = "[nameplate]\npower_w = 4000.0\nvoltage_v = 400.0\ncurrent_a = 8.2\n\
+    frequency_hz = 50.0\nspeed_rpm = 1440.0\npole_pairs = 2\n\
+    [plant]\nrs_ohm = 1.4\nrr_ohm = 1.1\nls_h = 0.188\nlr_h = 0.188\nlm_h = 0.18\npole_pairs = 2\n\
+    inertia_kgm2 = 0.015\nfriction_nms = 0.0\n\
+    [inverse_gamma]\nrs_ohm = 1.4\nrr_ohm = 1.00838\nl_sigma_h = 0.01566\nl_m_h = 0.17234\n\
+    [board]\ndc_bus_v = 540.0\ncurrent_full_scale_a = 40.0\n";
+
+/// Rated load applied (at 3 s) and removed (at 5 s), motoring and regenerating, at 10,
+/// 50 and 100 % of rated speed, on the paper's 750 W machine, motulator's 2.2 kW, a
+/// 4 kW motor and the 37 kW (50 hp) machine, each with a catalogue inertia for its power
+/// (4-pole motors: J = 0.0032 P_kW^1.3 kg m^2, through 0.0022 at 0.75 kW and 0.35 at
+/// 37 kW), the default sensors and inverter. Bounds from the speed loop's design from the
+/// nameplate: a rated step slows the rotor by at most `RATED_STEP_DIP` (10 %) of rated
+/// speed on the feedback alone (the load estimate's feed-forward only helps), on and off;
+/// below rated speed back within 1 % of rated speed in 0.2 s (4 time constants at the
+/// design's lowest bandwidth, 25 rad/s, less than 0.16 s). No fault. Measured: dips 3.1-8.6 %,
+/// back in 0.03-0.04 s. (The paper's observer: 7-13 %, 0.05-0.22 s, and `LossOfControl`
+/// regenerating at 10 % speed on the paper's machine.)
+#[test]
+fn rated_load_applied_and_removed_on_every_machine() {
+    let files = [
+        (
+            "paper-750w",
+            include_str!("../crates/acim-sim/machines/paper-750w.toml"),
+        ),
+        (
+            "motulator-2k2",
+            include_str!("../crates/acim-sim/machines/motulator-2k2.toml"),
+        ),
+        (
+            "krause-50hp",
+            include_str!("../crates/acim-sim/machines/krause-50hp.toml"),
+        ),
+        ("4kw", MOTOR_4KW),
+    ];
+    for (name, file) in files {
+        // the nameplate's power and rated speed, and the file's inertia replaced
+        let value = |key: &str| -> Option<f32> {
+            let line = file.lines().find(|l| l.trim_start().starts_with(key))?;
+            let v = line.split('=').nth(1)?.split('#').next()?;
+            v.trim().parse().ok()
+        };
+        let power_w = value("power_w").unwrap();
+        // without a rated speed on the plate the drive rates the machine at the
+        // synchronous speed
+        let rated_rpm = value("speed_rpm")
+            .unwrap_or(60.0 * value("frequency_hz").unwrap() / value("pole_pairs").unwrap());
+        let j = 0.0032 * (power_w / 1000.0).powf(1.3);
+        let file: String = file
+            .lines()
+            .map(|l| {
+                if l.starts_with("inertia_kgm2") {
+                    format!("inertia_kgm2 = {j}\n")
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
+        let rated_nm = power_w / (rated_rpm * acim::math::RPM_TO_RAD_S);
+        for frac in [0.1f32, 0.5, 1.0] {
+            let rpm = frac * rated_rpm;
+            for sign in [1.0f32, -1.0] {
+                let text = format!(
+                    "name = \"{name}\"\nduration_s = 7.0\n{file}\n[[speed_profile]]\nt_s = 0.2\nrpm = {rpm}\n\
+                     [[load_profile]]\nt_s = 3.0\nkind = \"active\"\ntorque_nm = {}\n\
+                     [[load_profile]]\nt_s = 5.0\nkind = \"active\"\ntorque_nm = 0.0\n",
+                    sign * rated_nm
+                );
+                let sc = acim_sim::scenario::Scenario::from_file_text(&text)
+                    .unwrap()
+                    .with_overrides(&["drive.observer=\"flux\"".to_string()])
+                    .unwrap();
+                let (rows, m) = run(&sc);
+                let label = format!("{name}, {rpm} rpm, {} N m", sign * rated_nm);
+                assert_eq!(m.fault, None, "{label}");
+                let band = 0.01 * rated_rpm;
+                for (t0, what) in [(3.0f32, "applied"), (5.0, "removed")] {
+                    let window: Vec<Row> =
+                        rows.iter().filter(|r| r.t_s < t0 + 2.0).cloned().collect();
+                    let (dip, back) = excursion(&window, t0, band);
+                    assert!(
+                        dip <= acim::nameplate::RATED_STEP_DIP * rated_rpm,
+                        "{label}, {what}: {dip} rpm"
+                    );
+                    if frac < 1.0 {
+                        assert!(back <= 0.2, "{label}, {what}: back after {back} s");
+                    }
+                }
+            }
+        }
+    }
+}
