@@ -77,7 +77,7 @@ const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
 /// order of the issue.
-const REPORT_REGIONS: [&str; 12] = [
+const REPORT_REGIONS: [&str; 13] = [
     "sincos",
     "clarke_park",
     "current_pi",
@@ -85,6 +85,7 @@ const REPORT_REGIONS: [&str; 12] = [
     "flux_slip",
     "observer_reduced",
     "observer_full_order",
+    "observer_flux",
     "rs_estimator",
     "svpwm",
     "fault_checks",
@@ -2314,7 +2315,7 @@ mod tests {
     use super::*;
 
     /// The scenario on the host: the probed clone reproduces `Drive::step` bit for bit,
-    /// the drive does not fault, and both observers track the true speed.
+    /// the drive does not fault, and the three observers track the true speed.
     #[test]
     fn scenario_probed_step_matches_the_drive_on_the_host() {
         let s = scenario::run();
@@ -2324,6 +2325,7 @@ mod tests {
         assert!(!s.drive_faulted, "{s:?}");
         assert!(s.full_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.reduced_mean_abs_err_rpm < 10.0, "{s:?}");
+        assert!(s.flux_mean_abs_err_rpm < 10.0, "{s:?}");
     }
 
     #[test]

@@ -25,6 +25,7 @@ use core::hint::black_box;
 use core::sync::atomic::AtomicU32;
 
 use acim::drive::{Drive, DriveConfig, DriveInputs, DriveState, PwmOutput, StepProbe, StepRegion};
+use acim::flux_observer::{FluxObserverConfig, FluxObserverDesign, FluxObserverState};
 use acim::frames::{clarke_two, inverse_park, AlphaBeta, FastSinCos};
 use acim::full_order::{FullOrderConfig, FullOrderDesign, FullOrderObserver};
 use acim::math::RPM_TO_RAD_S;
@@ -32,7 +33,7 @@ use acim::svpwm::SvpwmConfig;
 use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
-pub const REGIONS: [&str; 13] = [
+pub const REGIONS: [&str; 14] = [
     "empty",
     "fault_checks",
     "sincos",
@@ -46,6 +47,7 @@ pub const REGIONS: [&str; 13] = [
     "svpwm",
     "drive_step",
     "overmodulation",
+    "observer_flux",
 ];
 
 /// Steps from `start()` on (magnetising, with the speed search, the inverter test at
@@ -162,6 +164,7 @@ markers! {
     10 => bench_begin_svpwm, bench_end_svpwm;
     11 => bench_begin_drive_step, bench_end_drive_step;
     12 => bench_begin_overmodulation, bench_end_overmodulation;
+    13 => bench_begin_observer_flux, bench_end_observer_flux;
 }
 
 /// Calls the marker pair of each region of `Drive::step_probed`.
@@ -204,12 +207,17 @@ pub fn bench_config() -> DriveConfig {
     c
 }
 
-/// The baseline full-order observer, run as a passenger on the drive's samples and its
-/// applied voltage.
+/// The baseline full-order observer and the flux observer, run as passengers on the
+/// drive's samples and its applied voltage.
 pub struct Passenger {
     cfg: FullOrderConfig,
     /// Observer state.
     pub full: FullOrderObserver,
+    flux_cfg: FluxObserverConfig,
+    /// The flux observer's state.
+    pub flux: FluxObserverState,
+    /// The stator resistance the flux observer assumes (the machine's), ohm.
+    rs: f32,
     /// alpha-beta voltage applied over the coming period (the previous command), V.
     applied: (f32, f32),
     /// The drive's modulator configuration, for the overmodulation region.
@@ -223,6 +231,14 @@ impl Passenger {
             cfg: FullOrderConfig::new(&m, FullOrderDesign::paper_defaults(&m), cfg.control_period)
                 .ok()?,
             full: FullOrderObserver::new(),
+            flux_cfg: FluxObserverConfig::new(
+                &m,
+                FluxObserverDesign::defaults(cfg.max_speed),
+                cfg.control_period,
+            )
+            .ok()?,
+            flux: FluxObserverState::new(),
+            rs: m.stator_resistance(),
             applied: (0.0, 0.0),
             pwm: SvpwmConfig::new(
                 cfg.dead_time,
@@ -236,6 +252,11 @@ impl Passenger {
     /// Speed estimate, rad/s.
     pub fn speed(&self) -> f32 {
         self.full.speed(&self.cfg)
+    }
+
+    /// The flux observer's speed estimate, rad/s.
+    pub fn flux_speed(&self) -> f32 {
+        self.flux.speed(&self.flux_cfg)
     }
 }
 
@@ -260,6 +281,11 @@ pub fn bench_regions_step(
     p.full
         .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
     bench_end_observer_full_order();
+    let p = black_box(&mut *passenger);
+    bench_begin_observer_flux();
+    p.flux
+        .update(&p.flux_cfg, p.applied, (i_ab.alpha, i_ab.beta), p.rs);
+    bench_end_observer_flux();
 
     // the overmodulating modulator alone (not in the drive's default step): this
     // step's command lengthened to 1.05 x the linear limit, at the measured bus
@@ -338,6 +364,8 @@ pub struct Summary {
     pub full_mean_abs_err_rpm: f32,
     /// Mean |reduced-order - true| over the measured steps, rpm.
     pub reduced_mean_abs_err_rpm: f32,
+    /// Mean |flux observer - true| over the measured steps, rpm.
+    pub flux_mean_abs_err_rpm: f32,
 }
 
 /// Runs the scenario: start, magnetise, ramp to [`SPEED_TARGET_RPM`], load step; the
@@ -367,6 +395,7 @@ pub fn run() -> Summary {
     let mut s = Summary::default();
     let mut err_full = 0.0f32;
     let mut err_red = 0.0f32;
+    let mut err_flux = 0.0f32;
     let ts = cfg.control_period;
     while s.steps < MAX_STEPS && s.measured < MEASURED_STEPS {
         let meas = plant.sample();
@@ -388,6 +417,8 @@ pub fn run() -> Summary {
             let p = &mut passenger;
             p.full
                 .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
+            p.flux
+                .update(&p.flux_cfg, p.applied, (i_ab.alpha, i_ab.beta), p.rs);
             None
         };
         let out = bench_region_drive_step(drive, &inp, on);
@@ -416,6 +447,7 @@ pub fn run() -> Summary {
             let w = plant.speed();
             err_full += (passenger.speed() - w).abs();
             err_red += (drive.telemetry().speed_estimate - w).abs();
+            err_flux += (passenger.flux_speed() - w).abs();
         }
         if drive.state() == DriveState::Fault {
             s.drive_faulted = true;
@@ -432,5 +464,6 @@ pub fn run() -> Summary {
     s.full_rpm = passenger.speed() / RPM_TO_RAD_S;
     s.full_mean_abs_err_rpm = err_full / n / RPM_TO_RAD_S;
     s.reduced_mean_abs_err_rpm = err_red / n / RPM_TO_RAD_S;
+    s.flux_mean_abs_err_rpm = err_flux / n / RPM_TO_RAD_S;
     s
 }
