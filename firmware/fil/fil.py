@@ -42,6 +42,23 @@ from unicorn.arm_const import (
     UC_CPU_ARM_CORTEX_M4,
 )
 
+try:
+    # the library and callback types of the binding (unicorn 2.1.1, pinned): see
+    # Machine._map_peripherals
+    from unicorn.unicorn_py3.unicorn import (uclib as _uclib, MMIO_READ_CFUNC as _MMIO_READ_CFUNC,
+                                             MMIO_WRITE_CFUNC as _MMIO_WRITE_CFUNC)
+except ImportError:
+    _uclib = None
+
+
+def _keep_exception(uc, e):
+    # what the binding's own callback guard does: the first exception is raised by
+    # emu_start once the emulation has stopped
+    if uc._hook_exception is None:
+        uc._hook_exception = e
+    uc.emu_stop()
+
+
 # main-program instructions per PWM period: the real budget is 34 000 cycles, of which
 # the main loop only polls; 8 000 keeps the emulation fast and is ample for its work
 INSTRUCTIONS_PER_PERIOD = 8_000
@@ -74,6 +91,8 @@ GPR = [UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3, UC_ARM_REG_R4
        UC_ARM_REG_R10, UC_ARM_REG_R11, UC_ARM_REG_R12, UC_ARM_REG_SP, UC_ARM_REG_LR,
        UC_ARM_REG_PC, UC_ARM_REG_XPSR, UC_ARM_REG_PRIMASK, UC_ARM_REG_FPSCR]
 FPR = [UC_ARM_REG_S0 + i for i in range(32)]
+# data registers: writing one only stores its value (SP, PC, xPSR, PRIMASK and FPSCR do more)
+_PLAIN_REGS = frozenset(GPR[:13] + [UC_ARM_REG_LR])
 
 # peripheral bases and the register names the write log prints
 PERIPHERALS = {
@@ -117,6 +136,38 @@ FLASH_KEYS = (0x4567_0123, 0xCDEF_89AB)
 FLASH_LOCK = 1 << 31
 FLASH_BSY = 1 << 16
 MOE = 1 << 15
+
+
+def _split_uncached(addr):
+    for base in sorted(PERIPHERALS, reverse=True):
+        if base <= addr < base + 0x400:
+            return base, addr - base
+    if 0xE000_0000 <= addr < 0xE010_0000:
+        return addr & ~0xFF, addr & 0xFF
+    return addr & ~0x3FF, addr & 0x3FF
+
+
+# the plain memory: flash below the modelled top page, SRAM, CCM SRAM, the handlers' stop
+# page, system memory
+MEMORY = [(0x0800_0000, FLASH_TOP - 0x0800_0000), (0x2000_0000, 0x2_0000),
+          (0x1000_0000, 0x8000), (STOP, 0x1000), (0x1FFF_0000, 0x1_0000)]
+
+
+def _plain_write(base, off4):
+    """Whether a write to this register only stores its value (Machine._write's special
+    cases are the others)."""
+    return not (base in (0x4000_7000, 0x5000_0000, 0x5000_0100, 0x4001_2C00)
+                or (base, off4) in ((0x4002_1000, 0x8), (0x4000_1000, 0x10), (0x4002_0C00, 0x4),
+                                    (0x4000_4400, 0x28), (0x4000_4400, 0x20),
+                                    (0x4000_4400, 0x18), (0x4000_3000, 0x0),
+                                    (0xE000_ED00, 0x94))
+                or (base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14, 0x18))
+                or (base == 0xE000_E100 and off4 < 0x20))
+
+
+_SPLIT = {}         # address -> (base, offset)
+_READ_DECODE = {}   # address -> ((base, aligned offset), special read or None, shift)
+_WRITE_DECODE = {}  # address -> (base, offset, aligned offset, key, peripheral, register, plain)
 
 
 def load_elf(path):
@@ -271,6 +322,7 @@ class Machine:
         self.board = BOARDS[board]
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M4)
+        self._callbacks = []
         self.flash_top = bytearray(b"\xff" * 0x1000)
         if settings_pages is not None:
             if len(settings_pages) != 0x1000:
@@ -288,17 +340,13 @@ class Machine:
         self._flash_half = None      # first word of a double word being programmed
         self.uc.mmio_map(FLASH_TOP, 0x1000, self._flash_mem_read, None,
                          self._flash_mem_write, None)
-        for base, size in [(0x0800_0000, FLASH_TOP - 0x0800_0000), (0x2000_0000, 0x2_0000),
-                           (0x1000_0000, 0x8000), (STOP, 0x1000), (0x1FFF_0000, 0x1_0000)]:
+        for base, size in MEMORY:
             self.uc.mem_map(base, size)
         for paddr, blob in load_elf(elf):
             self.uc.mem_write(paddr, blob)
         for base, size in [(0x4000_0000, 0x3_0000), (0x4800_0000, 0x2000),
                            (0x5000_0000, 0x1000), (0xE000_0000, 0x10_0000)]:
-            # Unicorn passes the offset into the mapped region, not the address
-            self.uc.mmio_map(base, size,
-                             lambda uc, off, size, d, b=base: self._read(uc, b + off, size, d), None,
-                             lambda uc, off, size, v, d, b=base: self._write(uc, b + off, size, v, d), None)
+            self._map_peripherals(base, size)
         # peripheral bit-band alias: one word per bit of 0x4000_0000.. (the HAL uses it)
         self.uc.mmio_map(0x4200_0000, 0x200_0000, self._bitband_read, None,
                          self._bitband_write, None)
@@ -369,13 +417,15 @@ class Machine:
         r[(0xE000_ED00, 0x0)] = 0x410F_C241     # CPUID
         r[(0xE000_E010, 0x1C)] = 0x4000_0000    # SysTick CALIB
 
-    def _split(self, addr):
-        for base in sorted(PERIPHERALS, reverse=True):
-            if base <= addr < base + 0x400:
-                return base, addr - base
-        if 0xE000_0000 <= addr < 0xE010_0000:
-            return addr & ~0xFF, addr & 0xFF
-        return addr & ~0x3FF, addr & 0x3FF
+    @staticmethod
+    def _split(addr):
+        """(peripheral base, offset) of an address: a pure function of it, so each address's
+        answer is computed once (the main loop polls a few registers hundreds of times a
+        period)."""
+        s = _SPLIT.get(addr)
+        if s is None:
+            s = _SPLIT[addr] = _split_uncached(addr)
+        return s
 
     def _bitband_read(self, uc, off, size, _d):
         byte_off, bitn = off // 32, (off % 32) // 4
@@ -409,51 +459,114 @@ class Machine:
     def _pwr_clocked(self):
         return bool(self.reg(0x4002_1000, 0x58) & (1 << 28))
 
+    def _map_peripherals(self, base, size):
+        """Maps `base`..`base + size` to the peripheral models (_read, _write). The main
+        loop polls a few registers hundreds of times a period, so a peripheral access is
+        the emulation's most frequent event: with the pinned binding (requirements.txt) the
+        callbacks are registered with the library directly, one Python call each instead
+        of three (the binding's exception guard, its adapter, ours); an exception in a
+        model is kept and raised by emu_start, as the binding does."""
+        uc = self.uc
+        if _uclib is None:
+            # Unicorn passes the offset into the mapped region, not the address
+            uc.mmio_map(base, size, lambda _uc, off, n, _d: self._read(uc, base + off, n, None),
+                        None, lambda _uc, off, n, v, _d: self._write(uc, base + off, n, v, None),
+                        None)
+            return
+        read, write = self._read, self._write
+
+        def on_read(_handle, off, n, _data):
+            try:
+                return read(uc, base + off, n, None)
+            except Exception as e:
+                _keep_exception(uc, e)
+                return 0
+
+        def on_write(_handle, off, n, value, _data):
+            try:
+                write(uc, base + off, n, value, None)
+            except Exception as e:
+                _keep_exception(uc, e)
+
+        cbs = (_MMIO_READ_CFUNC(on_read), _MMIO_WRITE_CFUNC(on_write))
+        self._callbacks.append(cbs)             # alive as long as the machine
+        status = _uclib.uc_mmio_map(uc._uch, base, size, cbs[0], None, cbs[1], None)
+        if status != 0:
+            raise UcError(status)
+
     def _read(self, uc, addr, size, _data):
-        base, off = self._split(addr)
-        v = self.reg(base, off & ~3)
-        if base == 0x4000_7000 and not self._pwr_clocked():
-            v = 0                                       # gated bus reads as 0
-        elif base == 0x4002_1000 and off == 0x0:
-            v |= (v & (1 << 8)) << 2                    # HSIRDY follows HSION
-            v |= (v & (1 << 24)) << 1                   # PLLRDY follows PLLON
-        elif base == 0x4002_1000 and off == 0x8:
-            v = (v & ~0xC) | ((v & 0x3) << 2)           # SWS follows SW
-        elif base == 0x4002_1000 and off == 0x94:
-            v |= 0x2                                    # LSIRDY
-        elif base in (0x5000_0000, 0x5000_0100) and off == 0x8:
-            v &= ~(1 << 31)                             # ADCAL done at once
-        elif base == 0x4000_4400 and off == 0x1C:       # USART2_ISR
-            txfnf = self._tx_credit is None or self._tx_credit >= 1.0
-            v = ((1 << 7) if txfnf else 0) | (1 << 6) | (1 << 21) | (1 << 22) \
-                | ((1 << 5) if self.rx else 0) | ((1 << 3) if self.uart_ore else 0)
-        elif base == 0x4000_4400 and off == 0x24:       # RDR
-            v = self.rx.pop(0) if self.rx else 0
-        elif base == 0x4002_0C00 and off == 0x0:
-            v |= 1 << 31                                # CORDIC RRDY
-        elif base == 0x4002_0C00 and off == 0x8:
-            v = self.cordic_results.pop(0) if self.cordic_results else 0
-        elif base == 0xE000_E000 and off == 0x10:       # SysTick CSR: COUNTFLAG
-            v |= 1 << 16
-        elif base == 0xE000_1000 and off == 0x4:        # DWT CYCCNT
-            v = self.instret & 0xFFFF_FFFF
-        elif base == 0x4000_3000 and off == 0xC:        # IWDG_SR: updates done
-            v = 0
-        shift = (off & 3) * 8
+        d = _READ_DECODE.get(addr)
+        if d is None:
+            base, off = self._split(addr)
+            d = _READ_DECODE[addr] = ((base, off & ~3), _READ_SPECIAL.get(
+                base if base == 0x4000_7000 else (base, off)), (off & 3) * 8)
+        key, special, shift = d
+        v = self.regs.get(key, 0)
+        if special is not None:
+            v = special(self, v)
         return (v >> shift) & ((1 << (8 * size)) - 1)
 
+    # registers whose reads are not their stored value (the (base, offset) of each, as
+    # _split gives it; PWR by its base)
+    def _read_pwr(self, v):
+        return v if self._pwr_clocked() else 0          # gated bus reads as 0
+
+    def _read_rcc_cr(self, v):
+        v |= (v & (1 << 8)) << 2                        # HSIRDY follows HSION
+        v |= (v & (1 << 24)) << 1                       # PLLRDY follows PLLON
+        return v
+
+    def _read_rcc_cfgr(self, v):
+        return (v & ~0xC) | ((v & 0x3) << 2)            # SWS follows SW
+
+    def _read_rcc_csr(self, v):
+        return v | 0x2                                  # LSIRDY
+
+    def _read_adc_cr(self, v):
+        return v & ~(1 << 31)                           # ADCAL done at once
+
+    def _read_usart_isr(self, v):
+        txfnf = self._tx_credit is None or self._tx_credit >= 1.0
+        return ((1 << 7) if txfnf else 0) | (1 << 6) | (1 << 21) | (1 << 22) \
+            | ((1 << 5) if self.rx else 0) | ((1 << 3) if self.uart_ore else 0)
+
+    def _read_usart_rdr(self, v):
+        return self.rx.pop(0) if self.rx else 0
+
+    def _read_cordic_csr(self, v):
+        return v | 1 << 31                              # CORDIC RRDY
+
+    def _read_cordic_rdata(self, v):
+        return self.cordic_results.pop(0) if self.cordic_results else 0
+
+    def _read_systick_csr(self, v):
+        return v | 1 << 16                              # COUNTFLAG
+
+    def _read_dwt_cyccnt(self, v):
+        return self.instret & 0xFFFF_FFFF
+
+    def _read_iwdg_sr(self, v):
+        return 0                                        # updates done
+
     def _write(self, uc, addr, size, value, _data):
-        base, off = self._split(addr)
-        off4 = off & ~3
+        d = _WRITE_DECODE.get(addr)
+        if d is None:
+            base, off = self._split(addr)
+            off4 = off & ~3
+            d = _WRITE_DECODE[addr] = (base, off, off4, (base, off4), *self._name(base, off4),
+                                       _plain_write(base, off4))
+        base, off, off4, key, p, name, plain = d
         if size < 4:
-            old = self.reg(base, off4)
+            old = self.regs.get(key, 0)
             shift = (off & 3) * 8
             mask = ((1 << (8 * size)) - 1) << shift
             value = (old & ~mask) | ((value << shift) & mask)
-        p, name = self._name(base, off4)
         if p is not None:
             self.writes.append((self.instret, p, name, value))
             self.write_offsets.append(off4)
+        if plain:
+            self.regs[key] = value
+            return
         if base == 0x4000_7000:
             self.events.append(("PWR write", self._pwr_clocked()))
             if not self._pwr_clocked() or self.pwr_gated_writes:
@@ -731,14 +844,22 @@ class Machine:
 
     # --- execution ---------------------------------------------------------------------
     def _save(self):
-        return ([self.uc.reg_read(r) for r in GPR], [self.uc.reg_read(r) for r in FPR])
+        regs = self.uc.reg_read_batch(GPR + FPR)
+        return (regs[:len(GPR)], regs[len(GPR):])
 
     def _restore(self, ctx):
+        # in the same order as the registers were saved; a core or floating-point data
+        # register that still holds its saved value (the callee-saved ones after a handler)
+        # is not written again: writing it would store the same value
         g, f = ctx
-        for r, v in zip(GPR, g):
+        now = self.uc.reg_read_batch(GPR + FPR)
+        for i, (r, v) in enumerate(zip(GPR, g)):
+            if r in _PLAIN_REGS and now[i] == v:
+                continue
             self.uc.reg_write(r, v)
-        for r, v in zip(FPR, f):
-            self.uc.reg_write(r, v)
+        for i, (r, v) in enumerate(zip(FPR, f), len(GPR)):
+            if now[i] != v:
+                self.uc.reg_write(r, v)
 
     def _count_block(self, uc, address, size, _data):
         key = (address, size)
@@ -935,6 +1056,23 @@ class Machine:
                 break
             out.append(f"{p}.{name} = 0x{v:08X}")
         return out
+
+
+_READ_SPECIAL = {
+    0x4000_7000: Machine._read_pwr,
+    (0x4002_1000, 0x0): Machine._read_rcc_cr,
+    (0x4002_1000, 0x8): Machine._read_rcc_cfgr,
+    (0x4002_1000, 0x94): Machine._read_rcc_csr,
+    (0x5000_0000, 0x8): Machine._read_adc_cr,
+    (0x5000_0100, 0x8): Machine._read_adc_cr,
+    (0x4000_4400, 0x1C): Machine._read_usart_isr,
+    (0x4000_4400, 0x24): Machine._read_usart_rdr,
+    (0x4002_0C00, 0x0): Machine._read_cordic_csr,
+    (0x4002_0C00, 0x8): Machine._read_cordic_rdata,
+    (0xE000_E000, 0x10): Machine._read_systick_csr,
+    (0xE000_1000, 0x4): Machine._read_dwt_cyccnt,
+    (0x4000_3000, 0xC): Machine._read_iwdg_sr,
+}
 
 
 def default_elf(mode):
