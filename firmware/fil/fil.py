@@ -162,6 +162,7 @@ def _plain_write(base, off4):
                                     (0x4000_4400, 0x18), (0x4000_3000, 0x0),
                                     (0xE000_ED00, 0x94))
                 or (base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14, 0x18))
+                or (base in (0x4800_0000, 0x4800_0400, 0x4800_0800) and off4 in (0x18, 0x28))
                 or (base == 0xE000_E100 and off4 < 0x20))
 
 
