@@ -836,7 +836,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         let inv_dc_bus = m.dc_bus.recip();
         let limit = self
             .modulator
-            .voltage_limit(&self.coeffs, m.dc_bus, inv_dc_bus);
+            .voltage_limit(&self.coeffs.pwm, m.dc_bus, inv_dc_bus);
         let limit = self.transient_limit(limit);
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
@@ -1055,7 +1055,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
             }
         };
         let observer = est.observer.update(
-            c,
+            &c.observer,
             &SpeedObserverInputs {
                 i_ab: m.i_ab,
                 i_dq: i,
@@ -1674,7 +1674,7 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         // the same current signs; the estimators keep the command v, which the two
         // compensations make the machine see
         let out = self.modulator.modulate(
-            c,
+            &c.pwm,
             v_ab,
             m.dc_bus,
             inv_dc_bus,

@@ -435,10 +435,11 @@ impl crate::observer::SpeedObserver for FluxObserver {
     #[inline(always)]
     fn update(
         &mut self,
-        coeffs: &crate::DriveCoeffs<f32>,
+        _coeffs: &crate::observer::ObserverCoeffs<f32>,
         x: &crate::observer::SpeedObserverInputs,
     ) -> crate::observer::SpeedEstimate {
-        let rs = x.equivalent_resistance - coeffs.referred_rotor_resistance;
+        // (R_R of the same machine model as the drive's design)
+        let rs = x.equivalent_resistance - self.cfg.r_r;
         self.state.update(
             &self.cfg,
             (x.v_ab.alpha, x.v_ab.beta),

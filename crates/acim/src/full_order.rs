@@ -477,7 +477,7 @@ impl crate::observer::SpeedObserver for FullOrder {
     #[inline(always)]
     fn update(
         &mut self,
-        _coeffs: &crate::DriveCoeffs<f32>,
+        _coeffs: &crate::observer::ObserverCoeffs<f32>,
         x: &crate::observer::SpeedObserverInputs,
     ) -> crate::observer::SpeedEstimate {
         let mut speed = self.state.update(

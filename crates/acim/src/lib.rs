@@ -66,6 +66,7 @@ pub mod thermal;
 
 // the cascade: configuration and design, supervision, the staged drive
 pub mod commissioning;
+pub mod config;
 pub mod controller;
 pub mod design;
 pub mod drive;

@@ -48,7 +48,6 @@
 //! and [`ObserverConfig::discrete_stable`] checks the discrete characteristic polynomial
 //! built from the actual gains with Jury's test.
 
-use crate::design::DriveCoeffs;
 use crate::frames::{AlphaBeta, Dq};
 use crate::math::is_finite;
 use crate::num::Num;
@@ -396,9 +395,9 @@ pub trait SpeedObserver<N: Num = f32> {
     /// [`crate::rs_estimator::RsRunningConfig::max_frequency`], where the resistive drop
     /// is observable against inductance errors (Rs/L_M).
     const RS_RUNNING_AT_SPEED: bool = true;
-    /// One step. `coeffs` are the drive's coefficients (an observer may read its own part
-    /// of them, as the reduced-order observer reads [`crate::DriveCoeffs::observer`]).
-    fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
+    /// One step. `coeffs` are the reduced-order observer's design (eq. 12, 14) built with
+    /// the drive's; another observer holds its own design and may ignore them.
+    fn update(&mut self, coeffs: &ObserverCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
     /// Back to the initial state (a start command).
     fn reset(&mut self);
     /// Called when magnetizing ends, with the measured i_sq: speed control starts from
@@ -417,11 +416,11 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
     /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
     /// section 4).
     #[inline(always)]
-    fn update(&mut self, coeffs: &DriveCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N> {
+    fn update(&mut self, coeffs: &ObserverCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N> {
         if !x.magnetizing {
             ReducedOrderObserver::update(
                 self,
-                &coeffs.observer,
+                coeffs,
                 &ObserverInputs {
                     i_sq: x.i_dq.q,
                     i_sd: x.i_dq.d,

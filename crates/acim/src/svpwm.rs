@@ -35,7 +35,6 @@
 //!   by (t_d/T_pwm + V_drop/V_dc) sat(i_x/i_band): a sign function made linear within
 //!   +/- `current_band` so that it does not chatter around zero crossings.
 
-use crate::design::{DriveCoeffs, FW_TRIM_FRACTION};
 use crate::frames::{inverse_clarke, AlphaBeta};
 use crate::math::{clamp, sqrt};
 use crate::num::Num;
@@ -55,6 +54,9 @@ pub struct SvpwmConfig<N: Num = f32> {
     pub inv_current_band: N::Gain,
     /// Smallest bus voltage used as divisor, V.
     pub min_bus_voltage: N,
+    /// 1/V_dc -> 1/v_max: 1/([`VOLTAGE_MARGIN`]/sqrt 3) (the current loops' voltage
+    /// limit's reciprocal from the bus's).
+    pub voltage_limit_per_inv_bus: N::Gain,
 }
 
 impl SvpwmConfig<f32> {
@@ -66,9 +68,15 @@ impl SvpwmConfig<f32> {
             device_drop: clamp(device_drop, 0.0, 20.0),
             inv_current_band: 1.0 / current_band.max(1e-3),
             min_bus_voltage: 1.0,
+            voltage_limit_per_inv_bus: 1.0 / (VOLTAGE_MARGIN * INV_SQRT3),
         }
     }
 }
+
+/// The voltage-feedback trim holds the voltage command at this fraction of the current
+/// loops' limit: 8 % headroom for the current loops' transients at high speed, where the
+/// machine runs on the voltage limit.
+pub const FW_TRIM_FRACTION: f32 = 0.92;
 
 /// Output of the modulator.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -208,14 +216,14 @@ pub trait Modulator<N: Num = f32> {
     const OVERMODULATES: bool = false;
     /// The largest voltage vector the current loops may command at bus `dc_bus` (V, > 0)
     /// with `inv_dc_bus` = 1/`dc_bus`.
-    fn voltage_limit(&self, coeffs: &DriveCoeffs<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
+    fn voltage_limit(&self, pwm: &SvpwmConfig<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
     /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
     /// with `phase_currents` (A) predicted for the dead-time compensation, whose duty
     /// per leg is the configured one plus `dead_time_correction` (the inverter test's,
     ///; 0 leaves the configured compensation bit for bit).
     fn modulate(
         &self,
-        coeffs: &DriveCoeffs<N>,
+        pwm: &SvpwmConfig<N>,
         v: AlphaBeta<N>,
         dc_bus: N,
         inv_dc_bus: N,
@@ -231,7 +239,7 @@ pub struct Svpwm;
 impl Modulator<f32> for Svpwm {
     /// 98 % of the inscribed circle V_dc/sqrt(3) ([`VOLTAGE_MARGIN`]).
     #[inline(always)]
-    fn voltage_limit(&self, _: &DriveCoeffs<f32>, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+    fn voltage_limit(&self, _: &SvpwmConfig, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
         let max = linear_limit(dc_bus) * VOLTAGE_MARGIN;
         // (the coefficient is 1/(0.98/sqrt 3), folded at compile time here)
         let inv_max = inv_dc_bus * (1.0 / (VOLTAGE_MARGIN * INV_SQRT3));
@@ -246,7 +254,7 @@ impl Modulator<f32> for Svpwm {
     #[inline(always)]
     fn modulate(
         &self,
-        coeffs: &DriveCoeffs<f32>,
+        pwm: &SvpwmConfig,
         v: AlphaBeta,
         dc_bus: f32,
         inv_dc_bus: f32,
@@ -254,7 +262,7 @@ impl Modulator<f32> for Svpwm {
         dead_time_correction: f32,
     ) -> Modulation {
         modulate_with_inverse(
-            &coeffs.pwm,
+            pwm,
             v,
             dc_bus,
             inv_dc_bus,
@@ -332,7 +340,7 @@ impl Modulator<f32> for Overmodulation {
     /// The six-step fundamental 2 V_dc/pi; steady: the linear limit over
     /// [`FW_TRIM_FRACTION`].
     #[inline(always)]
-    fn voltage_limit(&self, _: &DriveCoeffs<f32>, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
+    fn voltage_limit(&self, _: &SvpwmConfig, dc_bus: f32, inv_dc_bus: f32) -> VoltageLimit {
         VoltageLimit {
             max: dc_bus * SIX_STEP,
             inv_max: inv_dc_bus * (1.0 / SIX_STEP),
@@ -344,7 +352,7 @@ impl Modulator<f32> for Overmodulation {
     #[inline(always)]
     fn modulate(
         &self,
-        coeffs: &DriveCoeffs<f32>,
+        pwm: &SvpwmConfig,
         v: AlphaBeta,
         dc_bus: f32,
         inv_dc_bus: f32,
@@ -352,7 +360,7 @@ impl Modulator<f32> for Overmodulation {
         dead_time_correction: f32,
     ) -> Modulation {
         overmodulate_corrected(
-            &coeffs.pwm,
+            pwm,
             v,
             dc_bus,
             inv_dc_bus,

@@ -268,6 +268,8 @@ pub fn svpwm(cfg: &SvpwmConfig, b: &PerUnitBases) -> Option<SvpwmConfig<Q24>> {
         device_drop: Q24(to_q24(cfg.device_drop / b.voltage)),
         inv_current_band: Gain::from_f32(cfg.inv_current_band * b.current)?,
         min_bus_voltage: Q24(to_q24(cfg.min_bus_voltage / b.voltage)),
+        // dimensionless
+        voltage_limit_per_inv_bus: Gain::from_f32(cfg.voltage_limit_per_inv_bus)?,
     })
 }
 
@@ -354,10 +356,6 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             "flux_current",
         )?,
         lead: angle_gain(b.frequency * ts * cfg.delay_periods).ok_or(missing("delay_periods"))?,
-        voltage_limit_per_inv_bus: gain(
-            1.0 / (crate::svpwm::VOLTAGE_MARGIN * crate::svpwm::INV_SQRT3),
-            "dc_bus_min",
-        )?,
         orientation: OrientationDesign {
             gain_per_flux: gain(
                 d.orientation.gain_per_flux * b.voltage / b.frequency,

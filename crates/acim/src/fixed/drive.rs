@@ -13,7 +13,7 @@
 use super::q::{clamp, to_q24, ONE, Q24};
 use super::trig::TableSinCos;
 use super::PerUnitBases;
-use crate::design::{ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign};
+use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign};
 use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
 use crate::frames::SinCos;
 use crate::frames::{AlphaBeta, Dq};
@@ -21,7 +21,7 @@ use crate::math::is_finite;
 use crate::num::Num;
 use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
-use crate::svpwm::{modulate_with_inverse, Modulation, Modulator, Svpwm, VoltageLimit};
+use crate::svpwm::{modulate_with_inverse, Modulation, Modulator, Svpwm, SvpwmConfig, VoltageLimit};
 
 /// The fixed-point sensorless IFOC drive (the paper's observer, SVPWM, table sin/cos).
 pub type FixedDrive = Drive<TableSinCos, Q24, ReducedOrderObserver<Q24>, Svpwm>;
@@ -41,12 +41,12 @@ impl Modulator<Q24> for Svpwm {
     #[inline(always)]
     fn voltage_limit(
         &self,
-        c: &DriveCoeffs<Q24>,
+        pwm: &SvpwmConfig<Q24>,
         dc_bus: Q24,
         inv_dc_bus: Q24,
     ) -> VoltageLimit<Q24> {
         let max = dc_bus * V_MAX_PER_BUS;
-        let inv_max = Q24::gain(c.voltage_limit_per_inv_bus, inv_dc_bus);
+        let inv_max = Q24::gain(pwm.voltage_limit_per_inv_bus, inv_dc_bus);
         VoltageLimit {
             max,
             inv_max,
@@ -58,7 +58,7 @@ impl Modulator<Q24> for Svpwm {
     #[inline(always)]
     fn modulate(
         &self,
-        c: &DriveCoeffs<Q24>,
+        pwm: &SvpwmConfig<Q24>,
         v: AlphaBeta<Q24>,
         dc_bus: Q24,
         inv_dc_bus: Q24,
@@ -66,7 +66,7 @@ impl Modulator<Q24> for Svpwm {
         dead_time_correction: Q24,
     ) -> Modulation<Q24> {
         modulate_with_inverse(
-            &c.pwm,
+            pwm,
             v,
             dc_bus,
             inv_dc_bus,

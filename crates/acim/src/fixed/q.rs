@@ -681,7 +681,7 @@ mod tests {
             c.torque_factor,
             c.speed_per_volt,
             c.lead,
-            c.voltage_limit_per_inv_bus,
+            c.pwm.voltage_limit_per_inv_bus,
         ];
         let mut shifts = [false; 63];
         for g in gains {
