@@ -23,8 +23,19 @@ use crate::svpwm::{linear_limit, SvpwmConfig};
 use crate::thermal::ThermalConfig;
 
 pub use crate::config::*;
-pub use crate::svpwm::FW_TRIM_FRACTION;
 use crate::config::{check, positive};
+pub use crate::field_weakening::{
+    FieldWeakeningDesign, FLUX_OPT_FALL_TAU_R, FLUX_OPT_MIN_FRACTION, FW_HOLD_BAND_FRACTION,
+    FW_MIN_FLUX_FRACTION, FW_MIN_FREQUENCY_FRACTION, FW_REPORT_SPEED_LOOP_CONSTANTS,
+    FW_TRIM_BANDWIDTH, FW_TRIM_GATE, FW_VOLTAGE_FRACTION, OVC_END_FRACTION, OVC_START_FRACTION,
+};
+pub use crate::inverter_test::{
+    InverterTestDesign, INVERTER_TEST_FILTER_TIME, INVERTER_TEST_LEVELS, INVERTER_TEST_LEVEL_TIME,
+    INVERTER_TEST_MAX_DUTY, INVERTER_TEST_MIN_BANDS, INVERTER_TEST_SETTLE_TIME, INVERTER_TEST_TIME,
+};
+pub use crate::orientation::OrientationDesign;
+pub use crate::supervisor::SupervisionLimits;
+pub use crate::svpwm::FW_TRIM_FRACTION;
 
 /// Overload: the speed loop settles in this many of its time constants (1 /
 /// speed_bandwidth); torque at the limit with a large speed error beyond that is a fault
@@ -51,30 +62,6 @@ pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
 /// Under load the orientation gain is at least this multiple of the stability bound
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
 pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
-/// Field weakening keeps the steady-state stator voltage within this fraction of the
-/// current loops' voltage limit: the margin the current loops keep for
-/// transients and for what the model of [`FieldWeakeningDesign`] neglects. 0.97 keeps
-/// the no-load voltage of the paper machine at rated flux and 1000 rpm (about 177 V of
-/// the 184 V limit on 325 V) below it: the drive weakens the field only above that.
-pub const FW_VOLTAGE_FRACTION: f32 = 0.97;
-/// Field weakening lowers the flux current to no less than this fraction of
-/// `flux_current` (the flux model's floor is 10 %, [`crate::flux`]).
-pub const FW_MIN_FLUX_FRACTION: f32 = 0.15;
-/// Light-load flux optimisation: the flux current never goes below this fraction of
-/// `flux_current` (the observer's gains follow 1/lambda_r, and a load step must find
-/// some flux to build torque on).
-pub const FLUX_OPT_MIN_FRACTION: f32 = 0.5;
-/// Light-load flux optimisation: the flux current falls towards a lower optimum with this
-/// many rotor time constants (the flux follows it with one more); it rises at once.
-pub const FLUX_OPT_FALL_TAU_R: f32 = 5.0;
-/// Below this fraction of the base electrical frequency p Omega_base (linear limit at
-/// `dc_bus_max`) the field-weakening model divides by this floor instead of |w_s|: there
-/// its flux current is far above `flux_current` and the rated flux is kept.
-pub const FW_MIN_FREQUENCY_FRACTION: f32 = 0.25;
-/// Bandwidth of the field weakening's voltage-feedback trim, rad/s: the steady-state
-/// loop gain of i_sd* -> |v| is w Ls, normalised by the 1/w of the trim; an order below
-/// 1/tau_r of the paper machine (15 rad/s) so the lag of the flux does not destabilise it.
-pub const FW_TRIM_BANDWIDTH: f32 = 30.0;
 /// With an overmodulating modulator ([`crate::svpwm::Overmodulation`]) the current loops
 /// may use the range above the sustained (linear) voltage limit for this long in a row,
 /// s; then the sustained limit applies until the command is back below it, when the
@@ -84,27 +71,6 @@ pub const FW_TRIM_BANDWIDTH: f32 = 30.0;
 /// that a drive held at its voltage limit (a target beyond the reachable speed) runs in
 /// the linear range, where its current samples carry no overmodulation harmonics.
 pub const OVERMODULATION_RESERVE_TIME: f32 = 0.05;
-/// Field weakening (the model and the voltage-feedback trim) is evaluated only where the
-/// no-load voltage at rated flux w Ls i_sd_rated exceeds this fraction of V (from about
-/// 0.7 x base speed up): below it the rated flux is kept without computing anything, and
-/// faults that saturate the current loops at lower speed do not move the flux. (A load
-/// whose Rs i_sq drop alone exceeds 0.3 V below that speed is voltage-limited by the
-/// current loops, as earlier.)
-pub const FW_TRIM_GATE: f32 = 0.7;
-/// Torque held at the voltage or bus limit: the speed reference stays within this
-/// fraction of `max_speed` of the speed estimate (the reachable speed is held and
-/// reported instead of a growing speed error).
-pub const FW_HOLD_BAND_FRACTION: f32 = 0.01;
-/// The telemetry's `speed_target_limited` stays set this many speed-loop time constants
-/// after the hold last bound: the hold binds only in the steps where the speed PI sits at
-/// its limit, which flickers at the reachable speed, and a report that flickers with it
-/// (a third of the steps, measured) says less than it knows.
-pub const FW_REPORT_SPEED_LOOP_CONSTANTS: f32 = 2.5;
-/// Over-voltage control starts reducing the regenerative current at this fraction of
-/// `dc_bus_max`.
-pub const OVC_START_FRACTION: f32 = 0.9;
-/// ... and allows none at this fraction.
-pub const OVC_END_FRACTION: f32 = 0.975;
 /// Speed targets are limited to this fraction of `max_speed` (the over-speed trip keeps
 /// a margin above any commanded speed).
 pub const SPEED_TARGET_FRACTION: f32 = 0.9;
@@ -170,233 +136,6 @@ pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
 /// p0347).
 pub const DEMAGNETIZE_TAU_R: f32 = 5.0;
 
-/// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
-/// of the step reads only these.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SupervisionLimits<N: Num = f32> {
-    /// Measured phases (the third current is derived with two shunts).
-    pub current_sensing: CurrentSensing,
-    /// Phase current trip, A.
-    pub overcurrent_trip: N,
-    /// Lowest DC bus while active, V.
-    pub dc_bus_min: N,
-    /// Highest DC bus, V.
-    pub dc_bus_max: N,
-    /// Over-speed trip on the estimated speed, rad/s.
-    pub max_speed: N,
-    /// Largest plausible |T_L_hat|, N m.
-    pub max_load_torque: N,
-    /// Steps an implausible load estimate may persist.
-    pub implausible_steps: u32,
-    /// Steps the stall condition may persist.
-    pub stall_steps: u32,
-    /// Steps the overload condition may persist (leaky): [`DriveConfig::overload_time`].
-    pub overload_steps: u32,
-    /// Overload: speed error beyond this fraction of |reference| ([`OVERLOAD_FRACTION`]).
-    pub overload_fraction: N,
-    /// ... and beyond this floor, rad/s ([`OVERLOAD_FRACTION`] of 100 rpm, so that a
-    /// reversal through zero does not count).
-    pub overload_speed_floor: N,
-    /// Torque at its limit with |w_s| below this, rad/s electrical (the orientation
-    /// correction's fade-in start: no information below it) ...
-    pub blind_frequency: N,
-    /// ... for longer than this, steps (one rotor time constant): `Overload`.
-    pub blind_steps: u32,
-    /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`]).
-    pub stall_fraction: N,
-    /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
-    pub rs_bound_faults: bool,
-    /// The control monitor's leaky-mean gain Ts / T_f, T_f =
-    /// [`MONITOR_FILTER_LOOP_CONSTANTS`] / current_bandwidth.
-    pub monitor_filter: N::Gain,
-    /// Largest mean |i* - i|, A: [`CURRENT_ERROR_FRACTION`] i_sd*.
-    pub current_error_limit: N,
-    /// Largest mean |a + b + c| with three shunts, A: [`CURRENT_SUM_FRACTION`] of the trip.
-    pub current_sum_limit: N,
-    /// Largest mean current-loop integral |I_d| + |I_q|, V: [`RESIDUAL_RS_TOLERANCE`] Rs
-    /// current_limit + [`RESIDUAL_VOLTAGE_FRACTION`] of the linear limit at `dc_bus_max`.
-    pub model_residual_limit: N,
-    /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
-    /// [`MAGNETIZING_TIMEOUT_TAU_R`] tau_r, plus the flying start's speed search (when
-    /// it runs).
-    pub magnetizing_timeout_steps: u32,
-    /// Periods after a switch-off before a start is accepted: [`DEMAGNETIZE_TAU_R`] tau_r.
-    pub demagnetize_steps: u32,
-    /// Idle offset means after the measurement: leaky-mean gain Ts /
-    /// [`OFFSET_FILTER_TIME`].
-    pub offset_filter: N::Gain,
-    /// Idle samples averaged with equal weights, after which the offset means are trusted
-    /// ([`OFFSET_MEASUREMENT_TIME`]).
-    pub offset_settle_steps: u32,
-    /// Idle periods after a switch-off whose samples are not taken
-    /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`], >= 1).
-    pub offset_skip_steps: u32,
-    /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`] of the trip (also the
-    /// largest DC component of the running alpha-beta current).
-    pub offset_limit: N,
-    /// The running offset check's leaky-mean gain Ts / [`RUNNING_OFFSET_FILTER_TIME`].
-    pub running_offset_filter: N::Gain,
-    /// The running offset check counts only above this |w_s|, rad/s electrical:
-    /// 4 I_max / (offset_limit T), where the AC current's ripple through the mean plus the
-    /// transient of a current that starts at that frequency, at most 2 I_max / (|w_s| T),
-    /// stays below half the limit.
-    pub running_offset_min_frequency: N,
-    /// Largest resistance the current-response check allows, ohm:
-    /// (1 + [`RESIDUAL_RS_TOLERANCE`]) Rs + R_R (while the flux builds with the frame
-    /// held, d lambda_r/dt = R_R i_sd - lambda_r/tau_r adds up to R_R |i|).
-    pub impedance_resistance: N,
-    /// Largest inductance the current-response check allows, H: Ls (the machine's
-    /// impedance is below Rs_max + |w_s| Ls at any slip).
-    pub impedance_inductance: N::Gain,
-    /// The current-response check judges only above this mean voltage, V: Rs
-    /// current_limit (the voltage of the largest current at standstill).
-    pub impedance_voltage_floor: N,
-}
-
-/// Field weakening and over-voltage control: a model-based flux reference
-/// with a voltage-feedback trim.
-///
-/// Why this combination: a pure voltage-feedback loop (integrating |v*| - V into i_sd*)
-/// needs the voltage to reach its limit before it acts, so on its own it would also act
-/// in the transients of every scenario below base speed. A pure model misses what the
-/// current loops' integrals supply (dead time, device drop, parameter errors: about 5 V
-/// of 184 V measured at base speed on the paper machine), which is just the margin; at
-/// no load near base speed it then kept the rated flux while the q loop was out of
-/// voltage (measured: the drive stuck near 980 rpm). So: the model sets the flux where
-/// the steady state needs it, and the trim corrects it from the measured voltage, both
-/// only where the no-load voltage at rated flux w Ls i_sd_rated exceeds
-/// [`FW_TRIM_GATE`] V.
-///
-/// With V = [`FW_VOLTAGE_FRACTION`] v_max and w = max(|w_s|, w_min), the steady-state
-/// voltages of eq. (9a)/(9b) with lambda_r = (L_M^2/L_R) i_sd, neglecting R in the d axis,
-/// are v_sd = -sigma Ls w_s i_sq, v_sq = Rs i_sq + w_s Ls i_sd (+ the q loop's integral
-/// I_q, measured). Keeping |v| <= V gives the model flux current
-///
-/// ```text
-/// i_sd_model = (sqrt(max(V^2 - (w sigmaLs i_sq)^2, V^2/2)) - (Rs i_sq + I_q) sgn w_s)/(w Ls)
-/// ```
-///
-/// (the square root floored at V/sqrt 2: at most half the voltage squared goes to the q
-/// current). The trim integrates (|v*|^2 - V_t^2)/v_max / w with V_t = [`FW_TRIM_FRACTION`]
-/// v_max at [`FW_TRIM_BANDWIDTH`], kept >= 0, and
-/// `i_sd* = clamp(min(i_sd_model, i_sd_rated - trim), i_sd_min, i_sd_rated)`.
-///
-/// The torque current is limited by the current circle sqrt(I_max^2 - i_sd*^2)
-/// (constant-power region) and by the maximum-torque-per-voltage line (breakdown
-/// region): with v_sq ~ Rs i_sq + w Ls i_sd and v_sd ~ -w sigma Ls i_sq, the product
-/// i_sd i_sq on |v| = V is largest at i_sq/i_sd = w Ls/|Rs + j w sigma Ls|. While
-/// i_sd* is the rated flux current the limits are the design's static ones (the control
-/// below base speed is unchanged). i_sq in the model is the previous step's reference.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FieldWeakeningDesign<N: Num = f32> {
-    /// Field weakening on ([`DriveConfig::field_weakening`]).
-    pub enabled: bool,
-    /// [`FW_VOLTAGE_FRACTION`] (dimensionless): V = this x v_max.
-    pub voltage_fraction: N::Gain,
-    /// w_min, rad/s electrical (> 0): the floor of |w_s| as divisor.
-    pub min_frequency: N,
-    /// i_sd_min, A.
-    pub min_flux_current: N,
-    /// I_max, A.
-    pub current_limit: N,
-    /// 1/Ls: flux linkage (V per rad/s) -> current, 1/H.
-    pub inv_stator_inductance: N::Gain,
-    /// Ls: (rad/s electrical x A) -> V, H.
-    pub stator_inductance: N::Gain,
-    /// 1: (rad/s electrical x Wb) -> V, for w lambda_r.
-    pub flux_voltage: N::Gain,
-    /// Hold band, rad/s mechanical ([`FW_HOLD_BAND_FRACTION`] max_speed).
-    pub hold_band: N,
-    /// Steps the target stays reported as limited after the hold last bound
-    /// ([`FW_REPORT_SPEED_LOOP_CONSTANTS`] / (speed bandwidth Ts)).
-    pub report_steps: u32,
-    /// Voltage-feedback trim gain [`FW_TRIM_BANDWIDTH`] Ts / (2 gamma Ls): flux linkage
-    /// excess (V per rad/s) -> i_sd* change per step, 1/H.
-    pub trim_gain: N::Gain,
-    /// [`FW_TRIM_GATE`] (dimensionless): the trim acts only where w Ls i_sd_rated is
-    /// above this fraction of V.
-    pub trim_gate: N::Gain,
-    /// [`FW_TRIM_FRACTION`] (dimensionless): the trim holds |v*| at this fraction of
-    /// v_max.
-    pub trim_fraction: N::Gain,
-    /// Ls i_sd_rated, Wb (the stator flux linkage at rated flux, no load).
-    pub rated_linkage: N,
-    /// lambda_ref, Wb: the orientation correction's gain k/lambda_ref is rescaled by
-    /// lambda_ref/lambda_r while the flux is weakened.
-    pub flux_reference: N,
-    /// Over-voltage control on ([`DriveConfig::overvoltage_control`]).
-    pub overvoltage_control: bool,
-    /// Light-load flux optimisation on ([`DriveConfig::flux_optimisation`]).
-    pub flux_optimisation: bool,
-    /// sqrt((Rs + R_R) / Rs): the copper-loss optimum's i_sd / |i_sq|.
-    pub optimum_ratio: N::Gain,
-    /// The optimiser's floor, A ([`FLUX_OPT_MIN_FRACTION`] flux_current).
-    pub optimum_min_current: N,
-    /// Ts / ([`FLUX_OPT_FALL_TAU_R`] tau_r): the optimum's fall per step.
-    pub optimum_fall: N::Gain,
-    /// Bus voltage where the regenerative current starts to be reduced, V.
-    pub regen_start: N,
-    /// 1/(bus band over which it falls to zero), 1/V.
-    pub inv_regen_band: N::Gain,
-}
-
-impl FieldWeakeningDesign {
-    fn new(cfg: &DriveConfig, base_speed: f32) -> Self {
-        let m = cfg.machine;
-        let band = (OVC_END_FRACTION - OVC_START_FRACTION) * cfg.dc_bus_max;
-        Self {
-            enabled: cfg.field_weakening,
-            voltage_fraction: FW_VOLTAGE_FRACTION,
-            min_frequency: FW_MIN_FREQUENCY_FRACTION * m.pole_pairs_f32() * base_speed,
-            min_flux_current: FW_MIN_FLUX_FRACTION * cfg.flux_current,
-            current_limit: cfg.current_limit,
-            inv_stator_inductance: 1.0 / m.stator_inductance(),
-            stator_inductance: m.stator_inductance(),
-            flux_voltage: 1.0,
-            hold_band: FW_HOLD_BAND_FRACTION * cfg.max_speed,
-            report_steps: (FW_REPORT_SPEED_LOOP_CONSTANTS
-                / (cfg.speed_bandwidth * cfg.control_period)) as u32,
-            trim_gain: FW_TRIM_BANDWIDTH * cfg.control_period
-                / (2.0 * FW_VOLTAGE_FRACTION * m.stator_inductance()),
-            trim_gate: FW_TRIM_GATE,
-            trim_fraction: FW_TRIM_FRACTION,
-            rated_linkage: m.stator_inductance() * cfg.flux_current,
-            flux_reference: m.rotor_flux_for(cfg.flux_current),
-            overvoltage_control: cfg.overvoltage_control,
-            flux_optimisation: cfg.flux_optimisation,
-            optimum_ratio: sqrt(
-                (m.stator_resistance() + m.referred_rotor_resistance()) / m.stator_resistance(),
-            ),
-            optimum_min_current: FLUX_OPT_MIN_FRACTION * cfg.flux_current,
-            optimum_fall: (cfg.control_period / (FLUX_OPT_FALL_TAU_R * m.rotor_time_constant()))
-                .min(1.0),
-            regen_start: OVC_START_FRACTION * cfg.dc_bus_max,
-            inv_regen_band: 1.0 / band,
-        }
-    }
-}
-
-/// The orientation correction's constants ([`crate::orientation`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OrientationDesign<N: Num = f32> {
-    /// k / lambda_ref, 1/Wb.
-    pub gain_per_flux: N::Gain,
-    /// c in the load scheduling k(i_sq) = k max(1, c |i_sq|), 1/A:
-    /// [`ORIENTATION_GAIN_MARGIN`] / (k i_sd*).
-    pub load_factor_per_current: N::Gain,
-    /// |w_s| where the fade-in starts, rad/s electrical.
-    pub fade_start: N,
-    /// 1 / (fade upper - fade lower), s/rad.
-    pub inv_fade_width: N::Gain,
-    /// Largest |correction|, rad/s electrical.
-    pub limit: N,
-    /// The far-side gain c (dimensionless).
-    pub far_side_gain: N::Gain,
-    /// a in its load scheduling c(i_sq) = c max(1, a |i_sq|), 1/A:
-    /// [`FAR_SIDE_LOAD_FRACTION`] / i_sd*.
-    pub far_side_load_factor: N::Gain,
-}
-
 /// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MagnetizingDesign<N: Num = f32> {
@@ -414,107 +153,6 @@ pub struct MagnetizingDesign<N: Num = f32> {
     pub residual_filter: N::Gain,
     /// The flying start's speed search.
     pub search: SpeedSearchDesign<N>,
-}
-
-/// The inverter test's d-axis current levels, fractions of `flux_current` (rising, so
-/// that the last is the magnetizing current and the flux build-up goes on from it).
-pub const INVERTER_TEST_LEVELS: [f32; 3] = [0.4, 0.7, 1.0];
-/// Time each level of the inverter test is held, s (three levels: 0.45 s, within the
-/// 0.5 s budget of the start).
-pub const INVERTER_TEST_LEVEL_TIME: f32 = 0.15;
-/// The first part of each level is not measured, s (the current loop settles in a few ms;
-/// the rest lets the L_sigma di/dt part of the voltage die out).
-pub const INVERTER_TEST_SETTLE_TIME: f32 = 0.05;
-/// Time constant of the low-pass that takes each level's mean, s (a quarter of the
-/// measured 0.1 s: the mean of about the last 50 ms, 250 samples at 5 kHz).
-pub const INVERTER_TEST_FILTER_TIME: f32 = 0.025;
-/// The test's total time, s.
-pub const INVERTER_TEST_TIME: f32 = 3.0 * INVERTER_TEST_LEVEL_TIME;
-/// `flux_current` must be at least this many dead-time current bands: the lowest level
-/// (0.4 of it) then puts phases b and c (-0.2 of it each) at 4 bands, where the inverter's
-/// error is at its full value (the fit assumes the current-sign pattern (+, -, -)).
-pub const INVERTER_TEST_MIN_BANDS: f32 = 20.0;
-/// The largest correction the test applies, in duty (0.05: 10 us at 5 kHz); a fit beyond
-/// it is not believed (no correction, telemetry shows none).
-pub const INVERTER_TEST_MAX_DUTY: f32 = 0.05;
-
-/// The inverter test at start ([`DriveConfig::inverter_identification`]).
-///
-/// At rest with the frame held on phase a (angle 0), a d-axis current i puts +i in phase a
-/// and -i/2 in b and c. Each leg's dead-time and device-drop error V_e opposes its current,
-/// and the amplitude-invariant Clarke transform of (+V_e, -V_e, -V_e) is (4/3) V_e on alpha
-/// (as in [`crate::commissioning`]'s DC steps). In the inverse-Gamma model the d-axis
-/// voltage is then
-///
-/// v_d = Rs i + L_sigma di/dt + d lambda_R/dt + (4/3) (V_e - V_e,comp),
-///
-/// with d lambda_R/dt = R_R i - lambda_R / tau_r, which the drive's flux model gives.
-/// Holding each level until L_sigma di/dt has died out and taking the flux model's rate
-/// out of the voltage leaves y = Rs i + (4/3) dV: a straight line whose slope is Rs and
-/// whose intercept is the uncompensated error dV. The flux does not need to settle, so
-/// three levels take 0.45 s where the commissioning's settled DC steps take 4.8 s. The
-/// fit's intercept does not depend on current-sensor gain errors (they scale i, so the
-/// slope); a sensor offset o moves it by Rs o (the offsets are measured before the start).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InverterTestDesign<N: Num = f32> {
-    /// Steps per level (0: no test).
-    pub level_steps: u32,
-    /// Steps at the start of each level that are not measured.
-    pub settle_steps: u32,
-    /// The d-axis current of each level, A.
-    pub levels: [N; 3],
-    /// How far each level's measured mean may be from its reference, A (a tenth of it:
-    /// the current loop did not follow the levels otherwise, and no fit is made).
-    pub tolerances: [N; 3],
-    /// Low-pass coefficient of each level's mean (Ts / [`INVERTER_TEST_FILTER_TIME`]).
-    pub filter: N::Gain,
-    /// The least-squares line through (level_k, y_k) has the intercept sum u_k y_k with
-    /// u_k = 1/3 - (L_k - L_mean) L_mean / sum (L_j - L_mean)^2 (dimensionless: the levels
-    /// are fixed fractions of one current); these are (3/4) u_k, so that the sum is the
-    /// leg error dV, V. The loop holds the measured current's mean at the reference, so
-    /// the references stand for the currents (a sensor gain error changes the slope only).
-    pub error_weights: [N::Gain; 3],
-    /// The slope's weights (L_k - L_mean) / sum (L_j - L_mean)^2, 1/A: sum w_k y_k is the
-    /// stator resistance the test saw, ohm (reported, and the standstill Rs
-    /// identification's starting value).
-    pub slope_weights: [N::Gain; 3],
-    /// The plausible slope: the centre and half-width of the Rs estimator's clamps
-    /// ([`crate::rs_estimator::RS_MIN_FACTOR`] to [`crate::rs_estimator::RS_MAX_FACTOR`]
-    /// times the nominal Rs), ohm. A slope outside is a test that did not see the
-    /// machine (outcome `Rejected`).
-    pub resistance_window: (N, N),
-    /// [`INVERTER_TEST_MAX_DUTY`].
-    pub max_duty: N,
-}
-
-impl InverterTestDesign {
-    /// The test for control period `ts` (s), flux current `i_d` (A) and nominal stator
-    /// resistance `rs` (ohm); off unless `enabled`.
-    pub fn new(enabled: bool, ts: f32, i_d: f32, rs: f32) -> Self {
-        use crate::rs_estimator::{RS_MAX_FACTOR, RS_MIN_FACTOR};
-        let levels = INVERTER_TEST_LEVELS.map(|f| f * i_d);
-        let mean = (levels[0] + levels[1] + levels[2]) / 3.0;
-        let spread: f32 = levels.iter().map(|l| (l - mean) * (l - mean)).sum();
-        let slope_weights = levels.map(|l| (l - mean) / spread);
-        Self {
-            level_steps: if enabled {
-                ((INVERTER_TEST_LEVEL_TIME / ts) as u32).max(3)
-            } else {
-                0
-            },
-            settle_steps: (INVERTER_TEST_SETTLE_TIME / ts) as u32,
-            levels,
-            tolerances: levels.map(|l| 0.1 * l),
-            filter: (ts / INVERTER_TEST_FILTER_TIME).min(1.0),
-            error_weights: slope_weights.map(|w| 0.75 * (1.0 / 3.0 - w * mean)),
-            slope_weights,
-            resistance_window: (
-                0.5 * (RS_MIN_FACTOR + RS_MAX_FACTOR) * rs,
-                0.5 * (RS_MAX_FACTOR - RS_MIN_FACTOR) * rs,
-            ),
-            max_duty: INVERTER_TEST_MAX_DUTY,
-        }
-    }
 }
 
 /// Open-loop V/f constants.
@@ -1104,7 +742,10 @@ impl DriveDesign {
 
     /// This design's step coefficients in the arithmetic `N` (`bases`: `()` for f32 SI,
     /// the per-unit bases in fixed point).
-    pub fn coeffs<N: Num>(&self, bases: &N::Bases) -> Result<DriveCoeffs<N>, ConfigError> {
+    pub fn coeffs<N: DesignArithmetic>(
+        &self,
+        bases: &N::Bases,
+    ) -> Result<DriveCoeffs<N>, ConfigError> {
         N::coeffs(self, bases)
     }
 
@@ -1114,6 +755,21 @@ impl DriveDesign {
         let mut cfg = self.config;
         cfg.orientation_gain = gain;
         Self::new(cfg)
+    }
+}
+
+/// An arithmetic the design converts its step coefficients to: f32 SI here, Q7.24 per
+/// unit in [`crate::fixed`]. Apart from [`Num`] so that the blocks, which need only the
+/// arithmetic, do not depend on the design.
+pub trait DesignArithmetic: Num {
+    /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
+    /// fixed point checks that every value fits its per-unit range.
+    fn coeffs(design: &DriveDesign, bases: &Self::Bases) -> Result<DriveCoeffs<Self>, ConfigError>;
+}
+
+impl DesignArithmetic for f32 {
+    fn coeffs(design: &DriveDesign, _: &()) -> Result<DriveCoeffs<f32>, ConfigError> {
+        Ok(DriveCoeffs::si(design))
     }
 }
 

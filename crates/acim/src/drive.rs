@@ -41,12 +41,12 @@
 //! preloaded compare registers; the voltage the plant saw over (k .. k+1) is the command of
 //! step k-1, which is what the observer and the Rs estimator use.
 
-use crate::design::DriveCoeffs;
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
+use crate::design::{DesignArithmetic, DriveCoeffs};
 use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
-    SinCos, SinCosValue,
+    LeadRotation, SinCos, SinCosValue,
 };
 use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::{InverterTest, InverterTestOutcome};
@@ -443,7 +443,7 @@ impl<S: SinCos> Drive<S> {
     }
 }
 
-impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, M> {
+impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, M> {
     /// An idle drive from a validated design (converted to `N` with `bases`) and its parts.
     pub fn with_parts(
         design: DriveDesign,
@@ -451,7 +451,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
         sincos: S,
         observer: O,
         modulator: M,
-    ) -> Result<Self, ConfigError> {
+    ) -> Result<Self, ConfigError>
+    where
+        N: DesignArithmetic,
+    {
         let coeffs = N::coeffs(&design, &bases)?;
         let rs_initial = coeffs.rs_initial;
         Ok(Self {
@@ -681,7 +684,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// arithmetic is refused and the old one kept. A design with another inverter
     /// compensation (dead time, device drop or current band) drops the correction the
     /// start test or the running tracker found beyond the old one.
-    pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
+    pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError>
+    where
+        N: DesignArithmetic,
+    {
         let (old, new) = (&self.design.config, &design.config);
         let retune = old.machine == new.machine
             && old.control_period == new.control_period
@@ -715,7 +721,10 @@ impl<S: SinCos<N>, N: Num, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, 
     /// Changes the orientation-correction gain k at run time (outside the interrupt:
     /// tuning or analysis; 0 restores the paper's scheme) by swapping in a new design.
     /// Rejects non-finite or negative values and values above 50, keeping the old gain.
-    pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError> {
+    pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError>
+    where
+        N: DesignArithmetic,
+    {
         if !crate::math::is_finite(gain) {
             return Err(CommandError::NotFinite);
         }

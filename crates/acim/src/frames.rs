@@ -168,6 +168,34 @@ pub fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
     }
 }
 
+/// An arithmetic's sin/cos at the angle the voltage acts at: the frame angle advanced by
+/// the computation and PWM delay (the modulation stage's lead).
+pub trait LeadRotation: Num {
+    /// `theta` (with `sc` its sin/cos) advanced by the lead of `frequency` (rad/s
+    /// electrical) over `lead` (the delay).
+    fn rotate_ahead<S: SinCos<Self>>(
+        sincos: &mut S,
+        sc: SinCosValue<Self>,
+        theta: Self::Angle,
+        frequency: Self,
+        lead: Self::Lead,
+    ) -> SinCosValue<Self>;
+}
+
+impl LeadRotation for f32 {
+    /// The small rotation by w_s Ts delay (its series, no second sin/cos).
+    #[inline(always)]
+    fn rotate_ahead<S: SinCos<f32>>(
+        _sincos: &mut S,
+        sc: SinCosValue<f32>,
+        _theta: f32,
+        frequency: f32,
+        lead: (f32, f32),
+    ) -> SinCosValue<f32> {
+        small_rotation(sc, frequency * lead.0 * lead.1)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

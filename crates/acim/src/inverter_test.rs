@@ -12,8 +12,114 @@
 //! correction from it (`DriveConfig::inverter_tracking`), with the running Rs estimator
 //! carrying the rest as an apparent resistance.
 
-use crate::design::InverterTestDesign;
 use crate::num::Num;
+
+/// The inverter test's d-axis current levels, fractions of `flux_current` (rising, so
+/// that the last is the magnetizing current and the flux build-up goes on from it).
+pub const INVERTER_TEST_LEVELS: [f32; 3] = [0.4, 0.7, 1.0];
+
+/// Time each level of the inverter test is held, s (three levels: 0.45 s, within the
+/// 0.5 s budget of the start).
+pub const INVERTER_TEST_LEVEL_TIME: f32 = 0.15;
+
+/// The first part of each level is not measured, s (the current loop settles in a few ms;
+/// the rest lets the L_sigma di/dt part of the voltage die out).
+pub const INVERTER_TEST_SETTLE_TIME: f32 = 0.05;
+
+/// Time constant of the low-pass that takes each level's mean, s (a quarter of the
+/// measured 0.1 s: the mean of about the last 50 ms, 250 samples at 5 kHz).
+pub const INVERTER_TEST_FILTER_TIME: f32 = 0.025;
+
+/// The test's total time, s.
+pub const INVERTER_TEST_TIME: f32 = 3.0 * INVERTER_TEST_LEVEL_TIME;
+
+/// `flux_current` must be at least this many dead-time current bands: the lowest level
+/// (0.4 of it) then puts phases b and c (-0.2 of it each) at 4 bands, where the inverter's
+/// error is at its full value (the fit assumes the current-sign pattern (+, -, -)).
+pub const INVERTER_TEST_MIN_BANDS: f32 = 20.0;
+
+/// The largest correction the test applies, in duty (0.05: 10 us at 5 kHz); a fit beyond
+/// it is not believed (no correction, telemetry shows none).
+pub const INVERTER_TEST_MAX_DUTY: f32 = 0.05;
+
+/// The inverter test at start ([`DriveConfig::inverter_identification`](crate::design::DriveConfig::inverter_identification)).
+///
+/// At rest with the frame held on phase a (angle 0), a d-axis current i puts +i in phase a
+/// and -i/2 in b and c. Each leg's dead-time and device-drop error V_e opposes its current,
+/// and the amplitude-invariant Clarke transform of (+V_e, -V_e, -V_e) is (4/3) V_e on alpha
+/// (as in [`crate::commissioning`]'s DC steps). In the inverse-Gamma model the d-axis
+/// voltage is then
+///
+/// v_d = Rs i + L_sigma di/dt + d lambda_R/dt + (4/3) (V_e - V_e,comp),
+///
+/// with d lambda_R/dt = R_R i - lambda_R / tau_r, which the drive's flux model gives.
+/// Holding each level until L_sigma di/dt has died out and taking the flux model's rate
+/// out of the voltage leaves y = Rs i + (4/3) dV: a straight line whose slope is Rs and
+/// whose intercept is the uncompensated error dV. The flux does not need to settle, so
+/// three levels take 0.45 s where the commissioning's settled DC steps take 4.8 s. The
+/// fit's intercept does not depend on current-sensor gain errors (they scale i, so the
+/// slope); a sensor offset o moves it by Rs o (the offsets are measured before the start).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InverterTestDesign<N: Num = f32> {
+    /// Steps per level (0: no test).
+    pub level_steps: u32,
+    /// Steps at the start of each level that are not measured.
+    pub settle_steps: u32,
+    /// The d-axis current of each level, A.
+    pub levels: [N; 3],
+    /// How far each level's measured mean may be from its reference, A (a tenth of it:
+    /// the current loop did not follow the levels otherwise, and no fit is made).
+    pub tolerances: [N; 3],
+    /// Low-pass coefficient of each level's mean (Ts / [`INVERTER_TEST_FILTER_TIME`]).
+    pub filter: N::Gain,
+    /// The least-squares line through (level_k, y_k) has the intercept sum u_k y_k with
+    /// u_k = 1/3 - (L_k - L_mean) L_mean / sum (L_j - L_mean)^2 (dimensionless: the levels
+    /// are fixed fractions of one current); these are (3/4) u_k, so that the sum is the
+    /// leg error dV, V. The loop holds the measured current's mean at the reference, so
+    /// the references stand for the currents (a sensor gain error changes the slope only).
+    pub error_weights: [N::Gain; 3],
+    /// The slope's weights (L_k - L_mean) / sum (L_j - L_mean)^2, 1/A: sum w_k y_k is the
+    /// stator resistance the test saw, ohm (reported, and the standstill Rs
+    /// identification's starting value).
+    pub slope_weights: [N::Gain; 3],
+    /// The plausible slope: the centre and half-width of the Rs estimator's clamps
+    /// ([`crate::rs_estimator::RS_MIN_FACTOR`] to [`crate::rs_estimator::RS_MAX_FACTOR`]
+    /// times the nominal Rs), ohm. A slope outside is a test that did not see the
+    /// machine (outcome `Rejected`).
+    pub resistance_window: (N, N),
+    /// [`INVERTER_TEST_MAX_DUTY`].
+    pub max_duty: N,
+}
+
+impl InverterTestDesign {
+    /// The test for control period `ts` (s), flux current `i_d` (A) and nominal stator
+    /// resistance `rs` (ohm); off unless `enabled`.
+    pub fn new(enabled: bool, ts: f32, i_d: f32, rs: f32) -> Self {
+        use crate::rs_estimator::{RS_MAX_FACTOR, RS_MIN_FACTOR};
+        let levels = INVERTER_TEST_LEVELS.map(|f| f * i_d);
+        let mean = (levels[0] + levels[1] + levels[2]) / 3.0;
+        let spread: f32 = levels.iter().map(|l| (l - mean) * (l - mean)).sum();
+        let slope_weights = levels.map(|l| (l - mean) / spread);
+        Self {
+            level_steps: if enabled {
+                ((INVERTER_TEST_LEVEL_TIME / ts) as u32).max(3)
+            } else {
+                0
+            },
+            settle_steps: (INVERTER_TEST_SETTLE_TIME / ts) as u32,
+            levels,
+            tolerances: levels.map(|l| 0.1 * l),
+            filter: (ts / INVERTER_TEST_FILTER_TIME).min(1.0),
+            error_weights: slope_weights.map(|w| 0.75 * (1.0 / 3.0 - w * mean)),
+            slope_weights,
+            resistance_window: (
+                0.5 * (RS_MIN_FACTOR + RS_MAX_FACTOR) * rs,
+                0.5 * (RS_MAX_FACTOR - RS_MIN_FACTOR) * rs,
+            ),
+            max_duty: INVERTER_TEST_MAX_DUTY,
+        }
+    }
+}
 
 /// Where the test is.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

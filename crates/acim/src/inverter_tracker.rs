@@ -103,7 +103,7 @@ impl InverterTrackerConfig<f32> {
             current_floor: (0.01 * flux_current * flux_current).max(1e-6),
             min_frequency: 2.0 * core::f32::consts::PI * INVERTER_TRACKER_MIN_FREQUENCY_HZ,
             max_frequency: current_bandwidth / 6.0,
-            limit: crate::design::INVERTER_TEST_MAX_DUTY,
+            limit: crate::inverter_test::INVERTER_TEST_MAX_DUTY,
             holdoff_steps: (INVERTER_TRACKER_HOLDOFF / ts) as u32,
             trust_steps: (INVERTER_TRACKER_TRUST / ts) as u32,
         }

@@ -45,6 +45,7 @@
 #![warn(missing_docs)]
 
 // control blocks
+pub mod field_weakening;
 pub mod flux;
 pub mod frames;
 pub mod gain_calibration;

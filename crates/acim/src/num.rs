@@ -112,15 +112,6 @@ pub trait Num:
     /// The angle advanced by `frequency` over one period (`per_step` is Ts, or its
     /// turn-count equivalent), wrapped to one turn.
     fn advance(angle: Self::Angle, frequency: Self, per_step: Self::Gain) -> Self::Angle;
-    /// sin/cos at the angle the voltage acts at: `theta` (with `sc` its sin/cos) advanced by
-    /// the lead of `frequency` over `lead` (the computation and PWM delay).
-    fn rotate_ahead<S: crate::frames::SinCos<Self>>(
-        sincos: &mut S,
-        sc: crate::frames::SinCosValue<Self>,
-        theta: Self::Angle,
-        frequency: Self,
-        lead: Self::Lead,
-    ) -> crate::frames::SinCosValue<Self>;
     /// The angle in radians (telemetry).
     fn angle_to_rad(a: Self::Angle) -> f32;
     /// The value as an f32 in this arithmetic's units (SI in f32, per unit in fixed
@@ -130,12 +121,6 @@ pub trait Num:
     /// The signal holding `x` (in this arithmetic's units; rounded and saturated).
     fn from_f32(x: f32) -> Self;
 
-    /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
-    /// fixed point checks that every value fits its per-unit range.
-    fn coeffs(
-        design: &crate::design::DriveDesign,
-        bases: &Self::Bases,
-    ) -> Result<crate::design::DriveCoeffs<Self>, crate::design::ConfigError>;
     /// `(a + b) x`: distributed as `a x + b x` in f32 (the order its feed-forward always
     /// had), one product in fixed point.
     fn sum_times(a: Self, b: Self, x: Self) -> Self;
@@ -237,16 +222,6 @@ impl Num for f32 {
         crate::math::wrap_angle_step(angle + frequency * per_step)
     }
     #[inline(always)]
-    fn rotate_ahead<S: crate::frames::SinCos<f32>>(
-        _sincos: &mut S,
-        sc: crate::frames::SinCosValue<f32>,
-        _theta: f32,
-        frequency: f32,
-        lead: (f32, f32),
-    ) -> crate::frames::SinCosValue<f32> {
-        crate::frames::small_rotation(sc, frequency * lead.0 * lead.1)
-    }
-    #[inline(always)]
     fn angle_to_rad(a: f32) -> f32 {
         a
     }
@@ -257,12 +232,6 @@ impl Num for f32 {
     #[inline(always)]
     fn from_f32(x: f32) -> f32 {
         x
-    }
-    fn coeffs(
-        design: &crate::design::DriveDesign,
-        _: &(),
-    ) -> Result<crate::design::DriveCoeffs<f32>, crate::design::ConfigError> {
-        Ok(crate::design::DriveCoeffs::si(design))
     }
     #[inline(always)]
     fn sum_times(a: f32, b: f32, x: f32) -> f32 {

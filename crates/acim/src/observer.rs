@@ -397,7 +397,11 @@ pub trait SpeedObserver<N: Num = f32> {
     const RS_RUNNING_AT_SPEED: bool = true;
     /// One step. `coeffs` are the reduced-order observer's design (eq. 12, 14) built with
     /// the drive's; another observer holds its own design and may ignore them.
-    fn update(&mut self, coeffs: &ObserverCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N>;
+    fn update(
+        &mut self,
+        coeffs: &ObserverCoeffs<N>,
+        x: &SpeedObserverInputs<N>,
+    ) -> SpeedEstimate<N>;
     /// Back to the initial state (a start command).
     fn reset(&mut self);
     /// Called when magnetizing ends, with the measured i_sq: speed control starts from
@@ -416,7 +420,11 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
     /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
     /// section 4).
     #[inline(always)]
-    fn update(&mut self, coeffs: &ObserverCoeffs<N>, x: &SpeedObserverInputs<N>) -> SpeedEstimate<N> {
+    fn update(
+        &mut self,
+        coeffs: &ObserverCoeffs<N>,
+        x: &SpeedObserverInputs<N>,
+    ) -> SpeedEstimate<N> {
         if !x.magnetizing {
             ReducedOrderObserver::update(
                 self,

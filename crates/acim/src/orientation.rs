@@ -12,8 +12,28 @@
 //! vanishes. `orientation_gain = 0` is the paper's scheme. Derivation, the measured
 //! stability map and before/after figures: `docs/orientation-stability.md`.
 
-use crate::design::OrientationDesign;
 use crate::num::Num;
+
+/// The orientation correction's constants ([`crate::orientation`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrientationDesign<N: Num = f32> {
+    /// k / lambda_ref, 1/Wb.
+    pub gain_per_flux: N::Gain,
+    /// c in the load scheduling k(i_sq) = k max(1, c |i_sq|), 1/A:
+    /// [`ORIENTATION_GAIN_MARGIN`](crate::design::ORIENTATION_GAIN_MARGIN) / (k i_sd*).
+    pub load_factor_per_current: N::Gain,
+    /// |w_s| where the fade-in starts, rad/s electrical.
+    pub fade_start: N,
+    /// 1 / (fade upper - fade lower), s/rad.
+    pub inv_fade_width: N::Gain,
+    /// Largest |correction|, rad/s electrical.
+    pub limit: N,
+    /// The far-side gain c (dimensionless).
+    pub far_side_gain: N::Gain,
+    /// a in its load scheduling c(i_sq) = c max(1, a |i_sq|), 1/A:
+    /// [`FAR_SIDE_LOAD_FRACTION`](crate::design::FAR_SIDE_LOAD_FRACTION) / i_sd*.
+    pub far_side_load_factor: N::Gain,
+}
 
 /// The fade in |w_s|: 0 below `orientation_fade`'s start (no orientation information at
 /// w_s = 0), 1 above its end, linear between, from the stator frequency

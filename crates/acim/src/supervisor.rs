@@ -8,9 +8,92 @@
 //! same step. The counters the decisions need live here too, so resetting the supervisor
 //! resets them all.
 
-use crate::design::{CurrentSensing, SupervisionLimits};
+use crate::config::CurrentSensing;
 use crate::frames::{AlphaBeta, Dq};
 use crate::num::Num;
+
+/// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
+/// of the step reads only these.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupervisionLimits<N: Num = f32> {
+    /// Measured phases (the third current is derived with two shunts).
+    pub current_sensing: CurrentSensing,
+    /// Phase current trip, A.
+    pub overcurrent_trip: N,
+    /// Lowest DC bus while active, V.
+    pub dc_bus_min: N,
+    /// Highest DC bus, V.
+    pub dc_bus_max: N,
+    /// Over-speed trip on the estimated speed, rad/s.
+    pub max_speed: N,
+    /// Largest plausible |T_L_hat|, N m.
+    pub max_load_torque: N,
+    /// Steps an implausible load estimate may persist.
+    pub implausible_steps: u32,
+    /// Steps the stall condition may persist.
+    pub stall_steps: u32,
+    /// Steps the overload condition may persist (leaky): [`DriveConfig::overload_time`](crate::design::DriveConfig::overload_time).
+    pub overload_steps: u32,
+    /// Overload: speed error beyond this fraction of |reference| ([`OVERLOAD_FRACTION`](crate::design::OVERLOAD_FRACTION)).
+    pub overload_fraction: N,
+    /// ... and beyond this floor, rad/s ([`OVERLOAD_FRACTION`](crate::design::OVERLOAD_FRACTION) of 100 rpm, so that a
+    /// reversal through zero does not count).
+    pub overload_speed_floor: N,
+    /// Torque at its limit with |w_s| below this, rad/s electrical (the orientation
+    /// correction's fade-in start: no information below it) ...
+    pub blind_frequency: N,
+    /// ... for longer than this, steps (one rotor time constant): `Overload`.
+    pub blind_steps: u32,
+    /// Stall: speed estimate below this fraction of the reference ([`STALL_SPEED_FRACTION`](crate::design::STALL_SPEED_FRACTION)).
+    pub stall_fraction: N,
+    /// Whether an Rs estimate at its clamp bound faults (only while it adapts).
+    pub rs_bound_faults: bool,
+    /// The control monitor's leaky-mean gain Ts / T_f, T_f =
+    /// [`MONITOR_FILTER_LOOP_CONSTANTS`](crate::design::MONITOR_FILTER_LOOP_CONSTANTS) / current_bandwidth.
+    pub monitor_filter: N::Gain,
+    /// Largest mean |i* - i|, A: [`CURRENT_ERROR_FRACTION`](crate::design::CURRENT_ERROR_FRACTION) i_sd*.
+    pub current_error_limit: N,
+    /// Largest mean |a + b + c| with three shunts, A: [`CURRENT_SUM_FRACTION`](crate::design::CURRENT_SUM_FRACTION) of the trip.
+    pub current_sum_limit: N,
+    /// Largest mean current-loop integral |I_d| + |I_q|, V: [`RESIDUAL_RS_TOLERANCE`](crate::design::RESIDUAL_RS_TOLERANCE) Rs
+    /// current_limit + [`RESIDUAL_VOLTAGE_FRACTION`](crate::design::RESIDUAL_VOLTAGE_FRACTION) of the linear limit at `dc_bus_max`.
+    pub model_residual_limit: N,
+    /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
+    /// [`MAGNETIZING_TIMEOUT_TAU_R`](crate::design::MAGNETIZING_TIMEOUT_TAU_R) tau_r, plus the flying start's speed search (when
+    /// it runs).
+    pub magnetizing_timeout_steps: u32,
+    /// Periods after a switch-off before a start is accepted: [`DEMAGNETIZE_TAU_R`](crate::design::DEMAGNETIZE_TAU_R) tau_r.
+    pub demagnetize_steps: u32,
+    /// Idle offset means after the measurement: leaky-mean gain Ts /
+    /// [`OFFSET_FILTER_TIME`](crate::design::OFFSET_FILTER_TIME).
+    pub offset_filter: N::Gain,
+    /// Idle samples averaged with equal weights, after which the offset means are trusted
+    /// ([`OFFSET_MEASUREMENT_TIME`](crate::design::OFFSET_MEASUREMENT_TIME)).
+    pub offset_settle_steps: u32,
+    /// Idle periods after a switch-off whose samples are not taken
+    /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`](crate::design::OFFSET_SWITCH_OFF_SKIP_TIME), >= 1).
+    pub offset_skip_steps: u32,
+    /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`](crate::design::OFFSET_FRACTION) of the trip (also the
+    /// largest DC component of the running alpha-beta current).
+    pub offset_limit: N,
+    /// The running offset check's leaky-mean gain Ts / [`RUNNING_OFFSET_FILTER_TIME`](crate::design::RUNNING_OFFSET_FILTER_TIME).
+    pub running_offset_filter: N::Gain,
+    /// The running offset check counts only above this |w_s|, rad/s electrical:
+    /// 4 I_max / (offset_limit T), where the AC current's ripple through the mean plus the
+    /// transient of a current that starts at that frequency, at most 2 I_max / (|w_s| T),
+    /// stays below half the limit.
+    pub running_offset_min_frequency: N,
+    /// Largest resistance the current-response check allows, ohm:
+    /// (1 + [`RESIDUAL_RS_TOLERANCE`](crate::design::RESIDUAL_RS_TOLERANCE)) Rs + R_R (while the flux builds with the frame
+    /// held, d lambda_r/dt = R_R i_sd - lambda_r/tau_r adds up to R_R |i|).
+    pub impedance_resistance: N,
+    /// Largest inductance the current-response check allows, H: Ls (the machine's
+    /// impedance is below Rs_max + |w_s| Ls at any slip).
+    pub impedance_inductance: N::Gain,
+    /// The current-response check judges only above this mean voltage, V: Rs
+    /// current_limit (the voltage of the largest current at standstill).
+    pub impedance_voltage_floor: N,
+}
 
 /// Operating state of the drive.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

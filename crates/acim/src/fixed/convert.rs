@@ -570,3 +570,9 @@ fn field_weakening(
         inv_regen_band: gain(f.inv_regen_band * b.voltage, "dc_bus_max")?,
     })
 }
+
+impl crate::design::DesignArithmetic for Q24 {
+    fn coeffs(design: &DriveDesign, bases: &PerUnitBases) -> Result<DriveCoeffs<Q24>, ConfigError> {
+        coeffs(design, bases)
+    }
+}

@@ -21,7 +21,9 @@ use crate::math::is_finite;
 use crate::num::Num;
 use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
-use crate::svpwm::{modulate_with_inverse, Modulation, Modulator, Svpwm, SvpwmConfig, VoltageLimit};
+use crate::svpwm::{
+    modulate_with_inverse, Modulation, Modulator, Svpwm, SvpwmConfig, VoltageLimit,
+};
 
 /// The fixed-point sensorless IFOC drive (the paper's observer, SVPWM, table sin/cos).
 pub type FixedDrive = Drive<TableSinCos, Q24, ReducedOrderObserver<Q24>, Svpwm>;
@@ -205,7 +207,7 @@ mod tests {
         assert_eq!(V_MAX_PER_BUS.0 + 1, to_q24(VOLTAGE_MARGIN * INV_SQRT3));
         assert_eq!(Q24::SQRT3.0 - 1, to_q24(1.732_050_8));
         let d = DriveDesign::new(DriveConfig::paper_defaults()).unwrap();
-        let c = Q24::coeffs(&d, &PerUnitBases::PAPER).unwrap();
+        let c = <Q24 as crate::design::DesignArithmetic>::coeffs(&d, &PerUnitBases::PAPER).unwrap();
         assert_eq!(c.limits.stall_fraction.0, to_q24(STALL_SPEED_FRACTION));
         assert_eq!(c.limits.stall_fraction.0, 1_677_722);
     }

@@ -335,6 +335,24 @@ impl PerUnitBases {
     }
 }
 
+/// Frame angle: fraction of one electrical turn, 2^32 counts per turn (wraps by design).
+pub type Angle = u32;
+
+/// Counts per radian: 2^32 / (2 pi).
+pub const COUNTS_PER_RAD: f32 = 4_294_967_296.0 / (2.0 * core::f32::consts::PI);
+
+/// An angle from radians (configuration and the simulator boundary only).
+pub fn angle_from_rad(rad: f32) -> Angle {
+    let turns = rad * (1.0 / (2.0 * core::f32::consts::PI));
+    let frac = turns - (turns as i64) as f32; // (-1, 1); `as` saturates, NaN -> 0
+    (frac * 4_294_967_296.0) as i64 as u32
+}
+
+/// An angle in radians, in [-pi, pi) (telemetry and the simulator boundary only).
+pub fn angle_to_rad(a: Angle) -> f32 {
+    (a as i32) as f32 * (1.0 / COUNTS_PER_RAD)
+}
+
 /// A Q7.24 signal (`value_pu * 2^24` in an `i32`) with saturating arithmetic: `+`, `-`
 /// and unary `-` saturate, `*` is [`mul`] (rounded, saturated). The cascade's fixed-point
 /// [`Num`](crate::num::Num).
@@ -391,7 +409,7 @@ const RS_EXTRA_BITS: u32 = 6;
 
 impl crate::num::Num for Q24 {
     type Gain = Gain;
-    type Angle = super::trig::Angle;
+    type Angle = Angle;
     /// Angle counts of the voltage lead per frequency pu.
     type Lead = Gain;
     /// Q1.30: six bits finer than the signal, so that alpha Ts e (1e-6 pu per step at a
@@ -482,31 +500,14 @@ impl crate::num::Num for Q24 {
         // a signed increment added modulo one turn: the intended wrap of an angle
         angle.wrapping_add(per_step.apply(frequency.0) as u32)
     }
-    #[inline(always)]
-    fn rotate_ahead<S: crate::frames::SinCos<Q24>>(
-        sincos: &mut S,
-        _sc: crate::frames::SinCosValue<Q24>,
-        theta: u32,
-        frequency: Q24,
-        lead: Gain,
-    ) -> crate::frames::SinCosValue<Q24> {
-        // the exact rotation from the table (no series needed)
-        sincos.sin_cos(theta.wrapping_add(lead.apply(frequency.0) as u32))
-    }
     fn angle_to_rad(a: u32) -> f32 {
-        super::trig::angle_to_rad(a)
+        angle_to_rad(a)
     }
     fn to_f32(self) -> f32 {
         from_q24(self.0)
     }
     fn from_f32(x: f32) -> Q24 {
         Q24(to_q24(x))
-    }
-    fn coeffs(
-        design: &crate::design::DriveDesign,
-        bases: &PerUnitBases,
-    ) -> Result<crate::design::DriveCoeffs<Q24>, crate::design::ConfigError> {
-        super::convert::coeffs(design, bases)
     }
     #[inline(always)]
     fn sum_times(a: Q24, b: Q24, x: Q24) -> Q24 {
@@ -532,6 +533,20 @@ impl crate::num::Num for Q24 {
         };
         let next = clamp(acc.saturating_add(signed), lo, hi);
         (next, next <= lo || next >= hi)
+    }
+}
+
+impl crate::frames::LeadRotation for Q24 {
+    #[inline(always)]
+    fn rotate_ahead<S: crate::frames::SinCos<Q24>>(
+        sincos: &mut S,
+        _sc: crate::frames::SinCosValue<Q24>,
+        theta: u32,
+        frequency: Q24,
+        lead: Gain,
+    ) -> crate::frames::SinCosValue<Q24> {
+        // the exact rotation from the table (no series needed)
+        sincos.sin_cos(theta.wrapping_add(lead.apply(frequency.0) as u32))
     }
 }
 

@@ -18,26 +18,9 @@
 //! three quarters; cos(theta) = sin(theta + pi/2). About 20 instructions per value, no
 //! multiply beyond the interpolation, 1 KiB of flash.
 
+pub use super::q::{angle_from_rad, angle_to_rad, Angle, COUNTS_PER_RAD};
 use super::q::{FRAC_BITS, Q24};
 use crate::frames::{SinCos, SinCosValue};
-
-/// Frame angle: fraction of one electrical turn, 2^32 counts per turn (wraps by design).
-pub type Angle = u32;
-
-/// Counts per radian: 2^32 / (2 pi).
-pub const COUNTS_PER_RAD: f32 = 4_294_967_296.0 / (2.0 * core::f32::consts::PI);
-
-/// An angle from radians (configuration and the simulator boundary only).
-pub fn angle_from_rad(rad: f32) -> Angle {
-    let turns = rad * (1.0 / (2.0 * core::f32::consts::PI));
-    let frac = turns - (turns as i64) as f32; // (-1, 1); `as` saturates, NaN -> 0
-    (frac * 4_294_967_296.0) as i64 as u32
-}
-
-/// An angle in radians, in [-pi, pi) (telemetry and the simulator boundary only).
-pub fn angle_to_rad(a: Angle) -> f32 {
-    (a as i32) as f32 * (1.0 / COUNTS_PER_RAD)
-}
 
 /// pi/2 in Q62 (round(pi/2 2^62)).
 const HALF_PI_Q62: i128 = 7_244_019_458_077_122_842;
