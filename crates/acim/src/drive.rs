@@ -43,6 +43,7 @@
 
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 use crate::design::{DesignArithmetic, DriveCoeffs};
+use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
 use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
@@ -195,7 +196,12 @@ fn rs_running_step<N: Num>(
 /// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
 /// the limits and whether the regeneration limit is tighter than the others.
 #[inline(always)]
-fn regen_limit<N: Num>(c: &DriveCoeffs<N>, target: N, speed: N, fw: FwLimits<N>) -> (N, N, bool) {
+fn regen_limit<N: Num>(
+    c: &DriveCoeffs<N>,
+    target: N,
+    speed: N,
+    fw: FieldWeakeningOutput<N>,
+) -> (N, N, bool) {
     let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
     let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
     let w = if w > N::ZERO { w } else { N::ZERO };
@@ -329,13 +335,9 @@ struct References<N> {
     far_side: bool,
     /// The previous step's i_sq*, A (the field-weakening model's load).
     i_sq_ref: N,
-    /// The field weakening's voltage-feedback trim of i_sd*, A (>= 0).
-    fw_trim: N,
-    /// The light-load flux optimiser's i_sd*, A (rated when off).
-    flux_optimum: N,
-    /// Field weakening has moved the flux and it has not settled back at its rated value
-    /// yet: the estimators take the moving flux into account.
-    fw_active: bool,
+    /// Field weakening, over-voltage control and flux optimisation
+    /// ([`crate::field_weakening`]).
+    fw: FieldWeakening<N>,
     /// A flying start: magnetizing in a frame turning with the rotor at the speed the
     /// search measured.
     flying: bool,
@@ -347,18 +349,6 @@ struct References<N> {
     /// Steps left of the overmodulation reserve (`DriveCoeffs::
     /// overmodulation_reserve_steps` when full; see [`Drive::transient_limit`]).
     overmodulation_reserve: u32,
-}
-
-/// The field-weakening stage's output.
-#[derive(Clone, Copy, Debug)]
-struct FwLimits<N> {
-    /// i_sd*, A.
-    i_sd_ref: N,
-    /// Lower and upper i_sq* limits, A.
-    i_sq_min: N,
-    i_sq_max: N,
-    /// The torque limit is set by the voltage or the bus, not the current circle.
-    torque_limited: bool,
 }
 
 /// Current-control stage state: the d and q PIs.
@@ -477,9 +467,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 limited_hold: 0,
                 far_side: false,
                 i_sq_ref: N::ZERO,
-                fw_trim: N::ZERO,
-                flux_optimum: N::ZERO,
-                fw_active: false,
+                fw: FieldWeakening::new(N::ZERO),
                 flying: false,
                 zero_steps: 0,
                 commanded: false,
@@ -746,9 +734,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.refs.far_side = false;
         self.refs.speed_ctl.reset();
         self.refs.i_sq_ref = N::ZERO;
-        self.refs.fw_trim = N::ZERO;
-        self.refs.flux_optimum = self.coeffs.i_sd_ref;
-        self.refs.fw_active = false;
+        self.refs.fw = FieldWeakening::new(self.coeffs.i_sd_ref);
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
         self.refs.zero_steps = 0;
@@ -1089,7 +1075,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // eq. (20) holds with settled flux; while field weakening moves it, the rotor
         // part of eq. (9a), R_R i_sd - lambda_r/tau_r (the flux's rate of change), is
         // taken out of v_sd so that the residual stays the orientation's
-        let weakened = self.refs.fw_active;
+        let weakened = self.refs.fw.active();
         let v_sd = if weakened {
             self.applied.v_dq.d - c.referred_rotor_resistance * i.d
                 + N::gain(c.inv_rotor_time_constant, est.flux.rotor_flux)
@@ -1288,15 +1274,26 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q: N::ZERO,
             });
         }
-        let mut fw = self.field_weakening(m, e, limit);
-        if self.coeffs.fw.flux_optimisation {
-            fw.i_sd_ref = self.flux_optimum(fw.i_sd_ref);
-        }
-        // latched from the first weakened step until the flux is back at its rated value
-        self.refs.fw_active =
-            fw.i_sd_ref < self.coeffs.i_sd_ref || (self.refs.fw_active && !e.flux_settled);
         let c = &self.coeffs;
         let r = &mut self.refs;
+        let fw = r.fw.update(
+            &c.fw,
+            &FieldWeakeningInputs {
+                flux_current: c.i_sd_ref,
+                transient_inductance: c.transient_inductance,
+                torque_current_min: c.speed_loop.pi.out_min,
+                torque_current_max: c.speed_loop.pi.out_max,
+                stator_frequency: e.stator_frequency,
+                stator_resistance: e.rs,
+                speed: e.observer.speed,
+                dc_bus: m.dc_bus,
+                limit,
+                last_voltage: self.applied.v_dq,
+                last_torque_current: r.i_sq_ref,
+                q_loop: &self.cur.q,
+                flux_settled: e.flux_settled,
+            },
+        );
         let target = if c.fw.enabled {
             // (the target is within speed_target_limit already): the reachable speed
             // depends on the load and is found by holding the reference below
@@ -1316,7 +1313,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // the reference instead, and in field weakening (the torque the voltage leaves is
         // the hold's to share out: with the slope's torque on top, braking from 3000 rpm
         // ran into the current-regulation trip)
-        let mut slope = if r.fw_active { N::ZERO } else { dv };
+        let mut slope = if r.fw.active() { N::ZERO } else { dv };
         let speed = e.observer.speed;
         // the far-side mode: the braking torque the target needs,
         // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
@@ -1417,7 +1414,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         } else {
             N::ZERO
         };
-        let (error, feedforward) = if r.fw_active {
+        let (error, feedforward) = if r.fw.active() {
             let scale = c.fw.flux_reference * self.est.flux.inv_rotor_flux;
             (error * scale, feedforward * scale)
         } else {
@@ -1442,147 +1439,6 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q: i_sq_ref,
             }),
         }
-    }
-
-    /// Light-load flux optimisation ([`crate::DriveConfig::flux_optimisation`]):
-    /// the copper-loss optimum i_sd* = sqrt((Rs + R_R)/Rs) |i_sq*| of the last step's
-    /// torque current, between the floor and `i_sd_max` (the rated or weakened flux
-    /// current). It rises at once (a load step takes the flux back up, with tau_r) and
-    /// falls slowly: with the lower flux the same torque needs more i_sq, so the optimum
-    /// found from i_sq is approached from above, where that loop settles.
-    #[inline(never)]
-    fn flux_optimum(&mut self, i_sd_max: N) -> N {
-        let fw = &self.coeffs.fw;
-        let r = &mut self.refs;
-        let target = N::gain(fw.optimum_ratio, r.i_sq_ref.abs());
-        let target = target.clamp(fw.optimum_min_current, i_sd_max);
-        r.flux_optimum = if target > r.flux_optimum {
-            target
-        } else {
-            r.flux_optimum + N::gain(fw.optimum_fall, target - r.flux_optimum)
-        };
-        if r.flux_optimum < i_sd_max {
-            r.flux_optimum
-        } else {
-            i_sd_max
-        }
-    }
-
-    /// Field weakening and over-voltage control ([`crate::design::FieldWeakeningDesign`] for
-    /// the equations): the flux current i_sd* and the torque-current limits at this
-    /// step's stator frequency, bus and load. Below base speed (i_sd* at its rated value)
-    /// and off the bus limit it returns the design's static values unchanged.
-    #[inline(always)]
-    fn field_weakening(
-        &mut self,
-        m: &Measured<N>,
-        e: &Estimate<N>,
-        limit: VoltageLimit<N>,
-    ) -> FwLimits<N> {
-        let c = &self.coeffs;
-        let fw = &c.fw;
-        let mut out = FwLimits {
-            i_sd_ref: c.i_sd_ref,
-            i_sq_min: c.speed_loop.pi.out_min,
-            i_sq_max: c.speed_loop.pi.out_max,
-            torque_limited: false,
-        };
-        if fw.enabled {
-            let ws = e.stator_frequency;
-            // |w_s| floored at w_min > 0: the divisor cannot vanish
-            let w = ws.abs();
-            let w = if w > fw.min_frequency {
-                w
-            } else {
-                fw.min_frequency
-            };
-            let v = N::gain(fw.voltage_fraction, limit.steady);
-            // field weakening is evaluated only where the no-load voltage at rated flux
-            // w Ls i_sd_rated exceeds FW_TRIM_GATE V (or the trim has not decayed yet): below
-            // that the rated flux is kept without computing the model (the cheap path)
-            let near_base =
-                N::gain_mul(fw.flux_voltage, w, fw.rated_linkage) > N::gain(fw.trim_gate, v);
-            let i_d_v = if near_base || self.refs.fw_trim > N::ZERO {
-                let v2 = v * v;
-                let iq = self.refs.i_sq_ref;
-                // q-axis share of the voltage at the present load, floored at the
-                // maximum-torque-per-voltage split (half of V^2 each)
-                let x = N::gain_mul(c.transient_inductance, w, iq);
-                let rest = v2 - x * x;
-                let half = v2.half();
-                let budget = if rest > half { rest } else { half };
-                // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
-                // q current loop's integral: the voltage the model misses (dead time, device
-                // drop, parameter errors), measured
-                let drop = e.rs * iq + self.cur.q.integral();
-                let drop = if ws < N::ZERO { -drop } else { drop };
-                // the rated flux fits when sqrt(budget) - drop >= w Ls i_sd_rated: decided
-                // without the square root and the division (the cheap path below base speed)
-                let need = N::gain_mul(fw.stator_inductance, w, c.i_sd_ref) + drop;
-                let i_d_model = if need <= N::ZERO || need * need <= budget {
-                    c.i_sd_ref
-                } else {
-                    N::gain(fw.inv_stator_inductance, N::ratio(budget.sqrt() - drop, w))
-                };
-                // voltage-feedback trim of what the model misses (the current loops'
-                // integrals, parameter errors): integrates (|v*|^2 - V_t^2)/v_max
-                // ~ 2 (|v*| - V_t) of the last command (V_t = trim fraction x the steady
-                // voltage; with overmodulation v_max is 3.5 % above V_t / 0.92 and the
-                // loop gain that much lower), per flux linkage (/w), kept >= 0,
-                // only where the rated flux needs most of V (`near_base`), so that faults
-                // below base speed do not move the flux; elsewhere it only decays
-                let trim = {
-                    let va = self.applied.v_dq;
-                    let vt = N::gain(fw.trim_fraction, limit.steady);
-                    let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
-                    let excess = if near_base { excess } else { -excess.abs() };
-                    let trim = self.refs.fw_trim + N::gain(fw.trim_gain, N::ratio(excess, w));
-                    trim.clamp(N::ZERO, c.i_sd_ref - fw.min_flux_current)
-                };
-                self.refs.fw_trim = trim;
-                if c.i_sd_ref - trim < i_d_model {
-                    c.i_sd_ref - trim
-                } else {
-                    i_d_model
-                }
-            } else {
-                c.i_sd_ref
-            };
-            let i_d = i_d_v.clamp(fw.min_flux_current, c.i_sd_ref);
-            if i_d < c.i_sd_ref {
-                // constant-power / breakdown region: the current circle with the lower
-                // flux current, and the maximum-torque-per-voltage bound below;
-                // the voltage itself is shared by the current loops (d priority) and
-                // the trim above lowers the flux while the q loop is short of voltage
-                let circle = (fw.current_limit * fw.current_limit - i_d * i_d).sqrt();
-                // maximum torque per voltage at this flux current: with
-                // v_sq ~ Rs i_sq + w Ls i_sd and v_sd ~ -w sigma Ls i_sq, the product
-                // i_sd i_sq on |v| = V is largest at i_sq/i_sd = w Ls/|Rs + j w sigma Ls|;
-                // beyond it more i_sq (and the lower flux the trim then needs) lowers the
-                // torque, so the trim settles on that line instead of the flux floor
-                let x_q = N::gain_mul(c.transient_inductance, w, N::ONE);
-                let z_q = (x_q * x_q + e.rs * e.rs).sqrt();
-                let mtpv = N::ratio(N::gain_mul(fw.stator_inductance, w, i_d), z_q);
-                let i_q = if mtpv < circle { mtpv } else { circle };
-                out.i_sd_ref = i_d;
-                out.i_sq_min = -i_q;
-                out.i_sq_max = i_q;
-                out.torque_limited = mtpv < circle || self.cur.q.saturated();
-            }
-        }
-        if fw.overvoltage_control && m.dc_bus > fw.regen_start {
-            // over-voltage control: the regenerative side (i_sq against the speed) falls
-            // linearly to zero over the band above regen_start
-            let k = (N::ONE - N::gain(fw.inv_regen_band, m.dc_bus - fw.regen_start))
-                .clamp(N::ZERO, N::ONE);
-            if e.observer.speed > N::ZERO {
-                out.i_sq_min = out.i_sq_min * k;
-            } else {
-                out.i_sq_max = out.i_sq_max * k;
-            }
-            out.torque_limited = true;
-        }
-        out
     }
 
     /// The current loops' voltage limit this step. A modulator with a range above its

@@ -3,9 +3,11 @@
 //! load ([`FieldWeakeningDesign`] for the equations).
 
 use crate::config::DriveConfig;
+use crate::frames::Dq;
 use crate::math::sqrt;
 use crate::num::Num;
-use crate::svpwm::FW_TRIM_FRACTION;
+use crate::pi::PiController;
+use crate::svpwm::{VoltageLimit, FW_TRIM_FRACTION};
 
 /// Field weakening keeps the steady-state stator voltage within this fraction of the
 /// current loops' voltage limit: the margin the current loops keep for
@@ -185,5 +187,244 @@ impl FieldWeakeningDesign {
             regen_start: OVC_START_FRACTION * cfg.dc_bus_max,
             inv_regen_band: 1.0 / band,
         }
+    }
+}
+
+/// The machine-model constants and last-period signals the field weakening reads, with
+/// this step's estimates. Units as in [`FieldWeakeningDesign`] (SI in f32, per unit in
+/// fixed point).
+#[derive(Clone, Copy, Debug)]
+pub struct FieldWeakeningInputs<'a, N: Num> {
+    /// Rated flux current i_sd_rated, A (the design's i_sd*).
+    pub flux_current: N,
+    /// sigma Ls: (frequency x current) -> voltage.
+    pub transient_inductance: N::Gain,
+    /// The torque-current limits below base speed (the speed PI's range), A.
+    pub torque_current_min: N,
+    /// ... upper.
+    pub torque_current_max: N,
+    /// Stator frequency w_s, rad/s electrical (this step's estimate).
+    pub stator_frequency: N,
+    /// Rs_hat, ohm.
+    pub stator_resistance: N,
+    /// Omega_hat, rad/s mechanical (the regenerative side's sign).
+    pub speed: N,
+    /// DC bus, V.
+    pub dc_bus: N,
+    /// The current loops' voltage limit this step.
+    pub limit: VoltageLimit<N>,
+    /// z^-1: the voltage command of the last step (rotor-flux frame), V.
+    pub last_voltage: Dq<N>,
+    /// z^-1: the last step's torque-current reference i_sq*, A.
+    pub last_torque_current: N,
+    /// z^-1: the q current loop as the last step left it: its integral (the voltage the
+    /// model misses, V) and whether it was at its voltage limit. By reference: read only
+    /// near base speed.
+    pub q_loop: &'a PiController<N>,
+    /// The rotor flux is within tolerance of its reference (this step).
+    pub flux_settled: bool,
+}
+
+/// The field weakening's output: the flux-current reference and the torque-current
+/// limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldWeakeningOutput<N> {
+    /// i_sd*, A.
+    pub i_sd_ref: N,
+    /// Lower i_sq* limit, A.
+    pub i_sq_min: N,
+    /// Upper i_sq* limit, A.
+    pub i_sq_max: N,
+    /// The torque limit is set by the voltage or the bus, not the current circle.
+    pub torque_limited: bool,
+}
+
+/// The field weakening's state: the voltage-feedback trim, the flux optimiser's i_sd*
+/// and the latch that tells the estimators the flux is moving.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FieldWeakening<N> {
+    /// The voltage-feedback trim of i_sd*, A (>= 0).
+    trim: N,
+    /// The light-load flux optimiser's i_sd*, A (rated when off).
+    flux_optimum: N,
+    /// Field weakening has moved the flux and it has not settled back at its rated value
+    /// yet.
+    active: bool,
+}
+
+impl<N: Num> FieldWeakening<N> {
+    /// The state of a start: no trim, the optimiser at the rated flux current
+    /// `flux_current` (A).
+    pub fn new(flux_current: N) -> Self {
+        Self {
+            trim: N::ZERO,
+            flux_optimum: flux_current,
+            active: false,
+        }
+    }
+
+    /// Whether the flux is weakened or has not settled back at its rated value since: the
+    /// estimators then take the moving flux into account (read after [`Self::update`],
+    /// this step's; before it, the last step's).
+    #[inline(always)]
+    pub fn active(&self) -> bool {
+        self.active
+    }
+
+    /// One step: the flux current i_sd* and the torque-current limits at this step's
+    /// stator frequency, bus and load ([`FieldWeakeningDesign`] for the equations), the
+    /// flux optimiser's i_sd* below them when on, and the latch. Below base speed (i_sd*
+    /// at its rated value) and off the bus limit it returns the static values unchanged.
+    #[inline(always)]
+    pub fn update(
+        &mut self,
+        cfg: &FieldWeakeningDesign<N>,
+        x: &FieldWeakeningInputs<'_, N>,
+    ) -> FieldWeakeningOutput<N> {
+        let mut out = self.limits(cfg, x);
+        if cfg.flux_optimisation {
+            out.i_sd_ref = self.flux_optimum(cfg, x.last_torque_current, out.i_sd_ref);
+        }
+        // latched from the first weakened step until the flux is back at its rated value
+        self.active = out.i_sd_ref < x.flux_current || (self.active && !x.flux_settled);
+        out
+    }
+
+    /// Light-load flux optimisation ([`crate::DriveConfig::flux_optimisation`]): the
+    /// copper-loss optimum i_sd* = sqrt((Rs + R_R)/Rs) |i_sq*| of the last step's torque
+    /// current `i_sq_ref` (A), between the floor and `i_sd_max` (the rated or weakened
+    /// flux current). It rises at once (a load step takes the flux back up, with tau_r)
+    /// and falls slowly: with the lower flux the same torque needs more i_sq, so the
+    /// optimum found from i_sq is approached from above, where that loop settles.
+    #[inline(never)]
+    fn flux_optimum(&mut self, fw: &FieldWeakeningDesign<N>, i_sq_ref: N, i_sd_max: N) -> N {
+        let target = N::gain(fw.optimum_ratio, i_sq_ref.abs());
+        let target = target.clamp(fw.optimum_min_current, i_sd_max);
+        self.flux_optimum = if target > self.flux_optimum {
+            target
+        } else {
+            self.flux_optimum + N::gain(fw.optimum_fall, target - self.flux_optimum)
+        };
+        if self.flux_optimum < i_sd_max {
+            self.flux_optimum
+        } else {
+            i_sd_max
+        }
+    }
+
+    /// Field weakening and over-voltage control: the model flux current with its
+    /// voltage-feedback trim, the current circle and the maximum-torque-per-voltage line,
+    /// and the regenerative side's fold-back above the bus threshold.
+    #[inline(always)]
+    fn limits(
+        &mut self,
+        fw: &FieldWeakeningDesign<N>,
+        x: &FieldWeakeningInputs<'_, N>,
+    ) -> FieldWeakeningOutput<N> {
+        let i_sd_rated = x.flux_current;
+        let limit = x.limit;
+        let mut out = FieldWeakeningOutput {
+            i_sd_ref: i_sd_rated,
+            i_sq_min: x.torque_current_min,
+            i_sq_max: x.torque_current_max,
+            torque_limited: false,
+        };
+        if fw.enabled {
+            let ws = x.stator_frequency;
+            // |w_s| floored at w_min > 0: the divisor cannot vanish
+            let w = ws.abs();
+            let w = if w > fw.min_frequency {
+                w
+            } else {
+                fw.min_frequency
+            };
+            let v = N::gain(fw.voltage_fraction, limit.steady);
+            // field weakening is evaluated only where the no-load voltage at rated flux
+            // w Ls i_sd_rated exceeds FW_TRIM_GATE V (or the trim has not decayed yet): below
+            // that the rated flux is kept without computing the model (the cheap path)
+            let near_base =
+                N::gain_mul(fw.flux_voltage, w, fw.rated_linkage) > N::gain(fw.trim_gate, v);
+            let i_d_v = if near_base || self.trim > N::ZERO {
+                let v2 = v * v;
+                let iq = x.last_torque_current;
+                // q-axis share of the voltage at the present load, floored at the
+                // maximum-torque-per-voltage split (half of V^2 each)
+                let xq = N::gain_mul(x.transient_inductance, w, iq);
+                let rest = v2 - xq * xq;
+                let half = v2.half();
+                let budget = if rest > half { rest } else { half };
+                // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
+                // q current loop's integral: the voltage the model misses (dead time, device
+                // drop, parameter errors), measured
+                let drop = x.stator_resistance * iq + x.q_loop.integral();
+                let drop = if ws < N::ZERO { -drop } else { drop };
+                // the rated flux fits when sqrt(budget) - drop >= w Ls i_sd_rated: decided
+                // without the square root and the division (the cheap path below base speed)
+                let need = N::gain_mul(fw.stator_inductance, w, i_sd_rated) + drop;
+                let i_d_model = if need <= N::ZERO || need * need <= budget {
+                    i_sd_rated
+                } else {
+                    N::gain(fw.inv_stator_inductance, N::ratio(budget.sqrt() - drop, w))
+                };
+                // voltage-feedback trim of what the model misses (the current loops'
+                // integrals, parameter errors): integrates (|v*|^2 - V_t^2)/v_max
+                // ~ 2 (|v*| - V_t) of the last command (V_t = trim fraction x the steady
+                // voltage; with overmodulation v_max is 3.5 % above V_t / 0.92 and the
+                // loop gain that much lower), per flux linkage (/w), kept >= 0,
+                // only where the rated flux needs most of V (`near_base`), so that faults
+                // below base speed do not move the flux; elsewhere it only decays
+                let trim = {
+                    let va = x.last_voltage;
+                    let vt = N::gain(fw.trim_fraction, limit.steady);
+                    let excess = (va.d * va.d + va.q * va.q - vt * vt) * limit.inv_max;
+                    let excess = if near_base { excess } else { -excess.abs() };
+                    let trim = self.trim + N::gain(fw.trim_gain, N::ratio(excess, w));
+                    trim.clamp(N::ZERO, i_sd_rated - fw.min_flux_current)
+                };
+                self.trim = trim;
+                if i_sd_rated - trim < i_d_model {
+                    i_sd_rated - trim
+                } else {
+                    i_d_model
+                }
+            } else {
+                i_sd_rated
+            };
+            let i_d = i_d_v.clamp(fw.min_flux_current, i_sd_rated);
+            if i_d < i_sd_rated {
+                // constant-power / breakdown region: the current circle with the lower
+                // flux current, and the maximum-torque-per-voltage bound below;
+                // the voltage itself is shared by the current loops (d priority) and
+                // the trim above lowers the flux while the q loop is short of voltage
+                let circle = (fw.current_limit * fw.current_limit - i_d * i_d).sqrt();
+                // maximum torque per voltage at this flux current: with
+                // v_sq ~ Rs i_sq + w Ls i_sd and v_sd ~ -w sigma Ls i_sq, the product
+                // i_sd i_sq on |v| = V is largest at i_sq/i_sd = w Ls/|Rs + j w sigma Ls|;
+                // beyond it more i_sq (and the lower flux the trim then needs) lowers the
+                // torque, so the trim settles on that line instead of the flux floor
+                let x_q = N::gain_mul(x.transient_inductance, w, N::ONE);
+                let rs = x.stator_resistance;
+                let z_q = (x_q * x_q + rs * rs).sqrt();
+                let mtpv = N::ratio(N::gain_mul(fw.stator_inductance, w, i_d), z_q);
+                let i_q = if mtpv < circle { mtpv } else { circle };
+                out.i_sd_ref = i_d;
+                out.i_sq_min = -i_q;
+                out.i_sq_max = i_q;
+                out.torque_limited = mtpv < circle || x.q_loop.saturated();
+            }
+        }
+        if fw.overvoltage_control && x.dc_bus > fw.regen_start {
+            // over-voltage control: the regenerative side (i_sq against the speed) falls
+            // linearly to zero over the band above regen_start
+            let k = (N::ONE - N::gain(fw.inv_regen_band, x.dc_bus - fw.regen_start))
+                .clamp(N::ZERO, N::ONE);
+            if x.speed > N::ZERO {
+                out.i_sq_min = out.i_sq_min * k;
+            } else {
+                out.i_sq_max = out.i_sq_max * k;
+            }
+            out.torque_limited = true;
+        }
+        out
     }
 }
