@@ -14,7 +14,6 @@ use crate::math::{is_finite, sqrt};
 use crate::num::Num;
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
-use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::speed_loop::SpeedLoopConfig;
@@ -24,6 +23,7 @@ use crate::thermal::ThermalConfig;
 
 pub use crate::config::*;
 use crate::config::{check, positive};
+pub use crate::current_loop::{CurrentLoopConfig, OVERMODULATION_RESERVE_TIME};
 pub use crate::field_weakening::{
     FieldWeakeningDesign, FLUX_OPT_FALL_TAU_R, FLUX_OPT_MIN_FRACTION, FW_HOLD_BAND_FRACTION,
     FW_MIN_FLUX_FRACTION, FW_MIN_FREQUENCY_FRACTION, FW_REPORT_SPEED_LOOP_CONSTANTS,
@@ -62,15 +62,6 @@ pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
 /// Under load the orientation gain is at least this multiple of the stability bound
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
 pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
-/// With an overmodulating modulator ([`crate::svpwm::Overmodulation`]) the current loops
-/// may use the range above the sustained (linear) voltage limit for this long in a row,
-/// s; then the sustained limit applies until the command is back below it, when the
-/// reserve refills at the same rate. Long enough for a load or speed step (the current
-/// loops settle in about 3 / 1 000 rad/s = 3 ms, the speed loop in about 0.1 s: the
-/// reserve covers the current transient and half the speed transient), short enough
-/// that a drive held at its voltage limit (a target beyond the reachable speed) runs in
-/// the linear range, where its current samples carry no overmodulation harmonics.
-pub const OVERMODULATION_RESERVE_TIME: f32 = 0.05;
 /// Speed targets are limited to this fraction of `max_speed` (the over-speed trip keeps
 /// a margin above any commanded speed).
 pub const SPEED_TARGET_FRACTION: f32 = 0.9;
@@ -170,10 +161,8 @@ pub struct VfDesign<N: Num = f32> {
 /// every value fits).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveCoeffs<N: Num = f32> {
-    /// d-axis current PI.
-    pub pi_d: PiConfig<N>,
-    /// q-axis current PI.
-    pub pi_q: PiConfig<N>,
+    /// The current loop (d/q PIs, overmodulation reserve).
+    pub current_loop: CurrentLoopConfig<N>,
     /// Speed loop: the disturbance PI and the feed-forwards.
     pub speed_loop: SpeedLoopConfig<N>,
     /// The short-time overload rating's I^2 t model.
@@ -245,10 +234,6 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub zero_speed_stop: bool,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: N,
-    /// Steps the current loops may spend beyond the sustained voltage limit in a row
-    /// before it applies ([`OVERMODULATION_RESERVE_TIME`]; only a modulator whose
-    /// [`crate::svpwm::VoltageLimit::sustained`] is below its `max` has such a reserve).
-    pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
     pub regen_current_per_frequency: N::Gain,
     /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical: the torque whose slip is one
@@ -280,10 +265,8 @@ pub struct DriveDesign {
     pub config: DriveConfig,
     /// Control period Ts, s.
     pub ts: f32,
-    /// d-axis current PI (eq. 9a plant; pole cancellation).
-    pub pi_d: PiConfig,
-    /// q-axis current PI (eq. 9b plant).
-    pub pi_q: PiConfig,
+    /// The current loop ([`crate::current_loop`]).
+    pub current_loop: CurrentLoopConfig,
     /// Speed loop (J, k_t at the flux reference; [`crate::speed_loop`]).
     pub speed_loop: SpeedLoopConfig,
     /// The short-time overload rating ([`crate::thermal`]).
@@ -327,8 +310,6 @@ pub struct DriveDesign {
     pub zero_speed_stop: bool,
     /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
     pub regen_min_frequency: f32,
-    /// [`OVERMODULATION_RESERVE_TIME`] in steps.
-    pub overmodulation_reserve_steps: u32,
     /// lambda_ref / R_R, A per rad/s electrical.
     pub regen_current_per_frequency: f32,
     /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical (0: no far-side transit).
@@ -524,7 +505,6 @@ impl DriveDesign {
         rs_running.max_frequency = crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
             * m.stator_resistance()
             / m.magnetizing_inductance();
-        let pi_current = PiConfig::current_loop(&m, cfg.current_bandwidth, ts, v_static);
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
         // sequence (frame held, Rs identification) applies
@@ -557,8 +537,7 @@ impl DriveDesign {
         Ok(Self {
             config: cfg,
             ts,
-            pi_d: pi_current,
-            pi_q: pi_current,
+            current_loop: CurrentLoopConfig::new(&cfg, v_static),
             speed_loop: SpeedLoopConfig::new(
                 &m,
                 flux_reference,
@@ -598,7 +577,6 @@ impl DriveDesign {
             zero_dwell_steps: ((cfg.zero_speed_dwell / ts) as u32).max(1),
             zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
             regen_min_frequency: cfg.regen_min_frequency,
-            overmodulation_reserve_steps: ((OVERMODULATION_RESERVE_TIME / ts) as u32).max(1),
             regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
             far_side_torque_per_frequency: if cfg.far_side_gain > 0.0 {
                 1.5 * pp * flux_reference * flux_reference / m.referred_rotor_resistance()
@@ -778,8 +756,7 @@ impl DriveCoeffs<f32> {
     pub(crate) fn si(d: &DriveDesign) -> Self {
         let cfg = &d.config;
         Self {
-            pi_d: d.pi_d,
-            pi_q: d.pi_q,
+            current_loop: d.current_loop,
             speed_loop: d.speed_loop,
             thermal: d.thermal,
             flux: d.flux,
@@ -800,7 +777,6 @@ impl DriveCoeffs<f32> {
             zero_dwell_steps: d.zero_dwell_steps,
             zero_speed_stop: d.zero_speed_stop,
             regen_min_frequency: d.regen_min_frequency,
-            overmodulation_reserve_steps: d.overmodulation_reserve_steps,
             regen_current_per_frequency: d.regen_current_per_frequency,
             far_side_torque_per_frequency: d.far_side_torque_per_frequency,
             far_side_enter: d.far_side_enter,

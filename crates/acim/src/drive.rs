@@ -41,6 +41,7 @@
 //! preloaded compare registers; the voltage the plant saw over (k .. k+1) is the command of
 //! step k-1, which is what the observer and the Rs estimator use.
 
+use crate::current_loop::{CurrentLoop, CurrentLoopInputs};
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 use crate::design::{DesignArithmetic, DriveCoeffs};
 use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
@@ -346,16 +347,6 @@ struct References<N> {
     /// A nonzero speed target or reference since the start: `Stop` ramps down and then
     /// switches off; a drive started with a zero target waits for one.
     commanded: bool,
-    /// Steps left of the overmodulation reserve (`DriveCoeffs::
-    /// overmodulation_reserve_steps` when full; see [`Drive::transient_limit`]).
-    overmodulation_reserve: u32,
-}
-
-/// Current-control stage state: the d and q PIs.
-#[derive(Clone, Copy, Debug)]
-struct CurrentControl<N> {
-    d: PiController<N>,
-    q: PiController<N>,
 }
 
 /// Open-loop V/f state.
@@ -377,7 +368,7 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     sup: Supervisor,
     est: Estimator<N, O>,
     refs: References<N>,
-    cur: CurrentControl<N>,
+    cur: CurrentLoop<N>,
     modulator: M,
     sincos: S,
     applied: Applied<N>,
@@ -471,12 +462,8 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 flying: false,
                 zero_steps: 0,
                 commanded: false,
-                overmodulation_reserve: 0,
             },
-            cur: CurrentControl {
-                d: PiController::new(),
-                q: PiController::new(),
-            },
+            cur: CurrentLoop::new(),
             modulator,
             sincos,
             applied: Applied::default(),
@@ -739,9 +726,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.refs.rs_settled_steps = 0;
         self.refs.zero_steps = 0;
         self.refs.commanded = false;
-        self.refs.overmodulation_reserve = 0;
-        self.cur.d.reset();
-        self.cur.q.reset();
+        self.cur = CurrentLoop::new();
         self.est.flux = FluxModel::new();
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
@@ -832,7 +817,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let limit = self
             .modulator
             .voltage_limit(&self.coeffs.pwm, m.dc_bus, inv_dc_bus);
-        let limit = self.transient_limit(limit);
+        let limit = self.cur.limit(
+            &self.coeffs.current_loop,
+            limit,
+            self.applied.v_dq,
+            M::OVERMODULATES,
+        );
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
         let i_ref = match self.references(&m, &e, magnetizing, limit) {
@@ -850,7 +840,23 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         }
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
-        let v = self.current_control(&m, &e, i_ref, limit);
+        let c = &self.coeffs;
+        let v = self.cur.update(
+            &c.current_loop,
+            &CurrentLoopInputs {
+                referred_rotor_resistance: c.referred_rotor_resistance,
+                inv_rotor_time_constant: c.inv_rotor_time_constant,
+                transient_inductance: c.transient_inductance,
+                back_emf: c.back_emf,
+                stator_resistance: e.rs,
+                stator_frequency: e.stator_frequency,
+                rotor_flux: e.rotor_flux,
+                speed: e.observer.speed,
+                reference: i_ref,
+                current: m.i_dq,
+                limit,
+            },
+        );
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
         if let Some(reason) = self.monitor_control(&m, &e, i_ref, v) {
@@ -922,10 +928,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         v: Dq<N>,
     ) -> Option<FaultReason> {
         let residual = Dq {
-            d: self.cur.d.integral(),
-            q: self.cur.q.integral(),
+            d: self.cur.d().integral(),
+            q: self.cur.q().integral(),
         };
-        let voltage_limited = self.cur.d.saturated() || self.cur.q.saturated();
+        let voltage_limited = self.cur.d().saturated() || self.cur.q().saturated();
         let found = self.monitor.check(
             &self.coeffs.limits,
             i_ref,
@@ -1290,7 +1296,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 limit,
                 last_voltage: self.applied.v_dq,
                 last_torque_current: r.i_sq_ref,
-                q_loop: &self.cur.q,
+                q_loop: self.cur.q(),
                 flux_settled: e.flux_settled,
             },
         );
@@ -1363,7 +1369,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // to the q loop drives (the q loop at its limit: at the field-weakening onset the
         // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
         // out, while the ramp goes on)
-        let short = r.speed_ctl.saturated() || self.cur.q.saturated();
+        let short = r.speed_ctl.saturated() || self.cur.q().saturated();
         // the regeneration limit holds the torque only when the drive brakes (its last
         // torque current against the speed): a motoring drive at its limit, e.g. a locked
         // rotor, is the stall detector's case, with the reference kept
@@ -1439,79 +1445,6 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q: i_sq_ref,
             }),
         }
-    }
-
-    /// The current loops' voltage limit this step. A modulator with a range above its
-    /// sustained limit ([`crate::svpwm::Overmodulation`]) lends it as a reserve: each
-    /// step whose command (the last one) was beyond the sustained limit uses a step of
-    /// it, each step at or below returns one, and with none left the sustained limit
-    /// applies ([`crate::design::OVERMODULATION_RESERVE_TIME`]). A modulator without
-    /// one ([`crate::Svpwm`]: `sustained == max`) passes unchanged.
-    #[inline(always)]
-    fn transient_limit(&mut self, limit: VoltageLimit<N>) -> VoltageLimit<N> {
-        if !M::OVERMODULATES || limit.sustained >= limit.max {
-            return limit;
-        }
-        let v = self.applied.v_dq;
-        let s = limit.sustained;
-        let r = &mut self.refs.overmodulation_reserve;
-        if v.d * v.d + v.q * v.q > s * s {
-            *r = r.saturating_sub(1);
-        } else if *r < self.coeffs.overmodulation_reserve_steps {
-            *r += 1;
-        }
-        if *r == 0 {
-            VoltageLimit {
-                max: s,
-                inv_max: limit.inv_sustained,
-                ..limit
-            }
-        } else {
-            limit
-        }
-    }
-
-    /// Current-control stage: d/q PIs with decoupling feed-forward (eq. 9a, 9b), the
-    /// voltage vector limited to `limit` with d-axis priority.
-    #[inline(always)]
-    fn current_control(
-        &mut self,
-        m: &Measured<N>,
-        e: &Estimate<N>,
-        i_ref: Dq<N>,
-        limit: VoltageLimit<N>,
-    ) -> Dq<N> {
-        let c = &self.coeffs;
-        let (rs, ws, lambda) = (e.rs, e.stator_frequency, e.rotor_flux);
-        let (i_sd_ref, i_sq_ref) = (i_ref.d, i_ref.q);
-        // eq. (9a): v_sd = Rseq i_sd - lambda_r/tau_r - sigma Ls w_s i_sq
-        let ff_d = N::sum_times(rs, c.referred_rotor_resistance, i_sd_ref)
-            - N::gain(c.inv_rotor_time_constant, lambda)
-            - N::gain_mul(c.transient_inductance, ws, i_sq_ref);
-        // eq. (9b): v_sq = Rseq i_sq + sigma Ls w_s i_sd + p Omega lambda_r
-        let ff_q = (rs + c.referred_rotor_resistance) * i_sq_ref
-            + N::gain_mul(c.transient_inductance, ws, i_sd_ref)
-            + N::gain_mul(c.back_emf, e.observer.speed, lambda);
-        let v_max = limit.max;
-        let v_d = self
-            .cur
-            .d
-            .update_with_limits(&c.pi_d, i_sd_ref - m.i_dq.d, ff_d, -v_max, v_max);
-        // q limit on the circle |v| <= v_max with d priority, sqrt(v_max^2 - v_d^2), without
-        // a square root: the Taylor bound v_max - v_d^2/(2 v_max) while |v_d| <= v_max/2
-        // (at most 1 % above the circle there), the chord sqrt(3) (v_max - |v_d|) beyond
-        // (inside the circle, zero when v_d is at its limit)
-        let ad = v_d.abs();
-        let v_q_max = if ad <= v_max.half() {
-            v_max - (v_d * v_d).half() * limit.inv_max
-        } else {
-            N::SQRT3 * (v_max - ad)
-        };
-        let v_q =
-            self.cur
-                .q
-                .update_with_limits(&c.pi_q, i_sq_ref - m.i_dq.q, ff_q, -v_q_max, v_q_max);
-        Dq { d: v_d, q: v_q }
     }
 
     /// Modulation stage: inverse Park at the angle the voltage will act at (advanced by

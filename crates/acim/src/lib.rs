@@ -69,6 +69,7 @@ pub mod thermal;
 pub mod commissioning;
 pub mod config;
 pub mod controller;
+pub mod current_loop;
 pub mod design;
 pub mod drive;
 pub mod nameplate;

@@ -11,6 +11,7 @@
 use super::q::{to_q24, Gain, Q24};
 use super::trig::COUNTS_PER_RAD;
 use super::PerUnitBases;
+use crate::current_loop::CurrentLoopConfig;
 use crate::design::{
     ConfigError, DriveCoeffs, DriveDesign, FieldWeakeningDesign, InverterTestDesign,
     MagnetizingDesign, OrientationDesign, SupervisionLimits, VfDesign,
@@ -310,10 +311,14 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         return Err(not_representable("flux_current"));
     }
     let missing = not_representable;
-    let pi_current = pi(&d.pi_d, b.current, b.voltage).ok_or(missing("current_bandwidth"))?;
+    let pi_current =
+        pi(&d.current_loop.pi_d, b.current, b.voltage).ok_or(missing("current_bandwidth"))?;
     Ok(DriveCoeffs {
-        pi_d: pi_current,
-        pi_q: pi_current,
+        current_loop: CurrentLoopConfig {
+            pi_d: pi_current,
+            pi_q: pi_current,
+            overmodulation_reserve_steps: d.current_loop.overmodulation_reserve_steps,
+        },
         speed_loop: speed_loop(&d.speed_loop, b).ok_or(missing("speed_bandwidth"))?,
         thermal: ThermalConfig {
             heat_gain: gain(
@@ -471,7 +476,6 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         rr: rr_estimator(&d.rr_estimator, b).ok_or(missing("machine.rotor_resistance"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
-        overmodulation_reserve_steps: d.overmodulation_reserve_steps,
         regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
         regen_current_per_frequency: gain(
             d.regen_current_per_frequency * b.frequency / b.current,

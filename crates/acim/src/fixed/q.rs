@@ -665,8 +665,8 @@ mod tests {
             crate::design::DriveDesign::new(crate::design::DriveConfig::paper_defaults()).unwrap();
         let c = super::super::convert::coeffs(&d, &PerUnitBases::PAPER).unwrap();
         let gains = [
-            c.pi_d.kp,
-            c.pi_d.ki_ts,
+            c.current_loop.pi_d.kp,
+            c.current_loop.pi_d.ki_ts,
             c.speed_loop.pi.kp,
             c.speed_loop.pi.ki_ts,
             c.speed_loop.acceleration_feedforward,
