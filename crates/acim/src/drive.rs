@@ -273,6 +273,9 @@ pub struct Measured<N: Num = f32> {
     pub dc_bus: N,
     /// i_a + i_b + i_c with three shunts (0 with two), A.
     pub current_sum: N,
+    /// The voltage applied over the period this sample closes: the last command, scaled
+    /// by the bus measured now over the bus it was computed for.
+    pub applied: Applied<N>,
 }
 
 /// Output of the estimation stage.
@@ -302,6 +305,31 @@ pub struct Applied<N = f32> {
     pub dc_bus: N,
     /// 1 / `dc_bus`, 1/V.
     pub inv_dc_bus: N,
+}
+
+/// z^-1: every signal a stage reads of the last period, written once at the end of each
+/// running step (and at a start, from the reset state). Stages read it by value and
+/// mutate only their own state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Previous<N = f32> {
+    /// The last voltage command and the bus it was computed for.
+    pub voltage: Applied<N>,
+    /// i_sq*, A.
+    pub i_sq_ref: N,
+    /// The speed reference was ramping.
+    pub ramping: bool,
+    /// The far-side mode was on.
+    pub far_side: bool,
+    /// Field weakening had moved the flux ([`FieldWeakening::active`]).
+    pub fw_active: bool,
+    /// Rs_hat, ohm.
+    pub stator_resistance: N,
+    /// Stator frequency w_s of the frame, rad/s electrical.
+    pub stator_frequency: N,
+    /// The q current loop's integral, V.
+    pub q_integral: N,
+    /// The q current loop was at its voltage limit.
+    pub q_saturated: bool,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
@@ -371,7 +399,8 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     cur: CurrentLoop<N>,
     modulator: M,
     sincos: S,
-    applied: Applied<N>,
+    /// z^-1 ([`Previous`]).
+    prev: Previous<N>,
     monitor: ControlMonitor<N>,
     offsets: OffsetMonitor<N>,
     /// The offsets subtracted from the samples since the last start.
@@ -438,7 +467,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     {
         let coeffs = N::coeffs(&design, &bases)?;
         let rs_initial = coeffs.rs_initial;
-        Ok(Self {
+        let mut drive = Self {
             sup: Supervisor::new(),
             est: Estimator {
                 observer,
@@ -466,7 +495,17 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             cur: CurrentLoop::new(),
             modulator,
             sincos,
-            applied: Applied::default(),
+            prev: Previous {
+                voltage: Applied::default(),
+                i_sq_ref: N::ZERO,
+                ramping: false,
+                far_side: false,
+                fw_active: false,
+                stator_resistance: N::ZERO,
+                stator_frequency: N::ZERO,
+                q_integral: N::ZERO,
+                q_saturated: false,
+            },
             monitor: ControlMonitor::new(),
             offsets: OffsetMonitor::new(),
             offset_compensation: [N::ZERO; 3],
@@ -486,7 +525,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             gain_cal: GainCalibration::default(),
             pending_start: None,
             thermal: ThermalModel::new(),
-        })
+        };
+        drive.prev = drive.latch(Applied::default());
+        Ok(drive)
     }
 
     /// The configuration the drive was built with.
@@ -734,9 +775,26 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.est.filtered_residual = N::ZERO;
         self.search = SpeedSearch::new();
         self.refs.flying = false;
-        self.applied = Applied::default();
         self.monitor = ControlMonitor::new();
         self.open_loop = OpenLoop::default();
+        self.prev = self.latch(Applied::default());
+    }
+
+    /// The z^-1 signals as the stages' states hold them now, with the voltage `voltage`
+    /// (written at the end of each running step and at a start).
+    #[inline(always)]
+    fn latch(&self, voltage: Applied<N>) -> Previous<N> {
+        Previous {
+            voltage,
+            i_sq_ref: self.refs.i_sq_ref,
+            ramping: self.refs.ramping,
+            far_side: self.refs.far_side,
+            fw_active: self.refs.fw.active(),
+            stator_resistance: self.est.rs.stator_resistance_estimate,
+            stator_frequency: self.est.flux.stator_frequency,
+            q_integral: self.cur.q().integral(),
+            q_saturated: self.cur.q().saturated(),
+        }
     }
 
     /// Trips the supervisor and switches off. The speed target is cleared: a restart
@@ -744,7 +802,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
         self.pending_start = None;
         self.sup.trip(reason);
-        self.applied = Applied::default();
+        self.prev.voltage = Applied::default();
         self.refs.speed_target = N::ZERO;
         PwmOutput::OFF
     }
@@ -820,7 +878,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let limit = self.cur.limit(
             &self.coeffs.current_loop,
             limit,
-            self.applied.v_dq,
+            m.applied.v_dq,
             M::OVERMODULATES,
         );
         // 5. references, within the speed that voltage can reach
@@ -835,7 +893,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let zero_held = self.zero_speed_held(magnetizing);
         if zero_held && self.coeffs.zero_speed_stop && self.refs.commanded {
             self.sup.stop();
-            self.applied = Applied::default();
+            self.prev.voltage = Applied::default();
             return PwmOutput::OFF;
         }
         // 6. current control, within the voltage limit
@@ -870,12 +928,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let track = !magnetizing && !self.refs.ramping && self.est.rs.adapting;
         let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus, track);
         probe.end(StepRegion::Svpwm);
-        self.applied = Applied {
+        self.prev = self.latch(Applied {
             v_dq,
             v_ab,
             dc_bus: m.dc_bus,
             inv_dc_bus,
-        };
+        });
         self.record(&m, &e, i_ref, v, modulation.saturated, zero_held);
         PwmOutput {
             duties: modulation.duties,
@@ -960,7 +1018,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // the last step's duties were made for the bus measured then; they act over the
         // period this sample opens, at the bus measured now: a rippling or sagging bus
         // scales the voltage they apply (duty x bus), and the estimators use that voltage
-        let a = &mut self.applied;
+        let prev = &self.prev;
+        let mut applied = prev.voltage;
+        let a = &mut applied;
         if inp.dc_bus != a.dc_bus && a.dc_bus > N::ZERO {
             let k = inp.dc_bus * a.inv_dc_bus;
             a.v_dq = Dq {
@@ -990,25 +1050,25 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             alpha: i_ab.alpha - o.alpha,
             beta: i_ab.beta - o.beta,
         };
-        let rs = self.est.rs.stator_resistance_estimate;
-        let v = self.applied.v_ab;
+        let rs = prev.stator_resistance;
+        let v = applied.v_ab;
         self.offset_tracker.update(
             &self.coeffs.offset_tracker,
             AlphaBeta {
                 alpha: v.alpha - rs * i_ab.alpha,
                 beta: v.beta - rs * i_ab.beta,
             },
-            self.est.flux.stator_frequency,
+            prev.stator_frequency,
             running,
-            self.refs.ramping,
-            self.refs.i_sq_ref,
-            self.refs.far_side,
+            prev.ramping,
+            prev.i_sq_ref,
+            prev.far_side,
         );
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
         let i = park(i_ab, sc);
-        let v = self.applied.v_dq;
-        let k = N::gain(self.coeffs.sample_ripple, self.est.flux.stator_frequency);
+        let v = applied.v_dq;
+        let k = N::gain(self.coeffs.sample_ripple, prev.stator_frequency);
         Measured {
             i_ab,
             i_dq: Dq {
@@ -1019,6 +1079,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             angle,
             dc_bus: inp.dc_bus,
             current_sum,
+            applied,
         }
     }
 
@@ -1032,7 +1093,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         frame_held: bool,
         probe: &mut P,
     ) -> Estimate<N> {
-        let far_side_mode = self.refs.far_side;
+        let far_side_mode = self.prev.far_side;
         let c = &self.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
@@ -1060,8 +1121,8 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             &SpeedObserverInputs {
                 i_ab: m.i_ab,
                 i_dq: i,
-                v_ab: self.applied.v_ab,
-                v_dq: self.applied.v_dq,
+                v_ab: m.applied.v_ab,
+                v_dq: m.applied.v_dq,
                 stator_frequency: est.flux.stator_frequency,
                 rotor_flux: est.flux.rotor_flux,
                 inv_rotor_flux: est.flux.inv_rotor_flux,
@@ -1081,12 +1142,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // eq. (20) holds with settled flux; while field weakening moves it, the rotor
         // part of eq. (9a), R_R i_sd - lambda_r/tau_r (the flux's rate of change), is
         // taken out of v_sd so that the residual stays the orientation's
-        let weakened = self.refs.fw.active();
+        let weakened = self.prev.fw_active;
         let v_sd = if weakened {
-            self.applied.v_dq.d - c.referred_rotor_resistance * i.d
+            m.applied.v_dq.d - c.referred_rotor_resistance * i.d
                 + N::gain(c.inv_rotor_time_constant, est.flux.rotor_flux)
         } else {
-            self.applied.v_dq.d
+            m.applied.v_dq.d
         };
         if c.rs_running.enabled {
             // Rs also while running (the default mode)
@@ -1097,10 +1158,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 v_sd,
                 ws_prev,
                 flux_settled,
-                self.applied.v_dq.q,
+                m.applied.v_dq.q,
                 est.flux.rotor_flux,
                 frame_held,
-                self.refs.i_sq_ref,
+                self.prev.i_sq_ref,
                 !O::RS_RUNNING_AT_SPEED,
             );
         } else {
@@ -1196,7 +1257,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             // flying start: the speed search on the voltage of the held frame
             match self
                 .search
-                .update(&mag.search, self.applied.v_dq, m.i_dq, e.rs)
+                .update(&mag.search, m.applied.v_dq, m.i_dq, e.rs)
             {
                 Some(SearchOutcome::Turning(speed)) => {
                     // catch the rotor: the frame turns with it from the next step (zero
@@ -1236,7 +1297,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             if !r.flying {
                 self.gain_cal.update(
                     &c.gain_calibration,
-                    self.applied.v_dq.q - e.rs * m.i_dq.q,
+                    m.applied.v_dq.q - e.rs * m.i_dq.q,
                     e.rs * m.i_dq.d + rotor_voltage,
                 );
             }
@@ -1246,12 +1307,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 } else {
                     // the d-axis voltage less the flux model's d lambda_R / dt (exact
                     // in fixed point; in f32 within rounding of the two-term form)
-                    let voltage = self.applied.v_dq.d - rotor_voltage;
+                    let voltage = m.applied.v_dq.d - rotor_voltage;
                     i_sd = self.inverter.update(
                         &c.inverter_test,
                         m.i_dq.d,
                         voltage,
-                        self.applied.inv_dc_bus,
+                        m.applied.inv_dc_bus,
                     );
                     // its fit's slope is the stator resistance at rest: with Rs estimation
                     // on, the standstill identification goes on from it (with a +50 %
@@ -1294,9 +1355,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 speed: e.observer.speed,
                 dc_bus: m.dc_bus,
                 limit,
-                last_voltage: self.applied.v_dq,
-                last_torque_current: r.i_sq_ref,
-                q_loop: self.cur.q(),
+                last_voltage: m.applied.v_dq,
+                last_torque_current: self.prev.i_sq_ref,
+                q_integral: self.prev.q_integral,
+                q_saturated: self.prev.q_saturated,
                 flux_settled: e.flux_settled,
             },
         );
@@ -1369,7 +1431,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // to the q loop drives (the q loop at its limit: at the field-weakening onset the
         // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
         // out, while the ramp goes on)
-        let short = r.speed_ctl.saturated() || self.cur.q().saturated();
+        let short = r.speed_ctl.saturated() || self.prev.q_saturated;
         // the regeneration limit holds the torque only when the drive brakes (its last
         // torque current against the speed): a motoring drive at its limit, e.g. a locked
         // rotor, is the stall detector's case, with the reference kept

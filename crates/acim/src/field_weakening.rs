@@ -6,7 +6,6 @@ use crate::config::DriveConfig;
 use crate::frames::Dq;
 use crate::math::sqrt;
 use crate::num::Num;
-use crate::pi::PiController;
 use crate::svpwm::{VoltageLimit, FW_TRIM_FRACTION};
 
 /// Field weakening keeps the steady-state stator voltage within this fraction of the
@@ -194,7 +193,7 @@ impl FieldWeakeningDesign {
 /// this step's estimates. Units as in [`FieldWeakeningDesign`] (SI in f32, per unit in
 /// fixed point).
 #[derive(Clone, Copy, Debug)]
-pub struct FieldWeakeningInputs<'a, N: Num> {
+pub struct FieldWeakeningInputs<N: Num> {
     /// Rated flux current i_sd_rated, A (the design's i_sd*).
     pub flux_current: N,
     /// sigma Ls: (frequency x current) -> voltage.
@@ -217,10 +216,11 @@ pub struct FieldWeakeningInputs<'a, N: Num> {
     pub last_voltage: Dq<N>,
     /// z^-1: the last step's torque-current reference i_sq*, A.
     pub last_torque_current: N,
-    /// z^-1: the q current loop as the last step left it: its integral (the voltage the
-    /// model misses, V) and whether it was at its voltage limit. By reference: read only
-    /// near base speed.
-    pub q_loop: &'a PiController<N>,
+    /// z^-1: the q current loop's integral after the last step (the voltage the model
+    /// misses), V.
+    pub q_integral: N,
+    /// z^-1: the q current loop was at its voltage limit in the last step.
+    pub q_saturated: bool,
     /// The rotor flux is within tolerance of its reference (this step).
     pub flux_settled: bool,
 }
@@ -279,7 +279,7 @@ impl<N: Num> FieldWeakening<N> {
     pub fn update(
         &mut self,
         cfg: &FieldWeakeningDesign<N>,
-        x: &FieldWeakeningInputs<'_, N>,
+        x: &FieldWeakeningInputs<N>,
     ) -> FieldWeakeningOutput<N> {
         let mut out = self.limits(cfg, x);
         if cfg.flux_optimisation {
@@ -319,7 +319,7 @@ impl<N: Num> FieldWeakening<N> {
     fn limits(
         &mut self,
         fw: &FieldWeakeningDesign<N>,
-        x: &FieldWeakeningInputs<'_, N>,
+        x: &FieldWeakeningInputs<N>,
     ) -> FieldWeakeningOutput<N> {
         let i_sd_rated = x.flux_current;
         let limit = x.limit;
@@ -356,7 +356,7 @@ impl<N: Num> FieldWeakening<N> {
                 // Rs i_sq adds to v_sq when it has the sign of w_s (motoring), and so does the
                 // q current loop's integral: the voltage the model misses (dead time, device
                 // drop, parameter errors), measured
-                let drop = x.stator_resistance * iq + x.q_loop.integral();
+                let drop = x.stator_resistance * iq + x.q_integral;
                 let drop = if ws < N::ZERO { -drop } else { drop };
                 // the rated flux fits when sqrt(budget) - drop >= w Ls i_sd_rated: decided
                 // without the square root and the division (the cheap path below base speed)
@@ -410,7 +410,7 @@ impl<N: Num> FieldWeakening<N> {
                 out.i_sd_ref = i_d;
                 out.i_sq_min = -i_q;
                 out.i_sq_max = i_q;
-                out.torque_limited = mtpv < circle || x.q_loop.saturated();
+                out.torque_limited = mtpv < circle || x.q_saturated;
             }
         }
         if fw.overvoltage_control && x.dc_bus > fw.regen_start {
