@@ -142,7 +142,7 @@ pub struct DriveConfig {
     pub orientation_gain: f32,
     /// The correction fades in between these |w_s|, rad/s electrical (lower, upper).
     pub orientation_fade: (f32, f32),
-    /// The far-side mode ([`FAR_SIDE_GAIN`](crate::design::FAR_SIDE_GAIN) by default, 0 = off): the
+    /// The far-side mode ([`FAR_SIDE_GAIN`] by default, 0 = off): the
     /// gain c (dimensionless) of a term the observer's speed and load updates (eq. 12) take
     /// on the far side of the unobservable line, where the stator frequency turns against
     /// the speed estimate: the q-axis error e minus c max(1, |i_sq| / (2 i_sd*)) times the

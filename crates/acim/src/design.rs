@@ -156,7 +156,7 @@ pub struct VfDesign<N: Num = f32> {
 }
 
 /// What the control step reads, in the arithmetic `N`: every gain, reciprocal and limit
-/// of the cascade. Built once from a [`DriveDesign`] by [`Num::coeffs`] (the identity
+/// of the cascade. Built once from a [`DriveDesign`] by [`DesignArithmetic::coeffs`] (the identity
 /// for f32 SI; a conversion with the per-unit bases in fixed point, which checks that
 /// every value fits).
 #[derive(Clone, Copy, Debug, PartialEq)]

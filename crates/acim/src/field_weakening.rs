@@ -88,7 +88,7 @@ pub const OVC_END_FRACTION: f32 = 0.975;
 /// ```
 ///
 /// (the square root floored at V/sqrt 2: at most half the voltage squared goes to the q
-/// current). The trim integrates (|v*|^2 - V_t^2)/v_max / w with V_t = [`FW_TRIM_FRACTION`](crate::design::FW_TRIM_FRACTION)
+/// current). The trim integrates (|v*|^2 - V_t^2)/v_max / w with V_t = [`FW_TRIM_FRACTION`]
 /// v_max at [`FW_TRIM_BANDWIDTH`], kept >= 0, and
 /// `i_sd* = clamp(min(i_sd_model, i_sd_rated - trim), i_sd_min, i_sd_rated)`.
 ///
@@ -127,7 +127,7 @@ pub struct FieldWeakeningDesign<N: Num = f32> {
     /// [`FW_TRIM_GATE`] (dimensionless): the trim acts only where w Ls i_sd_rated is
     /// above this fraction of V.
     pub trim_gate: N::Gain,
-    /// [`FW_TRIM_FRACTION`](crate::design::FW_TRIM_FRACTION) (dimensionless): the trim holds |v*| at this fraction of
+    /// [`FW_TRIM_FRACTION`] (dimensionless): the trim holds |v*| at this fraction of
     /// v_max.
     pub trim_fraction: N::Gain,
     /// Ls i_sd_rated, Wb (the stator flux linkage at rated flux, no load).

@@ -46,7 +46,7 @@ pub trait Num:
     type Gain: Copy + Debug + PartialEq + MaybeFormat;
     /// The frame angle: radians in `f32`, a `u32` turn fraction in fixed point.
     type Angle: Copy + Debug + Default + PartialEq + MaybeFormat;
-    /// What the voltage-lead rotation needs (see [`Num::rotate_ahead`]).
+    /// What the voltage-lead rotation needs (see [`crate::frames::LeadRotation::rotate_ahead`]).
     type Lead: Copy + Debug + PartialEq + MaybeFormat;
     /// The Rs integrator's state (`f32`, or Q1.30 for six more bits than the signal).
     type Fine: Copy + Debug + PartialEq + MaybeFormat;
