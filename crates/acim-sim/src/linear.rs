@@ -227,8 +227,8 @@ impl Model {
             correction_limit: f64::from(c.orientation.limit),
             current_bandwidth: f64::from(v.drive.current_bandwidth),
             running,
-            regen_min_frequency: f64::from(c.regen_min_frequency),
-            regen_current_per_frequency: f64::from(c.regen_current_per_frequency),
+            regen_min_frequency: f64::from(c.speed_loop.regen_min_frequency),
+            regen_current_per_frequency: f64::from(c.speed_loop.regen_current_per_frequency),
             inverter_error,
             speed_ref: f64::from(speed_rpm) * f64::from(acim::math::RPM_TO_RAD_S),
             load: f64::from(load_nm),
@@ -246,11 +246,11 @@ impl Model {
         // which leaves none: a row with an inverter error stands for a drive whose test
         // did not run or was rejected, which keeps the limit
         let braking = -model.speed_ref.signum() * model.load;
-        let enter = f64::from(c.far_side_enter);
+        let enter = f64::from(c.speed_loop.far_side_enter);
         model.far_side = enter > 0.0
             && model.inverter_error == 0.0
             && braking
-                >= f64::from(c.far_side_torque_per_frequency)
+                >= f64::from(c.speed_loop.far_side_torque_per_frequency)
                     * (model.p * model.speed_ref.abs() + enter);
         if model.regen_min_frequency > 0.0 {
             let i_need = model.ideal_torque_current(model.speed_ref);

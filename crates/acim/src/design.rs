@@ -25,15 +25,18 @@ pub use crate::config::*;
 use crate::config::{check, positive};
 pub use crate::current_loop::{CurrentLoopConfig, OVERMODULATION_RESERVE_TIME};
 pub use crate::field_weakening::{
-    FieldWeakeningDesign, FLUX_OPT_FALL_TAU_R, FLUX_OPT_MIN_FRACTION, FW_HOLD_BAND_FRACTION,
-    FW_MIN_FLUX_FRACTION, FW_MIN_FREQUENCY_FRACTION, FW_REPORT_SPEED_LOOP_CONSTANTS,
-    FW_TRIM_BANDWIDTH, FW_TRIM_GATE, FW_VOLTAGE_FRACTION, OVC_END_FRACTION, OVC_START_FRACTION,
+    FieldWeakeningDesign, FLUX_OPT_FALL_TAU_R, FLUX_OPT_MIN_FRACTION, FW_MIN_FLUX_FRACTION,
+    FW_MIN_FREQUENCY_FRACTION, FW_TRIM_BANDWIDTH, FW_TRIM_GATE, FW_VOLTAGE_FRACTION,
+    OVC_END_FRACTION, OVC_START_FRACTION,
 };
 pub use crate::inverter_test::{
     InverterTestDesign, INVERTER_TEST_FILTER_TIME, INVERTER_TEST_LEVELS, INVERTER_TEST_LEVEL_TIME,
     INVERTER_TEST_MAX_DUTY, INVERTER_TEST_MIN_BANDS, INVERTER_TEST_SETTLE_TIME, INVERTER_TEST_TIME,
 };
 pub use crate::orientation::OrientationDesign;
+pub use crate::speed_loop::{
+    FAR_SIDE_ENTER_HZ, FAR_SIDE_LEAVE_HZ, FW_HOLD_BAND_FRACTION, FW_REPORT_SPEED_LOOP_CONSTANTS,
+};
 pub use crate::supervisor::SupervisionLimits;
 pub use crate::svpwm::FW_TRIM_FRACTION;
 
@@ -51,14 +54,6 @@ pub const OVERLOAD_FRACTION: f32 = 0.5;
 pub const FAR_SIDE_LOAD_FRACTION: f32 = 0.5;
 /// Largest accepted [`DriveConfig::far_side_gain`].
 pub const MAX_FAR_SIDE_GAIN: f32 = 10.0;
-/// The far-side transit: with [`DriveConfig::far_side_gain`] on, the
-/// regeneration limit is released while the load torque estimate puts the speed target's
-/// operating point at least this far beyond the line w_s = 0, Hz (the observable
-/// bound, |f_s| >= 1 Hz).
-pub const FAR_SIDE_ENTER_HZ: f32 = 1.0;
-/// ... and applies again once that point comes within this of the line, Hz (the start of
-/// the orientation correction's fade, where the far-side term is off).
-pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
 /// Under load the orientation gain is at least this multiple of the stability bound
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
 pub const ORIENTATION_GAIN_MARGIN: f32 = 1.25;
@@ -203,14 +198,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub back_emf: N::Gain,
     /// 1.5 p: (flux x current) -> torque.
     pub torque_factor: N::Gain,
-    /// Speed reference change per step, rad/s.
-    pub ramp_step: N,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
-    /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
-    /// equals a voltage; with the voltage limit, the fastest reachable speed (without
-    /// field weakening).
-    pub speed_per_volt: N::Gain,
     /// The voltage lead of the inverse Park (delay compensation).
     pub lead: N::Lead,
     /// Orientation correction.
@@ -232,18 +221,6 @@ pub struct DriveCoeffs<N: Num = f32> {
     /// [`ZeroSpeedPolicy::Stop`]: switch off after the dwell (false: `Hold`, which keeps
     /// the flux and reports the hold, [`crate::DriveTelemetry::zero_speed_held`]).
     pub zero_speed_stop: bool,
-    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
-    pub regen_min_frequency: N,
-    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
-    pub regen_current_per_frequency: N::Gain,
-    /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical: the torque whose slip is one
-    /// rad/s (the far-side transit; 0 when [`DriveConfig::far_side_gain`] is 0).
-    pub far_side_torque_per_frequency: N::Gain,
-    /// The far-side transit enters beyond this stator frequency, rad/s electrical (0: no
-    /// transit).
-    pub far_side_enter: N,
-    /// ... and leaves within this one, rad/s electrical.
-    pub far_side_leave: N,
     /// The inverter test at start ([`DriveConfig::inverter_identification`]).
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
@@ -302,22 +279,10 @@ pub struct DriveDesign {
     pub pole_pairs: f32,
     /// 1.5 p (Te = 1.5 p lambda_r i_sq).
     pub torque_factor: f32,
-    /// Speed reference change per step, rad/s.
-    pub ramp_step: f32,
     /// Steps at a zero target and reference before the zero-speed policy acts (>= 1).
     pub zero_dwell_steps: u32,
     /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
     pub zero_speed_stop: bool,
-    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
-    pub regen_min_frequency: f32,
-    /// lambda_ref / R_R, A per rad/s electrical.
-    pub regen_current_per_frequency: f32,
-    /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical (0: no far-side transit).
-    pub far_side_torque_per_frequency: f32,
-    /// [`FAR_SIDE_ENTER_HZ`], rad/s electrical.
-    pub far_side_enter: f32,
-    /// [`FAR_SIDE_LEAVE_HZ`], rad/s electrical.
-    pub far_side_leave: f32,
     /// The inverter test at start.
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker.
@@ -545,7 +510,8 @@ impl DriveDesign {
                 ts,
                 i_sq_limit,
                 cfg.load_torque_feedforward,
-            ),
+            )
+            .with_reference_limits(&cfg, flux_reference),
             thermal: ThermalConfig::new(
                 cfg.current_limit,
                 cfg.continuous_current,
@@ -573,28 +539,8 @@ impl DriveDesign {
             inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
             pole_pairs: pp,
             torque_factor: 1.5 * pp,
-            ramp_step: cfg.speed_ramp * ts,
             zero_dwell_steps: ((cfg.zero_speed_dwell / ts) as u32).max(1),
             zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
-            regen_min_frequency: cfg.regen_min_frequency,
-            regen_current_per_frequency: flux_reference / m.referred_rotor_resistance(),
-            far_side_torque_per_frequency: if cfg.far_side_gain > 0.0 {
-                1.5 * pp * flux_reference * flux_reference / m.referred_rotor_resistance()
-            } else {
-                0.0
-            },
-            // the transit needs the Rs estimate kept while running: with Rs held 20 % high
-            // the far side at 15-30 rpm is unstable with the far-side term
-            // (docs/robustness.md, "The far-side mode")
-            far_side_enter: if cfg.far_side_gain > 0.0
-                && cfg.rs_estimation
-                && cfg.rs_estimation_mode == RsEstimationMode::Running
-            {
-                2.0 * core::f32::consts::PI * FAR_SIDE_ENTER_HZ
-            } else {
-                0.0
-            },
-            far_side_leave: 2.0 * core::f32::consts::PI * FAR_SIDE_LEAVE_HZ,
             inverter_test: InverterTestDesign::new(
                 inverter_test_on,
                 ts,
@@ -773,16 +719,9 @@ impl DriveCoeffs<f32> {
             pole_pairs: d.pole_pairs,
             back_emf: d.pole_pairs,
             torque_factor: d.torque_factor,
-            ramp_step: d.ramp_step,
             zero_dwell_steps: d.zero_dwell_steps,
             zero_speed_stop: d.zero_speed_stop,
-            regen_min_frequency: d.regen_min_frequency,
-            regen_current_per_frequency: d.regen_current_per_frequency,
-            far_side_torque_per_frequency: d.far_side_torque_per_frequency,
-            far_side_enter: d.far_side_enter,
-            far_side_leave: d.far_side_leave,
             speed_target_limit: d.speed_target_limit,
-            speed_per_volt: 1.0 / (d.pole_pairs * d.flux_reference),
             lead: (d.ts, cfg.delay_periods),
             orientation: d.orientation,
             magnetizing: d.magnetizing,

@@ -44,7 +44,7 @@
 use crate::current_loop::{CurrentLoop, CurrentLoopInputs};
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 use crate::design::{DesignArithmetic, DriveCoeffs};
-use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
+use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs};
 use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
@@ -59,9 +59,9 @@ use crate::observer::{
 };
 use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
-use crate::pi::PiController;
 use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
+use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
 use crate::speed_search::{SearchOutcome, SpeedSearch};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
@@ -186,34 +186,6 @@ fn rs_running_step<N: Num>(
             low_frequency_only,
         },
     );
-}
-
-/// The torque-current limits with the low-frequency regeneration limit
-/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed target has the
-/// sign of the speed estimate (holding a speed; a zero or opposite target is a transit,
-/// through zero to a stop or a reversal, which must cross the line), the braking side is
-/// limited to
-/// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
-/// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
-/// the limits and whether the regeneration limit is tighter than the others.
-#[inline(always)]
-fn regen_limit<N: Num>(
-    c: &DriveCoeffs<N>,
-    target: N,
-    speed: N,
-    fw: FieldWeakeningOutput<N>,
-) -> (N, N, bool) {
-    let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
-    let w = N::gain(c.pole_pairs, speed.abs()) - c.regen_min_frequency;
-    let w = if w > N::ZERO { w } else { N::ZERO };
-    let i = N::gain(c.regen_current_per_frequency, w);
-    if speed > N::ZERO && target > N::ZERO && lo < -i {
-        (-i, hi, true)
-    } else if speed < N::ZERO && target < N::ZERO && hi > i {
-        (lo, i, true)
-    } else {
-        (lo, hi, false)
-    }
 }
 
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
@@ -346,24 +318,11 @@ struct Estimator<N: Num, O> {
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
 #[derive(Clone, Copy, Debug)]
-struct References<N> {
-    speed_target: N,
-    speed_reference: N,
-    speed_ctl: PiController<N>,
+struct References<N: Num> {
+    /// The speed loop ([`crate::speed_loop`]).
+    speed: SpeedLoop<N>,
     magnetizing_steps: u32,
     rs_settled_steps: u32,
-    /// The target is beyond the reachable speed (reported in the telemetry).
-    target_limited: bool,
-    /// The speed reference moved this step towards its target (a ramp; not the
-    /// regeneration limit's hold, which moves it with the speed).
-    ramping: bool,
-    /// Steps the target stays reported as limited since the hold last bound.
-    limited_hold: u32,
-    /// The far-side mode: the regeneration limit released and the
-    /// observer's far-side term on.
-    far_side: bool,
-    /// The previous step's i_sq*, A (the field-weakening model's load).
-    i_sq_ref: N,
     /// Field weakening, over-voltage control and flux optimisation
     /// ([`crate::field_weakening`]).
     fw: FieldWeakening<N>,
@@ -477,16 +436,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 rr: RrEstimator::new(&coeffs.rr),
             },
             refs: References {
-                speed_target: N::ZERO,
-                speed_reference: N::ZERO,
-                speed_ctl: PiController::new(),
+                speed: SpeedLoop::new(),
                 magnetizing_steps: 0,
                 rs_settled_steps: 0,
-                target_limited: false,
-                ramping: false,
-                limited_hold: 0,
-                far_side: false,
-                i_sq_ref: N::ZERO,
                 fw: FieldWeakening::new(N::ZERO),
                 flying: false,
                 zero_steps: 0,
@@ -608,7 +560,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             return Err(CommandError::NotFinite);
         }
         let lim = self.coeffs.speed_target_limit;
-        self.refs.speed_target = speed.clamp(-lim, lim);
+        self.refs.speed.speed_target = speed.clamp(-lim, lim);
         Ok(())
     }
 
@@ -757,11 +709,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     }
 
     fn reset_dynamic_state(&mut self) {
-        self.refs.speed_reference = N::ZERO;
-        self.refs.limited_hold = 0;
-        self.refs.far_side = false;
-        self.refs.speed_ctl.reset();
-        self.refs.i_sq_ref = N::ZERO;
+        self.refs.speed.speed_reference = N::ZERO;
+        self.refs.speed.limited_hold = 0;
+        self.refs.speed.far_side = false;
+        self.refs.speed.pi.reset();
+        self.refs.speed.i_sq_ref = N::ZERO;
         self.refs.fw = FieldWeakening::new(self.coeffs.i_sd_ref);
         self.refs.magnetizing_steps = 0;
         self.refs.rs_settled_steps = 0;
@@ -786,9 +738,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     fn latch(&self, voltage: Applied<N>) -> Previous<N> {
         Previous {
             voltage,
-            i_sq_ref: self.refs.i_sq_ref,
-            ramping: self.refs.ramping,
-            far_side: self.refs.far_side,
+            i_sq_ref: self.refs.speed.i_sq_ref,
+            ramping: self.refs.speed.ramping,
+            far_side: self.refs.speed.far_side,
             fw_active: self.refs.fw.active(),
             stator_resistance: self.est.rs.stator_resistance_estimate,
             stator_frequency: self.est.flux.stator_frequency,
@@ -803,7 +755,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.pending_start = None;
         self.sup.trip(reason);
         self.prev.voltage = Applied::default();
-        self.refs.speed_target = N::ZERO;
+        self.refs.speed.speed_target = N::ZERO;
         PwmOutput::OFF
     }
 
@@ -925,7 +877,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // the inverter tracker's gate: turning, the speed reference not ramping, and the
         // running Rs law adapting this step (its own gate: a steady torque current), so
         // that the resistance estimate follows what the correction takes away
-        let track = !magnetizing && !self.refs.ramping && self.est.rs.adapting;
+        let track = !magnetizing && !self.refs.speed.ramping && self.est.rs.adapting;
         let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus, track);
         probe.end(StepRegion::Svpwm);
         self.prev = self.latch(Applied {
@@ -951,7 +903,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     #[inline(always)]
     fn zero_speed_held(&mut self, magnetizing: bool) -> bool {
         let r = &mut self.refs;
-        if !magnetizing && r.speed_target == N::ZERO && r.speed_reference == N::ZERO {
+        if !magnetizing && r.speed.speed_target == N::ZERO && r.speed.speed_reference == N::ZERO {
             r.zero_steps = r.zero_steps.saturating_add(1);
         } else {
             r.zero_steps = 0;
@@ -969,7 +921,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             current: e.observer.current,
             rs_at_bound: self.est.rs.at_bound,
         };
-        let saturated = self.refs.speed_ctl.saturated();
+        let saturated = self.refs.speed.pi.saturated();
         self.sup
             .plausibility(&self.coeffs.limits, &health, saturated)
     }
@@ -1215,7 +1167,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                     i_sq: i.q,
                     rotor_flux: est.flux.rotor_flux,
                     stator_frequency: ws_prev,
-                    ramping: self.refs.speed_reference != self.refs.speed_target,
+                    ramping: self.refs.speed.speed_reference != self.refs.speed.speed_target,
                     usable: !frame_held && !magnetizing && flux_settled && !weakened,
                 },
             );
@@ -1331,9 +1283,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 self.sup.magnetized();
                 self.gain_cal.finish(&c.gain_calibration);
                 self.est.observer.start_running(m.i_dq.q);
-                r.speed_ctl.reset();
+                r.speed.pi.reset();
                 // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
-                r.speed_reference = e.observer.speed;
+                r.speed.speed_reference = e.observer.speed;
                 r.flying = false;
             }
             return Ok(Dq {
@@ -1362,140 +1314,39 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 flux_settled: e.flux_settled,
             },
         );
-        let target = if c.fw.enabled {
-            // (the target is within speed_target_limit already): the reachable speed
-            // depends on the load and is found by holding the reference below
-            r.speed_target
+        // the short-time overload rating (`thermal`), on the measured current
+        let rating = if c.thermal.enabled {
+            Some(self.thermal.update(&c.thermal, m.i_dq.d, m.i_dq.q))
         } else {
-            // a target beyond the no-load speed the steady voltage reaches (back-EMF
-            // p Omega lambda_ref = V_steady, `VoltageLimit::steady`) is limited to it and
-            // reported in the telemetry
-            let reach = N::gain(c.speed_per_volt, voltage_limit);
-            r.speed_target.clamp(-reach, reach)
+            None
         };
-        r.target_limited = target != r.speed_target;
-        let dv = (target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
-        r.speed_reference = r.speed_reference + dv;
-        r.ramping = dv != N::ZERO;
-        // the ramp's slope, fed forward (`speed_loop`): zero where the hold below moves
-        // the reference instead, and in field weakening (the torque the voltage leaves is
-        // the hold's to share out: with the slope's torque on top, braking from 3000 rpm
-        // ran into the current-regulation trip)
-        let mut slope = if r.fw.active() { N::ZERO } else { dv };
+        let i_sq_ref = r.speed.update(
+            &c.speed_loop,
+            &SpeedLoopInputs {
+                pole_pairs: c.pole_pairs,
+                speed: e.observer.speed,
+                load_torque: e.observer.load_torque,
+                limits: fw,
+                fw_enabled: c.fw.enabled,
+                fw_active: r.fw.active(),
+                flux_reference: c.fw.flux_reference,
+                inv_rotor_flux: self.est.flux.inv_rotor_flux,
+                voltage_limit,
+                inverter_error_known: O::FAR_SIDE_TERM
+                    && (self.inverter.outcome == InverterTestOutcome::Identified
+                        || self
+                            .inverter_tracker
+                            .trusted(&c.inverter_tracker, self.inverter.correction_duty)),
+                regeneration_limit: O::REGENERATION_LIMIT,
+                rating,
+                q_saturated: self.prev.q_saturated,
+            },
+        );
         let speed = e.observer.speed;
-        // the far-side mode: the braking torque the target needs,
-        // -sign(target) T_L_hat, against the torque whose slip puts w_s = p Omega* + slip
-        // beyond the line by `far_side_enter` (entering) or within `far_side_leave` of it
-        // (leaving); only with the inverter's voltage error known (the start test
-        // identified it at this start, or the tracker has adapted it long enough to be
-        // trusted). In it the regeneration limit is released (the transit) and the observer
-        // takes the far-side term
-        r.far_side = if O::FAR_SIDE_TERM
-            && c.far_side_enter > N::ZERO
-            && r.speed_target != N::ZERO
-            && (self.inverter.outcome == InverterTestOutcome::Identified
-                || self
-                    .inverter_tracker
-                    .trusted(&c.inverter_tracker, self.inverter.correction_duty))
-        {
-            let braking = if r.speed_target > N::ZERO {
-                -e.observer.load_torque
-            } else {
-                e.observer.load_torque
-            };
-            let line = N::gain(c.pole_pairs, r.speed_target.abs());
-            let margin = if r.far_side {
-                c.far_side_leave
-            } else {
-                c.far_side_enter
-            };
-            braking >= N::gain(c.far_side_torque_per_frequency, line + margin)
-        } else {
-            false
-        };
-        let (i_sq_min, i_sq_max, regen_limited) =
-            if O::REGENERATION_LIMIT && c.regen_min_frequency > N::ZERO && !r.far_side {
-                regen_limit(c, r.speed_target, speed, fw)
-            } else {
-                (fw.i_sq_min, fw.i_sq_max, false)
-            };
-        // the short-time overload rating (`thermal`): on the measured current, the
-        // torque-current limits fold back to the continuous current when it is spent
-        let (i_sq_min, i_sq_max) = if c.thermal.enabled {
-            let rating = self.thermal.update(&c.thermal, m.i_dq.d, m.i_dq.q);
-            (i_sq_min * rating, i_sq_max * rating)
-        } else {
-            (i_sq_min, i_sq_max)
-        };
-        // the speed PI at its limit, or its torque current beyond what the voltage left
-        // to the q loop drives (the q loop at its limit: at the field-weakening onset the
-        // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
-        // out, while the ramp goes on)
-        let short = r.speed_ctl.saturated() || self.prev.q_saturated;
-        // the regeneration limit holds the torque only when the drive brakes (its last
-        // torque current against the speed): a motoring drive at its limit, e.g. a locked
-        // rotor, is the stall detector's case, with the reference kept
-        let braking = regen_limited && ((speed > N::ZERO) == (r.i_sq_ref < N::ZERO));
-        if (fw.torque_limited || braking) && short {
-            // the torque is at the voltage (or bus) limit, or at the low-frequency
-            // regeneration limit: the speed the drive reaches there is the reachable
-            // speed; hold the reference within a band of it (no growing speed error, no
-            // overload trip) and report it
-            let band = c.fw.hold_band;
-            let held = r.speed_reference.clamp(speed - band, speed + band);
-            slope = N::ZERO;
-            // reported when the hold binds, and whenever the regeneration limit holds the
-            // torque: the speed then settles above the target, inside the band or not
-            if held != r.speed_reference || braking {
-                r.limited_hold = c.fw.report_steps;
-            }
-            // at the regeneration limit the reference follows the speed and the torque
-            // is the limit's, a slow function of the speed: not a ramp (the inverter
-            // tracker's gate; with it shut there, a drive held by the limit never learnt
-            // the inverter error the far-side mode needs)
-            if braking {
-                r.ramping = false;
-            }
-            r.speed_reference = held;
-        }
-        // reported while the hold binds and for a few speed-loop time constants after
-        // (the speed PI's saturation flickers at the reachable speed)
-        r.target_limited = r.target_limited || r.limited_hold > 0;
-        r.limited_hold = r.limited_hold.saturating_sub(1);
-        let error = r.speed_reference - speed;
-        // the torque per ampere is 1.5 p lambda_r and the speed PI is designed at lambda_ref
-        // (`SpeedLoopConfig::new`): while the flux is weakened its gains are scaled by
-        // lambda_ref/lambda_r (the error it sees), so the loop keeps its bandwidth and
-        // damping as the flux falls. Unscaled, at a sixth of the flux the loop's gain fell
-        // to a sixth: in fw-braking-3000 the ramp lagged 79 rpm and the speed overshot
-        // 3000 rpm by 78 rpm. The error, not the output, is scaled: the torque current does
-        // not jump with the flux estimate (lambda_r >= the flux model's floor)
-        // the feed-forwards (`speed_loop`): the torque currents that accelerate the rotor
-        // along the ramp, overcome the friction at the reference and hold the observer's
-        // load-torque estimate;
-        // both are torques over k_t at lambda_ref, scaled like the error below
-        let sl = &c.speed_loop;
-        let feedforward = if sl.feedforward {
-            N::gain(sl.acceleration_feedforward, slope)
-                + N::gain(sl.friction_feedforward, r.speed_reference)
-                + N::gain(sl.load_feedforward, e.observer.load_torque)
-        } else {
-            N::ZERO
-        };
-        let (error, feedforward) = if r.fw.active() {
-            let scale = c.fw.flux_reference * self.est.flux.inv_rotor_flux;
-            (error * scale, feedforward * scale)
-        } else {
-            (error, feedforward)
-        };
-        let i_sq_ref =
-            r.speed_ctl
-                .update_with_limits(&sl.pi, error, feedforward, i_sq_min, i_sq_max);
-        r.i_sq_ref = i_sq_ref;
-        let saturated = r.speed_ctl.saturated();
+        let saturated = r.speed.pi.saturated();
         let stall = self
             .sup
-            .stall(&c.limits, saturated, speed, r.speed_reference);
+            .stall(&c.limits, saturated, speed, r.speed.speed_reference);
         let stall = match stall {
             None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
             some => some,
@@ -1577,7 +1428,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         zero_held: bool,
     ) {
         self.telemetry = DriveTelemetry {
-            speed_reference: self.refs.speed_reference,
+            speed_reference: self.refs.speed.speed_reference,
             speed_estimate: e.observer.speed,
             load_torque_estimate: e.observer.load_torque,
             torque_estimate: N::gain_mul(self.coeffs.torque_factor, e.rotor_flux, m.i_dq.q),
@@ -1589,7 +1440,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             angle: m.angle,
             stator_frequency: e.stator_frequency,
             voltage_saturated: saturated,
-            speed_target_limited: self.refs.target_limited,
+            speed_target_limited: self.refs.speed.target_limited,
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
             search_speed: self.search.measured_speed,
@@ -1607,10 +1458,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             CurrentSensing::ThreePhase => (clarke_three(a, b, cc), [a, b, cc]),
         };
         let r = &mut self.refs;
-        let dv = (r.speed_target - r.speed_reference).clamp(-c.ramp_step, c.ramp_step);
-        r.speed_reference = r.speed_reference + dv;
+        let ramp = c.speed_loop.ramp_step;
+        let dv = (r.speed.speed_target - r.speed.speed_reference).clamp(-ramp, ramp);
+        r.speed.speed_reference = r.speed.speed_reference + dv;
         let ol = &mut self.open_loop;
-        ol.frequency = N::gain(c.pole_pairs, r.speed_reference);
+        ol.frequency = N::gain(c.pole_pairs, r.speed.speed_reference);
         let mag = (c.vf.boost + N::gain(c.vf.volts_per_rad_s, ol.frequency.abs()))
             .clamp(N::ZERO, linear_limit(inp.dc_bus));
         let sc = self.sincos.sin_cos(ol.angle);
@@ -1619,7 +1471,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let out = modulate(&c.pwm, v_ab, inp.dc_bus, currents);
         ol.angle = N::advance(ol.angle, ol.frequency, c.flux.ts);
         self.telemetry = DriveTelemetry {
-            speed_reference: r.speed_reference,
+            speed_reference: r.speed.speed_reference,
             current: park(i_ab, sc),
             voltage: v,
             angle: ol.angle,
@@ -1910,7 +1762,7 @@ mod tests {
         assert_eq!(d.config().orientation_gain, 0.0);
         assert_eq!(d.set_speed_target(f32::NAN), Err(CommandError::NotFinite));
         d.set_speed_target(1e6).unwrap();
-        assert!(d.refs.speed_target <= 0.9 * d.config().max_speed);
+        assert!(d.refs.speed.speed_target <= 0.9 * d.config().max_speed);
     }
 
     /// Without field weakening, a target above the speed the bus voltage can reach
@@ -1940,10 +1792,13 @@ mod tests {
         let reach = linear_limit(325.0) / (2.0 * d.design().flux_reference);
         assert!(d.telemetry().speed_target_limited);
         // the ramp heads for the reachable speed, not for 1800 rpm
-        d.refs.speed_reference = 0.99 * reach;
+        d.refs.speed.speed_reference = 0.99 * reach;
         d.step(&magnetizing);
         d.step(&magnetizing);
-        assert!(d.refs.speed_reference <= reach * (1.0 + 1e-5), "{reach}");
+        assert!(
+            d.refs.speed.speed_reference <= reach * (1.0 + 1e-5),
+            "{reach}"
+        );
         d.set_speed_target(500.0 * crate::math::RPM_TO_RAD_S)
             .unwrap();
         d.step(&magnetizing);

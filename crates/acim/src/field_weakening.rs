@@ -46,17 +46,6 @@ pub const FW_TRIM_BANDWIDTH: f32 = 30.0;
 /// current loops, as earlier.)
 pub const FW_TRIM_GATE: f32 = 0.7;
 
-/// Torque held at the voltage or bus limit: the speed reference stays within this
-/// fraction of `max_speed` of the speed estimate (the reachable speed is held and
-/// reported instead of a growing speed error).
-pub const FW_HOLD_BAND_FRACTION: f32 = 0.01;
-
-/// The telemetry's `speed_target_limited` stays set this many speed-loop time constants
-/// after the hold last bound: the hold binds only in the steps where the speed PI sits at
-/// its limit, which flickers at the reachable speed, and a report that flickers with it
-/// (a third of the steps, measured) says less than it knows.
-pub const FW_REPORT_SPEED_LOOP_CONSTANTS: f32 = 2.5;
-
 /// Over-voltage control starts reducing the regenerative current at this fraction of
 /// `dc_bus_max`.
 pub const OVC_START_FRACTION: f32 = 0.9;
@@ -116,11 +105,6 @@ pub struct FieldWeakeningDesign<N: Num = f32> {
     pub stator_inductance: N::Gain,
     /// 1: (rad/s electrical x Wb) -> V, for w lambda_r.
     pub flux_voltage: N::Gain,
-    /// Hold band, rad/s mechanical ([`FW_HOLD_BAND_FRACTION`] max_speed).
-    pub hold_band: N,
-    /// Steps the target stays reported as limited after the hold last bound
-    /// ([`FW_REPORT_SPEED_LOOP_CONSTANTS`] / (speed bandwidth Ts)).
-    pub report_steps: u32,
     /// Voltage-feedback trim gain [`FW_TRIM_BANDWIDTH`] Ts / (2 gamma Ls): flux linkage
     /// excess (V per rad/s) -> i_sd* change per step, 1/H.
     pub trim_gain: N::Gain,
@@ -166,9 +150,6 @@ impl FieldWeakeningDesign {
             inv_stator_inductance: 1.0 / m.stator_inductance(),
             stator_inductance: m.stator_inductance(),
             flux_voltage: 1.0,
-            hold_band: FW_HOLD_BAND_FRACTION * cfg.max_speed,
-            report_steps: (FW_REPORT_SPEED_LOOP_CONSTANTS
-                / (cfg.speed_bandwidth * cfg.control_period)) as u32,
             trim_gain: FW_TRIM_BANDWIDTH * cfg.control_period
                 / (2.0 * FW_VOLTAGE_FRACTION * m.stator_inductance()),
             trim_gate: FW_TRIM_GATE,

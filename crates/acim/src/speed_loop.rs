@@ -32,9 +32,29 @@
 //!
 //! The design is f32 SI; the fixed-point drive rescales it (`fixed::convert`).
 
+use crate::config::{DriveConfig, RsEstimationMode};
+use crate::field_weakening::FieldWeakeningOutput;
 use crate::num::Num;
 use crate::params::MachineParams;
-use crate::pi::PiConfig;
+use crate::pi::{PiConfig, PiController};
+
+/// The far-side transit: with [`DriveConfig::far_side_gain`] on, the
+/// regeneration limit is released while the load torque estimate puts the speed target's
+/// operating point at least this far beyond the line w_s = 0, Hz (the observable
+/// bound, |f_s| >= 1 Hz).
+pub const FAR_SIDE_ENTER_HZ: f32 = 1.0;
+/// ... and applies again once that point comes within this of the line, Hz (the start of
+/// the orientation correction's fade, where the far-side term is off).
+pub const FAR_SIDE_LEAVE_HZ: f32 = 0.5;
+/// Torque held at the voltage or bus limit: the speed reference stays within this
+/// fraction of `max_speed` of the speed estimate (the reachable speed is held and
+/// reported instead of a growing speed error).
+pub const FW_HOLD_BAND_FRACTION: f32 = 0.01;
+/// The telemetry's `speed_target_limited` stays set this many speed-loop time constants
+/// after the hold last bound: the hold binds only in the steps where the speed PI sits at
+/// its limit, which flickers at the reachable speed, and a report that flickers with it
+/// (a third of the steps, measured) says less than it knows.
+pub const FW_REPORT_SPEED_LOOP_CONSTANTS: f32 = 2.5;
 
 /// The speed controller's coefficients (configuration, apart from state).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,9 +73,91 @@ pub struct SpeedLoopConfig<N: Num = f32> {
     /// Whether the feed-forwards are on (the three gains above are zero otherwise, and
     /// the step skips them).
     pub feedforward: bool,
+    /// Speed reference change per step, rad/s.
+    pub ramp_step: N,
+    /// 1 / (p lambda_ref), rad/s per V: the no-load speed whose back-EMF p Omega lambda_ref
+    /// equals a voltage; with the voltage limit, the fastest reachable speed (without
+    /// field weakening).
+    pub speed_per_volt: N::Gain,
+    /// The low-frequency regeneration limit's w_min, rad/s electrical (0: off).
+    pub regen_min_frequency: N,
+    /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
+    pub regen_current_per_frequency: N::Gain,
+    /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical: the torque whose slip is one
+    /// rad/s (the far-side transit; 0 when [`DriveConfig::far_side_gain`] is 0).
+    pub far_side_torque_per_frequency: N::Gain,
+    /// The far-side transit enters beyond this stator frequency, rad/s electrical (0: no
+    /// transit; [`FAR_SIDE_ENTER_HZ`]).
+    pub far_side_enter: N,
+    /// ... and leaves within this one, rad/s electrical ([`FAR_SIDE_LEAVE_HZ`]).
+    pub far_side_leave: N,
+    /// The speed hold's band around the speed, rad/s mechanical
+    /// ([`FW_HOLD_BAND_FRACTION`] max_speed).
+    pub hold_band: N,
+    /// Steps the target stays reported as limited after the hold last bound
+    /// ([`FW_REPORT_SPEED_LOOP_CONSTANTS`] / (speed bandwidth Ts)).
+    pub report_steps: u32,
 }
 
 impl SpeedLoopConfig<f32> {
+    /// No reference limits (no ramp, no regeneration limit, no far-side transit, no hold):
+    /// [`Self::with_reference_limits`] sets them.
+    const NO_LIMITS: Self = Self {
+        pi: PiConfig {
+            kp: 0.0,
+            ki_ts: 0.0,
+            out_min: 0.0,
+            out_max: 0.0,
+        },
+        acceleration_feedforward: 0.0,
+        friction_feedforward: 0.0,
+        load_feedforward: 0.0,
+        feedforward: false,
+        ramp_step: 0.0,
+        speed_per_volt: 0.0,
+        regen_min_frequency: 0.0,
+        regen_current_per_frequency: 0.0,
+        far_side_torque_per_frequency: 0.0,
+        far_side_enter: 0.0,
+        far_side_leave: 0.0,
+        hold_band: 0.0,
+        report_steps: 0,
+    };
+
+    /// This design with the reference's limits for the settings `cfg` at the flux
+    /// reference `flux_reference` (Wb): the ramp, the reachable speed, the regeneration
+    /// limit, the far-side transit and the speed hold.
+    pub fn with_reference_limits(mut self, cfg: &DriveConfig, flux_reference: f32) -> Self {
+        let m = cfg.machine;
+        let ts = cfg.control_period;
+        let pp = m.pole_pairs_f32();
+        self.ramp_step = cfg.speed_ramp * ts;
+        self.speed_per_volt = 1.0 / (pp * flux_reference);
+        self.regen_min_frequency = cfg.regen_min_frequency;
+        self.regen_current_per_frequency = flux_reference / m.referred_rotor_resistance();
+        self.far_side_torque_per_frequency = if cfg.far_side_gain > 0.0 {
+            1.5 * pp * flux_reference * flux_reference / m.referred_rotor_resistance()
+        } else {
+            0.0
+        };
+        // the transit needs the Rs estimate kept while running: with Rs held 20 % high
+        // the far side at 15-30 rpm is unstable with the far-side term
+        // (docs/robustness.md, "The far-side mode")
+        self.far_side_enter = if cfg.far_side_gain > 0.0
+            && cfg.rs_estimation
+            && cfg.rs_estimation_mode == RsEstimationMode::Running
+        {
+            2.0 * core::f32::consts::PI * FAR_SIDE_ENTER_HZ
+        } else {
+            0.0
+        };
+        self.far_side_leave = 2.0 * core::f32::consts::PI * FAR_SIDE_LEAVE_HZ;
+        self.hold_band = FW_HOLD_BAND_FRACTION * cfg.max_speed;
+        self.report_steps =
+            (FW_REPORT_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * cfg.control_period)) as u32;
+        self
+    }
+
     /// The design for `bandwidth` (rad/s) at rotor flux `rotor_flux` (Wb), period `ts`
     /// (s), q-current limit `current_limit` (A): the PI with its double pole at the
     /// bandwidth, or (`feedforward`) the two-degree-of-freedom loop (module docs).
@@ -84,6 +186,7 @@ impl SpeedLoopConfig<f32> {
                 friction_feedforward: m.viscous_friction() / kt,
                 load_feedforward: 1.0 / kt,
                 feedforward: true,
+                ..Self::NO_LIMITS
             }
         } else {
             Self {
@@ -92,8 +195,254 @@ impl SpeedLoopConfig<f32> {
                 friction_feedforward: 0.0,
                 load_feedforward: 0.0,
                 feedforward: false,
+                ..Self::NO_LIMITS
             }
         }
+    }
+}
+
+/// This step's signals the speed loop reads (SI in f32, per unit in fixed point).
+#[derive(Clone, Copy, Debug)]
+pub struct SpeedLoopInputs<N: Num> {
+    /// p: mechanical speed -> electrical frequency.
+    pub pole_pairs: N::Gain,
+    /// Omega_hat, rad/s mechanical.
+    pub speed: N,
+    /// T_L_hat, N m.
+    pub load_torque: N,
+    /// The field weakening's flux current and torque-current limits this step.
+    pub limits: FieldWeakeningOutput<N>,
+    /// Field weakening is on: the reachable speed is found by the hold, not from the
+    /// voltage.
+    pub fw_enabled: bool,
+    /// The flux is weakened (or not settled back since): the ramp's slope is not fed
+    /// forward and the loop's gains are scaled by lambda_ref / lambda_r.
+    pub fw_active: bool,
+    /// lambda_ref, Wb, and 1 / lambda_r, 1/Wb (that scaling).
+    pub flux_reference: N,
+    /// 1 / lambda_r, 1/Wb.
+    pub inv_rotor_flux: N,
+    /// The current loops' steady voltage limit, V (the reachable speed without field
+    /// weakening).
+    pub voltage_limit: N,
+    /// The observer has a far-side term and the inverter's voltage error is known (the
+    /// start test identified it, or the tracker has adapted long enough to be trusted).
+    pub inverter_error_known: bool,
+    /// The observer needs the low-frequency regeneration limit.
+    pub regeneration_limit: bool,
+    /// The short-time overload rating's factor on the torque-current limits (None: off).
+    pub rating: Option<N>,
+    /// z^-1: the q current loop was at its voltage limit in the last step.
+    pub q_saturated: bool,
+}
+
+/// The speed loop's state: target, ramped reference, the PI, the hold's report and the
+/// far-side mode.
+#[derive(Clone, Copy, Debug)]
+pub struct SpeedLoop<N> {
+    /// The speed target, rad/s (within its limit: the command's).
+    pub speed_target: N,
+    /// The ramped speed reference, rad/s.
+    pub speed_reference: N,
+    /// The speed PI.
+    pub pi: PiController<N>,
+    /// The target is beyond the reachable speed (reported in the telemetry).
+    pub target_limited: bool,
+    /// The speed reference moved this step towards its target (a ramp; not the
+    /// regeneration limit's hold, which moves it with the speed).
+    pub ramping: bool,
+    /// Steps the target stays reported as limited since the hold last bound.
+    pub limited_hold: u32,
+    /// The far-side mode: the regeneration limit released and the observer's far-side
+    /// term on.
+    pub far_side: bool,
+    /// The last step's i_sq*, A.
+    pub i_sq_ref: N,
+}
+
+impl<N: Num> Default for SpeedLoop<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<N: Num> SpeedLoop<N> {
+    /// At rest: zero target and reference, integral zero.
+    pub fn new() -> Self {
+        Self {
+            speed_target: N::ZERO,
+            speed_reference: N::ZERO,
+            pi: PiController::new(),
+            target_limited: false,
+            ramping: false,
+            limited_hold: 0,
+            far_side: false,
+            i_sq_ref: N::ZERO,
+        }
+    }
+
+    /// Whether the PI is at its limit.
+    #[inline(always)]
+    pub fn saturated(&self) -> bool {
+        self.pi.saturated()
+    }
+
+    /// One running step: the ramp towards the target (limited to the reachable speed
+    /// without field weakening), the far-side mode, the regeneration limit, the overload
+    /// rating, the hold at the voltage or regeneration limit, the feed-forwards and the
+    /// PI. Returns i_sq*, A.
+    #[inline(always)]
+    pub fn update(&mut self, cfg: &SpeedLoopConfig<N>, x: &SpeedLoopInputs<N>) -> N {
+        let fw = x.limits;
+        let target = if x.fw_enabled {
+            // (the target is within speed_target_limit already): the reachable speed
+            // depends on the load and is found by holding the reference below
+            self.speed_target
+        } else {
+            // a target beyond the no-load speed the steady voltage reaches (back-EMF
+            // p Omega lambda_ref = V_steady) is limited to it and reported in the telemetry
+            let reach = N::gain(cfg.speed_per_volt, x.voltage_limit);
+            self.speed_target.clamp(-reach, reach)
+        };
+        self.target_limited = target != self.speed_target;
+        let dv = (target - self.speed_reference).clamp(-cfg.ramp_step, cfg.ramp_step);
+        self.speed_reference = self.speed_reference + dv;
+        self.ramping = dv != N::ZERO;
+        // the ramp's slope, fed forward: zero where the hold below moves the reference
+        // instead, and in field weakening (the torque the voltage leaves is the hold's to
+        // share out: with the slope's torque on top, braking from 3000 rpm ran into the
+        // current-regulation trip)
+        let mut slope = if x.fw_active { N::ZERO } else { dv };
+        let speed = x.speed;
+        // the far-side mode: the braking torque the target needs, -sign(target) T_L_hat,
+        // against the torque whose slip puts w_s = p Omega* + slip beyond the line by
+        // `far_side_enter` (entering) or within `far_side_leave` of it (leaving); only
+        // with the inverter's voltage error known. In it the regeneration limit is
+        // released (the transit) and the observer takes the far-side term
+        self.far_side = if cfg.far_side_enter > N::ZERO
+            && self.speed_target != N::ZERO
+            && x.inverter_error_known
+        {
+            let braking = if self.speed_target > N::ZERO {
+                -x.load_torque
+            } else {
+                x.load_torque
+            };
+            let line = N::gain(x.pole_pairs, self.speed_target.abs());
+            let margin = if self.far_side {
+                cfg.far_side_leave
+            } else {
+                cfg.far_side_enter
+            };
+            braking >= N::gain(cfg.far_side_torque_per_frequency, line + margin)
+        } else {
+            false
+        };
+        let (i_sq_min, i_sq_max, regen_limited) =
+            if x.regeneration_limit && cfg.regen_min_frequency > N::ZERO && !self.far_side {
+                regen_limit(cfg, x.pole_pairs, self.speed_target, speed, fw)
+            } else {
+                (fw.i_sq_min, fw.i_sq_max, false)
+            };
+        // the short-time overload rating: on the measured current, the torque-current
+        // limits fold back to the continuous current when it is spent
+        let (i_sq_min, i_sq_max) = match x.rating {
+            Some(rating) => (i_sq_min * rating, i_sq_max * rating),
+            None => (i_sq_min, i_sq_max),
+        };
+        // the speed PI at its limit, or its torque current beyond what the voltage left
+        // to the q loop drives (the q loop at its limit: at the field-weakening onset the
+        // trim lowers the flux over tens of ms, and with overmodulation the reserve runs
+        // out, while the ramp goes on)
+        let short = self.pi.saturated() || x.q_saturated;
+        // the regeneration limit holds the torque only when the drive brakes (its last
+        // torque current against the speed): a motoring drive at its limit, e.g. a locked
+        // rotor, is the stall detector's case, with the reference kept
+        let braking = regen_limited && ((speed > N::ZERO) == (self.i_sq_ref < N::ZERO));
+        if (fw.torque_limited || braking) && short {
+            // the torque is at the voltage (or bus) limit, or at the low-frequency
+            // regeneration limit: the speed the drive reaches there is the reachable
+            // speed; hold the reference within a band of it (no growing speed error, no
+            // overload trip) and report it
+            let band = cfg.hold_band;
+            let held = self.speed_reference.clamp(speed - band, speed + band);
+            slope = N::ZERO;
+            // reported when the hold binds, and whenever the regeneration limit holds the
+            // torque: the speed then settles above the target, inside the band or not
+            if held != self.speed_reference || braking {
+                self.limited_hold = cfg.report_steps;
+            }
+            // at the regeneration limit the reference follows the speed and the torque
+            // is the limit's, a slow function of the speed: not a ramp (the inverter
+            // tracker's gate; with it shut there, a drive held by the limit never learnt
+            // the inverter error the far-side mode needs)
+            if braking {
+                self.ramping = false;
+            }
+            self.speed_reference = held;
+        }
+        // reported while the hold binds and for a few speed-loop time constants after
+        // (the speed PI's saturation flickers at the reachable speed)
+        self.target_limited = self.target_limited || self.limited_hold > 0;
+        self.limited_hold = self.limited_hold.saturating_sub(1);
+        let error = self.speed_reference - speed;
+        // the feed-forwards: the torque currents that accelerate the rotor along the ramp,
+        // overcome the friction at the reference and hold the observer's load-torque
+        // estimate; torques over k_t at lambda_ref, scaled like the error below
+        let feedforward = if cfg.feedforward {
+            N::gain(cfg.acceleration_feedforward, slope)
+                + N::gain(cfg.friction_feedforward, self.speed_reference)
+                + N::gain(cfg.load_feedforward, x.load_torque)
+        } else {
+            N::ZERO
+        };
+        // the torque per ampere is 1.5 p lambda_r and the PI is designed at lambda_ref:
+        // while the flux is weakened its error and feed-forward are scaled by
+        // lambda_ref/lambda_r, so the loop keeps its bandwidth and damping as the flux
+        // falls (unscaled, at a sixth of the flux the ramp lagged 79 rpm in
+        // fw-braking-3000 and the speed overshot 3000 rpm by 78 rpm); the error, not the
+        // output, is scaled: the torque current does not jump with the flux estimate
+        // (lambda_r >= the flux model's floor)
+        let (error, feedforward) = if x.fw_active {
+            let scale = x.flux_reference * x.inv_rotor_flux;
+            (error * scale, feedforward * scale)
+        } else {
+            (error, feedforward)
+        };
+        let i_sq_ref = self
+            .pi
+            .update_with_limits(&cfg.pi, error, feedforward, i_sq_min, i_sq_max);
+        self.i_sq_ref = i_sq_ref;
+        i_sq_ref
+    }
+}
+
+/// The torque-current limits with the low-frequency regeneration limit
+/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed target has the
+/// sign of the speed estimate (holding a speed; a zero or opposite target is a transit,
+/// through zero to a stop or a reversal, which must cross the line), the braking side is
+/// limited to
+/// (p |Omega_hat| - w_min) lambda_ref / R_R (>= 0), which keeps
+/// w_s = p Omega + R_R i_sq / lambda at least w_min on the rotor's side of zero. Returns
+/// the limits and whether the regeneration limit is tighter than the others.
+#[inline(always)]
+fn regen_limit<N: Num>(
+    cfg: &SpeedLoopConfig<N>,
+    pole_pairs: N::Gain,
+    target: N,
+    speed: N,
+    fw: FieldWeakeningOutput<N>,
+) -> (N, N, bool) {
+    let (lo, hi) = (fw.i_sq_min, fw.i_sq_max);
+    let w = N::gain(pole_pairs, speed.abs()) - cfg.regen_min_frequency;
+    let w = if w > N::ZERO { w } else { N::ZERO };
+    let i = N::gain(cfg.regen_current_per_frequency, w);
+    if speed > N::ZERO && target > N::ZERO && lo < -i {
+        (-i, hi, true)
+    } else if speed < N::ZERO && target < N::ZERO && hi > i {
+        (lo, i, true)
+    } else {
+        (lo, hi, false)
     }
 }
 

@@ -86,6 +86,19 @@ pub fn speed_loop(cfg: &SpeedLoopConfig, b: &PerUnitBases) -> Option<SpeedLoopCo
         friction_feedforward: Gain::from_f32(cfg.friction_feedforward * b.speed / b.current)?,
         load_feedforward: Gain::from_f32(cfg.load_feedforward * b.torque / b.current)?,
         feedforward: cfg.feedforward,
+        ramp_step: Q24(to_q24(cfg.ramp_step / b.speed)),
+        speed_per_volt: Gain::from_f32(cfg.speed_per_volt * b.voltage / b.speed)?,
+        regen_min_frequency: Q24(to_q24(cfg.regen_min_frequency / b.frequency)),
+        regen_current_per_frequency: Gain::from_f32(
+            cfg.regen_current_per_frequency * b.frequency / b.current,
+        )?,
+        far_side_torque_per_frequency: Gain::from_f32(
+            cfg.far_side_torque_per_frequency * b.frequency / b.torque,
+        )?,
+        far_side_enter: Q24(to_q24(cfg.far_side_enter / b.frequency)),
+        far_side_leave: Q24(to_q24(cfg.far_side_leave / b.frequency)),
+        hold_band: Q24(to_q24(cfg.hold_band / b.speed)),
+        report_steps: cfg.report_steps,
     })
 }
 
@@ -319,7 +332,29 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             pi_q: pi_current,
             overmodulation_reserve_steps: d.current_loop.overmodulation_reserve_steps,
         },
-        speed_loop: speed_loop(&d.speed_loop, b).ok_or(missing("speed_bandwidth"))?,
+        // the reference's limits with the field each depends on named in its error (and
+        // 1/(p lambda_ref) in the order the design has always converted it)
+        speed_loop: SpeedLoopConfig {
+            ramp_step: Q24(to_q24(d.speed_loop.ramp_step / b.speed)),
+            speed_per_volt: gain(
+                b.voltage / (pp * d.flux_reference * b.speed),
+                "flux_current",
+            )?,
+            regen_min_frequency: Q24(to_q24(d.speed_loop.regen_min_frequency / b.frequency)),
+            regen_current_per_frequency: gain(
+                d.speed_loop.regen_current_per_frequency * b.frequency / b.current,
+                "regen_min_frequency",
+            )?,
+            far_side_torque_per_frequency: gain(
+                d.speed_loop.far_side_torque_per_frequency * b.frequency / b.torque,
+                "far_side_gain",
+            )?,
+            far_side_enter: Q24(to_q24(d.speed_loop.far_side_enter / b.frequency)),
+            far_side_leave: Q24(to_q24(d.speed_loop.far_side_leave / b.frequency)),
+            hold_band: pu(d.speed_loop.hold_band, b.speed, "max_speed")?,
+            report_steps: d.speed_loop.report_steps,
+            ..speed_loop(&d.speed_loop, b).ok_or(missing("speed_bandwidth"))?
+        },
         thermal: ThermalConfig {
             heat_gain: gain(
                 d.thermal.heat_gain * b.current * b.current,
@@ -354,12 +389,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         pole_pairs: gain(pp * b.speed / b.frequency, "machine")?,
         back_emf: gain(pp * b.speed * b.flux / b.voltage, "machine")?,
         torque_factor: gain(1.5 * pp * b.flux * b.current / b.torque, "machine")?,
-        ramp_step: Q24(to_q24(d.ramp_step / b.speed)),
         speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
-        speed_per_volt: gain(
-            b.voltage / (pp * d.flux_reference * b.speed),
-            "flux_current",
-        )?,
         lead: angle_gain(b.frequency * ts * cfg.delay_periods).ok_or(missing("delay_periods"))?,
         orientation: OrientationDesign {
             gain_per_flux: gain(
@@ -476,17 +506,6 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         rr: rr_estimator(&d.rr_estimator, b).ok_or(missing("machine.rotor_resistance"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
-        regen_min_frequency: Q24(to_q24(d.regen_min_frequency / b.frequency)),
-        regen_current_per_frequency: gain(
-            d.regen_current_per_frequency * b.frequency / b.current,
-            "regen_min_frequency",
-        )?,
-        far_side_torque_per_frequency: gain(
-            d.far_side_torque_per_frequency * b.frequency / b.torque,
-            "far_side_gain",
-        )?,
-        far_side_enter: Q24(to_q24(d.far_side_enter / b.frequency)),
-        far_side_leave: Q24(to_q24(d.far_side_leave / b.frequency)),
         inverter_test: InverterTestDesign {
             level_steps: d.inverter_test.level_steps,
             settle_steps: d.inverter_test.settle_steps,
@@ -555,8 +574,6 @@ fn field_weakening(
             "machine",
         )?,
         flux_voltage: gain(f.flux_voltage * b.frequency * b.flux / b.voltage, "machine")?,
-        hold_band: pu(f.hold_band, b.speed, "max_speed")?,
-        report_steps: f.report_steps,
         trim_gain: gain(
             f.trim_gain * b.voltage / (b.frequency * b.current),
             "field_weakening",

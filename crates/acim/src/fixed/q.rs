@@ -694,7 +694,7 @@ mod tests {
             c.pole_pairs,
             c.back_emf,
             c.torque_factor,
-            c.speed_per_volt,
+            c.speed_loop.speed_per_volt,
             c.lead,
             c.pwm.voltage_limit_per_inv_bus,
         ];
