@@ -48,6 +48,7 @@
 pub mod flux;
 pub mod frames;
 pub mod gain_calibration;
+pub mod hardware_trip;
 pub mod inverter_test;
 pub mod inverter_tracker;
 pub mod math;
