@@ -311,7 +311,7 @@ impl Plant {
                 };
                 for _ in 0..n {
                     opened_at =
-                        self.gates_on_substep(h, load, &src, elapsed, t, &mut acc, &mut watch);
+                        self.gates_on_substep(h, load, &src, (elapsed, t), &mut acc, &mut watch);
                     if opened_at.is_some() {
                         break 'intervals;
                     }
@@ -321,8 +321,14 @@ impl Plant {
         } else if gates {
             let mut elapsed = 0.0f32;
             for _ in 0..self.substeps {
-                opened_at =
-                    self.gates_on_substep(h_max, load, &averaged, elapsed, t, &mut acc, &mut watch);
+                opened_at = self.gates_on_substep(
+                    h_max,
+                    load,
+                    &averaged,
+                    (elapsed, t),
+                    &mut acc,
+                    &mut watch,
+                );
                 if opened_at.is_some() {
                     break;
                 }
@@ -361,7 +367,7 @@ impl Plant {
     }
 
     /// One sub-step of `h` s with the gates on (terminal source `src`), starting `elapsed`
-    /// s into the period, with the comparator's check at its end. Returns when the
+    /// s into the period of `period` s, with the comparator's check at its end. Returns when the
     /// comparator opened the gates (s from the period start), having integrated the
     /// machine up to that instant only.
     fn gates_on_substep<F>(
@@ -369,8 +375,7 @@ impl Plant {
         h: f32,
         load: LoadTorque,
         src: &F,
-        elapsed: f32,
-        period: f32,
+        (elapsed, period): (f32, f32),
         acc: &mut StepSourceIntegral,
         watch: &mut Watch,
     ) -> Option<f32>

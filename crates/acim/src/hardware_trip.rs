@@ -12,21 +12,24 @@
 //! control and digital power conversion": comparator + DAC threshold into TIM1's break
 //! input, MOE cleared in hardware).
 //!
-//! Its level sits a margin [`HARDWARE_TRIP_MARGIN`] above the software trip, so that with
-//! working sensors the software trip acts first (and reports its own reason) and the
-//! comparator only fires when the samples do not show the current.
+//! Its level is the software trip's own ([`HARDWARE_TRIP_RATIO`] = 1): the two watch the
+//! same limit, the software on the samples once per period (and reports which check
+//! fired), the comparator continuously on the amplifier outputs. A level above the
+//! software trip would leave a band of current the samples may never report: a stuck
+//! channel can hold the true current inside it for as long as the drive runs, so the
+//! phase current would stay above the drive's trip while switching.
 
 use crate::design::DriveConfig;
 
-/// The hardware trip level over the software trip level (a ratio, 1.1 = 10 % above).
+/// The hardware trip level over the software trip level (a ratio; 1: the same level).
 ///
-/// The margin covers what separates the two measurements with healthy sensors: the
-/// current channels' gain tolerance (a few percent: shunt 1 %, amplifier gain 1-2 %), the
-/// comparator's input offset and the DAC's error (a few millivolts against the amplifier's
-/// 1-2 V span at the trip) and the current ripple between two samples, which the samples
-/// taken at the PWM centre do not see. Above it, a current the samples miss is cut within
-/// the comparator's delay.
-pub const HARDWARE_TRIP_MARGIN: f32 = 1.1;
+/// Not above 1, for the reason in the module documentation. What separates the two
+/// measurements with healthy sensors (the channels' gain tolerance, a few percent; the
+/// comparator's offset and the DAC's error, a few millivolts against the amplifier's 1-2 V
+/// span at the trip; the current ripple between samples, which the samples at the PWM
+/// centre do not see) then decides which of the two fires first at a real over-current:
+/// the switches open either way.
+pub const HARDWARE_TRIP_RATIO: f32 = 1.0;
 
 /// The comparator's delay from the current crossing its level to the gates off, s:
 /// comparator propagation (tens of ns on the STM32G4's comparators), the break input's
@@ -35,22 +38,23 @@ pub const HARDWARE_TRIP_MARGIN: f32 = 1.1;
 pub const HARDWARE_TRIP_DELAY: f32 = 1.5e-6;
 
 /// The hardware trip level of a drive configuration, A (phase peak):
-/// [`HARDWARE_TRIP_MARGIN`] times its software trip
+/// [`HARDWARE_TRIP_RATIO`] times its software trip
 /// ([`DriveConfig::overcurrent_trip`]).
 pub fn hardware_trip_level(cfg: &DriveConfig) -> f32 {
-    HARDWARE_TRIP_MARGIN * cfg.overcurrent_trip
+    HARDWARE_TRIP_RATIO * cfg.overcurrent_trip
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Above the software trip, so working sensors trip in software first.
+    /// Not above the software trip (no band the samples could hide), and from the
+    /// configuration: the paper defaults' 8 A.
     #[test]
-    fn the_hardware_level_is_above_the_software_trip() {
+    fn the_hardware_level_is_the_software_trip() {
         let cfg = DriveConfig::paper_defaults();
         let hw = hardware_trip_level(&cfg);
-        assert!(hw > cfg.overcurrent_trip);
-        assert!((hw - 8.8).abs() < 1e-4, "{hw}");
+        assert!(hw <= cfg.overcurrent_trip);
+        assert!((hw - 8.0).abs() < 1e-4, "{hw}");
     }
 }

@@ -60,6 +60,7 @@ pub mod params;
 pub mod pi;
 pub mod rr_estimator;
 pub mod rs_estimator;
+pub mod sensor_check;
 pub mod speed_loop;
 pub mod speed_search;
 pub mod svpwm;
