@@ -95,3 +95,206 @@ pub fn markdown(rows: &[(crate::scenario::Scenario, Option<f32>, Metrics)]) -> S
     );
     s
 }
+
+/// One case of the current-sensor fault matrix ([`sensor_cases`]).
+#[derive(Clone, Debug)]
+pub struct SensorCase {
+    /// The acceptance machine's file stem.
+    pub machine: &'static str,
+    /// The operating point, e.g. `500 rpm` or `field weakening 1800 rpm`.
+    pub point: String,
+    /// The fault, e.g. `all channels 0 A` or `channel b stuck`.
+    pub fault: &'static str,
+    /// Measured phases: 2 or 3.
+    pub shunts: u8,
+    /// When the fault is injected, s: [`SETTLE_S`] after the speed reference reached the
+    /// point in a run without the fault. `None`: the drive did not reach the point
+    /// without any fault (the scenario then runs without one, and the table says why).
+    pub injected_at_s: Option<f32>,
+    /// Why the point was not reached (the fault of the run without a sensor fault).
+    pub not_reached: Option<String>,
+    /// The scenario.
+    pub scenario: crate::scenario::Scenario,
+}
+
+/// The speeds of the matrix, rpm; the field-weakening point comes on top
+/// ([`FIELD_WEAKENING_OVER_SYNC`]).
+pub const SENSOR_CASE_SPEEDS_RPM: [f32; 3] = [60.0, 500.0, 1500.0];
+/// The field-weakening point, times the machine's synchronous speed (1.2: 1800 rpm for a
+/// 50 Hz four-pole machine, above each acceptance machine's base speed on its board's
+/// bus; the over-speed trip is set to twice the synchronous speed).
+pub const FIELD_WEAKENING_OVER_SYNC: f32 = 1.2;
+/// How long the speed is held after the reference reached it, before the fault, s.
+pub const SETTLE_S: f32 = 0.5;
+/// How long the run goes on after the fault, s.
+const AFTER_S: f32 = 0.3;
+/// The longest start (offsets, inverter test, Rs identification, magnetizing) a run
+/// without the fault allows for, s.
+const START_ALLOWANCE_S: f32 = 4.0;
+
+/// Every current-sensor fault (all channels at 0 A, one channel stuck at its last
+/// reading; two and three shunts) at 60, 500, 1500 rpm and in field weakening, on every
+/// acceptance machine (`crates/acim-sim/machines/`, realistic sensors, the controller with
+/// the file's own model, configured from the nameplate and board; the plant's hardware
+/// comparator as the simulator's default). No load. Each point is first run without a
+/// fault to find when its speed reference arrives (the start's length differs between
+/// machines); the fault comes [`SETTLE_S`] later.
+pub fn sensor_cases() -> Result<Vec<SensorCase>, String> {
+    let mut out = Vec::new();
+    for m in crate::machines::MACHINES.iter() {
+        let base = crate::machines::base(m)?;
+        let np = base.nameplate.ok_or("a machine file without [nameplate]")?;
+        let poles = np.pole_pairs.unwrap_or(base.plant.pole_pairs) as f32;
+        let sync_rpm = 60.0 * np.frequency_hz / poles;
+        let mut points: Vec<(String, f32)> = SENSOR_CASE_SPEEDS_RPM
+            .iter()
+            .map(|&r| (format!("{r:.0} rpm"), r))
+            .collect();
+        let fw = (FIELD_WEAKENING_OVER_SYNC * sync_rpm / 10.0).round() * 10.0;
+        points.push((format!("field weakening {fw:.0} rpm"), fw));
+        for (point, rpm) in points {
+            let mut sc = base.clone();
+            sc.sensors.channels = 2;
+            sc.drive.max_speed_rpm = Some(2.0 * sync_rpm);
+            sc.speed_profile = vec![crate::scenario::SpeedPoint { t_s: 0.5, rpm }];
+            sc.load_profile = Vec::new();
+            sc.windows = Vec::new();
+            sc.csv_decimation = None;
+            let v = sc.validate().map_err(|e| format!("{}: {e}", m.name))?;
+            let ramp = v.drive.speed_ramp * acim::math::RAD_S_TO_RPM;
+            sc.duration_s = 0.5 + START_ALLOWANCE_S + rpm / ramp + SETTLE_S;
+            // when the reference arrives, without a fault
+            let probe = crate::sim::run(&sc).map_err(|e| format!("{}: {e}", m.name))?;
+            let arrived = probe
+                .rows
+                .iter()
+                .find(|r| r.state == 2 && r.speed_ref_rpm >= 0.999 * rpm)
+                .map(|r| r.t_s);
+            let (injected_at_s, not_reached) = match (arrived, probe.fault_time_s) {
+                (Some(t), None) => (Some(((t + SETTLE_S) * 100.0).round() / 100.0), None),
+                (Some(t), Some(tf)) if tf > t + SETTLE_S => {
+                    (Some(((t + SETTLE_S) * 100.0).round() / 100.0), None)
+                }
+                (_, Some(tf)) => (
+                    None,
+                    Some(format!(
+                        "{} at {tf:.2} s without a sensor fault",
+                        probe.fault.map(crate::sim::fault_name).unwrap_or_default()
+                    )),
+                ),
+                (None, None) => (None, Some("the reference never arrived".into())),
+            };
+            for (fault, shunts) in [
+                ("all channels 0 A", 2u8),
+                ("all channels 0 A", 3),
+                ("channel b stuck", 2),
+                ("channel b stuck", 3),
+            ] {
+                let mut c = sc.clone();
+                c.name = format!(
+                    "sensor-{}-{}-{}-{}shunt",
+                    m.name,
+                    rpm as u32,
+                    if fault.starts_with("all") {
+                        "zero"
+                    } else {
+                        "stuck"
+                    },
+                    shunts
+                );
+                c.description = format!("{}: {fault}, {shunts} shunts, at {point}", m.name);
+                c.sensors.channels = shunts;
+                if let Some(at) = injected_at_s {
+                    if fault.starts_with("all") {
+                        c.faults.current_sensors_zero_at_s = Some(at);
+                    } else {
+                        c.faults.current_sensor_stuck_at_s = Some(at);
+                        c.faults.current_sensor_stuck_channel = 1;
+                    }
+                    c.duration_s = at + AFTER_S;
+                }
+                out.push(SensorCase {
+                    machine: m.name,
+                    point: point.clone(),
+                    fault,
+                    shunts,
+                    injected_at_s,
+                    not_reached: not_reached.clone(),
+                    scenario: c,
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Runs every [`sensor_cases`] case through `run`.
+pub fn run_sensor_cases(
+    run: &mut dyn FnMut(&crate::scenario::Scenario) -> Result<Metrics, String>,
+) -> Result<Vec<(SensorCase, Metrics)>, String> {
+    sensor_cases()?
+        .into_iter()
+        .map(|c| {
+            let m = run(&c.scenario)?;
+            Ok((c, m))
+        })
+        .collect()
+}
+
+/// The current-sensor fault matrix as Markdown.
+pub fn sensor_markdown(rows: &[(SensorCase, Metrics)]) -> String {
+    let control_period_s = rows
+        .iter()
+        .filter_map(|(c, _)| c.scenario.validate().ok())
+        .map(|v| v.drive.control_period)
+        .fold(0.0f32, f32::max);
+    let mut s = format!(
+        "\n## Current-sensor faults on every acceptance machine\n\n\
+         Every channel reading 0 A, or channel b stuck at its last reading, with two and three \
+         shunts, at 60, 500, 1500 rpm and in field weakening ({FIELD_WEAKENING_OVER_SYNC} times the \
+         synchronous speed), no load, on each machine of `crates/acim-sim/machines/` \
+         (realistic sensors, the controller with the file's model, configured from its nameplate \
+         and board), injected {SETTLE_S} s after the speed reference arrived (found by a run without \
+         the fault). The software trip cannot see a current \
+         its sensors do not report; the plant's hardware comparator (at the software trip level, \
+         1.5 us delay, `acim::hardware_trip`) opens the switches. The peak true current and the \
+         time above the trip are taken at every integration sub-step with the gates on, not only at \
+         the samples; acceptance: above the trip for at most one PWM period \
+         ({:.0} us, the longest period of the rows) while switching.\n\n\
+         | machine | point | fault | shunts | reason | detected after (ms) | trip (A) | peak true current while switching (A) | above the trip while switching (us) |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+        control_period_s * 1e6
+    );
+    for (c, m) in rows {
+        if let Some(why) = &c.not_reached {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | point not reached: {why} | - | - | - | - |",
+                c.machine, c.point, c.fault, c.shunts
+            );
+            continue;
+        }
+        let after = match (m.fault_time_s, c.injected_at_s) {
+            (Some(t), Some(a)) => format!("{:.1}", (t - a) * 1e3),
+            _ => "-".into(),
+        };
+        let trip = c
+            .scenario
+            .validate()
+            .map_or(0.0, |v| v.drive.overcurrent_trip);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.2} | {:.1} |",
+            c.machine,
+            c.point,
+            c.fault,
+            c.shunts,
+            m.fault.as_deref().unwrap_or("none (held)"),
+            after,
+            trip,
+            m.peak_true_current_switching_a,
+            m.above_trip_switching_longest_s * 1e6,
+        );
+    }
+    s
+}
