@@ -7,10 +7,10 @@
 //! channel lets the true current run away between samples the drive believes. A
 //! comparator on each current-sense amplifier output, wired into the timer's break input,
 //! switches the bridge off within its propagation delay and filter (a few microseconds)
-//! whatever the software believes (ST AN5306 "Operational amplifier (OPAMP) usage in
-//! STM32G4 Series" and AN4277 "Using STM32 device PWM shut-down features for motor
-//! control and digital power conversion": comparator + DAC threshold into TIM1's break
-//! input, MOE cleared in hardware).
+//! whatever the software believes (ST AN4232 "Getting started with analog comparators for
+//! STM32F3 Series and STM32G4 Series devices", its over-current case, and AN4277 "Using
+//! STM32 device PWM shut-down features for motor control and digital power conversion":
+//! comparator + DAC threshold into the timer's break input, MOE cleared in hardware).
 //!
 //! Its level is the software trip's own ([`HARDWARE_TRIP_RATIO`] = 1): the two watch the
 //! same limit, the software on the samples once per period (and reports which check
