@@ -4,7 +4,9 @@
 //! hardware-free self-test all run the `acim` drive against: the machine (paper eq. 1-3
 //! in the stationary frame), load torque, inverter (averaged or switching-level), the one
 //! PWM timing model ([`PwmPreload`]: duties computed at step k act over the next period),
-//! sensors, the DC link ([`DcLink`]) and fault injection ([`FaultInjector`]).
+//! sensors, the DC link ([`DcLink`]), fault injection ([`FaultInjector`]) and the
+//! inverter's hardware over-current comparator ([`ComparatorConfig`], not fitted unless
+//! asked: [`Plant::set_comparator`]).
 //!
 //! Everything is `no_std`, allocation-free, f32-only and panic-free; no trigonometry is
 //! needed at run time because the machine is integrated in the stationary alpha-beta frame.
