@@ -138,3 +138,52 @@ fn plant_changes_ramp_validate_and_act() {
         "a +50 % plant Rs step moved the speed-estimation error only from {base} to {hot} rpm"
     );
 }
+
+/// The hardware over-current comparator: on by default at the drive's trip level, its
+/// level and delay validated with the field named, and off when asked (the drive's own
+/// checks then find a dead current sensing).
+#[test]
+fn the_hardware_comparator_is_configurable() {
+    let sc = Scenario::from_toml(EXAMPLE).unwrap();
+    assert!(sc.inverter.hardware_trip && sc.inverter.hardware_trip_a.is_none());
+    for bad in ["-1.0", "0.0", "1e9", "nan"] {
+        let e = sc
+            .with_overrides(&[format!("inverter.hardware_trip_a={bad}")])
+            .and_then(|s| s.validate().map(|_| ()))
+            .unwrap_err();
+        assert_eq!(e.field, "inverter.hardware_trip_a", "{bad}: {e}");
+        assert!(e.allowed.contains("hardware_trip = false"), "{e}");
+    }
+    let e = sc
+        .with_overrides(&["inverter.hardware_trip_delay_s=1.0".into()])
+        .unwrap()
+        .validate()
+        .unwrap_err();
+    assert_eq!(e.field, "inverter.hardware_trip_delay_s");
+    // dead current sensing: the comparator fires at the trip level, and the run says so
+    let dead = acim_sim::builtins::get("fault-sensors-zero").unwrap();
+    let (r, m) = acim_sim::run_with_metrics(&dead).unwrap();
+    let h = m.hardware_trip.expect("the comparator fired");
+    assert_eq!(h.level_a, r.config.overcurrent_trip);
+    assert!(h.off_s > 3.0 && h.off_s - h.crossing_s < 2e-6, "{h:?}");
+    assert_eq!(m.fault.as_deref(), Some("HardwareBreak"));
+    assert!(r.rows.last().unwrap().csv().ends_with(",1"));
+    // a level of its own
+    let (_, m) = acim_sim::run_with_metrics(
+        &dead
+            .with_overrides(&["inverter.hardware_trip_a=7.0".into()])
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(m.hardware_trip.unwrap().level_a, 7.0);
+    // switched off: the drive's software checks alone
+    let (r, m) = acim_sim::run_with_metrics(
+        &dead
+            .with_overrides(&["inverter.hardware_trip=false".into()])
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(m.hardware_trip.is_none());
+    assert_eq!(m.fault.as_deref(), Some("NoCurrentResponse"));
+    assert!(r.rows.iter().all(|x| !x.hardware_trip));
+}

@@ -13,6 +13,9 @@ level:
 - ADC1/ADC2: power-up (ADCAL self-clears, ADRDY on ADEN), injected conversions triggered
   each PWM period once JADSTART is set (JEOS/JEOC, rc_w1), JDRx from a load model through
   the board's shunt/amplifier/divider description;
+- COMP1..7 (plain registers) and the internal DAC3/DAC4 (plain registers; DAC_SR.DACxRDY
+  reads set once DAC_CR.ENx is), configured for the hardware over-current path into
+  TIM1's break 2 (their analog behaviour is not modelled: a comparator never fires);
 - CORDIC (sine and cosine of the q1.31 argument), IWDG (start/feed counted), USART2 (bytes
   in and out), SysTick (COUNTFLAG reads set: delays take no emulated time), DWT (CYCCNT =
   instructions executed), NVIC (enables), TIM6 (the self-test's period interrupt).
@@ -94,6 +97,7 @@ FPR = [UC_ARM_REG_S0 + i for i in range(32)]
 # data registers: writing one only stores its value (SP, PC, xPSR, PRIMASK and FPSCR do more)
 _PLAIN_REGS = frozenset(GPR[:13] + [UC_ARM_REG_LR])
 
+DAC_REGS = {0x0: "CR", 0x8: "DHR12R1", 0x14: "DHR12R2", 0x34: "SR", 0x3C: "MCR"}
 # peripheral bases and the register names the write log prints
 PERIPHERALS = {
     0x4000_1000: ("TIM6", {0x0: "CR1", 0xC: "DIER", 0x10: "SR", 0x14: "EGR", 0x28: "PSC", 0x2C: "ARR"}),
@@ -102,6 +106,8 @@ PERIPHERALS = {
                              0x20: "ICR", 0x28: "TDR", 0x2C: "PRESC"}),
     0x4000_7000: ("PWR", {0x0: "CR1", 0x4: "CR2", 0x8: "CR3", 0xC: "CR4", 0x18: "SCR", 0x80: "CR5"}),
     0x4001_0000: ("SYSCFG", {0x1C: "CFGR2"}),
+    0x4001_0200: ("COMP", {0x0: "C1CSR", 0x4: "C2CSR", 0x8: "C3CSR", 0xC: "C4CSR",
+                           0x10: "C5CSR", 0x14: "C6CSR", 0x18: "C7CSR"}),
     0x4001_2C00: ("TIM1", {0x0: "CR1", 0x4: "CR2", 0x8: "SMCR", 0xC: "DIER", 0x10: "SR",
                            0x14: "EGR", 0x18: "CCMR1", 0x1C: "CCMR2", 0x20: "CCER",
                            0x24: "CNT", 0x28: "PSC", 0x2C: "ARR", 0x30: "RCR", 0x34: "CCR1",
@@ -119,6 +125,7 @@ PERIPHERALS = {
                             0x20: "OPTR"}),
     0x4800_0000: ("GPIOA", {}), 0x4800_0400: ("GPIOB", {}), 0x4800_0800: ("GPIOC", {}),
     0x5000_0000: ("ADC1", {}), 0x5000_0100: ("ADC2", {}), 0x5000_0300: ("ADC12", {0x8: "CCR"}),
+    0x5000_1000: ("DAC3", DAC_REGS), 0x5000_1400: ("DAC4", DAC_REGS),
     0xE004_2000: ("DBGMCU", {0x4: "CR", 0x8: "APB1FZR1", 0xC: "APB1FZR2", 0x10: "APB2FZR"}),
 }
 GPIO_REGS = {0x0: "MODER", 0x4: "OTYPER", 0x8: "OSPEEDR", 0xC: "PUPDR", 0x14: "ODR",
@@ -346,7 +353,7 @@ class Machine:
         for paddr, blob in load_elf(elf):
             self.uc.mem_write(paddr, blob)
         for base, size in [(0x4000_0000, 0x3_0000), (0x4800_0000, 0x2000),
-                           (0x5000_0000, 0x1000), (0xE000_0000, 0x10_0000)]:
+                           (0x5000_0000, 0x2000), (0xE000_0000, 0x10_0000)]:
             self._map_peripherals(base, size)
         # peripheral bit-band alias: one word per bit of 0x4000_0000.. (the HAL uses it)
         self.uc.mmio_map(0x4200_0000, 0x200_0000, self._bitband_read, None,
@@ -542,6 +549,12 @@ class Machine:
 
     def _read_systick_csr(self, v):
         return v | 1 << 16                              # COUNTFLAG
+
+    def _read_dac_sr(self, v, base):
+        # DACxRDY (bits 11 and 27) follow DAC_CR.ENx (bits 0 and 16): the channel is ready
+        # once enabled (RM0440 22.7.16; its wake-up time is not modelled)
+        cr = self.reg(base, 0x0)
+        return v | ((cr & 1) << 11) | (((cr >> 16) & 1) << 27)
 
     def _read_dwt_cyccnt(self, v):
         return self.instret & 0xFFFF_FFFF
@@ -1073,6 +1086,8 @@ _READ_SPECIAL = {
     (0xE000_E000, 0x10): Machine._read_systick_csr,
     (0xE000_1000, 0x4): Machine._read_dwt_cyccnt,
     (0x4000_3000, 0xC): Machine._read_iwdg_sr,
+    (0x5000_1000, 0x34): lambda m, v: m._read_dac_sr(v, 0x5000_1000),
+    (0x5000_1400, 0x34): lambda m, v: m._read_dac_sr(v, 0x5000_1400),
 }
 
 

@@ -23,7 +23,8 @@ MODULES = {
     "TIM1": "tim1", "TIM6": "tim6", "IWDG": "iwdg", "USART2": "usart1", "PWR": "pwr",
     "SYSCFG": "syscfg", "CORDIC": "cordic", "RCC": "rcc", "FLASH": "flash",
     "GPIOA": "gpioa", "GPIOB": "gpiob", "GPIOC": "gpioc", "ADC1": "adc1", "ADC2": "adc1",
-    "ADC12": "adc12_common", "DBGMCU": "dbgmcu",
+    "ADC12": "adc12_common", "DBGMCU": "dbgmcu", "COMP": "comp", "DAC3": "dac1",
+    "DAC4": "dac1",
 }
 
 _BLOCK = re.compile(

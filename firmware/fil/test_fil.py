@@ -691,6 +691,72 @@ class Profiles(unittest.TestCase):
                       file=sys.stderr)
 
 
+class HardwareTrip(unittest.TestCase):
+    """The hardware over-current path of each board profile (firmware/board-core/src/
+    profile.rs, `hardware_trip`; firmware/src/hw.rs, `hardware_trip_init`): after boot,
+    each comparator on its amplifier pin against its DAC3/DAC4 channel, the DAC code of
+    the drive's trip through the board's measurement chain, and TIM1's break 2 fed by the
+    comparators (RM0440: the DAC and COMP chapters, section 29 TIMx_BDTR and TIMx_AF2). The emulator models no
+    analog: it checks the configuration, not a crossing."""
+
+    COMP, DAC3, TIM1 = 0x4001_0200, 0x5000_1000, 0x4001_2C00
+    # COMPx_CSR: EN, INMSEL = 0b100 (DAC3/DAC4), POL (the amplifiers fall with the motor
+    # current), HYST = 0b001 (10 mV), INPSEL = IO1
+    CSR = 1 | (0b100 << 4) | (1 << 15) | (0b001 << 16)
+    # (ELF, fil.BOARDS key, bus V, {COMP index: CSR offset}, DAC3 channels used,
+    #  TIM1_AF2, the DAC code at the default trip: bias - gain * shunt * trip in 3.3 V / 4096)
+    CASES = [
+        # U on PA0 = COMP3 IO1, W on PA1 = COMP1 IO1, both DAC3 CH1; 8 A: 0.33 V, 409.6
+        ("power-stage", "generic", 325.0, (3, 1), (1,), (1 << 3) | (1 << 1), 410),
+        ("steval-ihm023v3", "steval-ihm023v3", 325.0, (3, 1), (1,), (1 << 3) | (1 << 1), 410),
+        # U on PA1 = COMP1 IO1 (DAC3 CH1), W on PB0 = COMP4 IO1 (DAC3 CH2); 2.9 A on
+        # 0.33 ohm x 1.53: 0.186 V, 230.6
+        ("x-nucleo-ihm16m1", "x-nucleo-ihm16m1", 40.0, (1, 4), (1, 2), (1 << 1) | (1 << 4), 231),
+    ]
+
+    def test_comparators_dacs_and_break2_after_boot(self):
+        for elf, board, bus, comps, chans, af2, code in self.CASES:
+            with self.subTest(profile=board):
+                m = fil.Machine(fil.default_elf(elf), board=board, dc_bus=bus)
+                m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+                self.assertIsNone(m.halted)
+                for k in range(1, 8):
+                    csr = m.reg(self.COMP, 4 * (k - 1))
+                    self.assertEqual(csr, self.CSR if k in comps else 0, f"COMP{k}_CSR {csr:#x}")
+                self.assertTrue(m.reg(0x4002_1000, 0x4C) & (1 << 18), "RCC_AHB2ENR.DAC3EN")
+                mcr, cr = m.reg(self.DAC3, 0x3C), m.reg(self.DAC3, 0x0)
+                self.assertEqual((mcr >> 14) & 3, 0b10, "DAC_MCR.HFSEL: AHB above 160 MHz")
+                for ch in (1, 2):
+                    on = ch in chans
+                    mode = (mcr >> (0 if ch == 1 else 16)) & 7
+                    self.assertEqual(mode, 0b011 if on else 0, f"MODE{ch}: internal, no buffer")
+                    self.assertEqual(bool(cr & (1 << (0 if ch == 1 else 16))), on, f"EN{ch}")
+                    dhr = m.reg(self.DAC3, 0x8 if ch == 1 else 0x14)
+                    self.assertEqual(dhr, code if on else 0, f"DHR12R{ch}")
+                self.assertEqual(m.reg(self.TIM1, 0x64), af2, "TIM1_AF2: BK2CMPxE only")
+                bdtr = m.reg(self.TIM1, 0x44)
+                self.assertEqual((bdtr >> 20) & 0xF, 0b1101, "BK2F: fDTS/32, N = 5 (0.94 us)")
+                self.assertTrue(bdtr & (1 << 24), "BK2E")
+                self.assertTrue(bdtr & (1 << 25), "BK2P: the comparators are active high")
+                self.assertFalse(m.moe())
+                print(f"\nprofile {board}: COMP{comps} on DAC3 CH{chans} at {code} counts, "
+                      f"AF2 {af2:#x}, BDTR {bdtr:#010x}", file=sys.stderr)
+
+    def test_a_new_trip_moves_the_threshold(self):
+        m = booted()
+        self.assertEqual(m.reg(self.DAC3, 0x8), 410)
+        self.assertIn("ok", command(m, "set overcurrent_trip 6"))
+        # 1.65 - 6 * 0.165 = 0.66 V: 819.2 counts
+        self.assertEqual(m.reg(self.DAC3, 0x8), 819)
+        # the drive still starts with the comparators armed (a start after `set` waits for
+        # the rebuilt drive's switches-off offset measurement, 500 periods, first)
+        command(m, "speed 100")
+        self.assertIn("ok", command(m, "start", 40))
+        m.run(600)
+        self.assertEqual(state_fault(m)[1], 0)
+        self.assertTrue(m.moe())
+
+
 class BitExact(unittest.TestCase):
     """Issue 11 item 3: the same closed loop on the host and in the emulated self-test
     firmware (built with `--features selftest,soft-sincos`: the library's FastSinCos in

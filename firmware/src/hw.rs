@@ -6,6 +6,8 @@
 //!   trigger at the sampling instant, one update event per period (RCR), compare writes,
 //!   main-output control and the break flag.
 //! - ADC1/ADC2: power-up, calibration and injected conversions triggered by TIM1 TRGO2.
+//! - The hardware over-current path: COMPx with DAC3/DAC4 thresholds on the current-sense
+//!   amplifier outputs into TIM1's break 2 (the board profile's `hardware_trip`).
 //! - NVIC priority/unmask of the control interrupt.
 //! - TIM6 flags for the self-test's period interrupt.
 //! - The main loop's period count (TIM1's update flag), the UART's receive flush and the
@@ -408,6 +410,138 @@ pub fn link_system_break() {
             .eccl()
             .set_bit()
     });
+}
+
+/// DAC3 and DAC4 (AHB2): the internal-only DACs of the G474 (RM0440, chapter "Digital-to-analog
+/// converter (DAC)"; the addresses as in the `stm32g4` PAC's `DAC3`/`DAC4`).
+const DAC3: u32 = 0x5000_1000;
+const DAC4: u32 = 0x5000_1400;
+
+/// The DAC register block of DAC 3 or 4.
+fn dac(n: u8) -> &'static pac::dac1::RegisterBlock {
+    let base = if n == 3 { DAC3 } else { DAC4 };
+    // SAFETY: DAC3 and DAC4 share DAC1's register layout (the PAC's `DAC3`/`DAC4` are
+    // `dac1::RegisterBlock` at these addresses); valid for the whole program.
+    unsafe { &*(base as *const pac::dac1::RegisterBlock) }
+}
+
+/// Sets the hardware over-current comparators' threshold for a trip of `level_a` A (the
+/// drive's trip, `acim::hardware_trip::hardware_trip_level`): the DAC code of the
+/// amplifier output at that current (`comparator_threshold`, from the board's
+/// measurement chain). A level the chain cannot represent leaves the previous code (the
+/// settings' bounds keep the trip inside the sense range). Nothing on a board without a
+/// hardware trip. Main context only: the control interrupt never touches the DACs.
+pub fn set_hardware_trip(level_a: f32) {
+    let Some(h) = BOARD.hardware_trip else { return };
+    let Ok(t) = acim_firmware_core::profile::comparator_threshold(&BOARD.stage, level_a) else {
+        return;
+    };
+    for (n, ch) in h.dac_channels().into_iter().flatten() {
+        // SAFETY (bits): a 12-bit code (comparator_threshold keeps it below 4095)
+        let d = dac(n);
+        if ch == 1 {
+            d.dhr12r1()
+                .write(|w| unsafe { w.bits(t.dac_counts as u32) });
+        } else {
+            d.dhr12r2()
+                .write(|w| unsafe { w.bits(t.dac_counts as u32) });
+        }
+    }
+}
+
+/// Configures the board's hardware over-current path (none without one), with MOE clear
+/// and before the outputs are ever enabled:
+/// 1. RCC_AHB2ENR.DAC3EN/DAC4EN (RM0440, RCC chapter) for the DACs the comparators use;
+///    the comparators are clocked with SYSCFG (APB2ENR.SYSCFGEN, set by
+///    [`link_system_break`], which runs first);
+/// 2. each DAC channel: DAC_MCR.HFSEL = 0b10 (AHB clock above 160 MHz) and MODEx = 0b011
+///    (normal mode, on-chip peripherals only, buffer off: DAC3/DAC4 have no pin), then the
+///    code ([`set_hardware_trip`]), then DAC_CR.ENx and a bounded wait for
+///    DAC_SR.DACxRDY (RM0440, DAC chapter: DAC_MCR, DAC_CR, DAC_SR);
+/// 3. each comparator: COMPx_CSR with INPSEL on its amplifier pin (already analog),
+///    INMSEL = 0b100 (its DAC3/DAC4 channel), POL for an amplifier that falls with the
+///    motor current, 10 mV hysteresis, no blanking, EN (RM0440, chapter "Comparator
+///    (COMP)", COMPx_CSR; field layout as in the `stm32g4` PAC);
+/// 4. TIM1_AF2: BK2CMPxE for each comparator, BK2INE off (no break-2 pin), BK2CMPxP = 0
+///    (RM0440 section 29, advanced-control timers, TIMx_AF2);
+/// 5. TIM1_BDTR: BK2F (the profile's filter), BK2P = 1 (a comparator output is active
+///    high), BK2E = 1 (RM0440 section 29, TIMx_BDTR). From here a comparator crossing clears MOE
+///    in hardware and sets SR.B2IF, which [`break_flag`] reports to the drive as
+///    `HardwareBreak`.
+///
+/// Returns false if a DAC did not report ready (the caller halts with the outputs off).
+pub fn hardware_trip_init(level_a: f32) -> bool {
+    let Some(h) = BOARD.hardware_trip else {
+        return true;
+    };
+    // SAFETY: init only, single-threaded: RCC read-modify-write of the DAC enables only.
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    let uses = |n: u8| h.dac_channels().into_iter().flatten().any(|(d, _)| d == n);
+    rcc.ahb2enr()
+        .modify(|_, w| w.dac3en().bit(uses(3)).dac4en().bit(uses(4)));
+    // the enable takes effect before the next access
+    let _ = rcc.ahb2enr().read();
+    let channels = h.dac_channels();
+    for (n, ch) in channels.into_iter().flatten() {
+        let d = dac(n);
+        // SAFETY (bits): HFSEL = 0b10 and MODEx = 0b011 are valid encodings of their
+        // fields (HFSEL bits 15:14; MODE1 bits 2:0, MODE2 bits 18:16), written while the
+        // channel is disabled, as MODEx requires.
+        d.mcr().modify(|r, w| unsafe {
+            let mode = if ch == 1 { 0b011 } else { 0b011 << 16 };
+            let keep = if ch == 1 { !0b111 } else { !(0b111 << 16) };
+            w.bits((r.bits() & keep & !(0b11 << 14)) | (0b10 << 14) | mode)
+        });
+    }
+    set_hardware_trip(level_a);
+    for (n, ch) in channels.into_iter().flatten() {
+        let d = dac(n);
+        // SAFETY (bits): EN1 is bit 0, EN2 bit 16
+        d.cr()
+            .modify(|r, w| unsafe { w.bits(r.bits() | if ch == 1 { 1 } else { 1 << 16 }) });
+        // DACxRDY: bit 11 (channel 1), bit 27 (channel 2); a few microseconds after EN
+        let rdy = if ch == 1 { 1 << 11 } else { 1 << 27 };
+        if !wait(|| d.sr().read().bits() & rdy != 0) {
+            return false;
+        }
+    }
+    let threshold = acim_firmware_core::profile::comparator_threshold(&BOARD.stage, level_a);
+    let inverted = threshold.map_or(BOARD.stage.current_sign < 0.0, |t| t.inverted);
+    // SAFETY: COMP shares its APB2 clock with SYSCFG (enabled); init only.
+    let comp = unsafe { &*pac::COMP::ptr() };
+    let mut af2 = 0u32;
+    for c in h.comparators {
+        let k = c.comp as usize;
+        // SAFETY (bits): INMSEL = 0b100 and HYST = 0b001 are valid 3-bit encodings;
+        // the comparator index is 1..=7 (the profile's check).
+        comp.ccsr(k - 1).write(|w| unsafe {
+            w.inpsel()
+                .bit(c.io2)
+                .inmsel()
+                .bits(acim_firmware_core::profile::COMP_INMSEL_DAC34 as u8)
+                .pol()
+                .bit(inverted)
+                .hyst()
+                .bits(0b001)
+                .en()
+                .set_bit()
+        });
+        af2 |= 1 << k; // BK2CMPxE: bits 1..7
+    }
+    let t = tim1();
+    // SAFETY (bits): only BK2CMPxE set; BK2INE (bit 0), BK2INP and BK2CMPxP clear.
+    t.af2().write(|w| unsafe { w.bits(af2) });
+    // SAFETY (bits): BK2F is a 4-bit code (the profile's check keeps it below 16)
+    t.bdtr()
+        .modify(|_, w| unsafe { w.bk2f().bits(h.filter).bk2p().set_bit().bk2e().set_bit() });
+    // a B2IF latched by the comparators' enable transient must not trip the idle drive
+    // (with MOE clear there was no current to cut); a level still active (an amplifier
+    // without supply reads below the threshold) sets it again at once, and the drive then
+    // reports `HardwareBreak`, as for BKIN.
+    // SAFETY: rc_w0 flags: writing 1 leaves a flag unchanged, 0 clears it: every flag of
+    // TIM1_SR (bits 0-13, 16-17, 20-23; the reserved bits stay 0) written 1 but B2IF (bit 8).
+    t.sr().write(|w| unsafe { w.bits(0x00F3_3FFF & !(1 << 8)) });
+    true
 }
 
 /// Whether the main output is on.

@@ -306,6 +306,11 @@ fn main() -> ! {
         let (_vbus, _ib) = (gpioc.pc0.into_analog(), gpioc.pc1.into_analog());
         #[cfg(feature = "x-nucleo-ihm16m1")]
         let (_iv, _iw) = (gpiob.pb1.into_analog(), gpiob.pb0.into_analog());
+        // the hardware over-current path on those (now analog) amplifier pins, at the
+        // drive's trip level, before the outputs are ever enabled
+        if !hw::hardware_trip_init(acim::hardware_trip::hardware_trip_level(&cfg)) {
+            panic!("hardware over-current DAC did not become ready");
+        }
         let mut delay = cp.SYST.delay(&rcc.clocks);
         let adc_ok = hw::adc_init(&hw::InjectedChannels::of_board(), |us| delay.delay_us(us));
         if !adc_ok {
@@ -711,6 +716,9 @@ impl Platform for Fw {
             build_drive(next, board_cfg::another(&mut self.rcc)).map_err(Rebuild::Invalid)?;
         control_isr::replace_drive_if_idle(drive).map_err(|_| Rebuild::NotIdle)?;
         self.cfg = cfg;
+        // the comparators follow the new trip level
+        #[cfg(not(feature = "selftest"))]
+        hw::set_hardware_trip(acim::hardware_trip::hardware_trip_level(&cfg));
         Ok(())
     }
 

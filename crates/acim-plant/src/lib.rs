@@ -4,7 +4,9 @@
 //! hardware-free self-test all run the `acim` drive against: the machine (paper eq. 1-3
 //! in the stationary frame), load torque, inverter (averaged or switching-level), the one
 //! PWM timing model ([`PwmPreload`]: duties computed at step k act over the next period),
-//! sensors, the DC link ([`DcLink`]) and fault injection ([`FaultInjector`]).
+//! sensors, the DC link ([`DcLink`]), fault injection ([`FaultInjector`]) and the
+//! inverter's hardware over-current comparator ([`ComparatorConfig`], not fitted unless
+//! asked: [`Plant::set_comparator`]).
 //!
 //! Everything is `no_std`, allocation-free, f32-only and panic-free; no trigonometry is
 //! needed at run time because the machine is integrated in the stationary alpha-beta frame.
@@ -38,6 +40,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+mod comparator;
 mod dc_link;
 mod faults;
 mod inverter;
@@ -46,6 +49,7 @@ mod machine;
 mod pwm;
 mod sensors;
 
+pub use comparator::{ComparatorConfig, ComparatorTrip};
 pub use dc_link::DcLink;
 pub use faults::{FaultInjector, FaultPlan};
 pub use pwm::PwmPreload;
@@ -65,6 +69,7 @@ pub use sensors::{
 use acim::frames::{inverse_clarke, park, AlphaBeta, Dq, SinCosValue};
 use acim::params::MachineParams;
 use acim::PwmOutput;
+use comparator::Comparator;
 use machine::{StageSource, StepSourceIntegral};
 
 fn max3(a: f32, b: f32, c: f32) -> f32 {
@@ -112,6 +117,29 @@ pub struct PeriodReport {
     pub dc_power: f32,
     /// Mean power into the machine terminals, 1.5 (v_alpha i_alpha + v_beta i_beta), W.
     pub input_power: f32,
+    /// Largest true |i_x| while the gates were on, checked at the period's start and at
+    /// every integration sub-step's end (0 with the gates off all period), A.
+    pub switching_peak_a: f32,
+    /// Time with the gates on and the largest true |i_x| above the watch level
+    /// ([`Plant::set_watch_level`]), interpolated linearly within each sub-step, s.
+    pub switching_above_watch_s: f32,
+}
+
+/// Peak and time above the watch level, gates on, over one period.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Watch {
+    peak: f32,
+    above_s: f32,
+}
+
+impl Watch {
+    /// A sub-step of `h` s over which max |i_x| went from `a` to `b`.
+    fn add(&mut self, a: f32, b: f32, level: f32, h: f32) {
+        if b > self.peak {
+            self.peak = b;
+        }
+        self.above_s += comparator::time_above(a, b, level, h);
+    }
 }
 
 /// Machine + inverter + sensors + load: what a simulator or the firmware's hardware-free
@@ -129,6 +157,10 @@ pub struct Plant {
     periods: u64,
     /// An open motor phase (0..=2), if any.
     open_phase: Option<usize>,
+    /// The hardware over-current comparator (not fitted by default) and its latch.
+    comparator: Comparator,
+    /// Level of [`PeriodReport::switching_above_watch_s`], A.
+    watch_level: f32,
 }
 
 impl Plant {
@@ -150,6 +182,8 @@ impl Plant {
             report: PeriodReport::default(),
             periods: 0,
             open_phase: None,
+            comparator: Comparator::default(),
+            watch_level: f32::INFINITY,
         };
         p.update_freewheel_slope();
         p
@@ -216,6 +250,10 @@ impl Plant {
 
     /// Runs one PWM period with duties `duties` (each clamped to [0, 1], NaN = 0.5),
     /// gates `enabled` (false: all switches off) and load `load` held over the period.
+    ///
+    /// With a comparator fitted ([`Plant::set_comparator`]) the gates go off within the
+    /// period when a phase current crosses its level (see [`ComparatorConfig`]), and stay
+    /// off, whatever `enabled` says, until [`Plant::reset_comparator`].
     pub fn run_period(&mut self, duties: [f32; 3], enabled: bool, load: LoadTorque) {
         self.update_freewheel_slope();
         self.load = load;
@@ -224,29 +262,35 @@ impl Plant {
         let t = inv.pwm_period();
         let h_max = t / self.substeps as f32;
         let mut acc = StepSourceIntegral::default();
-        let mut add = |s: StepSourceIntegral| {
-            acc.v_alpha_dt += s.v_alpha_dt;
-            acc.v_beta_dt += s.v_beta_dt;
-            acc.e_dc += s.e_dc;
-            acc.e_in += s.e_in;
+        let gates = enabled && self.comparator.trip.is_none();
+        let mut watch = Watch {
+            peak: if gates {
+                comparator::max_abs(self.machine.phase_currents())
+            } else {
+                0.0
+            },
+            above_s: 0.0,
         };
-        // period-averaged terminal voltages (gates on, or all off: diode conduction)
+        // period-averaged terminal voltages with the gates on
         let averaged = move |ia: f32, ib: f32| {
             let i = AlphaBeta {
                 alpha: ia,
                 beta: ib,
             };
-            let out = inv.averaged_output(duties, enabled, inverse_clarke(i));
+            let out = inv.averaged_output(duties, true, inverse_clarke(i));
             StageSource {
                 v_alpha: out.alpha_beta.alpha,
                 v_beta: out.alpha_beta.beta,
                 p_dc: vdc * out.dc_current,
             }
         };
-        if self.mode == PwmMode::Switched && enabled {
+        // when the comparator opened the gates, s from the period start
+        let mut opened_at: Option<f32> = None;
+        if gates && self.mode == PwmMode::Switched {
             let pattern = inv.switching_pattern(duties);
             let band = inv.config().current_band;
-            for iv in pattern.intervals() {
+            let mut elapsed = 0.0f32;
+            'intervals: for iv in pattern.intervals() {
                 let len = iv.t1 - iv.t0;
                 let ratio = len / h_max;
                 let mut n = ratio as u32;
@@ -268,40 +312,43 @@ impl Plant {
                     }
                 };
                 for _ in 0..n {
-                    add(self.machine.step_with(h, load, &src));
-                    self.constrain_open_phase();
+                    opened_at =
+                        self.gates_on_substep(h, load, &src, (elapsed, t), &mut acc, &mut watch);
+                    if opened_at.is_some() {
+                        break 'intervals;
+                    }
+                    elapsed += h;
                 }
             }
-        } else if !enabled {
-            let band = inv.freewheel_band();
-            let limit = vdc + 2.0 * inv.config().device_drop;
+        } else if gates {
+            let mut elapsed = 0.0f32;
             for _ in 0..self.substeps {
-                let small = self
-                    .machine
-                    .phase_currents()
-                    .iter()
-                    .all(|i| i.abs() <= band);
-                let [e1, e2, e3] = inverse_clarke(self.machine.open_circuit_voltage());
-                let spread = max3(e1, e2, e3) - min3(e1, e2, e3);
-                if small && spread <= limit {
-                    // every diode blocked: open stator, the terminals show the back-EMF
-                    self.machine.step_open_circuit(load, h_max);
-                    let e = self.machine.open_circuit_voltage();
-                    add(StepSourceIntegral {
-                        v_alpha_dt: e.alpha * h_max,
-                        v_beta_dt: e.beta * h_max,
-                        e_dc: 0.0,
-                        e_in: 0.0,
-                    });
-                } else {
-                    add(self.machine.step_with(h_max, load, &averaged));
-                    self.constrain_open_phase();
+                opened_at = self.gates_on_substep(
+                    h_max,
+                    load,
+                    &averaged,
+                    (elapsed, t),
+                    &mut acc,
+                    &mut watch,
+                );
+                if opened_at.is_some() {
+                    break;
                 }
+                elapsed += h_max;
             }
-        } else {
-            for _ in 0..self.substeps {
-                add(self.machine.step_with(h_max, load, &averaged));
-                self.constrain_open_phase();
+        }
+        if !gates {
+            self.run_gates_off(self.substeps, h_max, load, &mut acc);
+        } else if let Some(t_off) = opened_at {
+            // the rest of the period with the gates off
+            let rest = t - t_off;
+            if rest > 0.0 {
+                let ratio = rest / h_max;
+                let mut n = ratio as u32;
+                if (n as f32) < ratio || n == 0 {
+                    n += 1;
+                }
+                self.run_gates_off(n, rest / n as f32, load, &mut acc);
             }
         }
         let inv_t = 1.0 / t;
@@ -315,8 +362,155 @@ impl Plant {
             },
             dc_power: acc.e_dc * inv_t,
             input_power: acc.e_in * inv_t,
+            switching_peak_a: watch.peak,
+            switching_above_watch_s: watch.above_s,
         };
         self.periods = self.periods.wrapping_add(1);
+    }
+
+    /// One sub-step of `h` s with the gates on (terminal source `src`), starting `elapsed`
+    /// s into the period of `period` s, with the comparator's check at its end. Returns when the
+    /// comparator opened the gates (s from the period start), having integrated the
+    /// machine up to that instant only.
+    fn gates_on_substep<F>(
+        &mut self,
+        h: f32,
+        load: LoadTorque,
+        src: &F,
+        (elapsed, period): (f32, f32),
+        acc: &mut StepSourceIntegral,
+        watch: &mut Watch,
+    ) -> Option<f32>
+    where
+        F: Fn(f32, f32) -> StageSource,
+    {
+        let before = self.machine;
+        let a = comparator::max_abs(before.phase_currents());
+        let step = self.machine.step_with(h, load, src);
+        self.constrain_open_phase();
+        let b = comparator::max_abs(self.machine.phase_currents());
+        let cfg = match self.comparator.cfg {
+            Some(c) if b > c.level => c,
+            _ => {
+                acc.add(step);
+                watch.add(a, b, self.watch_level, h);
+                return None;
+            }
+        };
+        let crossing = comparator::crossing_fraction(a, b, cfg.level) * h;
+        let off = crossing + cfg.delay;
+        let (off, current) = if off < h {
+            // again from the sub-step's start, up to the switch-off
+            self.machine = before;
+            if off > 0.0 {
+                acc.add(self.machine.step_with(off, load, src));
+                self.constrain_open_phase();
+            }
+            let b1 = comparator::max_abs(self.machine.phase_currents());
+            watch.add(a, b1, self.watch_level, off);
+            (off, b1)
+        } else {
+            // the switch-off falls after this sub-step: on with the same source up to it
+            // (at the latest the period's end, after which the latch keeps the gates off)
+            acc.add(step);
+            watch.add(a, b, self.watch_level, h);
+            let off = if elapsed + off > period {
+                period - elapsed
+            } else {
+                off
+            };
+            let extra = off - h;
+            let mut b1 = b;
+            if extra > 0.0 {
+                acc.add(self.machine.step_with(extra, load, src));
+                self.constrain_open_phase();
+                b1 = comparator::max_abs(self.machine.phase_currents());
+                watch.add(b, b1, self.watch_level, extra);
+            }
+            (if extra > 0.0 { off } else { h }, b1)
+        };
+        self.comparator.trip = Some(ComparatorTrip {
+            period: self.periods,
+            crossing_s: elapsed + crossing,
+            off_s: elapsed + off,
+            current_a: current,
+        });
+        Some(elapsed + off)
+    }
+
+    /// `n` sub-steps of `h` s with every gate off: the diodes clamp the terminals, or the
+    /// stator is open once the currents are gone (see the inverter module).
+    fn run_gates_off(&mut self, n: u32, h: f32, load: LoadTorque, acc: &mut StepSourceIntegral) {
+        let inv = self.inverter;
+        let vdc = inv.dc_bus();
+        let off = move |ia: f32, ib: f32| {
+            let i = AlphaBeta {
+                alpha: ia,
+                beta: ib,
+            };
+            let out = inv.averaged_output([0.5; 3], false, inverse_clarke(i));
+            StageSource {
+                v_alpha: out.alpha_beta.alpha,
+                v_beta: out.alpha_beta.beta,
+                p_dc: vdc * out.dc_current,
+            }
+        };
+        let band = inv.freewheel_band();
+        let limit = vdc + 2.0 * inv.config().device_drop;
+        for _ in 0..n {
+            let small = self
+                .machine
+                .phase_currents()
+                .iter()
+                .all(|i| i.abs() <= band);
+            let [e1, e2, e3] = inverse_clarke(self.machine.open_circuit_voltage());
+            let spread = max3(e1, e2, e3) - min3(e1, e2, e3);
+            if small && spread <= limit {
+                // every diode blocked: open stator, the terminals show the back-EMF
+                self.machine.step_open_circuit(load, h);
+                let e = self.machine.open_circuit_voltage();
+                acc.add(StepSourceIntegral {
+                    v_alpha_dt: e.alpha * h,
+                    v_beta_dt: e.beta * h,
+                    e_dc: 0.0,
+                    e_in: 0.0,
+                });
+            } else {
+                acc.add(self.machine.step_with(h, load, &off));
+                self.constrain_open_phase();
+            }
+        }
+    }
+
+    /// Fits (or with `None` removes) the hardware over-current comparator; a latched trip
+    /// is kept.
+    pub fn set_comparator(&mut self, cfg: Option<ComparatorConfig>) {
+        self.comparator.cfg = cfg;
+    }
+
+    /// The comparator's configuration, if fitted.
+    pub fn comparator(&self) -> Option<ComparatorConfig> {
+        self.comparator.cfg
+    }
+
+    /// The comparator's latched trip, if it fired: the gates stay off until
+    /// [`Plant::reset_comparator`].
+    pub fn comparator_trip(&self) -> Option<ComparatorTrip> {
+        self.comparator.trip
+    }
+
+    /// Releases the comparator's latch (what the drive's fault reset does to the timer's
+    /// break: MOE may be set again).
+    pub fn reset_comparator(&mut self) {
+        self.comparator.trip = None;
+    }
+
+    /// Sets the level (A) above which [`PeriodReport::switching_above_watch_s`] counts the
+    /// time with the gates on (e.g. the drive's software trip, to measure how long the
+    /// true current stays above it while switching); infinite by default (nothing
+    /// counted).
+    pub fn set_watch_level(&mut self, level: f32) {
+        self.watch_level = level;
     }
 
     /// Runs one PWM period with the command the inverter applies over it (the output of
@@ -472,6 +666,70 @@ mod tests {
             assert!(i[1].abs() < 1e-4, "{i:?}");
         }
         assert!(p.phase_currents()[0].abs() > 0.1);
+    }
+
+    /// A DC vector into the machine at standstill: the current runs up until the
+    /// comparator opens the gates, which then stay off (latched) whatever the command
+    /// says, until the reset; the switch-off instant does not depend on the sub-step.
+    #[test]
+    fn the_comparator_opens_the_gates_and_latches() {
+        let run = |substeps: u32, mode: PwmMode| {
+            let mut p = Plant::paper_default(1);
+            p.set_substeps(substeps);
+            p.set_mode(mode);
+            p.set_comparator(Some(ComparatorConfig::at(8.8)));
+            p.set_watch_level(8.0);
+            let mut peak = 0.0f32;
+            let mut above = 0.0f32;
+            for _ in 0..200 {
+                p.run_period([1.0, 0.0, 0.0], true, LoadTorque::None);
+                peak = peak.max(p.last_period().switching_peak_a);
+                above += p.last_period().switching_above_watch_s;
+                if p.comparator_trip().is_some() {
+                    break;
+                }
+            }
+            let trip = p.comparator_trip().expect("the comparator fired");
+            (p, trip, peak, above)
+        };
+        let (mut p, trip, peak, above) = run(5, PwmMode::Averaged);
+        assert!(trip.off_s - trip.crossing_s > 1.4e-6, "{trip:?}");
+        // the gates went off within the delay: the current barely passed the level
+        assert!(trip.current_a > 8.8 && trip.current_a < 8.9, "{trip:?}");
+        assert!(peak <= trip.current_a + 1e-4 && peak > 8.8, "{peak}");
+        // from 8 A to the switch-off: the current approaches its DC end value (about
+        // 20 A) over several periods
+        assert!(above > 200e-6 && above < 5e-3, "{above}");
+        // latched: commanded on, the currents decay through the diodes
+        for _ in 0..10 {
+            p.run_period([1.0, 0.0, 0.0], true, LoadTorque::None);
+            assert_eq!(p.last_period().switching_peak_a, 0.0);
+        }
+        assert!(comparator::max_abs(p.phase_currents()) < 0.5);
+        p.reset_comparator();
+        p.run_period([1.0, 0.0, 0.0], true, LoadTorque::None);
+        assert!(p.last_period().switching_peak_a > 0.0);
+        // the same instant with 10x finer sub-steps and at switching level
+        for (n, mode) in [(50, PwmMode::Averaged), (5, PwmMode::Switched)] {
+            let (_, fine, _, _) = run(n, mode);
+            assert_eq!(fine.period, trip.period, "{fine:?} {trip:?}");
+            assert!((fine.off_s - trip.off_s).abs() < 5e-6, "{fine:?} {trip:?}");
+            assert!(fine.current_a > 8.8 && fine.current_a < 8.95, "{fine:?}");
+        }
+    }
+
+    /// Without a comparator nothing changes: the period is the same as before it existed
+    /// (gates on and off alike), and the report's peak follows the current.
+    #[test]
+    fn no_comparator_no_switch_off() {
+        let mut p = Plant::paper_default(1);
+        for _ in 0..40 {
+            p.run_period([1.0, 0.0, 0.0], true, LoadTorque::None);
+        }
+        assert!(p.comparator_trip().is_none());
+        assert!(comparator::max_abs(p.phase_currents()) > 9.0);
+        assert!(p.last_period().switching_peak_a > 9.0);
+        assert_eq!(p.last_period().switching_above_watch_s, 0.0);
     }
 
     /// cos by a short Taylor series after range reduction (tests only; no libm here).

@@ -146,6 +146,16 @@ pub(crate) struct StepSourceIntegral {
     pub e_in: f32,
 }
 
+impl StepSourceIntegral {
+    /// Adds another step's integrals.
+    pub(crate) fn add(&mut self, s: StepSourceIntegral) {
+        self.v_alpha_dt += s.v_alpha_dt;
+        self.v_beta_dt += s.v_beta_dt;
+        self.e_dc += s.e_dc;
+        self.e_in += s.e_in;
+    }
+}
+
 /// Coefficients of eq. (1)-(3) precomputed from the parameters (no division per stage).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Coeffs {

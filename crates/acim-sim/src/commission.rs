@@ -388,6 +388,17 @@ pub fn run(sc: &Scenario) -> Result<Run, String> {
         });
         plant.set_dc_bus(sc.bus_v());
         plant.run_pwm_period(pwm.advance(out), load_at(sc, t));
+        // the plant's hardware comparator (the simulator's default) opened the switches:
+        // the result would be built on currents that never flowed
+        if let Some(trip) = plant.comparator_trip() {
+            return Err(format!(
+                "commissioning: the hardware over-current comparator opened the switches at \
+                 {:.4} s ({:.1} A, level {:.1} A)",
+                t + trip.off_s,
+                trip.current_a,
+                plant.comparator().map_or(0.0, |c| c.level)
+            ));
+        }
         t += ts;
     }
     let electrical_s = t;

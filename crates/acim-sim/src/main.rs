@@ -357,6 +357,12 @@ fn outcome(m: &Metrics) -> String {
             }
         }
     }
+    if let Some(h) = m.hardware_trip {
+        notes.push(format!(
+            "hardware over-current trip: {:.1} A (level {:.1} A) switched off at {:.4} s",
+            h.current_a, h.level_a, h.off_s
+        ));
+    }
     // a short hold (an acceleration at the current limit) is in the CSV and the JSON only
     if m.target_clamps.is_empty() && m.speed_target_limited_s >= TARGET_LIMITED_NOTE_S {
         notes.push(format!(
@@ -748,7 +754,11 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let file = table_file(&o, "faults.md");
             let out = o.out();
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
-            let md = acim_sim::faults::markdown(&rows);
+            let mut md = acim_sim::faults::markdown(&rows);
+            // the current-sensor matrix on every acceptance machine (its own machines and
+            // settings: the --set overrides apply to the fault-* scenarios only)
+            let sensor = acim_sim::faults::run_sensor_cases(&mut |sc| run_one(sc, &out, &o))?;
+            md.push_str(&acim_sim::faults::sensor_markdown(&sensor));
             write_table(&file, &with_overrides_note(md, &o.sets), &out)?;
         }
         Some("overhauling") => {

@@ -421,6 +421,18 @@ pub struct Metrics {
     /// Time spent switching with the true speed beyond 110 % of `max_speed` or a true
     /// phase current beyond the trip, s.
     pub switching_beyond_limits_s: f32,
+    /// Largest |true phase current| with the gates on, checked at every integration
+    /// sub-step (not only at the samples), A.
+    pub peak_true_current_switching_a: f32,
+    /// Total time with the gates on and the true phase current above the drive's trip
+    /// level (sub-step resolution, interpolated), s.
+    pub above_trip_switching_s: f32,
+    /// The longest such episode (consecutive periods with time above the trip), s.
+    pub above_trip_switching_longest_s: f32,
+    /// The plant's hardware over-current comparator opened the gates (absent: it did not,
+    /// or none was fitted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hardware_trip: Option<crate::sim::HardwareTripRecord>,
     /// Largest |speed - ref| while running (10 ms average), rpm.
     pub speed_err_max_running_rpm: f32,
     /// The flying start's speed search at its decision.
@@ -801,6 +813,20 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         .filter(|r| r.speed_rpm.abs() > 1.1 * max_speed_rpm || r.i_phase_peak_a > trip)
         .count() as f32
         * ts;
+    let peak_true_current_switching_a = rows
+        .iter()
+        .fold(0.0f32, |m, r| m.max(r.i_phase_peak_switching_a));
+    let above_trip_switching_s: f32 = rows.iter().map(|r| r.above_trip_switching_s).sum();
+    let mut above_trip_switching_longest_s = 0.0f32;
+    let mut episode = 0.0f32;
+    for r in rows {
+        if r.above_trip_switching_s > 0.0 {
+            episode += r.above_trip_switching_s;
+            above_trip_switching_longest_s = above_trip_switching_longest_s.max(episode);
+        } else {
+            episode = 0.0;
+        }
+    }
     Metrics {
         schema_version: SCHEMA_VERSION,
         name: sc.name.clone(),
@@ -829,6 +855,10 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
         peak_speed_rpm,
         peak_speed_switching_rpm,
         switching_beyond_limits_s,
+        peak_true_current_switching_a,
+        above_trip_switching_s,
+        above_trip_switching_longest_s,
+        hardware_trip: r.hardware_trip,
         windows,
         load_steps,
         rs,

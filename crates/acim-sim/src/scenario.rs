@@ -429,6 +429,15 @@ pub struct InverterSpec {
     pub switching: bool,
     /// RK4 sub-steps per control period.
     pub substeps: u32,
+    /// The hardware over-current comparator on the true phase currents, which opens all
+    /// six switches (latched) and tells the drive (`HardwareBreak`); on by default.
+    pub hardware_trip: bool,
+    /// Its level, A (phase peak); absent: the drive's design level
+    /// (`acim::hardware_trip::hardware_trip_level`: the software trip level).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hardware_trip_a: Option<f32>,
+    /// From the crossing to the gates off, s (comparator, break filter, gate drivers).
+    pub hardware_trip_delay_s: f32,
 }
 
 impl Default for InverterSpec {
@@ -438,6 +447,9 @@ impl Default for InverterSpec {
             device_drop_v: 1.0,
             switching: false,
             substeps: 5,
+            hardware_trip: true,
+            hardware_trip_a: None,
+            hardware_trip_delay_s: acim::hardware_trip::HARDWARE_TRIP_DELAY,
         }
     }
 }
@@ -1043,6 +1055,24 @@ impl Scenario {
         if !(1..=200).contains(&self.inverter.substeps) {
             return err("inverter.substeps", "must be an integer in [1, 200]");
         }
+        if let Some(level) = self.inverter.hardware_trip_a {
+            if !(level.is_finite() && (0.01..=2000.0).contains(&level)) {
+                return err(
+                    "inverter.hardware_trip_a",
+                    &format!(
+                        "must be a level in A in [0.01, 2000], got {level} (leave it out for \
+                         the drive's design level; `hardware_trip = false` turns the \
+                         comparator off)"
+                    ),
+                );
+            }
+        }
+        check_range(
+            "inverter.hardware_trip_delay_s",
+            self.inverter.hardware_trip_delay_s,
+            0.0,
+            d.control_period_s,
+        )?;
         let s = &self.sensors;
         if !(4..=24).contains(&s.adc_bits) {
             return err("sensors.adc_bits", "must be an integer in [4, 24]");

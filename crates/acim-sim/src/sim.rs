@@ -33,7 +33,7 @@ const SATURATED_MODULATION: f32 = acim::svpwm::VOLTAGE_MARGIN * 0.999;
 const SATURATED_OVERMODULATION: f32 = acim::svpwm::SIX_STEP * SQRT_3 * 0.999;
 
 /// The CSV header: the required columns first, then extra ones.
-pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm";
+pub const CSV_HEADER: &str = "t_s,speed_ref_rpm,speed_rpm,speed_est_rpm,load_torque_nm,load_torque_est_nm,torque_nm,i_sd_a,i_sq_a,i_sd_ref_a,i_sq_ref_a,rotor_flux_est,stator_resistance_est_ohm,v_sd_v,v_sq_v,state,dc_bus_v,rotor_flux_true,orientation_error_deg,pwm_enabled,i_phase_peak_a,current_error_a,model_residual_v,stator_frequency_hz,voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm,i_phase_peak_switching_a,hardware_trip";
 
 /// One recorded control step.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -103,6 +103,17 @@ pub struct Row {
     pub speed_target_limited: bool,
     /// The speed target as the scenario gave it (before any clamp or ramp), rpm.
     pub speed_target_rpm: f32,
+    /// Largest |true phase current| while the gates were on over the period that follows
+    /// this step (checked at every integration sub-step, so it sees what the samples at
+    /// the period boundary miss), A.
+    pub i_phase_peak_switching_a: f32,
+    /// Time over that period with the gates on and the true current above the drive's
+    /// trip level, s (not a CSV column: the metrics sum it).
+    #[serde(skip)]
+    pub above_trip_switching_s: f32,
+    /// The hardware over-current comparator has opened the gates (latched) by the end of
+    /// the period that follows this step.
+    pub hardware_trip: bool,
 }
 
 /// A speed target the drive clamped to its limit (`SPEED_TARGET_FRACTION` of
@@ -138,7 +149,7 @@ impl Row {
     /// CSV line for this row (same column order as [`CSV_HEADER`]).
     pub fn csv(&self) -> String {
         format!(
-            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{},{},{:.3}",
+            "{:.5},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{:.3},{:.3},{},{:.2},{:.5},{:.3},{},{:.3},{:.4},{:.3},{:.4},{},{:.4},{},{},{},{:.3},{:.3},{}",
             self.t_s,
             self.speed_ref_rpm,
             self.speed_rpm,
@@ -169,6 +180,8 @@ impl Row {
             self.fault.map(fault_name).unwrap_or_default(),
             self.speed_target_limited as u8,
             self.speed_target_rpm,
+            self.i_phase_peak_switching_a,
+            self.hardware_trip as u8,
         )
     }
 }
@@ -206,6 +219,21 @@ pub struct RunResult {
     pub current_gain_correction: f32,
     /// Speed targets the drive clamped to its limit, in time order.
     pub target_clamps: Vec<TargetClamp>,
+    /// The hardware over-current comparator's trip, if it fired.
+    pub hardware_trip: Option<HardwareTripRecord>,
+}
+
+/// When the plant's hardware over-current comparator opened the gates.
+#[derive(Serialize, Clone, Copy, Debug, PartialEq)]
+pub struct HardwareTripRecord {
+    /// Its level, A.
+    pub level_a: f32,
+    /// The true current crossed the level, s.
+    pub crossing_s: f32,
+    /// The gates went off, s.
+    pub off_s: f32,
+    /// The largest |true phase current| then, A.
+    pub current_a: f32,
 }
 
 /// The rotor-resistance adaptation at the end of a run.
@@ -293,6 +321,17 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
         BusVoltageSensor::new(bs, sc.seed.wrapping_add(0x5eed)),
     );
     plant.set_substeps(sc.inverter.substeps);
+    if sc.inverter.hardware_trip {
+        plant.set_comparator(Some(acim_plant::ComparatorConfig {
+            level: sc
+                .inverter
+                .hardware_trip_a
+                .unwrap_or_else(|| acim::hardware_trip::hardware_trip_level(&v.drive)),
+            delay: sc.inverter.hardware_trip_delay_s,
+        }));
+    }
+    // measure the time the true current spends above the drive's trip while switching
+    plant.set_watch_level(v.drive.overcurrent_trip);
     if let Some(sat) = sc.saturation {
         plant
             .machine_mut()
@@ -511,6 +550,7 @@ pub fn run_with_progress(
     let mut user_target_rpm = 0.0f32;
     let plant_nominal = v.plant.data();
     let mut plant_factors = (1.0f32, 1.0f32);
+    let mut hardware_trip = None;
 
     for k in 0..n {
         if k % PROGRESS_EVERY == 0 {
@@ -625,6 +665,10 @@ pub fn run_with_progress(
             speed_target_limited: tel.speed_target_limited
                 || user_target_rpm.abs() > target_limit_rpm,
             speed_target_rpm: user_target_rpm,
+            // filled in once the period has run
+            i_phase_peak_switching_a: 0.0,
+            above_trip_switching_s: 0.0,
+            hardware_trip: false,
         });
 
         // apply: a switch-off acts at once, new duties from the next period
@@ -632,6 +676,23 @@ pub fn run_with_progress(
         plant.set_dc_bus(bus_v);
         plant.run_pwm_period(applied, load);
         dc_link.step(plant.last_period().dc_current, ts);
+        let report = plant.last_period();
+        if let Some(row) = rows.last_mut() {
+            row.i_phase_peak_switching_a = report.switching_peak_a;
+            row.above_trip_switching_s = report.switching_above_watch_s;
+            row.hardware_trip = plant.comparator_trip().is_some();
+        }
+        // the comparator fired in this period: the break input tells the drive (the
+        // firmware reads the timer's break flag; the trip path is the same)
+        if let (None, Some(trip)) = (hardware_trip, plant.comparator_trip()) {
+            hardware_trip = Some(HardwareTripRecord {
+                level_a: plant.comparator().map_or(0.0, |c| c.level),
+                crossing_s: t + trip.crossing_s,
+                off_s: t + trip.off_s,
+                current_a: trip.current_a,
+            });
+            drive.trip(FaultReason::HardwareBreak);
+        }
     }
     progress(n, n);
     Ok(RunResult {
@@ -657,6 +718,7 @@ pub fn run_with_progress(
         }),
         current_gain_correction: drive.current_gain_correction(),
         target_clamps,
+        hardware_trip,
         rotor_resistance: v.drive.rr_adaptation.then(|| {
             let r = drive.rotor_resistance();
             RotorResistanceRecord {

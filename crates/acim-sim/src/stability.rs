@@ -269,6 +269,13 @@ fn kicked(
             LoadTorque::None
         };
         plant.run_pwm_period(applied, load);
+        // the plant's hardware comparator opened the switches: the drive is tripped
+        // (HardwareBreak) as in the simulator's loop, and the case counts as lost
+        if plant.comparator_trip().is_some() {
+            drive.trip(acim::FaultReason::HardwareBreak);
+            lost = true;
+            break;
+        }
     }
     // deviation from the equilibrium just before the step
     let pre = (pre_s / ts) as usize;

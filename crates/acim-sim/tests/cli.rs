@@ -207,7 +207,7 @@ fn long_runs_are_decimated_by_default_and_gzip_is_optional() {
     let header = lines.next().unwrap();
     assert_eq!(header, acim_sim::sim::CSV_HEADER);
     assert!(header.ends_with(
-        "voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm"
+        "voltage_saturated,modulation_index,state_name,fault_reason,speed_target_limited,speed_target_rpm,i_phase_peak_switching_a,hardware_trip"
     ));
     assert_eq!(lines.count(), 75_000); // 225 000 steps, every 3rd
     assert_eq!(files(&d.join("res")).len(), 3);

@@ -211,6 +211,137 @@ impl AdcPlan {
     }
 }
 
+/// One of the G474's comparators on a current-sense amplifier output, its inverting input
+/// on an internal DAC channel (RM0440, chapter "Comparator (COMP)"; the input assignment as in ST's
+/// STM32G4 HAL, `stm32g4xx_hal_comp.h`: [`comp_input_pin`], [`comp_dac`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SenseComparator {
+    /// COMP1..COMP7.
+    pub comp: u8,
+    /// COMPx_CSR.INPSEL: false for the comparator's input IO1, true for IO2.
+    pub io2: bool,
+    /// The amplifier output it watches (its pin is the ADC plan's pin of that signal).
+    pub signal: Signal,
+}
+
+/// The hardware over-current path: comparators with DAC thresholds on the current-sense
+/// amplifier outputs into TIM1's break 2 input (TIM1_AF2.BK2CMPxE, BDTR.BK2E), as ST's
+/// application notes for the G4 do it (AN4232 on its comparators, AN4277 on the PWM
+/// shut-down): MOE is cleared in hardware within the comparator's propagation and the
+/// break filter, whatever the control interrupt does. Each comparator watches its phase in one direction (the current into the motor:
+/// the LQFP64's pins reach one comparator input each), and the pins decide which phases a
+/// board can watch at all.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HardwareTrip {
+    /// The comparators (at most three, one per phase).
+    pub comparators: &'static [SenseComparator],
+    /// TIM1_BDTR.BK2F, the break-2 filter code (0..=15).
+    pub filter: u8,
+}
+
+impl HardwareTrip {
+    /// The DAC channels its comparators use, each once (comparators may share one): (DAC
+    /// 3 or 4, channel 1 or 2), unused slots `None`.
+    pub const fn dac_channels(&self) -> [Option<(u8, u8)>; 3] {
+        let mut out = [None; 3];
+        let mut n = 0;
+        let mut i = 0;
+        while i < self.comparators.len() && n < 3 {
+            if let Some(dc) = comp_dac(self.comparators[i].comp) {
+                let mut seen = false;
+                let mut j = 0;
+                while j < n {
+                    if let Some((d, c)) = out[j] {
+                        seen |= d == dc.0 && c == dc.1;
+                    }
+                    j += 1;
+                }
+                if !seen {
+                    out[n] = Some(dc);
+                    n += 1;
+                }
+            }
+            i += 1;
+        }
+        out
+    }
+}
+
+/// The non-inverting input pin of COMPx (`comp` 1..=7) for INPSEL = `io2`: IO1 = PA1,
+/// PA7, PA0, PB0, PB13, PB11, PB14 and IO2 = PB1, PA3, PC1, PE7, PD12, PD11, PD14 for
+/// COMP1..7 (RM0440, COMP chapter, COMP pins and internal signals; the same table in
+/// ST's `stm32g4xx_hal_comp.h`, `COMP_INPUT_PLUS_IO1/IO2`). `None` for a pin outside the
+/// LQFP64's ports A-C as this module describes them, or no such comparator.
+pub const fn comp_input_pin(comp: u8, io2: bool) -> Option<Pin> {
+    match (comp, io2) {
+        (1, false) => Some(pa(1)),
+        (1, true) => Some(pb(1)),
+        (2, false) => Some(pa(7)),
+        (2, true) => Some(pa(3)),
+        (3, false) => Some(pa(0)),
+        (3, true) => Some(pc(1)),
+        (4, false) => Some(pb(0)),
+        (5, false) => Some(pb(13)),
+        (6, false) => Some(pb(11)),
+        (7, false) => Some(pb(14)),
+        _ => None,
+    }
+}
+
+/// The DAC channel on COMPx's inverting input with COMPx_CSR.INMSEL = 0b100: DAC3 CH1 for
+/// COMP1/3, DAC3 CH2 for COMP2/4, DAC4 CH1 for COMP5/7, DAC4 CH2 for COMP6 (RM0440, COMP
+/// chapter; `COMP_INPUT_MINUS_DAC3_CH1` ... in `stm32g4xx_hal_comp.h`). DAC3 and DAC4 are
+/// the G474's internal-only DACs. Returns (DAC 3 or 4, channel 1 or 2); `None` for no such
+/// comparator.
+pub const fn comp_dac(comp: u8) -> Option<(u8, u8)> {
+    match comp {
+        1 | 3 => Some((3, 1)),
+        2 | 4 => Some((3, 2)),
+        5 | 7 => Some((4, 1)),
+        6 => Some((4, 2)),
+        _ => None,
+    }
+}
+
+/// COMPx_CSR.INMSEL for the DAC3/DAC4 channel of [`comp_dac`].
+pub const COMP_INMSEL_DAC34: u32 = 0b100;
+
+/// A comparator threshold: the DAC code and the output polarity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ComparatorThreshold {
+    /// The 12-bit DAC code (DAC_DHR12Rx) of the amplifier output at the trip current.
+    pub dac_counts: u16,
+    /// COMPx_CSR.POL: the amplifier output falls with the current into the motor, so the
+    /// comparator output (high when the input is above the DAC) is inverted.
+    pub inverted: bool,
+}
+
+/// The DAC code and polarity at which a comparator on an amplifier output of `stage` fires
+/// for a current of `trip_a` A into the motor: the amplifier's output there is
+/// `bias + current_sign * gain * shunt * trip_a` V, in DAC counts of the same reference
+/// (the DAC and the ADC share VREF+). `Err` names what does not fit: a trip that is not a
+/// positive number, or one whose output voltage lies outside the DAC's range (the
+/// amplifier saturates before the trip; or its output never reaches the code).
+pub const fn comparator_threshold(
+    stage: &PowerStage,
+    trip_a: f32,
+) -> Result<ComparatorThreshold, &'static str> {
+    if !(trip_a > 0.0 && trip_a < f32::INFINITY) {
+        return Err("the hardware trip level must be a positive current");
+    }
+    let volts = stage.amplifier_bias_v
+        + stage.current_sign * stage.amplifier_gain * stage.shunt_ohm * trip_a;
+    let counts = volts / stage.adc_vref * stage.adc_counts as f32;
+    // strictly inside the code range: 0 and full scale cannot be crossed
+    if !(counts >= 1.0 && counts <= stage.adc_counts as f32 - 2.0) {
+        return Err("the hardware trip level is beyond the current-sense amplifier's range");
+    }
+    Ok(ComparatorThreshold {
+        dac_counts: (counts + 0.5) as u16,
+        inverted: stage.current_sign < 0.0,
+    })
+}
+
 /// The board's ratings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ratings {
@@ -241,6 +372,10 @@ pub struct BoardProfile {
     pub bus: BusProfile,
     /// The first-power-up profile (`--features low-voltage`, `defaults low-voltage`).
     pub low_voltage: BusProfile,
+    /// The hardware over-current path, where the board routes the amplifier outputs to
+    /// comparator inputs; `None`: the software trip only (say why in the profile's
+    /// documentation).
+    pub hardware_trip: Option<HardwareTrip>,
 }
 
 /// Pins the firmware uses for itself: USART2 TX (PA2, output) and RX (PA3, input), LD2
@@ -447,6 +582,47 @@ impl BoardProfile {
             }
             p += 1;
         }
+        // the hardware trip: each comparator on the pin of its signal, once each, its
+        // threshold inside the DAC's range for both bus profiles' trips
+        if let Some(h) = self.hardware_trip {
+            if h.filter > 15 {
+                return Err("the break-2 filter is a 4-bit code");
+            }
+            let cs = h.comparators;
+            let mut i = 0;
+            while i < cs.len() {
+                let c = cs[i];
+                let pin = match comp_input_pin(c.comp, c.io2) {
+                    Some(pin) => pin,
+                    None => return Err("a comparator input that the G474 does not have"),
+                };
+                let order = [a.adc1[0], a.adc2[0], a.adc2[1], a.adc1[1]];
+                let sensed = order[a.slot(c.signal)].pin;
+                if !pin.is(sensed) || c.signal as u8 == Signal::Bus as u8 {
+                    return Err("a comparator is not on its phase current's amplifier pin");
+                }
+                let mut j = i + 1;
+                while j < cs.len() {
+                    if cs[j].comp == c.comp || cs[j].signal as u8 == c.signal as u8 {
+                        return Err("a comparator or a phase is used twice");
+                    }
+                    j += 1;
+                }
+                i += 1;
+            }
+            if cs.is_empty() || cs.len() > 3 {
+                return Err("a hardware trip has one to three comparators");
+            }
+            let mut p = 0;
+            while p < 2 {
+                let bus = if p == 0 { &self.bus } else { &self.low_voltage };
+                let level = acim::hardware_trip::HARDWARE_TRIP_RATIO * bus.overcurrent_trip;
+                if comparator_threshold(&self.stage, level).is_err() {
+                    return Err("a bus profile's hardware trip is beyond the amplifier's range");
+                }
+                p += 1;
+            }
+        }
         Ok(())
     }
 }
@@ -530,6 +706,28 @@ pub const GENERIC: BoardProfile = BoardProfile {
     },
     bus: MAINS,
     low_voltage: LOW_VOLTAGE,
+    hardware_trip: Some(GENERIC_HARDWARE_TRIP),
+};
+
+/// The generic plan's comparators: U on PA0 is COMP3's IO1, W on PA1 COMP1's IO1, both
+/// against DAC3 CH1; V on PC1 reaches only COMP3 (IO2), which U takes, so V is watched
+/// by the software trip alone (with three phases summing to zero, a runaway of V drives
+/// U or W the other way). Break-2 filter fDTS/32, N = 5: 0.94 us at 170 MHz (RM0440
+/// section 29, TIMx_BDTR.BK2F), against the switching spikes the amplifiers pass.
+const GENERIC_HARDWARE_TRIP: HardwareTrip = HardwareTrip {
+    comparators: &[
+        SenseComparator {
+            comp: 3,
+            io2: false,
+            signal: Signal::CurrentU,
+        },
+        SenseComparator {
+            comp: 1,
+            io2: false,
+            signal: Signal::CurrentW,
+        },
+    ],
+    filter: 0b1101,
 };
 
 /// The X-NUCLEO-IHM16M1's bus window: its 7-45 V rating, within the 4:1 window the
@@ -611,6 +809,24 @@ pub const X_NUCLEO_IHM16M1: BoardProfile = BoardProfile {
     },
     bus: IHM16M1_BUS,
     low_voltage: IHM16M1_BUS,
+    // U on PA1 is COMP1's IO1 (DAC3 CH1), W on PB0 COMP4's IO1 (DAC3 CH2); V on PB1
+    // reaches only COMP1 (IO2), which U takes. The STSPIN830's own over-current
+    // comparator (EN_FAULT into BKIN) stays the first protection of this board.
+    hardware_trip: Some(HardwareTrip {
+        comparators: &[
+            SenseComparator {
+                comp: 1,
+                io2: false,
+                signal: Signal::CurrentU,
+            },
+            SenseComparator {
+                comp: 4,
+                io2: false,
+                signal: Signal::CurrentW,
+            },
+        ],
+        filter: 0b1101,
+    }),
 };
 
 /// A three-phase IGBT stage with L6390 gate drivers (STEVAL-IHM023V3; the STEVAL-IHM028V2's
@@ -646,6 +862,8 @@ pub const STEVAL_IHM023V3: BoardProfile = BoardProfile {
     },
     bus: MAINS,
     low_voltage: LOW_VOLTAGE,
+    // the generic stage's pins, so its comparators
+    hardware_trip: Some(GENERIC_HARDWARE_TRIP),
 };
 
 /// Every profile, the default first.
@@ -714,6 +932,104 @@ mod tests {
             p.check(),
             Err("the ADC plan must carry U, V, W and the bus once each")
         );
+    }
+
+    /// The comparator threshold from the measurement chain: the generic stage (0.033 ohm,
+    /// gain 5, bias 1.65 V, output falling with the motor current) at its 8 A trip sits at
+    /// 1.65 - 8 * 0.165 = 0.33 V, 409.6 counts of 3.3 V / 4096, and the comparator output
+    /// is inverted; the IHM16M1 (0.33 ohm, gain 1.53) at 2.9 A at 1.65 - 1.464 = 0.186 V,
+    /// 230.6 counts. Beyond the amplifier's range, or not a current, is refused.
+    #[test]
+    fn comparator_thresholds_follow_the_measurement_chain() {
+        let t = comparator_threshold(&GENERIC.stage, 8.0).unwrap();
+        assert_eq!(
+            t,
+            ComparatorThreshold {
+                dac_counts: 410,
+                inverted: true
+            }
+        );
+        let t = comparator_threshold(&X_NUCLEO_IHM16M1.stage, 2.9).unwrap();
+        assert_eq!(t.dac_counts, 231);
+        assert!(t.inverted);
+        // a rising amplifier: the same distance above the bias, not inverted
+        let mut up = GENERIC.stage;
+        up.current_sign = 1.0;
+        let t = comparator_threshold(&up, 8.0).unwrap();
+        assert_eq!(t.dac_counts, 3686);
+        assert!(!t.inverted);
+        // the amplifier saturates at 1.65 / 0.165 = 10 A
+        assert!(comparator_threshold(&GENERIC.stage, 10.5).is_err());
+        assert!(comparator_threshold(&GENERIC.stage, 0.0).is_err());
+        assert!(comparator_threshold(&GENERIC.stage, f32::NAN).is_err());
+        // the design's level: the drive's trip (acim::hardware_trip)
+        let cfg = drive_config_with(&GENERIC, &GENERIC.bus);
+        let level = acim::hardware_trip::hardware_trip_level(&cfg);
+        assert_eq!(level, GENERIC.bus.overcurrent_trip);
+    }
+
+    /// The comparator inputs as RM0440 assigns them, and the profiles' comparators on
+    /// their signals' pins.
+    #[test]
+    fn comparators_sit_on_their_amplifier_pins() {
+        assert_eq!(comp_input_pin(3, false), Some(pa(0)));
+        assert_eq!(comp_input_pin(3, true), Some(pc(1)));
+        assert_eq!(comp_input_pin(1, false), Some(pa(1)));
+        assert_eq!(comp_input_pin(4, false), Some(pb(0)));
+        assert_eq!(comp_input_pin(8, false), None);
+        assert_eq!(comp_dac(1), Some((3, 1)));
+        assert_eq!(comp_dac(4), Some((3, 2)));
+        assert_eq!(comp_dac(6), Some((4, 2)));
+        for p in ALL {
+            let h = p.hardware_trip.expect("every profile routes its currents");
+            assert_eq!(h.comparators.len(), 2, "{}", p.key);
+        }
+        // the generic comparators share DAC3 CH1; the IHM16M1's use both DAC3 channels
+        assert_eq!(
+            GENERIC_HARDWARE_TRIP.dac_channels(),
+            [Some((3, 1)), None, None]
+        );
+        let h = X_NUCLEO_IHM16M1.hardware_trip.unwrap();
+        assert_eq!(h.dac_channels(), [Some((3, 1)), Some((3, 2)), None]);
+        // a comparator on the wrong pin, or twice, is refused
+        let mut p = GENERIC;
+        p.hardware_trip = Some(HardwareTrip {
+            comparators: &[SenseComparator {
+                comp: 3,
+                io2: true,
+                signal: Signal::CurrentU,
+            }],
+            filter: 0,
+        });
+        assert_eq!(
+            p.check(),
+            Err("a comparator is not on its phase current's amplifier pin")
+        );
+        p.hardware_trip = Some(HardwareTrip {
+            comparators: &[
+                SenseComparator {
+                    comp: 3,
+                    io2: false,
+                    signal: Signal::CurrentU,
+                },
+                SenseComparator {
+                    comp: 3,
+                    io2: false,
+                    signal: Signal::CurrentU,
+                },
+            ],
+            filter: 0,
+        });
+        assert_eq!(p.check(), Err("a comparator or a phase is used twice"));
+        // a trip beyond the amplifier's range
+        let mut p = GENERIC;
+        p.hardware_trip = Some(GENERIC_HARDWARE_TRIP);
+        p.stage.amplifier_gain = 9.0;
+        assert!(p.check().is_err());
+        // no hardware trip: the software path only, allowed
+        let mut p = GENERIC;
+        p.hardware_trip = None;
+        assert_eq!(p.check(), Ok(()));
     }
 
     /// The L6390 stage inverts and idles its low sides high; the others drive no
