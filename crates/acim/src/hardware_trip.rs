@@ -21,7 +21,7 @@
 //! 1.1 times the trip: the simulator's dead-sensing built-in, every channel at 0 A at
 //! 500 rpm, stayed above the 8 A trip for 0.63 ms while switching, three periods).
 
-use crate::design::DriveConfig;
+use crate::config::DriveConfig;
 
 /// The hardware trip level over the software trip level (a ratio; 1: the same level).
 ///
