@@ -37,6 +37,7 @@ pub use crate::orientation::OrientationDesign;
 pub use crate::speed_loop::{
     FAR_SIDE_ENTER_HZ, FAR_SIDE_LEAVE_HZ, FW_HOLD_BAND_FRACTION, FW_REPORT_SPEED_LOOP_CONSTANTS,
 };
+pub use crate::start_sequence::MagnetizingDesign;
 pub use crate::supervisor::SupervisionLimits;
 pub use crate::svpwm::FW_TRIM_FRACTION;
 
@@ -121,25 +122,6 @@ pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
 /// explain. Industrial drives have the same wait (e.g. Siemens' motor de-excitation time,
 /// p0347).
 pub const DEMAGNETIZE_TAU_R: f32 = 5.0;
-
-/// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MagnetizingDesign<N: Num = f32> {
-    /// Whether magnetizing waits for the Rs identification.
-    pub identify_rs: bool,
-    /// Longest identification, steps from the start: `rs_identification_timeout`, plus the
-    /// speed search and the inverter test when the test runs (the identification begins
-    /// after them).
-    pub rs_timeout_steps: u32,
-    /// Settled-residual time, steps.
-    pub rs_settle_steps: u32,
-    /// Settled-residual threshold, A.
-    pub rs_settled_error: N,
-    /// Low-pass coefficient of the residual filter (Ts / 20 ms).
-    pub residual_filter: N::Gain,
-    /// The flying start's speed search.
-    pub search: SpeedSearchDesign<N>,
-}
 
 /// Open-loop V/f constants.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -44,7 +44,7 @@
 use crate::current_loop::{CurrentLoop, CurrentLoopInputs};
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
 use crate::design::{DesignArithmetic, DriveCoeffs};
-use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs};
+use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
 use crate::flux::FluxModel;
 use crate::frames::{
     clarke_three, clarke_two, inverse_clarke, inverse_park, park, AlphaBeta, Dq, FastSinCos,
@@ -62,7 +62,7 @@ use crate::orientation;
 use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
-use crate::speed_search::{SearchOutcome, SpeedSearch};
+use crate::start_sequence::{StartInputs, StartSequence, StartSequenceConfig};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
     Supervisor,
@@ -321,14 +321,9 @@ struct Estimator<N: Num, O> {
 struct References<N: Num> {
     /// The speed loop ([`crate::speed_loop`]).
     speed: SpeedLoop<N>,
-    magnetizing_steps: u32,
-    rs_settled_steps: u32,
     /// Field weakening, over-voltage control and flux optimisation
     /// ([`crate::field_weakening`]).
     fw: FieldWeakening<N>,
-    /// A flying start: magnetizing in a frame turning with the rotor at the speed the
-    /// search measured.
-    flying: bool,
     /// Steps the speed target and reference have been zero ([`crate::ZeroSpeedPolicy`]).
     zero_steps: u32,
     /// A nonzero speed target or reference since the start: `Stop` ramps down and then
@@ -369,19 +364,11 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     off_steps: u32,
     open_loop: OpenLoop<N>,
     telemetry: DriveTelemetry<N>,
-    /// The flying start's speed search ([`crate::speed_search`]), used only while
-    /// magnetizing (last: it keeps the running step's state within short load offsets).
-    search: SpeedSearch<N>,
-    /// The inverter test at start and its correction.
-    inverter: InverterTest<N>,
     /// The offsets' drift since the start, tracked while turning.
     offset_tracker: OffsetTracker<N>,
     /// The inverter error tracked while turning: it adapts the
     /// inverter test's correction.
     inverter_tracker: InverterTracker<N>,
-    /// The current sensors' relative gain, calibrated while magnetizing at rest
-    /// ([`crate::gain_calibration`]).
-    gain_cal: GainCalibration<N>,
     /// A start asked for before the switches-off offset measurement had settled: the idle
     /// step performs it once the measurement has (item 3: offsets measured
     /// before every start).
@@ -390,6 +377,9 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     /// kept across stops and faults (the machine cools with the drive off too, which the
     /// model does not see: it errs on the safe side).
     thermal: ThermalModel<N>,
+    /// The start sequence while magnetizing: speed search, inverter test, gain
+    /// calibration, Rs identification ([`crate::start_sequence`]).
+    start: StartSequence<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -437,10 +427,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             },
             refs: References {
                 speed: SpeedLoop::new(),
-                magnetizing_steps: 0,
-                rs_settled_steps: 0,
                 fw: FieldWeakening::new(N::ZERO),
-                flying: false,
                 zero_steps: 0,
                 commanded: false,
             },
@@ -470,11 +457,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             design,
             coeffs,
             bases,
-            search: SpeedSearch::new(),
-            inverter: InverterTest::default(),
+            start: StartSequence::default(),
             offset_tracker: OffsetTracker::default(),
             inverter_tracker: InverterTracker::default(),
-            gain_cal: GainCalibration::default(),
             pending_start: None,
             thermal: ThermalModel::new(),
         };
@@ -514,7 +499,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// The current channels' gain ratio g_a / g_b as the last calibration at a start from
     /// rest measured it (1 before any; [`crate::gain_calibration`]).
     pub fn current_gain_correction(&self) -> N {
-        self.gain_cal.ratio
+        self.start.gain_cal.ratio
     }
 
     /// The current-sensor offsets' drift since the start as the running tracker estimates
@@ -545,7 +530,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// The inverter test at start and the correction it identified
     /// ([`DriveConfig::inverter_identification`]).
     pub fn inverter_test(&self) -> &InverterTest<N> {
-        &self.inverter
+        &self.start.inverter
     }
 
     /// The observer.
@@ -626,8 +611,8 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.offset_tracker = OffsetTracker::default();
         self.reset_dynamic_state();
         if to == DriveState::Magnetizing {
-            self.inverter.restart(&self.coeffs.inverter_test);
-            self.gain_cal.restart(&self.coeffs.gain_calibration);
+            self.start.inverter.restart(&self.coeffs.inverter_test);
+            self.start.gain_cal.restart(&self.coeffs.gain_calibration);
         }
         self.off_steps = 0;
         Ok(())
@@ -674,14 +659,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             || old.device_drop != new.device_drop
             || old.dead_time_current_band != new.dead_time_current_band;
         if inverter_changed {
-            self.inverter = InverterTest::default();
+            self.start.inverter = InverterTest::default();
             self.inverter_tracker = InverterTracker::default();
         }
         self.design = design;
         // a design without the gain calibration (switched off, or three-phase sensing)
         // uses the samples as they come
         if !self.coeffs.gain_calibration.enabled {
-            self.gain_cal = GainCalibration::default();
+            self.start.gain_cal = GainCalibration::default();
         }
         Ok(())
     }
@@ -715,8 +700,6 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.refs.speed.pi.reset();
         self.refs.speed.i_sq_ref = N::ZERO;
         self.refs.fw = FieldWeakening::new(self.coeffs.i_sd_ref);
-        self.refs.magnetizing_steps = 0;
-        self.refs.rs_settled_steps = 0;
         self.refs.zero_steps = 0;
         self.refs.commanded = false;
         self.cur = CurrentLoop::new();
@@ -725,8 +708,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
-        self.search = SpeedSearch::new();
-        self.refs.flying = false;
+        self.start.reset();
         self.monitor = ControlMonitor::new();
         self.open_loop = OpenLoop::default();
         self.prev = self.latch(Applied::default());
@@ -783,25 +765,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         probe.end(StepRegion::FaultChecks);
         let mode = match gate {
             Gate::Run(mode) => mode,
-            Gate::Off(None) => {
-                self.off_steps = self.off_steps.saturating_add(1);
-                if self.sup.state() == DriveState::Idle {
-                    // switches off: measure the current channels' zero offsets (once the
-                    // current of the last switching has decayed)
-                    if self.off_steps > self.coeffs.limits.offset_skip_steps {
-                        self.offsets
-                            .idle_sample(&self.coeffs.limits, inp.phase_currents);
-                    }
-                    // a start that waited for them: performed now (switching from the
-                    // next step), or refused with a CurrentSensor fault
-                    if let Some(to) = self.pending_start {
-                        if self.offsets.settled(&self.coeffs.limits) {
-                            let _ = self.begin_start(to);
-                        }
-                    }
-                }
-                return PwmOutput::OFF;
-            }
+            Gate::Off(None) => return self.switched_off(inp),
             Gate::Off(Some(reason)) => return self.enter_fault(reason),
         };
         if mode == DriveState::OpenLoop {
@@ -815,7 +779,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // 3. estimate
         // the frame is held while magnetizing at rest and turns with the rotor on a
         // flying start
-        let frame_held = magnetizing && !self.refs.flying;
+        let frame_held = magnetizing && !self.start.flying();
         let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
         if let Some(reason) = self.plausibility(&e) {
@@ -824,15 +788,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // the modulator's voltage limit at this bus (the bus was checked against
         // dc_bus_min > 0 by the gate: one reciprocal per step, shared with the modulator)
         let inv_dc_bus = m.dc_bus.recip();
-        let limit = self
-            .modulator
-            .voltage_limit(&self.coeffs.pwm, m.dc_bus, inv_dc_bus);
-        let limit = self.cur.limit(
-            &self.coeffs.current_loop,
-            limit,
-            m.applied.v_dq,
-            M::OVERMODULATES,
-        );
+        let limit = self.voltage_limit(&m, inv_dc_bus);
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
         let i_ref = match self.references(&m, &e, magnetizing, limit) {
@@ -850,23 +806,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         }
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
-        let c = &self.coeffs;
-        let v = self.cur.update(
-            &c.current_loop,
-            &CurrentLoopInputs {
-                referred_rotor_resistance: c.referred_rotor_resistance,
-                inv_rotor_time_constant: c.inv_rotor_time_constant,
-                transient_inductance: c.transient_inductance,
-                back_emf: c.back_emf,
-                stator_resistance: e.rs,
-                stator_frequency: e.stator_frequency,
-                rotor_flux: e.rotor_flux,
-                speed: e.observer.speed,
-                reference: i_ref,
-                current: m.i_dq,
-                limit,
-            },
-        );
+        let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
         if let Some(reason) = self.monitor_control(&m, &e, i_ref, v) {
@@ -891,6 +831,27 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             duties: modulation.duties,
             enabled: true,
         }
+    }
+
+    /// A step with the switches off (idle, or stopped): idle, the current channels' zero
+    /// offsets are measured (once the current of the last switching has decayed) and a
+    /// start that waited for them is performed now (switching from the next step) or
+    /// refused with a `CurrentSensor` fault.
+    #[inline(always)]
+    fn switched_off(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
+        self.off_steps = self.off_steps.saturating_add(1);
+        if self.sup.state() == DriveState::Idle {
+            if self.off_steps > self.coeffs.limits.offset_skip_steps {
+                self.offsets
+                    .idle_sample(&self.coeffs.limits, inp.phase_currents);
+            }
+            if let Some(to) = self.pending_start {
+                if self.offsets.settled(&self.coeffs.limits) {
+                    let _ = self.begin_start(to);
+                }
+            }
+        }
+        PwmOutput::OFF
     }
 
     /// The zero-speed policy's count ([`crate::ZeroSpeedPolicy`]): the steps with the
@@ -970,8 +931,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // the last step's duties were made for the bus measured then; they act over the
         // period this sample opens, at the bus measured now: a rippling or sagging bus
         // scales the voltage they apply (duty x bus), and the estimators use that voltage
-        let prev = &self.prev;
-        let mut applied = prev.voltage;
+        let mut applied = self.prev.voltage;
         let a = &mut applied;
         if inp.dc_bus != a.dc_bus && a.dc_bus > N::ZERO {
             let k = inp.dc_bus * a.inv_dc_bus;
@@ -987,7 +947,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let [oa, ob, oc] = self.offset_compensation;
         let [a, b, c] = inp.phase_currents;
         // the a and b channels' gains equalized (1 until calibrated; two-phase sensing)
-        let [fa, fb] = self.gain_cal.factors;
+        let [fa, fb] = self.start.gain_cal.factors;
         let (a, b, c) = ((a - oa) * fa, (b - ob) * fb, c - oc);
         let (i_ab, current_sum) = match self.coeffs.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), N::ZERO),
@@ -995,32 +955,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         };
         let angle = self.est.flux.angle;
         let sc = self.sincos.sin_cos(angle);
-        // the tracked drift (last step's estimate) out of the current; the tracker reads
-        // the voltage less Rs_hat times that current (its DC part: the drift's)
-        let o = self.offset_tracker.offset;
-        let i_ab = AlphaBeta {
-            alpha: i_ab.alpha - o.alpha,
-            beta: i_ab.beta - o.beta,
-        };
-        let rs = prev.stator_resistance;
-        let v = applied.v_ab;
-        self.offset_tracker.update(
-            &self.coeffs.offset_tracker,
-            AlphaBeta {
-                alpha: v.alpha - rs * i_ab.alpha,
-                beta: v.beta - rs * i_ab.beta,
-            },
-            prev.stator_frequency,
-            running,
-            prev.ramping,
-            prev.i_sq_ref,
-            prev.far_side,
-        );
+        let i_ab = self.track_offsets(i_ab, applied.v_ab, running);
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
         let i = park(i_ab, sc);
         let v = applied.v_dq;
-        let k = N::gain(self.coeffs.sample_ripple, prev.stator_frequency);
+        let k = N::gain(self.coeffs.sample_ripple, self.prev.stator_frequency);
         Measured {
             i_ab,
             i_dq: Dq {
@@ -1035,6 +975,40 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         }
     }
 
+    /// The running offset tracker ([`crate::offset_tracker`]): the tracked drift (last
+    /// step's estimate) out of the current `i_ab` (A); the tracker reads the voltage `v_ab`
+    /// applied over the past period (V) less Rs_hat times that current (its DC part: the
+    /// drift's). Returns the corrected current.
+    #[inline(always)]
+    fn track_offsets(
+        &mut self,
+        i_ab: AlphaBeta<N>,
+        v_ab: AlphaBeta<N>,
+        running: bool,
+    ) -> AlphaBeta<N> {
+        let prev = &self.prev;
+        let o = self.offset_tracker.offset;
+        let i_ab = AlphaBeta {
+            alpha: i_ab.alpha - o.alpha,
+            beta: i_ab.beta - o.beta,
+        };
+        let rs = prev.stator_resistance;
+        let v = v_ab;
+        self.offset_tracker.update(
+            &self.coeffs.offset_tracker,
+            AlphaBeta {
+                alpha: v.alpha - rs * i_ab.alpha,
+                beta: v.beta - rs * i_ab.beta,
+            },
+            prev.stator_frequency,
+            running,
+            prev.ramping,
+            prev.i_sq_ref,
+            prev.far_side,
+        );
+        i_ab
+    }
+
     /// Estimation stage: speed observer, Rs estimator (eq. 19-20) and residual filter,
     /// orientation correction, flux model, slip law and angle (eq. 13, 8).
     #[inline(always)]
@@ -1045,13 +1019,43 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         frame_held: bool,
         probe: &mut P,
     ) -> Estimate<N> {
+        // observer, with the voltage applied over the past period and the flux state of
+        // the last step
+        probe.begin(StepRegion::ObserverReduced);
+        let observer = self.observe(m, magnetizing, frame_held);
+        probe.end(StepRegion::ObserverReduced);
+        // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
+        // (its error is the d-axis residual), the resistance adapts only inside its gate
+        probe.begin(StepRegion::RsEstimator);
+        let flux_settled = self.est.flux.rotor_flux >= self.coeffs.settled_flux;
+        let ws_prev = self.est.flux.stator_frequency;
+        let rs = self.estimate_rs(m, frame_held, flux_settled, ws_prev);
+        probe.end(StepRegion::RsEstimator);
+        probe.begin(StepRegion::FluxSlip);
+        self.flux_and_angle(m, &observer, magnetizing, frame_held, rs);
+        probe.end(StepRegion::FluxSlip);
+        Estimate {
+            observer,
+            rotor_flux: self.est.flux.rotor_flux,
+            stator_frequency: self.est.flux.stator_frequency,
+            rs,
+            flux_settled,
+        }
+    }
+
+    /// The speed observer's step ([`SpeedObserver`]; eq. 12 for the paper's), with the
+    /// far-side term in the far-side mode.
+    #[inline(always)]
+    fn observe(
+        &mut self,
+        m: &Measured<N>,
+        magnetizing: bool,
+        frame_held: bool,
+    ) -> SpeedEstimate<N> {
         let far_side_mode = self.prev.far_side;
         let c = &self.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
-        // observer, with the voltage applied over the past period and the flux state of
-        // the last step
-        probe.begin(StepRegion::ObserverReduced);
         // the far-side term: in the far-side mode (the reference
         // stage's, from the last step) and while w_s is against Omega_hat, the speed and
         // load updates see e - c(i_sq) w e_d (`DriveConfig::far_side_gain`)
@@ -1068,7 +1072,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 N::ZERO
             }
         };
-        let observer = est.observer.update(
+        est.observer.update(
             &c.observer,
             &SpeedObserverInputs {
                 i_ab: m.i_ab,
@@ -1083,14 +1087,22 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 magnetizing,
                 far_side_error,
             },
-        );
-        probe.end(StepRegion::ObserverReduced);
+        )
+    }
 
-        // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
-        // (its error is the d-axis residual), the resistance adapts only inside its gate
-        probe.begin(StepRegion::RsEstimator);
-        let flux_settled = est.flux.rotor_flux >= c.settled_flux;
-        let ws_prev = est.flux.stator_frequency;
+    /// The Rs estimator (eq. 19-20, the running law by default) and the standstill
+    /// identification's residual filter: Rs_hat after this step, ohm.
+    #[inline(always)]
+    fn estimate_rs(
+        &mut self,
+        m: &Measured<N>,
+        frame_held: bool,
+        flux_settled: bool,
+        ws_prev: N,
+    ) -> N {
+        let c = &self.coeffs;
+        let est = &mut self.est;
+        let i = m.i_dq;
         // eq. (20) holds with settled flux; while field weakening moves it, the rotor
         // part of eq. (9a), R_R i_sd - lambda_r/tau_r (the flux's rate of change), is
         // taken out of v_sd so that the residual stays the orientation's
@@ -1134,9 +1146,27 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 c.magnetizing.residual_filter,
                 est.rs.current_error - est.filtered_residual,
             );
-        probe.end(StepRegion::RsEstimator);
+        rs
+    }
 
-        probe.begin(StepRegion::FluxSlip);
+    /// Orientation correction, rotor-resistance adaptation, flux model, slip law and frame
+    /// angle (eq. 13, 8) with p Omega_hat: sensorless.
+    /// `rs` is this step's Rs_hat (ohm); the flux state is still the last step's.
+    #[inline(always)]
+    fn flux_and_angle(
+        &mut self,
+        m: &Measured<N>,
+        observer: &SpeedEstimate<N>,
+        magnetizing: bool,
+        frame_held: bool,
+        rs: N,
+    ) {
+        let c = &self.coeffs;
+        let est = &mut self.est;
+        let i = m.i_dq;
+        let flux_settled = est.flux.rotor_flux >= c.settled_flux;
+        let ws_prev = est.flux.stator_frequency;
+        let weakened = self.prev.fw_active;
         // (also while a flying start magnetizes in the turning frame: the residual of a
         // speed error locks the frame onto the rotor as the flux builds)
         let correction = if !O::ORIENTATION_CORRECTION {
@@ -1176,14 +1206,57 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // flux model, slip and angle (eq. 13, 8); the frame is held while magnetizing at
         // rest and turns with the rotor on a flying start
         est.flux.update(&c.flux, i.d, i.q, rotor_speed, frame_held);
-        probe.end(StepRegion::FluxSlip);
-        Estimate {
-            observer,
-            rotor_flux: est.flux.rotor_flux,
-            stator_frequency: est.flux.stator_frequency,
-            rs,
-            flux_settled,
+    }
+
+    /// Magnetizing: i_sd* at zero torque until the flux (and, with Rs estimation, the
+    /// standstill identification) has settled; the flying start's speed search and catch,
+    /// the current-gain calibration and the inverter test at rest; then the handover to
+    /// the running cascade (bumpless: the ramp starts from the speed the rotor turns at).
+    #[inline(always)]
+    fn magnetize(&mut self, m: &Measured<N>, e: &Estimate<N>) -> Result<Dq<N>, FaultReason> {
+        let c = &self.coeffs;
+        let steps = self.start.count();
+        if let Some(reason) = self.sup.magnetizing(&c.limits, steps) {
+            return Err(reason);
         }
+        let out = self.start.update(
+            &StartSequenceConfig {
+                magnetizing: &c.magnetizing,
+                inverter_test: &c.inverter_test,
+                gain_calibration: &c.gain_calibration,
+                preset_rs: c.rs.adapt,
+                flux_current: c.i_sd_ref,
+                referred_rotor_resistance: c.referred_rotor_resistance,
+                inv_rotor_time_constant: c.inv_rotor_time_constant,
+            },
+            &StartInputs {
+                applied_voltage: m.applied.v_dq,
+                inv_dc_bus: m.applied.inv_dc_bus,
+                current: m.i_dq,
+                stator_resistance: e.rs,
+                rotor_flux: e.rotor_flux,
+                flux_settled: e.flux_settled,
+                filtered_residual: self.est.filtered_residual,
+            },
+        )?;
+        if let Some(speed) = out.caught {
+            self.est.observer.preset_speed(speed);
+            self.est.flux.rotor_flux = N::ZERO;
+        }
+        if let Some(rs) = out.rs_preset {
+            self.est.rs.preset(rs);
+        }
+        if out.magnetized {
+            self.sup.magnetized();
+            self.est.observer.start_running(m.i_dq.q);
+            self.refs.speed.pi.reset();
+            // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
+            self.refs.speed.speed_reference = e.observer.speed;
+        }
+        Ok(Dq {
+            d: out.i_sd_ref,
+            q: N::ZERO,
+        })
     }
 
     /// Reference stage: while magnetizing, i_sd* at zero torque until the flux (and, with
@@ -1197,105 +1270,43 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         magnetizing: bool,
         limit: VoltageLimit<N>,
     ) -> Result<Dq<N>, FaultReason> {
-        let voltage_limit = limit.steady;
-        let c = &self.coeffs;
-        let r = &mut self.refs;
         if magnetizing {
-            let mag = &c.magnetizing;
-            r.magnetizing_steps = r.magnetizing_steps.saturating_add(1);
-            if let Some(reason) = self.sup.magnetizing(&c.limits, r.magnetizing_steps) {
-                return Err(reason);
-            }
-            // flying start: the speed search on the voltage of the held frame
-            match self
-                .search
-                .update(&mag.search, m.applied.v_dq, m.i_dq, e.rs)
-            {
-                Some(SearchOutcome::Turning(speed)) => {
-                    // catch the rotor: the frame turns with it from the next step (zero
-                    // slip at zero torque current) and the flux builds again from zero
-                    // in that frame (the search's flux decays with tau_r meanwhile)
-                    r.flying = true;
-                    self.gain_cal.abandon();
-                    self.est.observer.preset_speed(speed);
-                    self.est.flux.rotor_flux = N::ZERO;
-                }
-                Some(SearchOutcome::OverSpeed) => return Err(FaultReason::OverSpeed),
-                _ => {}
-            }
-            r.rs_settled_steps = if self.est.filtered_residual.abs() < mag.rs_settled_error {
-                r.rs_settled_steps.saturating_add(1)
-            } else {
-                0
-            };
-            // standstill Rs identification: wait for 50 ms of settled residual (not on
-            // a flying start: the rotor does not stand still)
-            let rs_done = !mag.identify_rs
-                || r.flying
-                || r.rs_settled_steps > mag.rs_settle_steps
-                || r.magnetizing_steps > mag.rs_timeout_steps;
-            // the inverter test holds the d-axis current at its levels
-            // for 0.45 s from the search's decision: the search measures at the flux
-            // current it is designed for (at the test's first level, 0.4 of it, the Q7.24
-            // search read -390 rpm of -493 and the drive stalled); on a flying start the
-            // test does not apply
-            let mut i_sd = c.i_sd_ref;
-            // the d-axis voltage the flux model predicts at rest, without the inverter's
-            // error: R_s_hat i_d + R_R i_d - lambda_R / tau_r (referred)
-            let rotor_voltage = c.referred_rotor_resistance * m.i_dq.d
-                - N::gain(c.inv_rotor_time_constant, e.rotor_flux);
-            // the beta voltage less Rs_hat times the measured beta current the loops leave
-            // (near zero): what remains is the drop of the beta current they cannot see
-            if !r.flying {
-                self.gain_cal.update(
-                    &c.gain_calibration,
-                    m.applied.v_dq.q - e.rs * m.i_dq.q,
-                    e.rs * m.i_dq.d + rotor_voltage,
-                );
-            }
-            if self.inverter.running() && self.search.done(&mag.search) {
-                if r.flying {
-                    self.inverter.skip();
-                } else {
-                    // the d-axis voltage less the flux model's d lambda_R / dt (exact
-                    // in fixed point; in f32 within rounding of the two-term form)
-                    let voltage = m.applied.v_dq.d - rotor_voltage;
-                    i_sd = self.inverter.update(
-                        &c.inverter_test,
-                        m.i_dq.d,
-                        voltage,
-                        m.applied.inv_dc_bus,
-                    );
-                    // its fit's slope is the stator resistance at rest: with Rs estimation
-                    // on, the standstill identification goes on from it (with a +50 %
-                    // initial error it otherwise reached its timeout, which counts from
-                    // the start, before settling)
-                    if c.rs.adapt && self.inverter.outcome == InverterTestOutcome::Identified {
-                        self.est.rs.preset(self.inverter.stator_resistance);
-                    }
-                }
-            }
-            if e.flux_settled
-                && rs_done
-                && self.search.done(&mag.search)
-                && !self.inverter.running()
-            {
-                self.sup.magnetized();
-                self.gain_cal.finish(&c.gain_calibration);
-                self.est.observer.start_running(m.i_dq.q);
-                r.speed.pi.reset();
-                // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
-                r.speed.speed_reference = e.observer.speed;
-                r.flying = false;
-            }
-            return Ok(Dq {
-                d: i_sd,
-                q: N::ZERO,
-            });
+            return self.magnetize(m, e);
         }
+        let fw = self.field_weakening(m, e, limit);
+        let i_sq_ref = self.speed_loop(m, e, fw, limit.steady);
         let c = &self.coeffs;
         let r = &mut self.refs;
-        let fw = r.fw.update(
+        let speed = e.observer.speed;
+        let saturated = r.speed.pi.saturated();
+        let stall = self
+            .sup
+            .stall(&c.limits, saturated, speed, r.speed.speed_reference);
+        let stall = match stall {
+            None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
+            some => some,
+        };
+        match stall {
+            Some(reason) => Err(reason),
+            None => Ok(Dq {
+                d: fw.i_sd_ref,
+                q: i_sq_ref,
+            }),
+        }
+    }
+
+    /// Field weakening ([`crate::field_weakening`]) with this step's estimates and the
+    /// last period's signals.
+    #[inline(always)]
+    fn field_weakening(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        limit: VoltageLimit<N>,
+    ) -> FieldWeakeningOutput<N> {
+        let c = &self.coeffs;
+        let r = &mut self.refs;
+        r.fw.update(
             &c.fw,
             &FieldWeakeningInputs {
                 flux_current: c.i_sd_ref,
@@ -1313,14 +1324,28 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q_saturated: self.prev.q_saturated,
                 flux_settled: e.flux_settled,
             },
-        );
+        )
+    }
+
+    /// The speed loop ([`crate::speed_loop`]) within the field weakening's limits `fw`
+    /// and the reachable speed of `voltage_limit` (V), with the overload rating: i_sq*.
+    #[inline(always)]
+    fn speed_loop(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        fw: FieldWeakeningOutput<N>,
+        voltage_limit: N,
+    ) -> N {
+        let c = &self.coeffs;
+        let r = &mut self.refs;
         // the short-time overload rating (`thermal`), on the measured current
         let rating = if c.thermal.enabled {
             Some(self.thermal.update(&c.thermal, m.i_dq.d, m.i_dq.q))
         } else {
             None
         };
-        let i_sq_ref = r.speed.update(
+        r.speed.update(
             &c.speed_loop,
             &SpeedLoopInputs {
                 pole_pairs: c.pole_pairs,
@@ -1333,31 +1358,58 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 inv_rotor_flux: self.est.flux.inv_rotor_flux,
                 voltage_limit,
                 inverter_error_known: O::FAR_SIDE_TERM
-                    && (self.inverter.outcome == InverterTestOutcome::Identified
+                    && (self.start.inverter.outcome == InverterTestOutcome::Identified
                         || self
                             .inverter_tracker
-                            .trusted(&c.inverter_tracker, self.inverter.correction_duty)),
+                            .trusted(&c.inverter_tracker, self.start.inverter.correction_duty)),
                 regeneration_limit: O::REGENERATION_LIMIT,
                 rating,
                 q_saturated: self.prev.q_saturated,
             },
-        );
-        let speed = e.observer.speed;
-        let saturated = r.speed.pi.saturated();
-        let stall = self
-            .sup
-            .stall(&c.limits, saturated, speed, r.speed.speed_reference);
-        let stall = match stall {
-            None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
-            some => some,
-        };
-        match stall {
-            Some(reason) => Err(reason),
-            None => Ok(Dq {
-                d: fw.i_sd_ref,
-                q: i_sq_ref,
-            }),
-        }
+        )
+    }
+
+    /// The current loops' voltage limit this step: the modulator's at this bus, with the
+    /// overmodulation reserve ([`CurrentLoop::limit`]).
+    #[inline(always)]
+    fn voltage_limit(&mut self, m: &Measured<N>, inv_dc_bus: N) -> VoltageLimit<N> {
+        let limit = self
+            .modulator
+            .voltage_limit(&self.coeffs.pwm, m.dc_bus, inv_dc_bus);
+        self.cur.limit(
+            &self.coeffs.current_loop,
+            limit,
+            m.applied.v_dq,
+            M::OVERMODULATES,
+        )
+    }
+
+    /// Current-control stage ([`crate::current_loop`]): v_dq* for `i_ref` within `limit`.
+    #[inline(always)]
+    fn current_control(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        i_ref: Dq<N>,
+        limit: VoltageLimit<N>,
+    ) -> Dq<N> {
+        let c = &self.coeffs;
+        self.cur.update(
+            &c.current_loop,
+            &CurrentLoopInputs {
+                referred_rotor_resistance: c.referred_rotor_resistance,
+                inv_rotor_time_constant: c.inv_rotor_time_constant,
+                transient_inductance: c.transient_inductance,
+                back_emf: c.back_emf,
+                stator_resistance: e.rs,
+                stator_frequency: e.stator_frequency,
+                rotor_flux: e.rotor_flux,
+                speed: e.observer.speed,
+                reference: i_ref,
+                current: m.i_dq,
+                limit,
+            },
+        )
     }
 
     /// Modulation stage: inverse Park at the angle the voltage will act at (advanced by
@@ -1390,14 +1442,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             m.dc_bus,
             inv_dc_bus,
             i_ref_abc,
-            self.inverter.correction_duty,
+            self.start.inverter.correction_duty,
         );
         // the inverter error the correction still leaves, from the sixth-harmonic
         // pattern across the current in this step's command, for the
         // next step's modulation
         if c.inverter_tracker.enabled {
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
-            self.inverter.correction_duty = self.inverter_tracker.update(
+            self.start.inverter.correction_duty = self.inverter_tracker.update(
                 &c.inverter_tracker,
                 v,
                 i_ref,
@@ -1405,7 +1457,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 inv_dc_bus,
                 e.stator_frequency,
                 track && !out.saturated,
-                self.inverter.correction_duty,
+                self.start.inverter.correction_duty,
             );
         }
         if M::OVERMODULATES && out.saturated {
@@ -1443,7 +1495,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             speed_target_limited: self.refs.speed.target_limited,
             current_error: self.monitor.current_error,
             model_residual: self.monitor.model_residual,
-            search_speed: self.search.measured_speed,
+            search_speed: self.start.search.measured_speed,
             zero_speed_held: zero_held,
         };
     }
@@ -1849,20 +1901,20 @@ mod tests {
     #[test]
     fn a_design_with_another_inverter_compensation_drops_its_correction() {
         let mut d = drive();
-        d.inverter.correction_duty = 0.002;
-        d.inverter.outcome = InverterTestOutcome::Identified;
+        d.start.inverter.correction_duty = 0.002;
+        d.start.inverter.outcome = InverterTestOutcome::Identified;
         let mut cfg = *d.config();
         cfg.orientation_gain *= 0.5;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.inverter.correction_duty, 0.002);
-        assert_eq!(d.inverter.outcome, InverterTestOutcome::Identified);
+        assert_eq!(d.start.inverter.correction_duty, 0.002);
+        assert_eq!(d.start.inverter.outcome, InverterTestOutcome::Identified);
         cfg.dead_time = 2.0e-6;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.inverter.correction_duty, 0.0);
-        assert_eq!(d.inverter.outcome, InverterTestOutcome::NotRun);
+        assert_eq!(d.start.inverter.correction_duty, 0.0);
+        assert_eq!(d.start.inverter.outcome, InverterTestOutcome::NotRun);
         assert!(!d
             .inverter_tracker
-            .trusted(&d.coeffs.inverter_tracker, d.inverter.correction_duty));
+            .trusted(&d.coeffs.inverter_tracker, d.start.inverter.correction_duty));
     }
 
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the
@@ -1870,12 +1922,12 @@ mod tests {
     #[test]
     fn a_design_without_the_gain_calibration_drops_its_correction() {
         let mut d = drive();
-        d.gain_cal.ratio = 1.01;
-        d.gain_cal.factors = [0.995, 1.005];
+        d.start.gain_cal.ratio = 1.01;
+        d.start.gain_cal.factors = [0.995, 1.005];
         let mut cfg = *d.config();
         cfg.current_gain_calibration = false;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.gain_cal.factors, [1.0; 2]);
+        assert_eq!(d.start.gain_cal.factors, [1.0; 2]);
         assert_eq!(d.current_gain_correction(), 1.0);
     }
 

@@ -64,6 +64,7 @@ pub mod rs_estimator;
 pub mod sensor_check;
 pub mod speed_loop;
 pub mod speed_search;
+pub mod start_sequence;
 pub mod svpwm;
 pub mod thermal;
 
