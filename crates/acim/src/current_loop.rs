@@ -180,3 +180,121 @@ impl<N: Num> CurrentLoop<N> {
         Dq { d: v_d, q: v_q }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::{DriveConfig, DriveDesign};
+
+    fn design() -> DriveDesign {
+        DriveDesign::new(DriveConfig::paper_defaults()).unwrap()
+    }
+
+    fn limit(max: f32, sustained: f32) -> VoltageLimit {
+        VoltageLimit {
+            max,
+            inv_max: 1.0 / max,
+            steady: max,
+            sustained,
+            inv_sustained: 1.0 / sustained,
+        }
+    }
+
+    fn inputs(
+        d: &DriveDesign,
+        reference: Dq,
+        current: Dq,
+        lim: VoltageLimit,
+    ) -> CurrentLoopInputs<f32> {
+        CurrentLoopInputs {
+            referred_rotor_resistance: d.referred_rotor_resistance,
+            inv_rotor_time_constant: d.inv_rotor_time_constant,
+            transient_inductance: d.transient_inductance,
+            back_emf: d.pole_pairs,
+            stator_resistance: d.config.machine.stator_resistance(),
+            stator_frequency: 150.0,
+            rotor_flux: d.flux_reference,
+            speed: 70.0,
+            reference,
+            current,
+            limit: lim,
+        }
+    }
+
+    #[test]
+    fn without_a_reserve_the_limit_passes_unchanged() {
+        let d = design();
+        let mut c = CurrentLoop::<f32>::new();
+        let l = limit(180.0, 180.0);
+        let big = Dq { d: 0.0, q: 500.0 };
+        assert_eq!(c.limit(&d.current_loop, l, big, true), l);
+        assert_eq!(
+            c.limit(&d.current_loop, limit(200.0, 180.0), big, false),
+            limit(200.0, 180.0)
+        );
+    }
+
+    #[test]
+    fn the_overmodulation_reserve_drains_and_refills() {
+        let d = design();
+        let n = d.current_loop.overmodulation_reserve_steps;
+        let mut c = CurrentLoop::<f32>::new();
+        let l = limit(200.0, 180.0);
+        let small = Dq { d: 0.0, q: 100.0 };
+        let big = Dq { d: 0.0, q: 190.0 };
+        for _ in 0..n {
+            assert_eq!(c.limit(&d.current_loop, l, small, true).max, 200.0);
+        }
+        // full: n steps beyond the sustained limit, then the sustained limit applies
+        for _ in 0..n - 1 {
+            assert_eq!(c.limit(&d.current_loop, l, big, true).max, 200.0);
+        }
+        let held = c.limit(&d.current_loop, l, big, true);
+        assert_eq!((held.max, held.inv_max), (180.0, 1.0 / 180.0));
+        // one step at or below returns one step of it
+        assert_eq!(c.limit(&d.current_loop, l, small, true).max, 200.0);
+    }
+
+    #[test]
+    fn with_no_current_error_the_command_is_the_feedforward_of_eq_9() {
+        let d = design();
+        let mut c = CurrentLoop::<f32>::new();
+        let i = Dq { d: 1.5, q: 2.0 };
+        let x = inputs(&d, i, i, limit(300.0, 300.0));
+        let v = c.update(&d.current_loop, &x);
+        let rs = x.stator_resistance;
+        let rr = x.referred_rotor_resistance;
+        let ff_d = (rs + rr) * i.d
+            - x.inv_rotor_time_constant * x.rotor_flux
+            - x.transient_inductance * x.stator_frequency * i.q;
+        let ff_q = (rs + rr) * i.q
+            + x.transient_inductance * x.stator_frequency * i.d
+            + x.back_emf * x.speed * x.rotor_flux;
+        assert!(
+            (v.d - ff_d).abs() < 1e-3 * ff_d.abs().max(1.0),
+            "{v:?} {ff_d}"
+        );
+        assert!(
+            (v.q - ff_q).abs() < 1e-3 * ff_q.abs().max(1.0),
+            "{v:?} {ff_q}"
+        );
+    }
+
+    #[test]
+    fn a_large_error_stays_inside_the_circle_with_d_priority() {
+        let d = design();
+        let mut c = CurrentLoop::<f32>::new();
+        let x = inputs(
+            &d,
+            Dq { d: 50.0, q: 50.0 },
+            Dq { d: 0.0, q: 0.0 },
+            limit(100.0, 100.0),
+        );
+        for _ in 0..20 {
+            let v = c.update(&d.current_loop, &x);
+            assert!((v.d * v.d + v.q * v.q).sqrt() <= 100.0 * 1.01, "{v:?}");
+            assert!(v.d > 0.0 && v.d <= 100.0);
+        }
+        assert!(c.d().saturated());
+    }
+}

@@ -409,3 +409,110 @@ impl<N: Num> FieldWeakening<N> {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::{DriveConfig, DriveDesign};
+    use crate::svpwm::linear_limit;
+
+    fn design(overvoltage: bool) -> DriveDesign {
+        let mut cfg = DriveConfig::paper_defaults();
+        cfg.overvoltage_control = overvoltage;
+        DriveDesign::new(cfg).unwrap()
+    }
+
+    fn inputs(d: &DriveDesign, ws: f32, dc_bus: f32, settled: bool) -> FieldWeakeningInputs<f32> {
+        let v = linear_limit(dc_bus) * 0.98;
+        FieldWeakeningInputs {
+            flux_current: d.i_sd_ref,
+            transient_inductance: d.transient_inductance,
+            torque_current_min: d.speed_loop.pi.out_min,
+            torque_current_max: d.speed_loop.pi.out_max,
+            stator_frequency: ws,
+            stator_resistance: d.config.machine.stator_resistance(),
+            speed: ws / d.pole_pairs,
+            dc_bus,
+            limit: VoltageLimit {
+                max: v,
+                inv_max: 1.0 / v,
+                steady: v,
+                sustained: v,
+                inv_sustained: 1.0 / v,
+            },
+            last_voltage: Dq { d: 0.0, q: 0.9 * v },
+            last_torque_current: 1.0,
+            q_integral: 0.0,
+            q_saturated: false,
+            flux_settled: settled,
+        }
+    }
+
+    #[test]
+    fn below_base_speed_the_static_limits_pass_unchanged() {
+        let d = design(false);
+        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let out = fw.update(
+            &d.field_weakening,
+            &inputs(&d, 50.0, d.config.dc_bus_max, true),
+        );
+        assert_eq!(out.i_sd_ref, d.i_sd_ref);
+        assert_eq!(
+            (out.i_sq_min, out.i_sq_max),
+            (d.speed_loop.pi.out_min, d.speed_loop.pi.out_max)
+        );
+        assert!(!out.torque_limited && !fw.active());
+    }
+
+    #[test]
+    fn beyond_base_speed_the_flux_falls_inside_the_current_circle_and_latches() {
+        let d = design(false);
+        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let base = linear_limit(d.config.dc_bus_max) / d.flux_reference;
+        let out = fw.update(
+            &d.field_weakening,
+            &inputs(&d, 2.0 * base, d.config.dc_bus_max, true),
+        );
+        assert!(out.i_sd_ref < d.i_sd_ref && out.i_sd_ref >= d.field_weakening.min_flux_current);
+        let i_max = d.field_weakening.current_limit;
+        assert!(out.i_sd_ref.powi(2) + out.i_sq_max.powi(2) <= i_max * i_max * 1.0001);
+        assert!(fw.active());
+        // back below base speed: latched until the flux has settled at its rated value
+        let low = inputs(&d, 50.0, d.config.dc_bus_max, false);
+        fw.update(&d.field_weakening, &low);
+        assert!(fw.active());
+        fw.update(
+            &d.field_weakening,
+            &FieldWeakeningInputs {
+                flux_settled: true,
+                ..low
+            },
+        );
+        assert!(!fw.active());
+    }
+
+    #[test]
+    fn over_voltage_control_folds_back_the_regenerative_side_only() {
+        let d = design(true);
+        let f = &d.field_weakening;
+        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let mid = f.regen_start + 0.5 / f.inv_regen_band;
+        let x = inputs(&d, 50.0, mid, true);
+        let out = fw.update(f, &x);
+        // turning forward: the braking (negative) side halves, the motoring side stays
+        assert!((out.i_sq_min - 0.5 * x.torque_current_min).abs() < 1e-3 * x.torque_current_max);
+        assert_eq!(out.i_sq_max, x.torque_current_max);
+        assert!(out.torque_limited);
+        let reverse = fw.update(
+            f,
+            &FieldWeakeningInputs {
+                speed: -x.speed,
+                ..x
+            },
+        );
+        assert_eq!(reverse.i_sq_min, x.torque_current_min);
+        assert!(
+            (reverse.i_sq_max - 0.5 * x.torque_current_max).abs() < 1e-3 * x.torque_current_max
+        );
+    }
+}

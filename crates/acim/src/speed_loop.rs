@@ -488,4 +488,73 @@ mod tests {
         assert_eq!(ff.pi.kp, c.pi.kp);
         assert_eq!(ff.pi.ki_ts, 0.0);
     }
+
+    fn block_inputs(d: &crate::design::DriveDesign, speed: f32, load: f32) -> SpeedLoopInputs<f32> {
+        SpeedLoopInputs {
+            pole_pairs: d.pole_pairs,
+            speed,
+            load_torque: load,
+            limits: FieldWeakeningOutput {
+                i_sd_ref: d.i_sd_ref,
+                i_sq_min: d.speed_loop.pi.out_min,
+                i_sq_max: d.speed_loop.pi.out_max,
+                torque_limited: false,
+            },
+            fw_enabled: true,
+            fw_active: false,
+            flux_reference: d.flux_reference,
+            inv_rotor_flux: 1.0 / d.flux_reference,
+            voltage_limit: 180.0,
+            inverter_error_known: false,
+            regeneration_limit: true,
+            rating: None,
+            q_saturated: false,
+        }
+    }
+
+    #[test]
+    fn the_reference_ramps_by_one_step_per_period() {
+        let d = crate::design::DriveDesign::new(crate::DriveConfig::paper_defaults()).unwrap();
+        let c = &d.speed_loop;
+        let mut s = SpeedLoop::<f32>::new();
+        s.speed_target = 100.0;
+        s.update(c, &block_inputs(&d, 0.0, 0.0));
+        assert_eq!(s.speed_reference, c.ramp_step);
+        assert!(s.ramping);
+        s.speed_target = 0.5 * c.ramp_step;
+        s.update(c, &block_inputs(&d, 0.0, 0.0));
+        assert_eq!(s.speed_reference, 0.5 * c.ramp_step);
+    }
+
+    #[test]
+    fn the_regeneration_limit_bounds_braking_near_zero_frequency() {
+        let mut cfg = crate::DriveConfig::paper_defaults();
+        cfg.regen_min_frequency = 2.0 * core::f32::consts::PI * 1.5;
+        let d = crate::design::DriveDesign::new(cfg).unwrap();
+        let c = &d.speed_loop;
+        let w_min = c.regen_min_frequency / d.pole_pairs; // rad/s mechanical
+        let target = 0.5 * w_min;
+        let run = |speed: f32, limit: bool| {
+            let mut s = SpeedLoop::<f32>::new();
+            s.speed_target = target;
+            s.speed_reference = target;
+            let x = SpeedLoopInputs {
+                regeneration_limit: limit,
+                ..block_inputs(&d, speed, 0.0)
+            };
+            s.update(c, &x)
+        };
+        // turning forward below w_min, a speed error that asks for braking gets no
+        // braking current (w_s stays on the rotor's side of zero)
+        assert_eq!(run(0.8 * w_min, true), 0.0);
+        // above it at most (p |Omega| - w_min) lambda_ref / R_R
+        let i = run(1.5 * w_min, true);
+        let bound = c.regen_current_per_frequency * (0.5 * c.regen_min_frequency);
+        assert!(i < 0.0 && -i <= bound * 1.0001, "{i} {bound}");
+        // without the limit the same errors brake harder
+        assert!(run(0.8 * w_min, false) < 0.0);
+        assert!(run(1.5 * w_min, false) < i);
+        // motoring is not limited
+        assert!(run(0.0, true) > 0.0);
+    }
 }

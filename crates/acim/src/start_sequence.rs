@@ -251,3 +251,113 @@ impl<N: Num> StartSequence<N> {
         Ok(out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::design::{DriveCoeffs, DriveConfig, DriveDesign};
+
+    fn coeffs(flying: bool, inverter: bool, identify_rs: bool) -> DriveCoeffs {
+        let mut cfg = DriveConfig::paper_defaults();
+        cfg.flying_start = flying;
+        cfg.inverter_identification = inverter;
+        cfg.rs_standstill_identification = identify_rs;
+        DriveCoeffs::si(&DriveDesign::new(cfg).unwrap())
+    }
+
+    fn config(c: &DriveCoeffs) -> StartSequenceConfig<'_, f32> {
+        StartSequenceConfig {
+            magnetizing: &c.magnetizing,
+            inverter_test: &c.inverter_test,
+            gain_calibration: &c.gain_calibration,
+            preset_rs: c.rs.adapt,
+            flux_current: c.i_sd_ref,
+            referred_rotor_resistance: c.referred_rotor_resistance,
+            inv_rotor_time_constant: c.inv_rotor_time_constant,
+        }
+    }
+
+    fn at_rest(c: &DriveCoeffs, flux_settled: bool) -> StartInputs<f32> {
+        StartInputs {
+            applied_voltage: Dq { d: 0.0, q: 0.0 },
+            inv_dc_bus: 1.0 / 325.0,
+            current: Dq {
+                d: c.i_sd_ref,
+                q: 0.0,
+            },
+            stator_resistance: c.rs_initial,
+            rotor_flux: 0.0,
+            flux_settled,
+            filtered_residual: 1.0,
+        }
+    }
+
+    #[test]
+    fn without_tests_it_hands_over_once_the_flux_has_settled() {
+        let c = coeffs(false, false, false);
+        let cfg = config(&c);
+        let mut s = StartSequence::<f32>::default();
+        assert_eq!(s.phase(&cfg), StartPhase::Settling);
+        for k in 1..=10 {
+            assert_eq!(s.count(), k);
+            let out = s.update(&cfg, &at_rest(&c, false)).unwrap();
+            assert!(!out.magnetized && out.caught.is_none() && out.rs_preset.is_none());
+            assert_eq!(out.i_sd_ref, c.i_sd_ref);
+        }
+        s.count();
+        assert!(s.update(&cfg, &at_rest(&c, true)).unwrap().magnetized);
+        s.reset();
+        assert_eq!(s.count(), 1);
+    }
+
+    #[test]
+    fn the_standstill_identification_waits_for_a_settled_residual() {
+        let c = coeffs(false, false, true);
+        let cfg = config(&c);
+        let mut s = StartSequence::<f32>::default();
+        // an unsettled residual holds the hand-over (until the timeout)
+        for _ in 0..c.magnetizing.rs_settle_steps + 5 {
+            s.count();
+            assert!(!s.update(&cfg, &at_rest(&c, true)).unwrap().magnetized);
+        }
+        let settled = StartInputs {
+            filtered_residual: 0.0,
+            ..at_rest(&c, true)
+        };
+        let mut steps = 0;
+        loop {
+            s.count();
+            steps += 1;
+            if s.update(&cfg, &settled).unwrap().magnetized {
+                break;
+            }
+            assert!(steps <= c.magnetizing.rs_settle_steps + 1);
+        }
+        assert_eq!(steps, c.magnetizing.rs_settle_steps + 1);
+    }
+
+    #[test]
+    fn the_search_comes_first_and_the_inverter_test_sets_the_flux_current() {
+        let c = coeffs(true, true, false);
+        let cfg = config(&c);
+        let mut s = StartSequence::<f32>::default();
+        s.inverter.restart(&c.inverter_test);
+        assert_eq!(s.phase(&cfg), StartPhase::SpeedSearch);
+        let mut levels = false;
+        let mut handed = false;
+        for _ in 0..20_000 {
+            s.count();
+            let out = s.update(&cfg, &at_rest(&c, true)).unwrap();
+            if s.phase(&cfg) == StartPhase::InverterTest {
+                levels |= out.i_sd_ref < c.i_sd_ref;
+            }
+            if out.magnetized {
+                handed = true;
+                break;
+            }
+        }
+        assert!(levels, "the inverter test held a lower level");
+        assert!(handed, "magnetized once the search and the test are done");
+        assert_eq!(s.phase(&cfg), StartPhase::Settling);
+    }
+}

@@ -75,29 +75,41 @@ pub fn pi(cfg: &PiConfig, error_base: f32, output_base: f32) -> Option<PiConfig<
     })
 }
 
-/// The speed loop: the PI from speed to current, the ramp's step (speed) and the load
-/// estimate (torque) to current.
-pub fn speed_loop(cfg: &SpeedLoopConfig, b: &PerUnitBases) -> Option<SpeedLoopConfig<Q24>> {
-    Some(SpeedLoopConfig {
-        pi: pi(&cfg.pi, b.speed, b.current)?,
+/// The speed loop: the PI from speed to current, the ramp's step (speed), the load
+/// estimate (torque) to current, and the reference's limits; fails naming the setting
+/// each depends on.
+pub fn speed_loop(d: &DriveDesign, b: &PerUnitBases) -> Result<SpeedLoopConfig<Q24>, ConfigError> {
+    let cfg = &d.speed_loop;
+    let bandwidth = || not_representable("speed_bandwidth");
+    Ok(SpeedLoopConfig {
+        pi: pi(&cfg.pi, b.speed, b.current).ok_or_else(bandwidth)?,
         acceleration_feedforward: Gain::from_f32(
             cfg.acceleration_feedforward * b.speed / b.current,
-        )?,
-        friction_feedforward: Gain::from_f32(cfg.friction_feedforward * b.speed / b.current)?,
-        load_feedforward: Gain::from_f32(cfg.load_feedforward * b.torque / b.current)?,
+        )
+        .ok_or_else(bandwidth)?,
+        friction_feedforward: Gain::from_f32(cfg.friction_feedforward * b.speed / b.current)
+            .ok_or_else(bandwidth)?,
+        load_feedforward: Gain::from_f32(cfg.load_feedforward * b.torque / b.current)
+            .ok_or_else(bandwidth)?,
         feedforward: cfg.feedforward,
         ramp_step: Q24(to_q24(cfg.ramp_step / b.speed)),
-        speed_per_volt: Gain::from_f32(cfg.speed_per_volt * b.voltage / b.speed)?,
-        regen_min_frequency: Q24(to_q24(cfg.regen_min_frequency / b.frequency)),
-        regen_current_per_frequency: Gain::from_f32(
-            cfg.regen_current_per_frequency * b.frequency / b.current,
+        // 1/(p lambda_ref) in the order the design has always converted it
+        speed_per_volt: gain(
+            b.voltage / (d.pole_pairs * d.flux_reference * b.speed),
+            "flux_current",
         )?,
-        far_side_torque_per_frequency: Gain::from_f32(
+        regen_min_frequency: Q24(to_q24(cfg.regen_min_frequency / b.frequency)),
+        regen_current_per_frequency: gain(
+            cfg.regen_current_per_frequency * b.frequency / b.current,
+            "regen_min_frequency",
+        )?,
+        far_side_torque_per_frequency: gain(
             cfg.far_side_torque_per_frequency * b.frequency / b.torque,
+            "far_side_gain",
         )?,
         far_side_enter: Q24(to_q24(cfg.far_side_enter / b.frequency)),
         far_side_leave: Q24(to_q24(cfg.far_side_leave / b.frequency)),
-        hold_band: Q24(to_q24(cfg.hold_band / b.speed)),
+        hold_band: pu(cfg.hold_band, b.speed, "max_speed")?,
         report_steps: cfg.report_steps,
     })
 }
@@ -332,29 +344,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             pi_q: pi_current,
             overmodulation_reserve_steps: d.current_loop.overmodulation_reserve_steps,
         },
-        // the reference's limits with the field each depends on named in its error (and
-        // 1/(p lambda_ref) in the order the design has always converted it)
-        speed_loop: SpeedLoopConfig {
-            ramp_step: Q24(to_q24(d.speed_loop.ramp_step / b.speed)),
-            speed_per_volt: gain(
-                b.voltage / (pp * d.flux_reference * b.speed),
-                "flux_current",
-            )?,
-            regen_min_frequency: Q24(to_q24(d.speed_loop.regen_min_frequency / b.frequency)),
-            regen_current_per_frequency: gain(
-                d.speed_loop.regen_current_per_frequency * b.frequency / b.current,
-                "regen_min_frequency",
-            )?,
-            far_side_torque_per_frequency: gain(
-                d.speed_loop.far_side_torque_per_frequency * b.frequency / b.torque,
-                "far_side_gain",
-            )?,
-            far_side_enter: Q24(to_q24(d.speed_loop.far_side_enter / b.frequency)),
-            far_side_leave: Q24(to_q24(d.speed_loop.far_side_leave / b.frequency)),
-            hold_band: pu(d.speed_loop.hold_band, b.speed, "max_speed")?,
-            report_steps: d.speed_loop.report_steps,
-            ..speed_loop(&d.speed_loop, b).ok_or(missing("speed_bandwidth"))?
-        },
+        speed_loop: speed_loop(d, b)?,
         thermal: ThermalConfig {
             heat_gain: gain(
                 d.thermal.heat_gain * b.current * b.current,
