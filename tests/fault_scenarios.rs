@@ -133,16 +133,24 @@ fn software_only(name: &str) -> acim_sim::scenario::Scenario {
 
 #[test]
 fn stuck_channel_with_two_shunts_trips_within_30_ms() {
-    // the drive's software alone (the true current reaches 7.8 A)
+    // the sensor check finds the still channel within two of its 1.6 ms windows, with
+    // or without the hardware comparator
     check_scenario(
         &software_only("fault-sensor-stuck"),
-        "LossOfControl",
+        "CurrentSensor",
         3.0,
-        0.03,
+        0.0032,
     );
-    // with the hardware comparator the true current crosses the trip level first
-    check("fault-sensor-stuck", "HardwareBreak", 3.0, 0.03);
+    check("fault-sensor-stuck", "CurrentSensor", 3.0, 0.0032);
     check_safe("fault-sensor-stuck");
+    // without it the drive's other checks alone (the true current reaches 7.8 A)
+    let mut sc = software_only("fault-sensor-stuck");
+    sc.drive.sensor_check = false;
+    check_scenario(&sc, "LossOfControl", 3.0, 0.03);
+    // and with the comparator the true current crosses the trip level first
+    let mut sc = builtins::get("fault-sensor-stuck").unwrap();
+    sc.drive.sensor_check = false;
+    check_scenario(&sc, "HardwareBreak", 3.0, 0.03);
 }
 
 #[test]
@@ -153,26 +161,32 @@ fn stuck_channel_with_three_shunts_trips_on_the_current_sum() {
 
 #[test]
 fn dead_current_sensing_trips_within_10_ms() {
+    // the sensor check: every channel still within two of its 1.6 ms windows
     check_scenario(
         &software_only("fault-sensors-zero"),
-        "NoCurrentResponse",
+        "CurrentSensor",
         3.0,
-        0.01,
+        0.0032,
     );
-    // with the hardware comparator the true current reaches the trip level first
-    check("fault-sensors-zero", "HardwareBreak", 3.0, 0.01);
+    check("fault-sensors-zero", "CurrentSensor", 3.0, 0.0032);
     check_safe("fault-sensors-zero");
+    // without it, the control monitor alone
+    let mut sc = software_only("fault-sensors-zero");
+    sc.drive.sensor_check = false;
+    check_scenario(&sc, "NoCurrentResponse", 3.0, 0.01);
+    // and with the hardware comparator the true current reaches the trip level first
+    let mut sc = builtins::get("fault-sensors-zero").unwrap();
+    sc.drive.sensor_check = false;
+    check_scenario(&sc, "HardwareBreak", 3.0, 0.01);
 }
 
 #[test]
 fn dead_current_sensing_at_power_up_does_not_hang_in_magnetizing() {
-    check(
-        "fault-sensors-zero-at-start",
-        "NoCurrentResponse",
-        0.0,
-        0.01,
-    );
+    check("fault-sensors-zero-at-start", "CurrentSensor", 0.0, 0.0032);
     check_safe("fault-sensors-zero-at-start");
+    let mut sc = builtins::get("fault-sensors-zero-at-start").unwrap();
+    sc.drive.sensor_check = false;
+    check_scenario(&sc, "NoCurrentResponse", 0.0, 0.01);
 }
 
 #[test]

@@ -160,8 +160,10 @@ fn the_hardware_comparator_is_configurable() {
         .validate()
         .unwrap_err();
     assert_eq!(e.field, "inverter.hardware_trip_delay_s");
-    // dead current sensing: the comparator fires at the trip level, and the run says so
-    let dead = acim_sim::builtins::get("fault-sensors-zero").unwrap();
+    // dead current sensing with the drive's sensor check off (it finds the dead channels
+    // first): the comparator fires at the trip level, and the run says so
+    let mut dead = acim_sim::builtins::get("fault-sensors-zero").unwrap();
+    dead.drive.sensor_check = false;
     let (r, m) = acim_sim::run_with_metrics(&dead).unwrap();
     let h = m.hardware_trip.expect("the comparator fired");
     assert_eq!(h.level_a, r.config.overcurrent_trip);

@@ -262,8 +262,12 @@ pub fn sensor_markdown(rows: &[(SensorCase, Metrics)]) -> String {
          (realistic sensors, the controller with the file's model, configured from its nameplate \
          and board), injected {SETTLE_S} s after the speed reference arrived (found by a run without \
          the fault). The software trip cannot see a current \
-         its sensors do not report; the plant's hardware comparator (at the software trip level, \
-         1.5 us delay, `acim::hardware_trip`) opens the switches. The peak true current and the \
+         its sensors do not report. Two protections find these faults, whichever comes first: \
+         the drive's sensor check (`CurrentSensor`: a channel standing still where the stator \
+         equation says the applied voltage moved it, judged every 1.6 ms, `acim::sensor_check`) \
+         and the plant's hardware comparator (`HardwareBreak`: at the software trip level, \
+         1.5 us delay, `acim::hardware_trip`), which opens the switches where the current loops \
+         drive the true current to the trip sooner. The peak true current and the \
          time above the trip are taken at every integration sub-step with the gates on, not only at \
          the samples; acceptance: above the trip for at most one PWM period \
          ({:.0} us, the longest period of the rows) while switching.\n\n\

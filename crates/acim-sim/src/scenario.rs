@@ -359,6 +359,9 @@ pub struct DriveSpec {
     /// Rotor-resistance adaptation at the start of speed ramps (item 7;
     /// `acim::DriveConfig::rr_adaptation`, off by default: it assumes the load holds).
     pub rr_adaptation: bool,
+    /// Dead or stuck current-sensor detection while switching (default true;
+    /// `acim::DriveConfig::sensor_check`).
+    pub sensor_check: bool,
 }
 
 impl Default for DriveSpec {
@@ -413,6 +416,7 @@ impl Default for DriveSpec {
             inverter_tracking: d.inverter_tracking,
             current_gain_calibration: d.current_gain_calibration,
             rr_adaptation: d.rr_adaptation,
+            sensor_check: d.sensor_check,
         }
     }
 }
@@ -817,7 +821,7 @@ pub struct Scenario {
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
     /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and the
     /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
-    /// `rr_adaptation`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
+    /// `rr_adaptation`, `sensor_check`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
     /// and `overload_time_s`; the plant's sensors take the board's full
     /// scales.
     pub nameplate: Option<NameplateSpec>,
@@ -1338,6 +1342,7 @@ impl Scenario {
         drive.inverter_tracking = d.inverter_tracking;
         drive.current_gain_calibration = d.current_gain_calibration;
         drive.rr_adaptation = d.rr_adaptation;
+        drive.sensor_check = d.sensor_check;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -1397,6 +1402,7 @@ impl Scenario {
             cfg.inverter_tracking = drive.inverter_tracking;
             cfg.current_gain_calibration = drive.current_gain_calibration;
             cfg.rr_adaptation = drive.rr_adaptation;
+            cfg.sensor_check = drive.sensor_check;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

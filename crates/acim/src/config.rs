@@ -256,6 +256,11 @@ pub struct DriveConfig {
     /// torque-current change plus a torque-per-inertia error times the model's speed
     /// change ([`crate::rr_estimator`]). Assumes the load torque holds over the window.
     pub rr_adaptation: bool,
+    /// Dead or stuck current-sensor detection while switching (on by default): each
+    /// channel's movement over a 1.6 ms window against the current the stator equation
+    /// predicts for the applied voltage ([`crate::sensor_check`]); a channel that does not
+    /// follow is a `CurrentSensor` fault.
+    pub sensor_check: bool,
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -317,6 +322,7 @@ impl DriveConfig {
             inverter_tracking: true,
             current_gain_calibration: true,
             rr_adaptation: false,
+            sensor_check: true,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)

@@ -16,6 +16,7 @@ use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
+use crate::sensor_check::{SensorCheckConfig, SensorCheckError};
 use crate::speed_loop::SpeedLoopConfig;
 use crate::speed_search::SpeedSearchDesign;
 use crate::svpwm::{linear_limit, SvpwmConfig};
@@ -213,6 +214,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub gain_calibration: GainCalibrationConfig<N>,
     /// The rotor-resistance adaptation ([`DriveConfig::rr_adaptation`]).
     pub rr: RrEstimatorConfig<N>,
+    /// Dead or stuck current sensors ([`DriveConfig::sensor_check`]).
+    pub sensor_check: SensorCheckConfig<N>,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -275,6 +278,8 @@ pub struct DriveDesign {
     pub gain_calibration: GainCalibrationConfig,
     /// The rotor-resistance adaptation.
     pub rr_estimator: RrEstimatorConfig,
+    /// The dead or stuck current-sensor check.
+    pub sensor_check: SensorCheckConfig,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: f32,
     /// Orientation correction.
@@ -561,6 +566,17 @@ impl DriveDesign {
                 m.referred_rotor_resistance(),
                 i_d,
             ),
+            sensor_check: SensorCheckConfig {
+                enabled: cfg.sensor_check,
+                ..SensorCheckConfig::new(&m, ts, i_max).map_err(|e| ConfigError::Invalid {
+                    field: match e {
+                        SensorCheckError::ControlPeriod => "control_period",
+                        SensorCheckError::CurrentLimit => "current_limit",
+                        SensorCheckError::Inductance => "machine",
+                    },
+                    rule: "the current-sensor check needs it positive and finite",
+                })?
+            },
             speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
@@ -719,6 +735,7 @@ impl DriveCoeffs<f32> {
             inverter_tracker: d.inverter_tracker,
             gain_calibration: d.gain_calibration,
             rr: d.rr_estimator,
+            sensor_check: d.sensor_check,
         }
     }
 }

@@ -61,6 +61,7 @@ use crate::offset_tracker::OffsetTracker;
 use crate::orientation;
 use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
+use crate::sensor_check::{SensorCheck, SensorCheckInputs};
 use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
 use crate::start_sequence::{StartInputs, StartSequence, StartSequenceConfig};
 pub use crate::supervisor::{
@@ -304,6 +305,15 @@ pub struct Previous<N = f32> {
     pub q_saturated: bool,
 }
 
+/// The checks that judge the control without trusting the estimates.
+#[derive(Clone, Copy, Debug, Default)]
+struct Monitors<N: Num> {
+    /// Current error, model residual, current sum, offset drift ([`ControlMonitor`]).
+    control: ControlMonitor<N>,
+    /// Dead or stuck current channels ([`crate::sensor_check`]).
+    sensors: SensorCheck<N>,
+}
+
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
 /// filter of the standstill Rs identification.
 #[derive(Clone, Debug)]
@@ -355,7 +365,7 @@ pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = 
     sincos: S,
     /// z^-1 ([`Previous`]).
     prev: Previous<N>,
-    monitor: ControlMonitor<N>,
+    monitor: Monitors<N>,
     offsets: OffsetMonitor<N>,
     /// The offsets subtracted from the samples since the last start.
     offset_compensation: [N; 3],
@@ -445,7 +455,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q_integral: N::ZERO,
                 q_saturated: false,
             },
-            monitor: ControlMonitor::new(),
+            monitor: Monitors::default(),
             offsets: OffsetMonitor::new(),
             offset_compensation: [N::ZERO; 3],
             off_steps: u32::MAX,
@@ -709,7 +719,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
         self.start.reset();
-        self.monitor = ControlMonitor::new();
+        self.monitor = Monitors::default();
         self.open_loop = OpenLoop::default();
         self.prev = self.latch(Applied::default());
     }
@@ -809,7 +819,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
-        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v) {
+        // the sensor check judges every switching period but those of a flying start's
+        // speed search, whose rotor speed the observer does not yet follow
+        let switching = !(magnetizing && self.start.flying());
+        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v, switching) {
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -897,13 +910,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         e: &Estimate<N>,
         i_ref: Dq<N>,
         v: Dq<N>,
+        switching: bool,
     ) -> Option<FaultReason> {
         let residual = Dq {
             d: self.cur.d().integral(),
             q: self.cur.q().integral(),
         };
         let voltage_limited = self.cur.d().saturated() || self.cur.q().saturated();
-        let found = self.monitor.check(
+        let found = self.monitor.control.check(
             &self.coeffs.limits,
             i_ref,
             m.i_dq,
@@ -913,15 +927,51 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             e.stator_frequency,
             voltage_limited,
         );
-        match found {
-            // the tracked drift at offset_limit: as beyond it at the start
-            None if self.offset_tracker.at_bound => Some(FaultReason::CurrentSensor),
-            None => {
-                self.monitor
-                    .check_offset_drift(&self.coeffs.limits, m.i_ab, e.stator_frequency)
-            }
-            some => some,
+        if found.is_some() {
+            return found;
         }
+        // the tracked drift at offset_limit: as beyond it at the start
+        if self.offset_tracker.at_bound {
+            return Some(FaultReason::CurrentSensor);
+        }
+        if let Some(reason) = self.check_sensors(m, e, switching) {
+            return Some(reason);
+        }
+        self.monitor
+            .control
+            .check_offset_drift(&self.coeffs.limits, m.i_ab, e.stator_frequency)
+    }
+
+    /// Dead or stuck current channels ([`crate::sensor_check`]): each channel's movement
+    /// against the current the stator equation predicts for the voltage applied over the
+    /// past period. The check rebuilds the channels from the corrected alpha-beta current
+    /// (the tracked drift out, exactly as the frame's current sees them).
+    #[inline(always)]
+    fn check_sensors(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        switching: bool,
+    ) -> Option<FaultReason> {
+        let cfg = &self.coeffs.sensor_check;
+        if !cfg.enabled {
+            return None;
+        }
+        self.monitor.sensors.update(
+            cfg,
+            &SensorCheckInputs {
+                current_ab: m.i_ab,
+                current_sum: m.current_sum,
+                three_channels: self.coeffs.limits.current_sensing == CurrentSensing::ThreePhase,
+                current: m.i_dq,
+                voltage: m.applied.v_dq,
+                stator_frequency: self.prev.stator_frequency,
+                rotor_speed: e.observer.speed,
+                rotor_flux: e.rotor_flux,
+                angle: m.sc,
+                switching,
+            },
+        )
     }
 
     /// Sense stage: Clarke (two or three phases), the tracked offset drift subtracted
@@ -1493,8 +1543,8 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             stator_frequency: e.stator_frequency,
             voltage_saturated: saturated,
             speed_target_limited: self.refs.speed.target_limited,
-            current_error: self.monitor.current_error,
-            model_residual: self.monitor.model_residual,
+            current_error: self.monitor.control.current_error,
+            model_residual: self.monitor.control.model_residual,
             search_speed: self.start.search.measured_speed,
             zero_speed_held: zero_held,
         };
@@ -1870,7 +1920,11 @@ mod tests {
                 });
             }
         };
-        let mut d = drive();
+        // the samples read 0 A while switching: every channel dead, which the sensor
+        // check reports within two windows (its own tests); the wait is tested here
+        let mut cfg = DriveConfig::paper_defaults();
+        cfg.sensor_check = false;
+        let mut d = powered(Drive::new(cfg).unwrap());
         assert_eq!(d.start(), Ok(()));
         idle(&mut d, 10);
         assert_eq!(d.state(), DriveState::Magnetizing);

@@ -25,6 +25,7 @@ use crate::offset_tracker::OffsetTrackerConfig;
 use crate::pi::PiConfig;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
+use crate::sensor_check::SensorCheckConfig;
 use crate::speed_loop::SpeedLoopConfig;
 use crate::svpwm::SvpwmConfig;
 use crate::thermal::ThermalConfig;
@@ -255,6 +256,36 @@ pub fn inverter_tracker(
         limit: Q24(to_q24(cfg.limit)),
         holdoff_steps: cfg.holdoff_steps,
         trust_steps: cfg.trust_steps,
+    })
+}
+
+/// The current-sensor check: its gains rescaled by the bases of what they multiply.
+pub fn sensor_check(cfg: &SensorCheckConfig, b: &PerUnitBases) -> Option<SensorCheckConfig<Q24>> {
+    let change_threshold = cfg.change_threshold / b.current;
+    if !(is_finite(change_threshold) && change_threshold.abs() <= MAX_CONFIGURED_PU) {
+        return None;
+    }
+    Some(SensorCheckConfig {
+        // volt -> current increment
+        ts_over_sigma_ls: Gain::from_f32(cfg.ts_over_sigma_ls * b.voltage / b.current)?,
+        // current -> voltage
+        r_sigma: Gain::from_f32(cfg.r_sigma * b.current / b.voltage)?,
+        // (frequency x current) -> voltage
+        sigma_ls: Gain::from_f32(cfg.sigma_ls * b.frequency * b.current / b.voltage)?,
+        // flux -> voltage
+        rr_over_lm: Gain::from_f32(cfg.rr_over_lm * b.flux / b.voltage)?,
+        // (mechanical speed x flux) -> voltage
+        back_emf: Gain::from_f32(cfg.back_emf * b.speed * b.flux / b.voltage)?,
+        window_gain: Gain::from_f32(cfg.window_gain)?,
+        enabled: cfg.enabled,
+        window: cfg.window,
+        change_threshold: Q24(to_q24(change_threshold)),
+        // dimensionless
+        response_ratio: Gain::from_f32(cfg.response_ratio)?,
+        astray_ratio: Gain::from_f32(cfg.astray_ratio)?,
+        still_threshold: Q24(to_q24(cfg.still_threshold / b.current)),
+        bias_gain: Gain::from_f32(cfg.bias_gain)?,
+        resistance_allowance: Gain::from_f32(cfg.resistance_allowance)?,
     })
 }
 
@@ -494,6 +525,7 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             ),
         },
         rr: rr_estimator(&d.rr_estimator, b).ok_or(missing("machine.rotor_resistance"))?,
+        sensor_check: sensor_check(&d.sensor_check, b).ok_or(missing("machine"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
         inverter_test: InverterTestDesign {
