@@ -362,6 +362,8 @@ pub struct DriveSpec {
     /// Dead or stuck current-sensor detection while switching (default true;
     /// `acim::DriveConfig::sensor_check`).
     pub sensor_check: bool,
+    /// The limit-cycle check (default true; `acim::DriveConfig::speed_oscillation_check`).
+    pub speed_oscillation_check: bool,
 }
 
 impl Default for DriveSpec {
@@ -417,6 +419,7 @@ impl Default for DriveSpec {
             current_gain_calibration: d.current_gain_calibration,
             rr_adaptation: d.rr_adaptation,
             sensor_check: d.sensor_check,
+            speed_oscillation_check: d.speed_oscillation_check,
         }
     }
 }
@@ -821,7 +824,7 @@ pub struct Scenario {
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
     /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and the
     /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
-    /// `rr_adaptation`, `sensor_check`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
+    /// `rr_adaptation`, `sensor_check`, `speed_oscillation_check`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
     /// and `overload_time_s`; the plant's sensors take the board's full
     /// scales.
     pub nameplate: Option<NameplateSpec>,
@@ -1343,6 +1346,7 @@ impl Scenario {
         drive.current_gain_calibration = d.current_gain_calibration;
         drive.rr_adaptation = d.rr_adaptation;
         drive.sensor_check = d.sensor_check;
+        drive.speed_oscillation_check = d.speed_oscillation_check;
         drive.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
@@ -1403,6 +1407,7 @@ impl Scenario {
             cfg.current_gain_calibration = drive.current_gain_calibration;
             cfg.rr_adaptation = drive.rr_adaptation;
             cfg.sensor_check = drive.sensor_check;
+            cfg.speed_oscillation_check = drive.speed_oscillation_check;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

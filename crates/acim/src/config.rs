@@ -261,6 +261,10 @@ pub struct DriveConfig {
     /// predicts for the applied voltage ([`crate::sensor_check`]); a channel that does not
     /// follow is a `CurrentSensor` fault.
     pub sensor_check: bool,
+    /// The limit-cycle check (on by default): the speed estimate swinging around a steady
+    /// reference by more than 2 % of `max_speed` peak to peak in three 1 s blocks in a
+    /// row is a `SpeedOscillation` fault ([`crate::supervisor::SpeedOscillation`]).
+    pub speed_oscillation_check: bool,
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
     pub zero_speed_policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
@@ -323,6 +327,7 @@ impl DriveConfig {
             current_gain_calibration: true,
             rr_adaptation: false,
             sensor_check: true,
+            speed_oscillation_check: true,
             zero_speed_policy: ZeroSpeedPolicy::Stop,
             zero_speed_dwell: 0.5,
             // the orientation correction's fade-in end (doc above)

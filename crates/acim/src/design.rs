@@ -112,6 +112,22 @@ pub const RUNNING_OFFSET_FILTER_TIME: f32 = 2.0;
 /// A channel whose idle offset exceeds this fraction of the over-current trip is a
 /// sensor fault (2 % of an 8 A trip: 0.16 A, some 30 LSB of a 12-bit +/-10 A channel).
 pub const OFFSET_FRACTION: f32 = 0.02;
+/// The speed-oscillation check's block, s ([`crate::supervisor::SpeedOscillation`]): long
+/// against the speed loop's settling (a load step's dip recovers within one block) and
+/// the slowest limit cycle seen (1-4 Hz at 60-120 rpm).
+pub const OSCILLATION_BLOCK_TIME: f32 = 1.0;
+/// The speed-oscillation check's low-pass time constant on the estimate's error, s (the
+/// simulator's verdict averages over 10 ms too).
+pub const OSCILLATION_FILTER_TIME: f32 = 0.01;
+/// The speed estimate's largest swing around a steady reference, fraction of `max_speed`
+/// (0.02: 40 rpm for the paper drive's 2000 rpm), after the 10 ms filter. In steady
+/// operation the filtered estimate swings a few rpm (the full-order observer's noisier
+/// one some 20); the limit cycles of a drifting current offset at 60-120 rpm swing it
+/// 50-165 rpm while the true speed swings 20-100 rpm.
+pub const OSCILLATION_FRACTION: f32 = 0.02;
+/// The swing that stands for "off", fraction of `max_speed` (beyond any swing the
+/// over-speed trip lets happen; representable in the fixed-point bases).
+const MAX_CONFIGURED_SWING: f32 = 1.9;
 /// Magnetizing gives up after this many rotor time constants beyond the standstill Rs
 /// identification's own timeout (the flux settles in about 3).
 pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
@@ -636,6 +652,14 @@ impl DriveDesign {
                 // rounded: 0.1 s / 0.2 ms is 499.99.. in f32
                 offset_settle_steps: ((OFFSET_MEASUREMENT_TIME / ts + 0.5) as u32).max(1),
                 offset_skip_steps: ((OFFSET_SWITCH_OFF_SKIP_TIME / ts + 0.5) as u32).max(1),
+                oscillation_steps: ((OSCILLATION_BLOCK_TIME / ts + 0.5) as u32).max(1),
+                oscillation_filter: (ts / OSCILLATION_FILTER_TIME).min(1.0),
+                // off: a swing no speed reaches (the over-speed trip is at max_speed)
+                oscillation_swing: if cfg.speed_oscillation_check {
+                    OSCILLATION_FRACTION * cfg.max_speed
+                } else {
+                    MAX_CONFIGURED_SWING * cfg.max_speed
+                },
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
                 running_offset_min_frequency: 4.0 * i_max

@@ -66,7 +66,7 @@ use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
 use crate::start_sequence::{StartInputs, StartSequence, StartSequenceConfig};
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
-    Supervisor,
+    SpeedOscillation, Supervisor,
 };
 use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
 use crate::thermal::ThermalModel;
@@ -312,6 +312,8 @@ struct Monitors<N: Num> {
     control: ControlMonitor<N>,
     /// Dead or stuck current channels ([`crate::sensor_check`]).
     sensors: SensorCheck<N>,
+    /// A limit cycle around a steady reference ([`SpeedOscillation`]).
+    oscillation: SpeedOscillation<N>,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
@@ -819,10 +821,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let v = self.current_control(&m, &e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
-        // the sensor check judges every switching period but those of a flying start's
-        // speed search, whose rotor speed the observer does not yet follow
-        let switching = !(magnetizing && self.start.flying());
-        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v, switching) {
+        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v, magnetizing) {
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -910,7 +909,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         e: &Estimate<N>,
         i_ref: Dq<N>,
         v: Dq<N>,
-        switching: bool,
+        magnetizing: bool,
     ) -> Option<FaultReason> {
         let residual = Dq {
             d: self.cur.d().integral(),
@@ -934,7 +933,19 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         if self.offset_tracker.at_bound {
             return Some(FaultReason::CurrentSensor);
         }
+        // the sensor check judges every switching period but those of a flying start's
+        // speed search, whose rotor speed the observer does not yet follow
+        let switching = !(magnetizing && self.start.flying());
         if let Some(reason) = self.check_sensors(m, e, switching) {
+            return Some(reason);
+        }
+        // a limit cycle: the estimate swinging around a steady reference
+        let speed = &self.refs.speed;
+        if let Some(reason) = self.monitor.oscillation.update(
+            &self.coeffs.limits,
+            e.observer.speed - speed.speed_reference,
+            !magnetizing && !speed.ramping,
+        ) {
             return Some(reason);
         }
         self.monitor

@@ -73,6 +73,14 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// Idle periods after a switch-off whose samples are not taken
     /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`](crate::design::OFFSET_SWITCH_OFF_SKIP_TIME), >= 1).
     pub offset_skip_steps: u32,
+    /// The speed-oscillation check's block, steps ([`OSCILLATION_BLOCK_TIME`](crate::design::OSCILLATION_BLOCK_TIME)).
+    pub oscillation_steps: u32,
+    /// Its low-pass gain on the speed estimate's error, Ts /
+    /// [`OSCILLATION_FILTER_TIME`](crate::design::OSCILLATION_FILTER_TIME).
+    pub oscillation_filter: N::Gain,
+    /// Largest swing (peak to peak) of the speed estimate's error over a block with the
+    /// reference steady, rad/s: [`OSCILLATION_FRACTION`](crate::design::OSCILLATION_FRACTION) of `max_speed`.
+    pub oscillation_swing: N,
     /// Largest idle offset of a channel, A: [`OFFSET_FRACTION`](crate::design::OFFSET_FRACTION) of the trip (also the
     /// largest DC component of the running alpha-beta current).
     pub offset_limit: N,
@@ -155,7 +163,9 @@ pub enum FaultReason {
     /// The current loops need a voltage the machine model does not explain (the speed or
     /// flux estimate is wrong: runaway under an overhauling load, lost orientation).
     LossOfControl,
-    /// Three-shunt sensing: the phase currents do not sum to zero.
+    /// A current channel fails: one that stands still where the applied voltage moves
+    /// the current (dead or stuck, [`crate::sensor_check`]), three phase currents that do
+    /// not sum to zero, or an offset beyond its limit.
     CurrentSensor,
     /// Torque at its limit with the speed far from its reference for longer than the
     /// speed loop settles: a load beyond the drive's torque capability (or control lost
@@ -166,6 +176,71 @@ pub enum FaultReason {
     /// The applied voltage drives far less measured current than the machine's largest
     /// impedance allows: current sensing dead (all channels at zero) or motor disconnected.
     NoCurrentResponse,
+    /// The speed estimate swings around a steady reference block after block: a limit
+    /// cycle (a current-sensor offset the tracker does not hold, a model error at low
+    /// speed), which the other checks see only as a moderate error ([`SpeedOscillation`]).
+    SpeedOscillation,
+}
+
+/// Consecutive oscillating blocks that fault ([`SpeedOscillation`]).
+pub const OSCILLATION_BLOCKS: u32 = 3;
+
+/// A limit cycle around a steady reference: the speed estimate's error (Omega_hat -
+/// Omega*), low-pass filtered over `oscillation_filter` (10 ms: an observer's noise of
+/// +/-20 rpm out, a 1-6 Hz cycle kept), is watched over blocks of `oscillation_steps` periods; a block whose swing
+/// (peak to peak) exceeds `oscillation_swing` counts, [`OSCILLATION_BLOCKS`] such blocks
+/// in a row fault [`FaultReason::SpeedOscillation`]. A block with the reference moving
+/// (a ramp) starts the count again: a load step's transient lasts one block, a limit
+/// cycle all of them. Detection within `OSCILLATION_BLOCKS + 1` blocks of the cycle's
+/// start (4 s by default).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SpeedOscillation<N: Num = f32> {
+    /// The error, low-pass filtered (the estimate's noise out), rad/s.
+    filtered: N,
+    steps: u32,
+    low: N,
+    high: N,
+    blocks: u32,
+}
+
+impl<N: Num> SpeedOscillation<N> {
+    /// One period: `error` = Omega_hat - Omega* (rad/s); `steady` false while the
+    /// reference ramps (or the drive magnetizes), which restarts the count.
+    pub fn update(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        error: N,
+        steady: bool,
+    ) -> Option<FaultReason> {
+        if !steady {
+            *self = Self {
+                filtered: error,
+                ..Self::default()
+            };
+            return None;
+        }
+        self.filtered = self.filtered + N::gain(limits.oscillation_filter, error - self.filtered);
+        let e = self.filtered;
+        if self.steps == 0 {
+            self.low = e;
+            self.high = e;
+        } else if e < self.low {
+            self.low = e;
+        } else if e > self.high {
+            self.high = e;
+        }
+        self.steps += 1;
+        if self.steps < limits.oscillation_steps {
+            return None;
+        }
+        self.steps = 0;
+        if self.high - self.low > limits.oscillation_swing {
+            self.blocks += 1;
+        } else {
+            self.blocks = 0;
+        }
+        (self.blocks >= OSCILLATION_BLOCKS).then_some(FaultReason::SpeedOscillation)
+    }
 }
 
 /// Commands refused by the drive.
@@ -717,6 +792,45 @@ fn classify_bad_samples<N: Num>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn oscillation_limits() -> SupervisionLimits {
+        let mut l = crate::design::DriveDesign::new(crate::DriveConfig::paper_defaults())
+            .unwrap()
+            .limits;
+        // blocks of one period of the 5 Hz swing below
+        l.oscillation_steps = 1000;
+        l
+    }
+
+    /// A 40 rad/s (380 rpm) swing at 5 Hz around a steady reference faults after three
+    /// blocks; the same with the reference ramping, or a swing below the bound, never.
+    #[test]
+    fn a_sustained_speed_swing_is_a_limit_cycle() {
+        let l = oscillation_limits();
+        let swing = |amp: f32, k: u32| amp * (core::f32::consts::TAU * 5.0 * k as f32 * 2e-4).sin();
+        let mut o = SpeedOscillation::default();
+        let mut at = None;
+        for k in 0..10_000 {
+            if let Some(r) = o.update(&l, swing(20.0, k), true) {
+                at = Some((k, r));
+                break;
+            }
+        }
+        let (k, r) = at.expect("no fault");
+        assert_eq!(r, FaultReason::SpeedOscillation);
+        assert_eq!(k + 1, 3 * l.oscillation_steps, "three blocks");
+        let mut o = SpeedOscillation::default();
+        for k in 0..10_000 {
+            // ramping every other block: the count restarts
+            let steady = (k / 1000) % 2 == 0;
+            assert_eq!(o.update(&l, swing(20.0, k), steady), None);
+        }
+        let small = 0.4 * l.oscillation_swing;
+        let mut o = SpeedOscillation::default();
+        for k in 0..10_000 {
+            assert_eq!(o.update(&l, swing(small, k), true), None);
+        }
+    }
     use crate::design::{DriveConfig, DriveDesign};
 
     fn limits() -> SupervisionLimits<f32> {

@@ -41,8 +41,8 @@ impl FirmwareFault {
     }
 }
 
-/// Fault code published in telemetry: 0 none, 1..15 the drive's [`FaultReason`], 16..
-/// a [`FirmwareFault`].
+/// Fault code published in telemetry: 0 none, 1..15 and 20 the drive's [`FaultReason`],
+/// 16..19 a [`FirmwareFault`].
 pub struct FaultCode;
 
 impl FaultCode {
@@ -73,6 +73,7 @@ impl FaultCode {
             Some(FaultReason::MagnetizingTimeout) => 13,
             Some(FaultReason::NoCurrentResponse) => 14,
             Some(FaultReason::Overload) => 15,
+            Some(FaultReason::SpeedOscillation) => 20,
         }
     }
 }

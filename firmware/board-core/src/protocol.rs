@@ -478,6 +478,7 @@ pub fn fault_name(code: u8) -> &'static str {
         17 => "DeadlineMissed (interrupt)",
         18 => "AdcSaturated",
         19 => "AdcSequence",
+        20 => "SpeedOscillation",
         _ => "?",
     }
 }
