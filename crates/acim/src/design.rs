@@ -125,9 +125,6 @@ pub const OSCILLATION_FILTER_TIME: f32 = 0.01;
 /// one some 20); the limit cycles of a drifting current offset at 60-120 rpm swing it
 /// 50-165 rpm while the true speed swings 20-100 rpm.
 pub const OSCILLATION_FRACTION: f32 = 0.02;
-/// The swing that stands for "off", fraction of `max_speed` (beyond any swing the
-/// over-speed trip lets happen; representable in the fixed-point bases).
-const MAX_CONFIGURED_SWING: f32 = 1.9;
 /// Magnetizing gives up after this many rotor time constants beyond the standstill Rs
 /// identification's own timeout (the flux settles in about 3).
 pub const MAGNETIZING_TIMEOUT_TAU_R: f32 = 10.0;
@@ -654,12 +651,8 @@ impl DriveDesign {
                 offset_skip_steps: ((OFFSET_SWITCH_OFF_SKIP_TIME / ts + 0.5) as u32).max(1),
                 oscillation_steps: ((OSCILLATION_BLOCK_TIME / ts + 0.5) as u32).max(1),
                 oscillation_filter: (ts / OSCILLATION_FILTER_TIME).min(1.0),
-                // off: a swing no speed reaches (the over-speed trip is at max_speed)
-                oscillation_swing: if cfg.speed_oscillation_check {
-                    OSCILLATION_FRACTION * cfg.max_speed
-                } else {
-                    MAX_CONFIGURED_SWING * cfg.max_speed
-                },
+                oscillation_check: cfg.speed_oscillation_check,
+                oscillation_swing: OSCILLATION_FRACTION * cfg.max_speed,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
                 running_offset_min_frequency: 4.0 * i_max

@@ -73,6 +73,8 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// Idle periods after a switch-off whose samples are not taken
     /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`](crate::design::OFFSET_SWITCH_OFF_SKIP_TIME), >= 1).
     pub offset_skip_steps: u32,
+    /// Whether the speed-oscillation check runs ([`DriveConfig::speed_oscillation_check`](crate::design::DriveConfig::speed_oscillation_check)).
+    pub oscillation_check: bool,
     /// The speed-oscillation check's block, steps ([`OSCILLATION_BLOCK_TIME`](crate::design::OSCILLATION_BLOCK_TIME)).
     pub oscillation_steps: u32,
     /// Its low-pass gain on the speed estimate's error, Ts /
@@ -205,14 +207,15 @@ pub struct SpeedOscillation<N: Num = f32> {
 
 impl<N: Num> SpeedOscillation<N> {
     /// One period: `error` = Omega_hat - Omega* (rad/s); `steady` false while the
-    /// reference ramps (or the drive magnetizes), which restarts the count.
+    /// reference ramps (or the drive magnetizes), which restarts the count. Never
+    /// reports with the check off.
     pub fn update(
         &mut self,
         limits: &SupervisionLimits<N>,
         error: N,
         steady: bool,
     ) -> Option<FaultReason> {
-        if !steady {
+        if !limits.oscillation_check || !steady {
             *self = Self {
                 filtered: error,
                 ..Self::default()
@@ -829,6 +832,15 @@ mod tests {
         let mut o = SpeedOscillation::default();
         for k in 0..10_000 {
             assert_eq!(o.update(&l, swing(small, k), true), None);
+        }
+        // switched off: the large swing never faults
+        let off = SupervisionLimits {
+            oscillation_check: false,
+            ..l
+        };
+        let mut o = SpeedOscillation::default();
+        for k in 0..10_000 {
+            assert_eq!(o.update(&off, swing(20.0, k), true), None);
         }
     }
     use crate::design::{DriveConfig, DriveDesign};

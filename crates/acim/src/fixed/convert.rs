@@ -472,10 +472,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             offset_skip_steps: d.limits.offset_skip_steps,
             oscillation_steps: d.limits.oscillation_steps,
             oscillation_filter: gain(d.limits.oscillation_filter, "control_period")?,
-            // at most 2 pu (the check off asks for 1.9 max_speed, beyond any swing)
-            oscillation_swing: Q24(to_q24(
-                (d.limits.oscillation_swing / b.speed).min(MAX_CONFIGURED_PU),
-            )),
+            oscillation_check: d.limits.oscillation_check,
+            oscillation_swing: pu(d.limits.oscillation_swing, b.speed, "max_speed")?,
             offset_limit: pu(d.limits.offset_limit, b.current, "overcurrent_trip")?,
             running_offset_filter: gain(d.limits.running_offset_filter, "control_period")?,
             running_offset_min_frequency: pu(
