@@ -17,6 +17,7 @@ still runs.
 """
 
 import argparse
+import concurrent.futures
 import csv
 import json
 import math
@@ -165,6 +166,8 @@ class Case:
         return "\n".join(out)
 
     def run_ours(self, sim, tmp, extra=()):
+        """Runs this case through our simulator in the directory `tmp` (its own per run: runs
+        go in parallel); returns the series and the run's wall-clock time in seconds."""
         path = Path(tmp) / f"{self.name}.toml"
         path.write_text(self.our_toml())
         cmd = [sim, "run", str(path), "--out", str(tmp), "-q"]
@@ -172,24 +175,30 @@ class Case:
             cmd += ["--set", s]
         t0 = time.perf_counter()
         p = subprocess.run(cmd, capture_output=True, text=True)
-        self.wall = time.perf_counter() - t0
+        wall = time.perf_counter() - t0
         csv_path = Path(tmp) / f"{self.name}.csv"
         if p.returncode != 0 or not csv_path.exists():
             raise RuntimeError(f"{' '.join(cmd)} failed ({p.returncode}):\n{p.stderr}{p.stdout}")
         t, w, we, ref, limited = [], [], [], [], []
         state = fault = ""
         fault_t = None
+        # the columns read by position (a DictReader per row took as long as the run)
         with open(csv_path, newline="") as f:
-            for row in csv.DictReader(f):
-                t.append(float(row["t_s"]))
-                w.append(float(row["speed_rpm"]))
-                we.append(float(row["speed_est_rpm"]))
-                ref.append(float(row["speed_ref_rpm"]))
-                state = row["state_name"]
-                if row["fault_reason"] and not fault:
-                    fault, fault_t = row["fault_reason"], t[-1]
-                limited.append(row["speed_target_limited"] not in ("", "0"))
-        return Series(t, w, we, running=(state == "running" and not fault), stop=fault or (state if state != "running" else ""), stop_t=fault_t, limited=limited, drive_ref=ref)
+            rows = csv.reader(f)
+            head = next(rows)
+            it, iw, iwe, iref, ist, ifa, ilim = (head.index(k) for k in (
+                "t_s", "speed_rpm", "speed_est_rpm", "speed_ref_rpm", "state_name",
+                "fault_reason", "speed_target_limited"))
+            for row in rows:
+                t.append(float(row[it]))
+                w.append(float(row[iw]))
+                we.append(float(row[iwe]))
+                ref.append(float(row[iref]))
+                state = row[ist]
+                if row[ifa] and not fault:
+                    fault, fault_t = row[ifa], t[-1]
+                limited.append(row[ilim] not in ("", "0"))
+        return Series(t, w, we, running=(state == "running" and not fault), stop=fault or (state if state != "running" else ""), stop_t=fault_t, limited=limited, drive_ref=ref), wall
 
     # -- motulator's side -------------------------------------------------------------
     def run_motulator(self):
@@ -606,10 +615,11 @@ def write_page(results, times, versions, ref_checks):
     )
     add("")
     add(
-        f"Run times on the machine that wrote this page, one simulation at a time: this drive "
+        f"Run times on the machine that wrote this page ({os.cpu_count()} cores): this drive "
         f"{times['n']} runs, {times['sim_s']:.0f} s simulated in {times['ours_sim']:.1f} s of wall-clock time "
-        f"(the CLI, CSV and plots included); motulator {times['n_motulator']} runs (a case that differs only "
-        f"in our settings reuses its run), {times['motulator_sim_s']:.0f} s simulated in "
+        f"summed over the runs (the CLI, CSV and plots included; our runs go {os.cpu_count()} at a time, so "
+        f"each shares the machine); motulator {times['n_motulator']} runs, one at a time (a case that differs "
+        f"only in our settings reuses its run), {times['motulator_sim_s']:.0f} s simulated in "
         f"{times['motulator']:.0f} s. Versions: {versions}."
     )
     add("")
@@ -949,16 +959,28 @@ def main():
     cache = json.loads(cache_path.read_text()) if (args.reuse and cache_path.exists()) else {}
     counted = set()
     with tempfile.TemporaryDirectory(prefix="acim-peer-") as tmp:
-        for c in cases:
+        # our runs (each case with the default observer and with the flux observer) are
+        # independent processes: they run as many at once as the machine has cores, each in
+        # its own directory, and are read back in the cases' order
+        def ours_timed(c, kind, extra):
+            d = Path(tmp) / kind
+            d.mkdir(exist_ok=True)
             t0 = time.perf_counter()
+            series, wall = c.run_ours(sim, d, extra)
+            return series, wall, time.perf_counter() - t0
+
+        pool = concurrent.futures.ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
+        runs = [(pool.submit(ours_timed, c, "ours", ()), pool.submit(ours_timed, c, "flux", FLUX_SETS))
+                for c in cases]
+        for c, (ours_run, flux_run) in zip(cases, runs):
             try:
-                ours = c.run_ours(sim, tmp)
+                ours, wall, total = ours_run.result()
             except RuntimeError as e:
                 problems.append(str(e))
                 print(f"{c.name}: our run failed", file=sys.stderr)
                 continue
-            times["ours"] += time.perf_counter() - t0
-            times["ours_sim"] += c.wall
+            times["ours"] += total
+            times["ours_sim"] += wall
             times["sim_s"] += c.duration
             times["n"] += 1
             mo_m = None
@@ -981,7 +1003,7 @@ def main():
             # the same case with our other speed observer, the reduced-order flux observer
             # (`drive.observer = "flux"`, which has no regeneration limit)
             try:
-                flux = c.run_ours(sim, tmp, FLUX_SETS)
+                flux = flux_run.result()[0]
             except RuntimeError as e:
                 problems.append(str(e))
                 print(f"{c.name}: our run with the flux observer failed", file=sys.stderr)
@@ -996,6 +1018,7 @@ def main():
             if c.name in FIGURE_CASES:
                 series[c.name] = (mo, ours, flux)
             print(f"{c.name:28} ours: {summary(ou_m)}   flux observer: {summary(fl_m)}" + ("" if mo_m is None else f"   motulator: {summary(mo_m)}"), flush=True)
+        pool.shutdown(wait=True, cancel_futures=True)
     print(
         f"our side: {times['n']} runs, {times['sim_s']:.0f} s simulated in {times['ours_sim']:.1f} s "
         f"({times['ours']:.1f} s with reading the CSVs)"
