@@ -161,21 +161,24 @@ MEMORY = [(0x0800_0000, FLASH_TOP - 0x0800_0000), (0x2000_0000, 0x2_0000),
 
 
 def _plain_write(base, off4):
-    """Whether a write to this register only stores its value (Machine._write's special
-    cases are the others)."""
+    """Whether a write to this register only stores its value (True), sets or resets GPIO
+    output bits (None: BSRR, BRR), or is one of Machine._write's other special cases
+    (False)."""
+    if base in (0x4800_0000, 0x4800_0400, 0x4800_0800) and off4 in (0x18, 0x28):
+        return None
     return not (base in (0x4000_7000, 0x5000_0000, 0x5000_0100, 0x4001_2C00)
                 or (base, off4) in ((0x4002_1000, 0x8), (0x4000_1000, 0x10), (0x4002_0C00, 0x4),
                                     (0x4000_4400, 0x28), (0x4000_4400, 0x20),
                                     (0x4000_4400, 0x18), (0x4000_3000, 0x0),
                                     (0xE000_ED00, 0x94))
                 or (base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14, 0x18))
-                or (base in (0x4800_0000, 0x4800_0400, 0x4800_0800) and off4 in (0x18, 0x28))
                 or (base == 0xE000_E100 and off4 < 0x20))
 
 
 _SPLIT = {}         # address -> (base, offset)
 _READ_DECODE = {}   # address -> ((base, aligned offset), special read or None, shift)
-_WRITE_DECODE = {}  # address -> (base, offset, aligned offset, key, peripheral, register, plain)
+_WRITE_DECODE = {}  # address -> (base, offset, aligned offset, key, peripheral, register,
+#                                  plain: True, None for a GPIO set/reset, False otherwise)
 
 
 def load_elf(path):
@@ -575,10 +578,24 @@ class Machine:
             shift = (off & 3) * 8
             mask = ((1 << (8 * size)) - 1) << shift
             value = (old & ~mask) | ((value << shift) & mask)
-        if p is not None:
+        if p is not None and self.boot_writes is None:
+            # the log keeps the boot's writes (the golden file's and the register map
+            # check's subject); after the boot the main loop writes a GPIO every few dozen
+            # instructions, and a log of those grew by a million entries an emulated second
             self.writes.append((self.instret, p, name, value))
             self.write_offsets.append(off4)
         if plain:
+            self.regs[key] = value
+            return
+        if plain is None:
+            # GPIO BSRR (set low half, reset high half) / BRR (reset): the pins' ODR
+            odr_key = (base, 0x14)
+            odr = self.regs.get(odr_key, 0)
+            if off4 == 0x18:
+                odr = (odr | (value & 0xFFFF)) & ~(value >> 16)
+            else:
+                odr &= ~(value & 0xFFFF)
+            self.regs[odr_key] = odr
             self.regs[key] = value
             return
         if base == 0x4000_7000:
@@ -597,14 +614,6 @@ class Machine:
         if base == 0x4001_2C00:
             self._tim1_write(off4, value)
             return
-        if base in (0x4800_0000, 0x4800_0400, 0x4800_0800) and off4 in (0x18, 0x28):
-            # GPIO BSRR (set low half, reset high half) / BRR (reset): the pins' ODR
-            odr = self.reg(base, 0x14)
-            if off4 == 0x18:
-                odr = (odr | (value & 0xFFFF)) & ~(value >> 16)
-            else:
-                odr &= ~(value & 0xFFFF)
-            self.regs[(base, 0x14)] = odr
         if base == 0x4000_1000 and off4 == 0x10:        # TIM6_SR rc_w0
             value = self.reg(base, off4) & value
         if base == 0x4002_0C00 and off4 == 0x4:         # CORDIC WDATA: sine of x pi
@@ -858,22 +867,14 @@ class Machine:
 
     # --- execution ---------------------------------------------------------------------
     def _save(self):
-        regs = self.uc.reg_read_batch(GPR + FPR)
-        return (regs[:len(GPR)], regs[len(GPR):])
+        """The CPU's state before an exception: Unicorn's native context (every core,
+        system and floating-point register, restored at once by `_restore`)."""
+        return self.uc.context_save()
 
     def _restore(self, ctx):
-        # in the same order as the registers were saved; a core or floating-point data
-        # register that still holds its saved value (the callee-saved ones after a handler)
-        # is not written again: writing it would store the same value
-        g, f = ctx
-        now = self.uc.reg_read_batch(GPR + FPR)
-        for i, (r, v) in enumerate(zip(GPR, g)):
-            if r in _PLAIN_REGS and now[i] == v:
-                continue
-            self.uc.reg_write(r, v)
-        for i, (r, v) in enumerate(zip(FPR, f), len(GPR)):
-            if now[i] != v:
-                self.uc.reg_write(r, v)
+        # the exception return: the handler's registers replaced by the interrupted
+        # program's (a Python write per register took a quarter of an emulated period)
+        self.uc.context_restore(ctx)
 
     def _count_block(self, uc, address, size, _data):
         key = (address, size)
@@ -948,7 +949,7 @@ class Machine:
         """Runs the handler of `vector` to its return (or `limit` instructions); returns the
         instructions it executed when counting is on, else None."""
         ctx = self._save()
-        sp = ctx[0][13]
+        sp = self.uc.reg_read(UC_ARM_REG_SP)
         self.uc.reg_write(UC_ARM_REG_SP, (sp - 104) & ~7)
         self.uc.reg_write(UC_ARM_REG_LR, STOP | 1)
         handler = self.vectors[vector]
@@ -1063,7 +1064,7 @@ class Machine:
         return out
 
     def write_log(self, until=None):
-        """The peripheral register writes as text lines (up to instruction `until`)."""
+        """The boot's peripheral register writes as text lines (up to instruction `until`)."""
         out = []
         for t, p, name, v in self.writes:
             if until is not None and t >= until:
