@@ -132,7 +132,7 @@ def framed(kind, payload):
 
 class Protocol(unittest.TestCase):
     def test_protocol_1_hello_version_and_crc_framed_commands(self):
-        """Issue 18: the hello at boot, `version`, and $C frames answered with $R/$E; a
+        """Protocol 1: the hello at boot, `version`, and $C frames answered with $R/$E; a
         corrupted frame of a valid command is refused and not executed."""
         self.assertEqual(crc16(b"123456789"), 0x29B1)
         m = booted()
@@ -152,7 +152,7 @@ class Protocol(unittest.TestCase):
 
 
     def test_rate_and_the_x_extension(self):
-        """Issue 18: `rate` reaches the interrupt's decimator; every `$T` frame is followed
+        """Protocol 1: `rate` reaches the interrupt's decimator; every `$T` frame is followed
         by its `$X` (same seq, the control period of the sample, the d/q current
         references in mA), both with a valid CRC; a rate faster than the UART carries is
         accepted with a note saying what the user will see."""
@@ -284,7 +284,7 @@ class Protection(unittest.TestCase):
         self.assertNotEqual(state_fault(m)[0], 4)
 
     def test_a_missed_deadline_switches_off_in_the_same_period(self):
-        """Issue 11, item 2: the next ADC sequence completing while the step still runs
+        """A missed deadline: the next ADC sequence completing while the step still runs
         (injected 600 instructions into the interrupt, after its acknowledge) is a missed
         deadline: fault 17, MOE cleared in that period and not re-armed."""
         m = started()
@@ -298,7 +298,7 @@ class Protection(unittest.TestCase):
         self.assertEqual(state_fault(m), (4, 17))
 
     def test_a_panic_switches_off_first(self):
-        """Issue 11, item 2: the panic handler clears MOE before anything that could
+        """The panic handler clears MOE before anything that could
         fail. Called with a zeroed PanicInfo: it switches off, then may fault reading the
         message; the outputs are off either way."""
         m = started()
@@ -443,7 +443,7 @@ class Logs(unittest.TestCase):
 
 
 class Settings(unittest.TestCase):
-    """Issue 11 item 4: settings over the serial link, kept in the two reserved flash pages
+    """Settings over the serial link, kept in the two reserved flash pages
     written alternately (self-test build: the same main loop and flash code, a 20-period
     boot)."""
 
@@ -758,7 +758,7 @@ class HardwareTrip(unittest.TestCase):
 
 
 class BitExact(unittest.TestCase):
-    """Issue 11 item 3: the same closed loop on the host and in the emulated self-test
+    """Bit for bit: the same closed loop on the host and in the emulated self-test
     firmware (built with `--features selftest,soft-sincos`: the library's FastSinCos in
     place of the CORDIC) gives identical duties, enable flags, speed and flux estimates and
     model speeds, bit for bit, period for period. The firmware's FIL_PROBE words are read
