@@ -18,7 +18,7 @@ use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::sensor_check::{SensorCheckConfig, SensorCheckError};
 use crate::speed_loop::SpeedLoopConfig;
-use crate::speed_search::SpeedSearchDesign;
+use crate::speed_search::{SpeedSearchDesign, SpeedSearchSpec};
 use crate::svpwm::{linear_limit, SvpwmConfig};
 use crate::thermal::ThermalConfig;
 
@@ -473,17 +473,17 @@ impl DriveDesign {
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
         // sequence (frame held, Rs identification) applies
-        let search = SpeedSearchDesign::new(
-            cfg.flying_start,
-            ts,
-            m.rotor_time_constant(),
-            m.referred_rotor_resistance(),
-            i_d,
-            cfg.current_bandwidth,
-            pp,
-            cfg.max_speed,
-            cfg.rs_max_frequency,
-        );
+        let search = SpeedSearchDesign::new(&SpeedSearchSpec {
+            enabled: cfg.flying_start,
+            control_period: ts,
+            rotor_time_constant: m.rotor_time_constant(),
+            referred_rotor_resistance: m.referred_rotor_resistance(),
+            i_sd_ref: i_d,
+            current_bandwidth: cfg.current_bandwidth,
+            pole_pairs: pp,
+            max_speed: cfg.max_speed,
+            standstill_frequency: cfg.rs_max_frequency,
+        });
         let Some(search) = search else {
             return Err(ConfigError::Invalid {
                 field: "flying_start",

@@ -52,18 +52,19 @@ use crate::frames::{
 };
 use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::{InverterTest, InverterTestOutcome};
-use crate::inverter_tracker::{sign_vector, InverterTracker};
+use crate::inverter_tracker::{sign_vector, InverterTracker, InverterTrackerInputs};
 use crate::num::Num;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
-use crate::offset_tracker::OffsetTracker;
+use crate::offset_tracker::{OffsetTracker, OffsetTrackerInputs};
 use crate::orientation;
 use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::sensor_check::{SensorCheck, SensorCheckInputs};
 use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
 use crate::start_sequence::{StartInputs, StartSequence, StartSequenceConfig};
+use crate::supervisor::ControlMonitorInputs;
 pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
     SpeedOscillation, Supervisor,
@@ -146,47 +147,6 @@ pub struct DriveTelemetry<N: Num = f32> {
     /// started with a zero target waits for one (after turning, `Stop` switches off
     /// instead).
     pub zero_speed_held: bool,
-}
-
-/// The running Rs law's step ([`RsEstimator::update_running`], the default mode):
-/// currents `i` (A), the d-axis voltage `v_sd` the estimator uses
-/// (V), the last stator frequency `ws` (rad/s), the last applied `v_sq` (V), the model
-/// flux `rotor_flux` (Wb) and the last torque-current reference `i_sq_ref` (A, the law's
-/// steadiness gate). Always inlined: out of line, the call and the argument moves cost 20
-/// instructions and 39 est. cycles per step (acim-bench).
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn rs_running_step<N: Num>(
-    rs: &mut RsEstimator<N>,
-    c: &DriveCoeffs<N>,
-    i: Dq<N>,
-    v_sd: N,
-    ws: N,
-    flux_settled: bool,
-    v_sq: N,
-    rotor_flux: N,
-    frame_held: bool,
-    i_sq_ref: N,
-    low_frequency_only: bool,
-) {
-    rs.update_running(
-        &c.rs,
-        &c.rs_running,
-        &RsEstimatorInputs {
-            i_sd: i.d,
-            i_sq: i.q,
-            v_sd,
-            stator_frequency: ws,
-            flux_settled,
-        },
-        &RsRunningInputs {
-            v_sq,
-            rotor_flux,
-            frame_held,
-            i_sq_ref,
-            low_frequency_only,
-        },
-    );
 }
 
 /// Regions of the control step, reported to a [`StepProbe`] (cycle benchmarks).
@@ -918,13 +878,15 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let voltage_limited = self.cur.d().saturated() || self.cur.q().saturated();
         let found = self.monitor.control.check(
             &self.coeffs.limits,
-            i_ref,
-            m.i_dq,
-            v,
-            residual,
-            m.current_sum,
-            e.stator_frequency,
-            voltage_limited,
+            &ControlMonitorInputs {
+                i_ref,
+                i: m.i_dq,
+                v,
+                residual,
+                current_sum: m.current_sum,
+                stator_frequency: e.stator_frequency,
+                voltage_limited,
+            },
         );
         if found.is_some() {
             return found;
@@ -1057,15 +1019,17 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let v = v_ab;
         self.offset_tracker.update(
             &self.coeffs.offset_tracker,
-            AlphaBeta {
-                alpha: v.alpha - rs * i_ab.alpha,
-                beta: v.beta - rs * i_ab.beta,
+            &OffsetTrackerInputs {
+                u_ab: AlphaBeta {
+                    alpha: v.alpha - rs * i_ab.alpha,
+                    beta: v.beta - rs * i_ab.beta,
+                },
+                stator_frequency: prev.stator_frequency,
+                running,
+                ramping: prev.ramping,
+                i_sq_ref: prev.i_sq_ref,
+                far_side: prev.far_side,
             },
-            prev.stator_frequency,
-            running,
-            prev.ramping,
-            prev.i_sq_ref,
-            prev.far_side,
         );
         i_ab
     }
@@ -1176,18 +1140,24 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         };
         if c.rs_running.enabled {
             // Rs also while running (the default mode)
-            rs_running_step(
-                &mut est.rs,
-                c,
-                i,
-                v_sd,
-                ws_prev,
-                flux_settled,
-                m.applied.v_dq.q,
-                est.flux.rotor_flux,
-                frame_held,
-                self.prev.i_sq_ref,
-                !O::RS_RUNNING_AT_SPEED,
+            // (the inputs built in place: the estimator's step is inlined)
+            est.rs.update_running(
+                &c.rs,
+                &c.rs_running,
+                &RsEstimatorInputs {
+                    i_sd: i.d,
+                    i_sq: i.q,
+                    v_sd,
+                    stator_frequency: ws_prev,
+                    flux_settled,
+                },
+                &RsRunningInputs {
+                    v_sq: m.applied.v_dq.q,
+                    rotor_flux: est.flux.rotor_flux,
+                    frame_held,
+                    i_sq_ref: self.prev.i_sq_ref,
+                    low_frequency_only: !O::RS_RUNNING_AT_SPEED,
+                },
             );
         } else {
             est.rs.update(
@@ -1512,12 +1482,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
             self.start.inverter.correction_duty = self.inverter_tracker.update(
                 &c.inverter_tracker,
-                v,
-                i_ref,
-                sigma,
-                inv_dc_bus,
-                e.stator_frequency,
-                track && !out.saturated,
+                &InverterTrackerInputs {
+                    v,
+                    i_ref,
+                    sigma,
+                    inv_dc_bus,
+                    stator_frequency: e.stator_frequency,
+                    gate: track && !out.saturated,
+                },
                 self.start.inverter.correction_duty,
             );
         }

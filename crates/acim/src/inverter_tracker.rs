@@ -136,6 +136,23 @@ pub struct InverterTracker<N: Num = f32> {
     pub active: bool,
 }
 
+/// What the tracker reads each step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InverterTrackerInputs<N: Num = f32> {
+    /// The voltage command, rotor-flux frame, V.
+    pub v: Dq<N>,
+    /// The current reference, same frame, A.
+    pub i_ref: Dq<N>,
+    /// The sign vector in that frame ([`sign_vector`]).
+    pub sigma: Dq<N>,
+    /// 1/V_dc, 1/V.
+    pub inv_dc_bus: N,
+    /// The stator frequency w_s, rad/s electrical.
+    pub stator_frequency: N,
+    /// The drive's conditions hold (running, linear, not ramping).
+    pub gate: bool,
+}
+
 impl<N: Num> InverterTracker<N> {
     /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`] and its `correction` (duty)
     /// is inside the bound: the drive then takes the correction as known, as after a
@@ -147,23 +164,22 @@ impl<N: Num> InverterTracker<N> {
         cfg.enabled && self.adapted_steps >= cfg.trust_steps && correction.abs() < cfg.limit
     }
 
-    /// One step: `v` the voltage command and `i_ref` the current reference (dq, the
-    /// same frame), `sigma` the sign vector in that frame, `inv_dc_bus` 1/V_dc,
-    /// `stator_frequency` w_s (rad/s), `gate` the drive's conditions (running, linear,
-    /// not ramping). Returns the new correction from `correction` (duty).
-    #[allow(clippy::too_many_arguments)]
+    /// One step on the inputs `x`. Returns the new correction from `correction` (duty).
     #[inline(always)]
     pub fn update(
         &mut self,
         cfg: &InverterTrackerConfig<N>,
-        v: Dq<N>,
-        i_ref: Dq<N>,
-        sigma: Dq<N>,
-        inv_dc_bus: N,
-        stator_frequency: N,
-        gate: bool,
+        x: &InverterTrackerInputs<N>,
         correction: N,
     ) -> N {
+        let &InverterTrackerInputs {
+            v,
+            i_ref,
+            sigma,
+            inv_dc_bus,
+            stator_frequency,
+            gate,
+        } = x;
         let y = v.q * i_ref.d - v.d * i_ref.q;
         let ws = stator_frequency.abs();
         let on = cfg.enabled && gate && ws >= cfg.min_frequency && ws <= cfg.max_frequency;
@@ -216,7 +232,18 @@ mod tests {
                 d: dc.d + e * sigma.d,
                 q: dc.q + e * sigma.q,
             };
-            c = t.update(&cfg, v, i_ref, sigma, 1.0 / VDC, w, gate, c);
+            c = t.update(
+                &cfg,
+                &InverterTrackerInputs {
+                    v,
+                    i_ref,
+                    sigma,
+                    inv_dc_bus: 1.0 / VDC,
+                    stator_frequency: w,
+                    gate,
+                },
+                c,
+            );
         }
         c
     }
@@ -262,7 +289,18 @@ mod tests {
         let w = core::f32::consts::TAU * 5.0;
         let steps = |t: &mut InverterTracker, secs: f32, gate: bool| {
             for _ in 0..(secs / TS) as usize {
-                t.update(&cfg, v, i, sigma, 1.0 / VDC, w, gate, 0.0);
+                t.update(
+                    &cfg,
+                    &InverterTrackerInputs {
+                        v,
+                        i_ref: i,
+                        sigma,
+                        inv_dc_bus: 1.0 / VDC,
+                        stator_frequency: w,
+                        gate,
+                    },
+                    0.0,
+                );
             }
         };
         // two open spells of 2 s: each adapts 1.5 s after its holdoff
@@ -306,7 +344,18 @@ mod tests {
                 d: 10.0 + dr * i.d,
                 q: 40.0 + dr * i.q,
             };
-            c = t.update(&cfg, v, i, sigma, 1.0 / VDC, w, true, c);
+            c = t.update(
+                &cfg,
+                &InverterTrackerInputs {
+                    v,
+                    i_ref: i,
+                    sigma,
+                    inv_dc_bus: 1.0 / VDC,
+                    stator_frequency: w,
+                    gate: true,
+                },
+                c,
+            );
         }
         // what is left is the DC filter's lag behind the ramp times the sawtooth's mean
         // over a part period: about 2 mV, a thousandth of a 1 us error's 1.6 V

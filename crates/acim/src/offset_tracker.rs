@@ -331,24 +331,36 @@ impl<N: Num> Default for OffsetTracker<N> {
     }
 }
 
+/// What the tracker reads each step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OffsetTrackerInputs<N: Num = f32> {
+    /// The voltage applied over the last period less Rs_hat times the corrected current,
+    /// stationary frame, V.
+    pub u_ab: AlphaBeta<N>,
+    /// The stator frequency w_s, rad/s electrical.
+    pub stator_frequency: N,
+    /// False while magnetizing.
+    pub running: bool,
+    /// The speed reference ramps.
+    pub ramping: bool,
+    /// The last torque-current reference, A.
+    pub i_sq_ref: N,
+    /// The drive's far-side mode.
+    pub far_side: bool,
+}
+
 impl<N: Num> OffsetTracker<N> {
-    /// One step: `u_ab` the voltage applied over the last period less Rs_hat times the
-    /// corrected current (V, stationary frame), `stator_frequency` w_s (rad/s), `running`
-    /// false while magnetizing, `ramping` true while the speed reference ramps,
-    /// `i_sq_ref` the last torque-current reference (A), `far_side` the drive's far-side
-    /// mode.
+    /// One step on the inputs `x`.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    pub fn update(
-        &mut self,
-        cfg: &OffsetTrackerConfig<N>,
-        u_ab: AlphaBeta<N>,
-        stator_frequency: N,
-        running: bool,
-        ramping: bool,
-        i_sq_ref: N,
-        far_side: bool,
-    ) {
+    pub fn update(&mut self, cfg: &OffsetTrackerConfig<N>, x: &OffsetTrackerInputs<N>) {
+        let &OffsetTrackerInputs {
+            u_ab,
+            stator_frequency,
+            running,
+            ramping,
+            i_sq_ref,
+            far_side,
+        } = x;
         self.adapting = false;
         if !(cfg.enabled && running) {
             return;
@@ -471,7 +483,17 @@ mod tests {
                 alpha: amplitude * c + RS * (t.offset.alpha - o.0),
                 beta: amplitude * s + RS * (t.offset.beta - o.1),
             };
-            t.update(&cfg, u, w, true, false, 0.0, far_side);
+            t.update(
+                &cfg,
+                &OffsetTrackerInputs {
+                    u_ab: u,
+                    stator_frequency: w,
+                    running: true,
+                    ramping: false,
+                    i_sq_ref: 0.0,
+                    far_side,
+                },
+            );
         }
         t
     }
@@ -509,8 +531,28 @@ mod tests {
             beta: 1.0,
         };
         for _ in 0..1000 {
-            t.update(&cfg, u, 100.0, false, false, 0.0, false);
-            t.update(&cfg, u, 100.0, true, true, 0.0, false);
+            t.update(
+                &cfg,
+                &OffsetTrackerInputs {
+                    u_ab: u,
+                    stator_frequency: 100.0,
+                    running: false,
+                    ramping: false,
+                    i_sq_ref: 0.0,
+                    far_side: false,
+                },
+            );
+            t.update(
+                &cfg,
+                &OffsetTrackerInputs {
+                    u_ab: u,
+                    stator_frequency: 100.0,
+                    running: true,
+                    ramping: true,
+                    i_sq_ref: 0.0,
+                    far_side: false,
+                },
+            );
         }
         assert_eq!(t.offset.alpha, 0.0);
         assert!(!t.adapting);
@@ -559,8 +601,28 @@ mod tests {
             alpha: f32::NAN,
             beta: 0.0,
         };
-        t.update(&cfg, nan, f32::NAN, true, false, 0.0, false);
-        t.update(&cfg, nan, 60.0, true, false, 0.0, false);
+        t.update(
+            &cfg,
+            &OffsetTrackerInputs {
+                u_ab: nan,
+                stator_frequency: f32::NAN,
+                running: true,
+                ramping: false,
+                i_sq_ref: 0.0,
+                far_side: false,
+            },
+        );
+        t.update(
+            &cfg,
+            &OffsetTrackerInputs {
+                u_ab: nan,
+                stator_frequency: 60.0,
+                running: true,
+                ramping: false,
+                i_sq_ref: 0.0,
+                far_side: false,
+            },
+        );
         assert!(t.offset.alpha.is_finite() && t.offset.beta.is_finite());
         assert!(t.frequency.is_finite());
     }

@@ -95,24 +95,44 @@ pub const SETTLE_CURRENT_LOOP_CONSTANTS: f32 = 5.0;
 /// V_n = 2 R_R i_sd*, 0.0145).
 pub const SIGNAL_FLOOR: f32 = 1e-3;
 
+/// What the search is designed from: the drive's period, machine and limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeedSearchSpec {
+    /// Whether the search runs ([`crate::DriveConfig::flying_start`]).
+    pub enabled: bool,
+    /// The control period Ts, s.
+    pub control_period: f32,
+    /// The rotor time constant tau_r, s.
+    pub rotor_time_constant: f32,
+    /// R_R, ohm.
+    pub referred_rotor_resistance: f32,
+    /// The flux current i_sd*, A.
+    pub i_sd_ref: f32,
+    /// The current loops' bandwidth, rad/s.
+    pub current_bandwidth: f32,
+    /// Pole pairs p.
+    pub pole_pairs: f32,
+    /// The over-speed limit, rad/s mechanical.
+    pub max_speed: f32,
+    /// Below this the rotor counts as at rest, rad/s electrical.
+    pub standstill_frequency: f32,
+}
+
 impl SpeedSearchDesign<f32> {
-    /// The search for a drive at period `ts` (s) with rotor time constant `tau_r` (s),
-    /// R_R (ohm), i_sd* (A), current-loop bandwidth (rad/s), `pole_pairs`, the
-    /// over-speed limit `max_speed` (rad/s mechanical) and the standstill threshold
-    /// (rad/s electrical). `None` when the search is enabled and the largest speed turns
-    /// the voltage by more than pi/4 in one period (no block length can resolve it).
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        enabled: bool,
-        ts: f32,
-        tau_r: f32,
-        referred_rotor_resistance: f32,
-        i_sd_ref: f32,
-        current_bandwidth: f32,
-        pole_pairs: f32,
-        max_speed: f32,
-        standstill_frequency: f32,
-    ) -> Option<Self> {
+    /// The search for `spec`. `None` when the search is enabled and the largest speed
+    /// turns the voltage by more than pi/4 in one period (no block length can resolve it).
+    pub fn new(spec: &SpeedSearchSpec) -> Option<Self> {
+        let &SpeedSearchSpec {
+            enabled,
+            control_period: ts,
+            rotor_time_constant: tau_r,
+            referred_rotor_resistance,
+            i_sd_ref,
+            current_bandwidth,
+            pole_pairs,
+            max_speed,
+            standstill_frequency,
+        } = spec;
         let quarter = 0.25 * core::f32::consts::PI;
         let per_period = pole_pairs * max_speed * ts;
         let resolvable = per_period <= quarter;
@@ -307,17 +327,17 @@ mod tests {
     fn design() -> SpeedSearchDesign {
         let tau_r = 0.56 / 8.4;
         let rr = (0.54f32 / 0.56).powi(2) * 8.4;
-        SpeedSearchDesign::new(
-            true,
-            200e-6,
-            tau_r,
-            rr,
-            1.5,
-            1000.0,
-            2.0,
-            2000.0 * crate::math::RPM_TO_RAD_S,
-            2.0 * core::f32::consts::PI * 1.5,
-        )
+        SpeedSearchDesign::new(&SpeedSearchSpec {
+            enabled: true,
+            control_period: 200e-6,
+            rotor_time_constant: tau_r,
+            referred_rotor_resistance: rr,
+            i_sd_ref: 1.5,
+            current_bandwidth: 1000.0,
+            pole_pairs: 2.0,
+            max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+            standstill_frequency: 2.0 * core::f32::consts::PI * 1.5,
+        })
         .unwrap()
     }
 
@@ -411,7 +431,17 @@ mod tests {
         let tau_r = 0.56 / 8.4;
         let max_speed = 2000.0 * crate::math::RPM_TO_RAD_S;
         // p max_speed Ts = 2 * 209 * 2e-3 = 0.84 > pi/4
-        let d = SpeedSearchDesign::new(true, 2e-3, tau_r, 7.8, 1.5, 100.0, 2.0, max_speed, 9.4);
+        let d = SpeedSearchDesign::new(&SpeedSearchSpec {
+            enabled: true,
+            control_period: 2e-3,
+            rotor_time_constant: tau_r,
+            referred_rotor_resistance: 7.8,
+            i_sd_ref: 1.5,
+            current_bandwidth: 100.0,
+            pole_pairs: 2.0,
+            max_speed,
+            standstill_frequency: 9.4,
+        });
         assert!(d.is_none());
         let cfg = crate::DriveConfig {
             control_period: 2e-3,

@@ -530,6 +530,26 @@ impl Supervisor {
     }
 }
 
+/// What the control monitor reads each step ([`ControlMonitor::check`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlMonitorInputs<N: Num = f32> {
+    /// This step's current reference, A.
+    pub i_ref: Dq<N>,
+    /// This step's measured current, A.
+    pub i: Dq<N>,
+    /// This step's voltage command, V.
+    pub v: Dq<N>,
+    /// The current loops' integrals (the model's voltage residual), V.
+    pub residual: Dq<N>,
+    /// a + b + c as measured (three shunts; 0 with two), A.
+    pub current_sum: N,
+    /// The stator frequency w_s (only to bound the impedance), rad/s electrical.
+    pub stator_frequency: N,
+    /// A current loop's output is at the voltage limit: an unmet reference is the
+    /// machine's limit, not a fault, and the regulation error holds.
+    pub voltage_limited: bool,
+}
+
 /// Estimate-independent consistency of the running control, judged on the measured
 /// currents, the current references and the voltage the current loops need beyond the
 /// machine model (their integrators: in steady state the feed-forward of eq. 9a-9b
@@ -604,28 +624,24 @@ impl<N: Num> ControlMonitor<N> {
         }
     }
 
-    /// One step of the checks, in the order of the evidence's directness: the current
-    /// sum (a sensor fault), the current response to the voltage (dead sensing), the
-    /// current following its reference, then the voltage residual.
-    ///
-    /// `i_ref`, `i`: this step's current reference and measurement (A); `v`: this
-    /// step's voltage command (V); `residual`: the current loops' integrals (V);
-    /// `stator_frequency`: w_s (rad/s electrical, only to bound the impedance);
-    /// `voltage_limited`: a current loop's output is at the voltage limit, so an unmet
-    /// reference is the machine's limit, not a fault, and the regulation error holds.
+    /// One step of the checks on `x`, in the order of the evidence's directness: the
+    /// current sum (a sensor fault), the current response to the voltage (dead sensing),
+    /// the current following its reference, then the voltage residual.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     pub fn check(
         &mut self,
         limits: &SupervisionLimits<N>,
-        i_ref: Dq<N>,
-        i: Dq<N>,
-        v: Dq<N>,
-        residual: Dq<N>,
-        current_sum: N,
-        stator_frequency: N,
-        voltage_limited: bool,
+        x: &ControlMonitorInputs<N>,
     ) -> Option<FaultReason> {
+        let &ControlMonitorInputs {
+            i_ref,
+            i,
+            v,
+            residual,
+            current_sum,
+            stator_frequency,
+            voltage_limited,
+        } = x;
         let g = limits.monitor_filter;
         let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
         if !voltage_limited {
@@ -1042,8 +1058,19 @@ mod tests {
         let l = limits();
         let mut m = ControlMonitor::new();
         (0..n).find_map(|k| {
-            m.check(&l, i_ref, i, v, residual, sum, 60.0, limited)
-                .map(|r| (k, r))
+            m.check(
+                &l,
+                &ControlMonitorInputs {
+                    i_ref,
+                    i,
+                    v,
+                    residual,
+                    current_sum: sum,
+                    stator_frequency: 60.0,
+                    voltage_limited: limited,
+                },
+            )
+            .map(|r| (k, r))
         })
     }
 
