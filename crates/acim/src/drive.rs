@@ -72,6 +72,17 @@ pub use crate::supervisor::{
 use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
 use crate::thermal::ThermalModel;
 
+/// What the front of a running step hands its back end: the current reference, the
+/// voltage limit at this period's bus, 1/V_dc, the phase and the zero-speed report.
+#[derive(Clone, Copy, Debug)]
+struct StepReferences<N: Num> {
+    i_ref: Dq<N>,
+    limit: VoltageLimit<N>,
+    inv_dc_bus: N,
+    magnetizing: bool,
+    zero_held: bool,
+}
+
 /// Samples of one control step (A and V; pu in fixed point).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -729,28 +740,18 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         inp: &DriveInputs<N>,
         probe: &mut P,
     ) -> PwmOutput<N> {
-        // 1. gate: state machine and raw-sample checks
-        probe.begin(StepRegion::FaultChecks);
-        let gate = self
-            .sup
-            .gate(&self.coeffs.limits, inp.phase_currents, inp.dc_bus);
-        probe.end(StepRegion::FaultChecks);
-        let mode = match gate {
-            Gate::Run(mode) => mode,
-            Gate::Off(None) => return self.switched_off(inp),
-            Gate::Off(Some(reason)) => return self.enter_fault(reason),
+        // 1. gate: state machine and raw-sample checks (the steps that do not close the
+        // loop end here)
+        let magnetizing = match self.gate(inp, probe) {
+            Ok(mode) => mode == DriveState::Magnetizing,
+            Err(out) => return out,
         };
-        if mode == DriveState::OpenLoop {
-            return self.step_open_loop(inp);
-        }
-        let magnetizing = mode == DriveState::Magnetizing;
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
         let m = self.sense(inp, !magnetizing);
         probe.end(StepRegion::ClarkePark);
-        // 3. estimate
-        // the frame is held while magnetizing at rest and turns with the rotor on a
-        // flying start
+        // 3. estimate; the frame is held while magnetizing at rest and turns with the
+        // rotor on a flying start
         let frame_held = magnetizing && !self.start.flying();
         let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
@@ -772,16 +773,73 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // (`Stop`) or are reported (`Hold`)
         let zero_held = self.zero_speed_held(magnetizing);
         if zero_held && self.coeffs.zero_speed_stop && self.refs.commanded {
-            self.sup.stop();
-            self.prev.voltage = Applied::default();
-            return PwmOutput::OFF;
+            return self.stop_at_zero_speed();
         }
+        // 6-7. current control and modulation
+        let step = StepReferences {
+            i_ref,
+            limit,
+            inv_dc_bus,
+            magnetizing,
+            zero_held,
+        };
+        self.control_and_modulate(&m, &e, &step, probe)
+    }
+
+    /// The gate ([`Supervisor::gate`]): the closed-loop mode this step runs in, or the
+    /// output of a step that does not close the loop (switched off, a fault, open-loop
+    /// V/f).
+    #[inline(always)]
+    fn gate<P: StepProbe>(
+        &mut self,
+        inp: &DriveInputs<N>,
+        probe: &mut P,
+    ) -> Result<DriveState, PwmOutput<N>> {
+        probe.begin(StepRegion::FaultChecks);
+        let gate = self
+            .sup
+            .gate(&self.coeffs.limits, inp.phase_currents, inp.dc_bus);
+        probe.end(StepRegion::FaultChecks);
+        match gate {
+            Gate::Run(DriveState::OpenLoop) => Err(self.step_open_loop(inp)),
+            Gate::Run(mode) => Ok(mode),
+            Gate::Off(None) => Err(self.switched_off(inp)),
+            Gate::Off(Some(reason)) => Err(self.enter_fault(reason)),
+        }
+    }
+
+    /// The zero-speed policy's stop (`ZeroSpeedPolicy::Stop`): switches off this step.
+    #[inline(always)]
+    fn stop_at_zero_speed(&mut self) -> PwmOutput<N> {
+        self.sup.stop();
+        self.prev.voltage = Applied::default();
+        PwmOutput::OFF
+    }
+
+    /// The running step's back end: current control within the voltage limit, the
+    /// control monitor, modulation at the angle the voltage will act at, and the latch
+    /// of this period's signals for the next ([`Previous`]).
+    #[inline(always)]
+    fn control_and_modulate<P: StepProbe>(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        step: &StepReferences<N>,
+        probe: &mut P,
+    ) -> PwmOutput<N> {
+        let StepReferences {
+            i_ref,
+            limit,
+            inv_dc_bus,
+            magnetizing,
+            zero_held,
+        } = *step;
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
-        let v = self.current_control(&m, &e, i_ref, limit);
+        let v = self.current_control(m, e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
-        if let Some(reason) = self.monitor_control(&m, &e, i_ref, v, magnetizing) {
+        if let Some(reason) = self.monitor_control(m, e, i_ref, v, magnetizing) {
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -790,7 +848,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // running Rs law adapting this step (its own gate: a steady torque current), so
         // that the resistance estimate follows what the correction takes away
         let track = !magnetizing && !self.refs.speed.ramping && self.est.rs.adapting;
-        let (v_ab, modulation, v_dq) = self.modulate(&m, &e, v, i_ref, inv_dc_bus, track);
+        let (v_ab, modulation, v_dq) = self.modulate(m, e, v, i_ref, inv_dc_bus, track);
         probe.end(StepRegion::Svpwm);
         self.prev = self.latch(Applied {
             v_dq,
@@ -798,7 +856,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             dc_bus: m.dc_bus,
             inv_dc_bus,
         });
-        self.record(&m, &e, i_ref, v, modulation.saturated, zero_held);
+        self.record(m, e, i_ref, v, modulation.saturated, zero_held);
         PwmOutput {
             duties: modulation.duties,
             enabled: true,
