@@ -278,13 +278,56 @@ pub struct Previous<N = f32> {
 
 /// The checks that judge the control without trusting the estimates.
 #[derive(Clone, Copy, Debug, Default)]
-struct Monitors<N: Num> {
+struct Supervision<N: Num> {
+    /// The drive's state machine and the raw-sample checks ([`Supervisor`]).
+    sup: Supervisor,
     /// Current error, model residual, current sum, offset drift ([`ControlMonitor`]).
     control: ControlMonitor<N>,
     /// Dead or stuck current channels ([`crate::sensor_check`]).
     sensors: SensorCheck<N>,
     /// A limit cycle around a steady reference ([`SpeedOscillation`]).
     oscillation: SpeedOscillation<N>,
+    /// The machine's heat against its short-time overload rating ([`crate::thermal`]):
+    /// kept across stops and faults (the machine cools with the drive off too, which the
+    /// model does not see: it errs on the safe side).
+    thermal: ThermalModel<N>,
+}
+
+/// The drive's fixed part: the design, its coefficients in `N`, the per-unit bases.
+#[derive(Clone, Debug)]
+struct DriveParts<N: Num> {
+    design: DriveDesign,
+    coeffs: DriveCoeffs<N>,
+    bases: N::Bases,
+}
+
+/// The output side of a step: the current loops, the modulator, sin/cos and the tracker
+/// of the inverter error the modulator's correction leaves.
+#[derive(Clone, Debug)]
+struct Loops<N: Num, S, M> {
+    cur: CurrentLoop<N>,
+    modulator: M,
+    sincos: S,
+    /// The inverter error tracked while turning: it adapts the inverter test's
+    /// correction.
+    inverter_tracker: InverterTracker<N>,
+}
+
+/// The current channels' zero offsets.
+#[derive(Clone, Copy, Debug)]
+struct Sensing<N: Num> {
+    /// Measured with the switches off ([`OffsetMonitor`]).
+    offsets: OffsetMonitor<N>,
+    /// The offsets subtracted from the samples since the last start.
+    compensation: [N; 3],
+    /// Periods with the switches off since they last switched (saturating; `u32::MAX` at
+    /// power-up: no flux to wait for).
+    off_steps: u32,
+    /// The offsets' drift since the start, tracked while turning.
+    tracker: OffsetTracker<N>,
+    /// A start asked for before the switches-off offset measurement had settled: the idle
+    /// step performs it once the measurement has (offsets measured before every start).
+    pending_start: Option<DriveState>,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
@@ -300,7 +343,7 @@ struct Estimator<N: Num, O> {
 }
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct References<N: Num> {
     /// The speed loop ([`crate::speed_loop`]).
     speed: SpeedLoop<N>,
@@ -312,6 +355,11 @@ struct References<N: Num> {
     /// A nonzero speed target or reference since the start: `Stop` ramps down and then
     /// switches off; a drive started with a zero target waits for one.
     commanded: bool,
+    /// The start sequence while magnetizing: speed search, inverter test, gain
+    /// calibration, Rs identification ([`crate::start_sequence`]).
+    start: StartSequence<N>,
+    /// Open-loop V/f.
+    open_loop: OpenLoop<N>,
 }
 
 /// Open-loop V/f state.
@@ -327,42 +375,21 @@ struct OpenLoop<N: Num> {
 /// paper's reduced-order observer by default), `M` modulates (SVPWM by default).
 #[derive(Clone, Debug)]
 pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = Svpwm> {
-    design: DriveDesign,
-    coeffs: DriveCoeffs<N>,
-    bases: N::Bases,
-    sup: Supervisor,
+    /// The design, its coefficients in `N` and the per-unit bases: fixed once built.
+    cfg: DriveParts<N>,
+    /// The state machine and the monitors that judge the running control.
+    supervision: Supervision<N>,
+    /// Speed observer, Rs and R_R estimators, flux model.
     est: Estimator<N, O>,
+    /// Speed loop, field weakening, the start sequence and open-loop V/f.
     refs: References<N>,
-    cur: CurrentLoop<N>,
-    modulator: M,
-    sincos: S,
+    /// Current loops, modulator, sin/cos and the inverter-error tracker.
+    loops: Loops<N, S, M>,
     /// z^-1 ([`Previous`]).
     prev: Previous<N>,
-    monitor: Monitors<N>,
-    offsets: OffsetMonitor<N>,
-    /// The offsets subtracted from the samples since the last start.
-    offset_compensation: [N; 3],
-    /// Periods with the switches off since they last switched (saturating; `u32::MAX` at
-    /// power-up: no flux to wait for).
-    off_steps: u32,
-    open_loop: OpenLoop<N>,
+    /// The current channels' offsets: measured while off, compensated, tracked.
+    sensing: Sensing<N>,
     telemetry: DriveTelemetry<N>,
-    /// The offsets' drift since the start, tracked while turning.
-    offset_tracker: OffsetTracker<N>,
-    /// The inverter error tracked while turning: it adapts the
-    /// inverter test's correction.
-    inverter_tracker: InverterTracker<N>,
-    /// A start asked for before the switches-off offset measurement had settled: the idle
-    /// step performs it once the measurement has (item 3: offsets measured
-    /// before every start).
-    pending_start: Option<DriveState>,
-    /// The machine's heat against its short-time overload rating ([`crate::thermal`]):
-    /// kept across stops and faults (the machine cools with the drive off too, which the
-    /// model does not see: it errs on the safe side).
-    thermal: ThermalModel<N>,
-    /// The start sequence while magnetizing: speed search, inverter test, gain
-    /// calibration, Rs identification ([`crate::start_sequence`]).
-    start: StartSequence<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -400,7 +427,13 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let coeffs = N::coeffs(&design, &bases)?;
         let rs_initial = coeffs.rs_initial;
         let mut drive = Self {
-            sup: Supervisor::new(),
+            supervision: Supervision {
+                sup: Supervisor::new(),
+                control: ControlMonitor::new(),
+                sensors: SensorCheck::new(),
+                oscillation: SpeedOscillation::default(),
+                thermal: ThermalModel::new(),
+            },
             est: Estimator {
                 observer,
                 rs: RsEstimator::new(rs_initial),
@@ -413,10 +446,15 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 fw: FieldWeakening::new(N::ZERO),
                 zero_steps: 0,
                 commanded: false,
+                start: StartSequence::default(),
+                open_loop: OpenLoop::default(),
             },
-            cur: CurrentLoop::new(),
-            modulator,
-            sincos,
+            loops: Loops {
+                cur: CurrentLoop::new(),
+                modulator,
+                sincos,
+                inverter_tracker: InverterTracker::default(),
+            },
             prev: Previous {
                 voltage: Applied::default(),
                 i_sq_ref: N::ZERO,
@@ -428,23 +466,22 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 q_integral: N::ZERO,
                 q_saturated: false,
             },
-            monitor: Monitors::default(),
-            offsets: OffsetMonitor::new(),
-            offset_compensation: [N::ZERO; 3],
-            off_steps: u32::MAX,
-            open_loop: OpenLoop::default(),
+            sensing: Sensing {
+                offsets: OffsetMonitor::new(),
+                compensation: [N::ZERO; 3],
+                off_steps: u32::MAX,
+                tracker: OffsetTracker::default(),
+                pending_start: None,
+            },
             telemetry: DriveTelemetry {
                 stator_resistance_estimate: rs_initial,
                 ..DriveTelemetry::default()
             },
-            design,
-            coeffs,
-            bases,
-            start: StartSequence::default(),
-            offset_tracker: OffsetTracker::default(),
-            inverter_tracker: InverterTracker::default(),
-            pending_start: None,
-            thermal: ThermalModel::new(),
+            cfg: DriveParts {
+                design,
+                coeffs,
+                bases,
+            },
         };
         drive.prev = drive.latch(Applied::default());
         Ok(drive)
@@ -452,27 +489,27 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
 
     /// The configuration the drive was built with.
     pub fn config(&self) -> &DriveConfig {
-        &self.design.config
+        &self.cfg.design.config
     }
     /// The design in use (f32 SI).
     pub fn design(&self) -> &DriveDesign {
-        &self.design
+        &self.cfg.design
     }
     /// The step's coefficients in this drive's arithmetic.
     pub fn coeffs(&self) -> &DriveCoeffs<N> {
-        &self.coeffs
+        &self.cfg.coeffs
     }
     /// The per-unit bases (`()` for f32 SI).
     pub fn bases(&self) -> &N::Bases {
-        &self.bases
+        &self.cfg.bases
     }
     /// Present state.
     pub fn state(&self) -> DriveState {
-        self.sup.state()
+        self.supervision.sup.state()
     }
     /// The fault that stopped the drive, if any.
     pub fn fault(&self) -> Option<FaultReason> {
-        self.sup.fault()
+        self.supervision.sup.fault()
     }
     /// Quantities computed by the last step.
     pub fn telemetry(&self) -> &DriveTelemetry<N> {
@@ -482,14 +519,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// The current channels' gain ratio g_a / g_b as the last calibration at a start from
     /// rest measured it (1 before any; [`crate::gain_calibration`]).
     pub fn current_gain_correction(&self) -> N {
-        self.start.gain_cal.ratio
+        self.refs.start.gain_cal.ratio
     }
 
     /// The current-sensor offsets' drift since the start as the running tracker estimates
     /// it (stationary frame, A; subtracted from the samples on top of the offsets measured
     /// with the switches off; [`crate::offset_tracker`]).
     pub fn offset_drift(&self) -> AlphaBeta<N> {
-        self.offset_tracker.offset
+        self.sensing.tracker.offset
     }
 
     /// The rotor-resistance adaptation's state ([`crate::rr_estimator`]; its estimate
@@ -499,21 +536,21 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     }
     /// The q-current limit sqrt(I_max^2 - i_sd*^2), A.
     pub fn torque_current_limit(&self) -> f32 {
-        self.design.i_sq_limit
+        self.cfg.design.i_sq_limit
     }
     /// Rotor-flux reference L_M i_sd*, Wb.
     pub fn flux_reference(&self) -> f32 {
-        self.design.flux_reference
+        self.cfg.design.flux_reference
     }
     /// Precomputed reduced-order observer design (f32 SI).
     pub fn observer_config(&self) -> &ObserverConfig {
-        &self.design.observer
+        &self.cfg.design.observer
     }
     /// The speed observer.
     /// The inverter test at start and the correction it identified
     /// ([`DriveConfig::inverter_identification`]).
     pub fn inverter_test(&self) -> &InverterTest<N> {
-        &self.start.inverter
+        &self.refs.start.inverter
     }
 
     /// The observer.
@@ -527,7 +564,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         if !speed.is_finite() {
             return Err(CommandError::NotFinite);
         }
-        let lim = self.coeffs.speed_target_limit;
+        let lim = self.cfg.coeffs.speed_target_limit;
         self.refs.speed.speed_target = speed.clamp(-lim, lim);
         Ok(())
     }
@@ -554,7 +591,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
 
     /// Whether a start is waiting for the switches-off offset measurement to settle.
     pub fn start_pending(&self) -> bool {
-        self.pending_start.is_some()
+        self.sensing.pending_start.is_some()
     }
 
     /// Idle only (the state machine refuses a start elsewhere): a start sooner than
@@ -562,16 +599,16 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// is refused (`Demagnetizing`, nothing changes); before the offsets have settled the
     /// start waits; otherwise it is performed now.
     fn request_start(&mut self, to: DriveState) -> Result<(), CommandError> {
-        let state = self.sup.state();
+        let state = self.supervision.sup.state();
         if state != DriveState::Idle {
             return Err(CommandError::WrongState(state));
         }
-        let limits = &self.coeffs.limits;
-        if self.off_steps < limits.demagnetize_steps {
+        let limits = &self.cfg.coeffs.limits;
+        if self.sensing.off_steps < limits.demagnetize_steps {
             return Err(CommandError::Demagnetizing);
         }
-        if !self.offsets.settled(limits) {
-            self.pending_start = Some(to);
+        if !self.sensing.offsets.settled(limits) {
+            self.sensing.pending_start = Some(to);
             return Ok(());
         }
         self.begin_start(to)
@@ -582,35 +619,45 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// offsets are subtracted from the samples until the next stop, and every controller
     /// and estimator is reset.
     fn begin_start(&mut self, to: DriveState) -> Result<(), CommandError> {
-        self.pending_start = None;
-        let limits = &self.coeffs.limits;
-        if let Some(reason) = self.sup.check_offsets(limits, &self.offsets) {
-            self.sup.trip(reason);
+        self.sensing.pending_start = None;
+        let limits = &self.cfg.coeffs.limits;
+        if let Some(reason) = self
+            .supervision
+            .sup
+            .check_offsets(limits, &self.sensing.offsets)
+        {
+            self.supervision.sup.trip(reason);
             return Err(CommandError::SensorOffset);
         }
-        self.sup.start(to)?;
-        self.offset_compensation = self.offsets.compensation(limits);
+        self.supervision.sup.start(to)?;
+        self.sensing.compensation = self.sensing.offsets.compensation(limits);
         // the measurement includes any drift so far: the tracker starts from zero
-        self.offset_tracker = OffsetTracker::default();
+        self.sensing.tracker = OffsetTracker::default();
         self.reset_dynamic_state();
         if to == DriveState::Magnetizing {
-            self.start.inverter.restart(&self.coeffs.inverter_test);
-            self.start.gain_cal.restart(&self.coeffs.gain_calibration);
+            self.refs
+                .start
+                .inverter
+                .restart(&self.cfg.coeffs.inverter_test);
+            self.refs
+                .start
+                .gain_cal
+                .restart(&self.cfg.coeffs.gain_calibration);
         }
-        self.off_steps = 0;
+        self.sensing.off_steps = 0;
         Ok(())
     }
 
     /// Any active state -> Idle, switches off at once (the machine coasts). A faulted drive
     /// stays faulted.
     pub fn stop(&mut self) {
-        self.pending_start = None;
-        self.sup.stop();
+        self.sensing.pending_start = None;
+        self.supervision.sup.stop();
     }
 
     /// Fault -> Idle: the deliberate reset after the cause has been dealt with.
     pub fn reset_fault(&mut self) -> Result<(), CommandError> {
-        self.sup.reset_fault()
+        self.supervision.sup.reset_fault()
     }
 
     /// Swaps in a new design between two steps (built outside the interrupt with
@@ -624,15 +671,16 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     where
         N: DesignArithmetic,
     {
-        let (old, new) = (&self.design.config, &design.config);
+        let (old, new) = (&self.cfg.design.config, &design.config);
         let retune = old.machine == new.machine
             && old.control_period == new.control_period
             && old.current_sensing == new.current_sensing;
-        let state = self.sup.state();
+        let state = self.supervision.sup.state();
         if !(retune || state == DriveState::Idle) {
             return Err(CommandError::WrongState(state));
         }
-        self.coeffs = N::coeffs(&design, &self.bases).map_err(|_| CommandError::OutOfRange)?;
+        self.cfg.coeffs =
+            N::coeffs(&design, &self.cfg.bases).map_err(|_| CommandError::OutOfRange)?;
         // the inverter test's and the tracker's correction is the error beyond the
         // configured compensation: with another compensation (e.g. a commissioned dead
         // time) it is meaningless, and a trusted tracker's or an identified test's would
@@ -642,14 +690,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             || old.device_drop != new.device_drop
             || old.dead_time_current_band != new.dead_time_current_band;
         if inverter_changed {
-            self.start.inverter = InverterTest::default();
-            self.inverter_tracker = InverterTracker::default();
+            self.refs.start.inverter = InverterTest::default();
+            self.loops.inverter_tracker = InverterTracker::default();
         }
-        self.design = design;
+        self.cfg.design = design;
         // a design without the gain calibration (switched off, or three-phase sensing)
         // uses the samples as they come
-        if !self.coeffs.gain_calibration.enabled {
-            self.start.gain_cal = GainCalibration::default();
+        if !self.cfg.coeffs.gain_calibration.enabled {
+            self.refs.start.gain_cal = GainCalibration::default();
         }
         Ok(())
     }
@@ -665,6 +713,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             return Err(CommandError::NotFinite);
         }
         let design = self
+            .cfg
             .design
             .with_orientation_gain(gain)
             .map_err(|_| CommandError::OutOfRange)?;
@@ -682,18 +731,20 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.refs.speed.far_side = false;
         self.refs.speed.pi.reset();
         self.refs.speed.i_sq_ref = N::ZERO;
-        self.refs.fw = FieldWeakening::new(self.coeffs.i_sd_ref);
+        self.refs.fw = FieldWeakening::new(self.cfg.coeffs.i_sd_ref);
         self.refs.zero_steps = 0;
         self.refs.commanded = false;
-        self.cur = CurrentLoop::new();
+        self.loops.cur = CurrentLoop::new();
         self.est.flux = FluxModel::new();
         self.est.observer.reset();
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
-        self.start.reset();
-        self.monitor = Monitors::default();
-        self.open_loop = OpenLoop::default();
+        self.refs.start.reset();
+        self.supervision.control = ControlMonitor::new();
+        self.supervision.sensors = SensorCheck::new();
+        self.supervision.oscillation = SpeedOscillation::default();
+        self.refs.open_loop = OpenLoop::default();
         self.prev = self.latch(Applied::default());
     }
 
@@ -709,16 +760,16 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             fw_active: self.refs.fw.active(),
             stator_resistance: self.est.rs.stator_resistance_estimate,
             stator_frequency: self.est.flux.stator_frequency,
-            q_integral: self.cur.q().integral(),
-            q_saturated: self.cur.q().saturated(),
+            q_integral: self.loops.cur.q().integral(),
+            q_saturated: self.loops.cur.q().saturated(),
         }
     }
 
     /// Trips the supervisor and switches off. The speed target is cleared: a restart
     /// after a fault needs a new speed command.
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
-        self.pending_start = None;
-        self.sup.trip(reason);
+        self.sensing.pending_start = None;
+        self.supervision.sup.trip(reason);
         self.prev.voltage = Applied::default();
         self.refs.speed.speed_target = N::ZERO;
         PwmOutput::OFF
@@ -752,7 +803,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         probe.end(StepRegion::ClarkePark);
         // 3. estimate; the frame is held while magnetizing at rest and turns with the
         // rotor on a flying start
-        let frame_held = magnetizing && !self.start.flying();
+        let frame_held = magnetizing && !self.refs.start.flying();
         let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
         if let Some(reason) = self.plausibility(&e) {
@@ -772,7 +823,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // 5b. zero-speed policy: a zero target and reference held for the dwell switch off
         // (`Stop`) or are reported (`Hold`)
         let zero_held = self.zero_speed_held(magnetizing);
-        if zero_held && self.coeffs.zero_speed_stop && self.refs.commanded {
+        if zero_held && self.cfg.coeffs.zero_speed_stop && self.refs.commanded {
             return self.stop_at_zero_speed();
         }
         // 6-7. current control and modulation
@@ -796,9 +847,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         probe: &mut P,
     ) -> Result<DriveState, PwmOutput<N>> {
         probe.begin(StepRegion::FaultChecks);
-        let gate = self
-            .sup
-            .gate(&self.coeffs.limits, inp.phase_currents, inp.dc_bus);
+        let gate =
+            self.supervision
+                .sup
+                .gate(&self.cfg.coeffs.limits, inp.phase_currents, inp.dc_bus);
         probe.end(StepRegion::FaultChecks);
         match gate {
             Gate::Run(DriveState::OpenLoop) => Err(self.step_open_loop(inp)),
@@ -811,7 +863,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// The zero-speed policy's stop (`ZeroSpeedPolicy::Stop`): switches off this step.
     #[inline(always)]
     fn stop_at_zero_speed(&mut self) -> PwmOutput<N> {
-        self.sup.stop();
+        self.supervision.sup.stop();
         self.prev.voltage = Applied::default();
         PwmOutput::OFF
     }
@@ -869,14 +921,15 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// refused with a `CurrentSensor` fault.
     #[inline(always)]
     fn switched_off(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
-        self.off_steps = self.off_steps.saturating_add(1);
-        if self.sup.state() == DriveState::Idle {
-            if self.off_steps > self.coeffs.limits.offset_skip_steps {
-                self.offsets
-                    .idle_sample(&self.coeffs.limits, inp.phase_currents);
+        self.sensing.off_steps = self.sensing.off_steps.saturating_add(1);
+        if self.supervision.sup.state() == DriveState::Idle {
+            if self.sensing.off_steps > self.cfg.coeffs.limits.offset_skip_steps {
+                self.sensing
+                    .offsets
+                    .idle_sample(&self.cfg.coeffs.limits, inp.phase_currents);
             }
-            if let Some(to) = self.pending_start {
-                if self.offsets.settled(&self.coeffs.limits) {
+            if let Some(to) = self.sensing.pending_start {
+                if self.sensing.offsets.settled(&self.cfg.coeffs.limits) {
                     let _ = self.begin_start(to);
                 }
             }
@@ -900,7 +953,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             r.zero_steps = 0;
             r.commanded = r.commanded || !magnetizing;
         }
-        r.zero_steps >= self.coeffs.zero_dwell_steps
+        r.zero_steps >= self.cfg.coeffs.zero_dwell_steps
     }
 
     /// The supervisor's plausibility check of this step's estimates.
@@ -913,8 +966,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             rs_at_bound: self.est.rs.at_bound,
         };
         let saturated = self.refs.speed.pi.saturated();
-        self.sup
-            .plausibility(&self.coeffs.limits, &health, saturated)
+        self.supervision
+            .sup
+            .plausibility(&self.cfg.coeffs.limits, &health, saturated)
     }
 
     /// The supervisor's control monitor ([`ControlMonitor`]): measured currents against
@@ -930,12 +984,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         magnetizing: bool,
     ) -> Option<FaultReason> {
         let residual = Dq {
-            d: self.cur.d().integral(),
-            q: self.cur.q().integral(),
+            d: self.loops.cur.d().integral(),
+            q: self.loops.cur.q().integral(),
         };
-        let voltage_limited = self.cur.d().saturated() || self.cur.q().saturated();
-        let found = self.monitor.control.check(
-            &self.coeffs.limits,
+        let voltage_limited = self.loops.cur.d().saturated() || self.loops.cur.q().saturated();
+        let found = self.supervision.control.check(
+            &self.cfg.coeffs.limits,
             &ControlMonitorInputs {
                 i_ref,
                 i: m.i_dq,
@@ -950,27 +1004,29 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             return found;
         }
         // the tracked drift at offset_limit: as beyond it at the start
-        if self.offset_tracker.at_bound {
+        if self.sensing.tracker.at_bound {
             return Some(FaultReason::CurrentSensor);
         }
         // the sensor check judges every switching period but those of a flying start's
         // speed search, whose rotor speed the observer does not yet follow
-        let switching = !(magnetizing && self.start.flying());
+        let switching = !(magnetizing && self.refs.start.flying());
         if let Some(reason) = self.check_sensors(m, e, switching) {
             return Some(reason);
         }
         // a limit cycle: the estimate swinging around a steady reference
         let speed = &self.refs.speed;
-        if let Some(reason) = self.monitor.oscillation.update(
-            &self.coeffs.limits,
+        if let Some(reason) = self.supervision.oscillation.update(
+            &self.cfg.coeffs.limits,
             e.observer.speed - speed.speed_reference,
             !magnetizing && !speed.ramping,
         ) {
             return Some(reason);
         }
-        self.monitor
-            .control
-            .check_offset_drift(&self.coeffs.limits, m.i_ab, e.stator_frequency)
+        self.supervision.control.check_offset_drift(
+            &self.cfg.coeffs.limits,
+            m.i_ab,
+            e.stator_frequency,
+        )
     }
 
     /// Dead or stuck current channels ([`crate::sensor_check`]): each channel's movement
@@ -984,16 +1040,17 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         e: &Estimate<N>,
         switching: bool,
     ) -> Option<FaultReason> {
-        let cfg = &self.coeffs.sensor_check;
+        let cfg = &self.cfg.coeffs.sensor_check;
         if !cfg.enabled {
             return None;
         }
-        self.monitor.sensors.update(
+        self.supervision.sensors.update(
             cfg,
             &SensorCheckInputs {
                 current_ab: m.i_ab,
                 current_sum: m.current_sum,
-                three_channels: self.coeffs.limits.current_sensing == CurrentSensing::ThreePhase,
+                three_channels: self.cfg.coeffs.limits.current_sensing
+                    == CurrentSensing::ThreePhase,
                 current: m.i_dq,
                 voltage: m.applied.v_dq,
                 stator_frequency: self.prev.stator_frequency,
@@ -1025,23 +1082,23 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 beta: a.v_ab.beta * k,
             };
         }
-        let [oa, ob, oc] = self.offset_compensation;
+        let [oa, ob, oc] = self.sensing.compensation;
         let [a, b, c] = inp.phase_currents;
         // the a and b channels' gains equalized (1 until calibrated; two-phase sensing)
-        let [fa, fb] = self.start.gain_cal.factors;
+        let [fa, fb] = self.refs.start.gain_cal.factors;
         let (a, b, c) = ((a - oa) * fa, (b - ob) * fb, c - oc);
-        let (i_ab, current_sum) = match self.coeffs.limits.current_sensing {
+        let (i_ab, current_sum) = match self.cfg.coeffs.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), N::ZERO),
             CurrentSensing::ThreePhase => (clarke_three(a, b, c), a + b + c),
         };
         let angle = self.est.flux.angle;
-        let sc = self.sincos.sin_cos(angle);
+        let sc = self.loops.sincos.sin_cos(angle);
         let i_ab = self.track_offsets(i_ab, applied.v_ab, running);
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
         let i = park(i_ab, sc);
         let v = applied.v_dq;
-        let k = N::gain(self.coeffs.sample_ripple, self.prev.stator_frequency);
+        let k = N::gain(self.cfg.coeffs.sample_ripple, self.prev.stator_frequency);
         Measured {
             i_ab,
             i_dq: Dq {
@@ -1068,15 +1125,15 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         running: bool,
     ) -> AlphaBeta<N> {
         let prev = &self.prev;
-        let o = self.offset_tracker.offset;
+        let o = self.sensing.tracker.offset;
         let i_ab = AlphaBeta {
             alpha: i_ab.alpha - o.alpha,
             beta: i_ab.beta - o.beta,
         };
         let rs = prev.stator_resistance;
         let v = v_ab;
-        self.offset_tracker.update(
-            &self.coeffs.offset_tracker,
+        self.sensing.tracker.update(
+            &self.cfg.coeffs.offset_tracker,
             &OffsetTrackerInputs {
                 u_ab: AlphaBeta {
                     alpha: v.alpha - rs * i_ab.alpha,
@@ -1110,7 +1167,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
         // (its error is the d-axis residual), the resistance adapts only inside its gate
         probe.begin(StepRegion::RsEstimator);
-        let flux_settled = self.est.flux.rotor_flux >= self.coeffs.settled_flux;
+        let flux_settled = self.est.flux.rotor_flux >= self.cfg.coeffs.settled_flux;
         let ws_prev = self.est.flux.stator_frequency;
         let rs = self.estimate_rs(m, frame_held, flux_settled, ws_prev);
         probe.end(StepRegion::RsEstimator);
@@ -1136,7 +1193,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         frame_held: bool,
     ) -> SpeedEstimate<N> {
         let far_side_mode = self.prev.far_side;
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
         // the far-side term: in the far-side mode (the reference
@@ -1183,7 +1240,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         flux_settled: bool,
         ws_prev: N,
     ) -> N {
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
         // eq. (20) holds with settled flux; while field weakening moves it, the rotor
@@ -1250,7 +1307,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         frame_held: bool,
         rs: N,
     ) {
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
         let flux_settled = est.flux.rotor_flux >= c.settled_flux;
@@ -1303,12 +1360,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// the running cascade (bumpless: the ramp starts from the speed the rotor turns at).
     #[inline(always)]
     fn magnetize(&mut self, m: &Measured<N>, e: &Estimate<N>) -> Result<Dq<N>, FaultReason> {
-        let c = &self.coeffs;
-        let steps = self.start.count();
-        if let Some(reason) = self.sup.magnetizing(&c.limits, steps) {
+        let c = &self.cfg.coeffs;
+        let steps = self.refs.start.count();
+        if let Some(reason) = self.supervision.sup.magnetizing(&c.limits, steps) {
             return Err(reason);
         }
-        let out = self.start.update(
+        let out = self.refs.start.update(
             &StartSequenceConfig {
                 magnetizing: &c.magnetizing,
                 inverter_test: &c.inverter_test,
@@ -1336,7 +1393,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             self.est.rs.preset(rs);
         }
         if out.magnetized {
-            self.sup.magnetized();
+            self.supervision.sup.magnetized();
             self.est.observer.start_running(m.i_dq.q);
             self.refs.speed.pi.reset();
             // bumpless: the ramp starts from the speed the rotor turns at (0 at rest)
@@ -1364,15 +1421,19 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         }
         let fw = self.field_weakening(m, e, limit);
         let i_sq_ref = self.speed_loop(m, e, fw, limit.steady);
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let r = &mut self.refs;
         let speed = e.observer.speed;
         let saturated = r.speed.pi.saturated();
-        let stall = self
-            .sup
-            .stall(&c.limits, saturated, speed, r.speed.speed_reference);
+        let stall =
+            self.supervision
+                .sup
+                .stall(&c.limits, saturated, speed, r.speed.speed_reference);
         let stall = match stall {
-            None => self.sup.blind(&c.limits, saturated, e.stator_frequency),
+            None => self
+                .supervision
+                .sup
+                .blind(&c.limits, saturated, e.stator_frequency),
             some => some,
         };
         match stall {
@@ -1393,7 +1454,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         e: &Estimate<N>,
         limit: VoltageLimit<N>,
     ) -> FieldWeakeningOutput<N> {
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let r = &mut self.refs;
         r.fw.update(
             &c.fw,
@@ -1426,11 +1487,15 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         fw: FieldWeakeningOutput<N>,
         voltage_limit: N,
     ) -> N {
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let r = &mut self.refs;
         // the short-time overload rating (`thermal`), on the measured current
         let rating = if c.thermal.enabled {
-            Some(self.thermal.update(&c.thermal, m.i_dq.d, m.i_dq.q))
+            Some(
+                self.supervision
+                    .thermal
+                    .update(&c.thermal, m.i_dq.d, m.i_dq.q),
+            )
         } else {
             None
         };
@@ -1447,10 +1512,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 inv_rotor_flux: self.est.flux.inv_rotor_flux,
                 voltage_limit,
                 inverter_error_known: O::FAR_SIDE_TERM
-                    && (self.start.inverter.outcome == InverterTestOutcome::Identified
+                    && (r.start.inverter.outcome == InverterTestOutcome::Identified
                         || self
+                            .loops
                             .inverter_tracker
-                            .trusted(&c.inverter_tracker, self.start.inverter.correction_duty)),
+                            .trusted(&c.inverter_tracker, r.start.inverter.correction_duty)),
                 regeneration_limit: O::REGENERATION_LIMIT,
                 rating,
                 q_saturated: self.prev.q_saturated,
@@ -1463,10 +1529,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     #[inline(always)]
     fn voltage_limit(&mut self, m: &Measured<N>, inv_dc_bus: N) -> VoltageLimit<N> {
         let limit = self
+            .loops
             .modulator
-            .voltage_limit(&self.coeffs.pwm, m.dc_bus, inv_dc_bus);
-        self.cur.limit(
-            &self.coeffs.current_loop,
+            .voltage_limit(&self.cfg.coeffs.pwm, m.dc_bus, inv_dc_bus);
+        self.loops.cur.limit(
+            &self.cfg.coeffs.current_loop,
             limit,
             m.applied.v_dq,
             M::OVERMODULATES,
@@ -1482,8 +1549,8 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         i_ref: Dq<N>,
         limit: VoltageLimit<N>,
     ) -> Dq<N> {
-        let c = &self.coeffs;
-        self.cur.update(
+        let c = &self.cfg.coeffs;
+        self.loops.cur.update(
             &c.current_loop,
             &CurrentLoopInputs {
                 referred_rotor_resistance: c.referred_rotor_resistance,
@@ -1514,8 +1581,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         inv_dc_bus: N,
         track: bool,
     ) -> (AlphaBeta<N>, Modulation<N>, Dq<N>) {
-        let c = &self.coeffs;
-        let rot = N::rotate_ahead(&mut self.sincos, m.sc, m.angle, e.stator_frequency, c.lead);
+        let c = &self.cfg.coeffs;
+        let rot = N::rotate_ahead(
+            &mut self.loops.sincos,
+            m.sc,
+            m.angle,
+            e.stator_frequency,
+            c.lead,
+        );
         let v_ab = inverse_park(v, rot);
         // dead-time compensation needs the current sign while the voltage acts: predict it
         // from the current reference at the same (advanced) angle, which is noise-free and
@@ -1525,20 +1598,20 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         // is compensated with it, as more dead-time duty per leg with
         // the same current signs; the estimators keep the command v, which the two
         // compensations make the machine see
-        let out = self.modulator.modulate(
+        let out = self.loops.modulator.modulate(
             &c.pwm,
             v_ab,
             m.dc_bus,
             inv_dc_bus,
             i_ref_abc,
-            self.start.inverter.correction_duty,
+            self.refs.start.inverter.correction_duty,
         );
         // the inverter error the correction still leaves, from the sixth-harmonic
         // pattern across the current in this step's command, for the
         // next step's modulation
         if c.inverter_tracker.enabled {
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
-            self.start.inverter.correction_duty = self.inverter_tracker.update(
+            self.refs.start.inverter.correction_duty = self.loops.inverter_tracker.update(
                 &c.inverter_tracker,
                 &InverterTrackerInputs {
                     v,
@@ -1548,7 +1621,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                     stator_frequency: e.stator_frequency,
                     gate: track && !out.saturated,
                 },
-                self.start.inverter.correction_duty,
+                self.refs.start.inverter.correction_duty,
             );
         }
         if M::OVERMODULATES && out.saturated {
@@ -1574,7 +1647,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             speed_reference: self.refs.speed.speed_reference,
             speed_estimate: e.observer.speed,
             load_torque_estimate: e.observer.load_torque,
-            torque_estimate: N::gain_mul(self.coeffs.torque_factor, e.rotor_flux, m.i_dq.q),
+            torque_estimate: N::gain_mul(self.cfg.coeffs.torque_factor, e.rotor_flux, m.i_dq.q),
             current: m.i_dq,
             current_reference: i_ref,
             voltage: v,
@@ -1584,9 +1657,9 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             stator_frequency: e.stator_frequency,
             voltage_saturated: saturated,
             speed_target_limited: self.refs.speed.target_limited,
-            current_error: self.monitor.control.current_error,
-            model_residual: self.monitor.control.model_residual,
-            search_speed: self.start.search.measured_speed,
+            current_error: self.supervision.control.current_error,
+            model_residual: self.supervision.control.model_residual,
+            search_speed: self.refs.start.search.measured_speed,
             zero_speed_held: zero_held,
         };
     }
@@ -1594,7 +1667,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// Open-loop V/f (commissioning): the voltage boost + V/f |w| at the frequency
     /// p * speed reference, no estimation.
     fn step_open_loop(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
-        let c = &self.coeffs;
+        let c = &self.cfg.coeffs;
         let [a, b, cc] = inp.phase_currents;
         let (i_ab, currents) = match c.limits.current_sensing {
             CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
@@ -1604,11 +1677,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         let ramp = c.speed_loop.ramp_step;
         let dv = (r.speed.speed_target - r.speed.speed_reference).clamp(-ramp, ramp);
         r.speed.speed_reference = r.speed.speed_reference + dv;
-        let ol = &mut self.open_loop;
+        let ol = &mut r.open_loop;
         ol.frequency = N::gain(c.pole_pairs, r.speed.speed_reference);
         let mag = (c.vf.boost + N::gain(c.vf.volts_per_rad_s, ol.frequency.abs()))
             .clamp(N::ZERO, linear_limit(inp.dc_bus));
-        let sc = self.sincos.sin_cos(ol.angle);
+        let sc = self.loops.sincos.sin_cos(ol.angle);
         let v = Dq { d: mag, q: N::ZERO };
         let v_ab = inverse_park(v, sc);
         let out = modulate(&c.pwm, v_ab, inp.dc_bus, currents);
@@ -1640,7 +1713,7 @@ mod tests {
     /// A drive powered long enough (switches off, zero currents) for its offset
     /// measurement to have settled: a start switches at the next step.
     fn powered(mut d: Drive) -> Drive {
-        for _ in 0..d.coeffs.limits.offset_settle_steps {
+        for _ in 0..d.coeffs().limits.offset_settle_steps {
             d.step(&idle_inputs());
         }
         d
@@ -1886,7 +1959,7 @@ mod tests {
             assert_eq!(d.fault(), None);
             // a restart waits for the rotor flux to decay (5 tau_r after the switch-off)
             assert_eq!(d.start(), Err(CommandError::Demagnetizing));
-            for _ in 0..d.coeffs.limits.demagnetize_steps {
+            for _ in 0..d.coeffs().limits.demagnetize_steps {
                 d.step(&idle_inputs());
             }
             d.start().unwrap();
@@ -1970,9 +2043,9 @@ mod tests {
         idle(&mut d, 10);
         assert_eq!(d.state(), DriveState::Magnetizing);
         d.stop();
-        let wait = d.coeffs.limits.demagnetize_steps;
-        let tau_r = d.design.config.machine.rotor_time_constant();
-        let ts = d.design.config.control_period;
+        let wait = d.coeffs().limits.demagnetize_steps;
+        let tau_r = d.design().config.machine.rotor_time_constant();
+        let ts = d.design().config.control_period;
         assert_eq!(wait, (5.0 * tau_r / ts) as u32);
         idle(&mut d, wait - 1);
         assert_eq!(d.start(), Err(CommandError::Demagnetizing));
@@ -1996,20 +2069,24 @@ mod tests {
     #[test]
     fn a_design_with_another_inverter_compensation_drops_its_correction() {
         let mut d = drive();
-        d.start.inverter.correction_duty = 0.002;
-        d.start.inverter.outcome = InverterTestOutcome::Identified;
+        d.refs.start.inverter.correction_duty = 0.002;
+        d.refs.start.inverter.outcome = InverterTestOutcome::Identified;
         let mut cfg = *d.config();
         cfg.orientation_gain *= 0.5;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.start.inverter.correction_duty, 0.002);
-        assert_eq!(d.start.inverter.outcome, InverterTestOutcome::Identified);
+        assert_eq!(d.refs.start.inverter.correction_duty, 0.002);
+        assert_eq!(
+            d.refs.start.inverter.outcome,
+            InverterTestOutcome::Identified
+        );
         cfg.dead_time = 2.0e-6;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.start.inverter.correction_duty, 0.0);
-        assert_eq!(d.start.inverter.outcome, InverterTestOutcome::NotRun);
-        assert!(!d
-            .inverter_tracker
-            .trusted(&d.coeffs.inverter_tracker, d.start.inverter.correction_duty));
+        assert_eq!(d.refs.start.inverter.correction_duty, 0.0);
+        assert_eq!(d.refs.start.inverter.outcome, InverterTestOutcome::NotRun);
+        assert!(!d.loops.inverter_tracker.trusted(
+            &d.coeffs().inverter_tracker,
+            d.refs.start.inverter.correction_duty
+        ));
     }
 
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the
@@ -2017,12 +2094,12 @@ mod tests {
     #[test]
     fn a_design_without_the_gain_calibration_drops_its_correction() {
         let mut d = drive();
-        d.start.gain_cal.ratio = 1.01;
-        d.start.gain_cal.factors = [0.995, 1.005];
+        d.refs.start.gain_cal.ratio = 1.01;
+        d.refs.start.gain_cal.factors = [0.995, 1.005];
         let mut cfg = *d.config();
         cfg.current_gain_calibration = false;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
-        assert_eq!(d.start.gain_cal.factors, [1.0; 2]);
+        assert_eq!(d.refs.start.gain_cal.factors, [1.0; 2]);
         assert_eq!(d.current_gain_correction(), 1.0);
     }
 
@@ -2043,7 +2120,7 @@ mod tests {
         // a start at power-up waits, switches off, for the offsets' measurement (0.1 s)
         // and then magnetizes with the measured offset subtracted
         let mut d = fresh();
-        let settle = d.coeffs.limits.offset_settle_steps as usize;
+        let settle = d.coeffs().limits.offset_settle_steps as usize;
         assert_eq!(settle, 500);
         idle(&mut d, 0.05, 10);
         assert_eq!(d.start(), Ok(()));
@@ -2061,9 +2138,9 @@ mod tests {
         assert!(!d.start_pending());
         assert_eq!(d.state(), DriveState::Magnetizing);
         assert!(
-            (d.offset_compensation[0] - 0.05).abs() < 0.01,
+            (d.sensing.compensation[0] - 0.05).abs() < 0.01,
             "{:?}",
-            d.offset_compensation
+            d.sensing.compensation
         );
         assert!(d.step(&idle_inputs()).enabled);
         // a stop cancels a waiting start
@@ -2092,7 +2169,7 @@ mod tests {
         let mut d = drive();
         idle(&mut d, 0.05, 3000);
         assert_eq!(d.start(), Ok(()));
-        assert!((d.offset_compensation[0] - 0.05).abs() < 1e-3);
+        assert!((d.sensing.compensation[0] - 0.05).abs() < 1e-3);
         let m = d.sense(
             &DriveInputs {
                 phase_currents: [0.05, 0.0, 0.0],
