@@ -1,7 +1,7 @@
 //! Any motor: each acceptance machine
 //! (`crates/acim-sim/machines/`) is commissioned from its nameplate and board alone
 //! against its plant (realistic sensors and inverter), the drive is built from the
-//! identified model only, and it runs the scenarios closed loop
+//! identified model only, and it runs the acceptance scenarios closed loop
 //! (`acim_sim::machines`). Acceptance: no fault, steady speed-estimation error and speed
 //! error at most 1 % of rated speed in every window.
 

@@ -47,7 +47,7 @@ fn check_one_of(
 /// `OverCurrent` after 5 ms before it, when the rotor reached that instant at another
 /// angle). Swept over one electrical period (60 ms at 500 rpm) in 5 ms steps: every
 /// instant trips within 20 ms (measured: 5-15 ms; the open phase's bound) and never
-/// switches beyond the trip current for more than the issue's 5 ms. Where the short's
+/// switches beyond the trip current for more than the required 5 ms. Where the short's
 /// current crosses the trip between two samples, the plant's hardware comparator (at the
 /// trip level) opens the switches first and the drive reports `HardwareBreak`: the
 /// over-current kind of instant.
@@ -105,7 +105,7 @@ fn nan_sample_trips_at_once() {
 
 // Faults judged without trusting the estimates. Bounds: the detection time
 // measured with `cargo run --release -p acim-sim -- run <name>` plus margin, and the
-// safety bound of the issue: never switching with a true phase current beyond the trip
+// the safety bound: never switching with a true phase current beyond the trip
 // or the true speed beyond 110 % of max_speed for more than 5 ms.
 
 fn check_safe(name: &str) {

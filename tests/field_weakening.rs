@@ -4,7 +4,7 @@
 //! link with the over-voltage control. Scenarios in `acim_sim::builtins` (`fw-*`).
 //!
 //! Measured (f32, `cargo run --release -p acim-sim -- run <name>`): see the numbers in
-//! each test. The 0.5 % steady speed error at 3000 rpm is met since the sense
+//! each test. The required 0.5 % steady speed error at 3000 rpm is met since the sense
 //! stage removes the current ripple a boundary sample carries (`DriveCoeffs::
 //! sample_ripple`): before, the true speed ran 1.2 % above the estimate there (the flux
 //! model read i_sd 2 % high at 0.22 Wb).
@@ -110,7 +110,7 @@ fn fixed_point_reversal() {
     assert!(m.windows["forward"].speed_mean_rpm > 2985.0);
 }
 
-/// The acceptance: steady speed error at most 0.5 % of the reference at
+/// The acceptance: steady speed error at most 0.5 % of the reference at
 /// 3000 rpm (15 rpm), on the paper machine and the 2.2 kW machine, and at 2500 rpm
 /// through the load step (12.5 rpm). Measured: 4.35 / 5.55 rpm (paper machine, forward /
 /// reverse), 5.08 / 3.73 rpm (2.2 kW), 4.72 / 4.21 rpm (2500 rpm, before / after the
@@ -307,7 +307,7 @@ fn overmodulation_keeps_the_acceptance_and_reaches_further() {
     assert!(m.windows["stopped"].speed_mean_rpm.abs() < 5.0);
 }
 
-/// The capability acceptance: with overmodulation the steady torque held is
+/// The capability acceptance: with overmodulation the steady torque held is
 /// within 5 % of the envelope of the machine equations (0.98 V_dc/sqrt 3, the current
 /// limit; `acim-sim capability` measures all twelve speeds, 95-100 %); linear SVPWM holds
 /// 85 %, its 8 % voltage headroom (torque goes with V^2).

@@ -54,7 +54,7 @@ fn builtin_flying_starts_catch_the_rotor() {
     check(&builtins::get("flying-start-reverse").unwrap(), 0.06, 5.0);
 }
 
-/// The sweep of the issue: +/-1000 rpm, 10x inertia (the rotor keeps its speed through
+/// The acceptance sweep: +/-1000 rpm, 10x inertia (the rotor keeps its speed through
 /// the search), both arithmetics, a speed target different from the caught speed.
 #[test]
 fn catches_any_speed_within_1000_rpm_in_both_arithmetics() {

@@ -42,7 +42,7 @@ fn rs_tracked_while_running() {
 
 /// In the standstill mode the same drift leaves the estimate at its
 /// standstill value and the speed estimate off by the Rs error times i_sq / (p lambda):
-/// the issue's 18.5 rpm at 500 rpm.
+/// the required 18.5 rpm at 500 rpm.
 #[test]
 fn standstill_mode_misses_the_drift() {
     let c = case(Variant::PlantRsDrift30, 500.0, false, 1.5);
@@ -287,7 +287,7 @@ fn inverter_error_is_tracked_while_running() {
 /// from `[drive]` (before, `--set drive.inverter_identification=false` and the other
 /// three were silently ignored there).
 #[test]
-fn nameplate_scenarios_take_the_issue_13_switches() {
+fn nameplate_scenarios_take_the_robustness_switches() {
     let mut s = builtin("fw-2k2-reversal-3000");
     s.duration_s = 1.2;
     s.speed_profile.retain(|p| p.t_s <= 1.2);
@@ -433,7 +433,7 @@ fn offset_drift_is_tracked_at_the_regeneration_limits_hold() {
 /// Item 3 on the far side (60 rpm, 4.5 N m regenerating, f_s = -1.05 Hz): below the
 /// tracker's 1.5 Hz gate, but in the drive's far-side mode the offset adapts from 0.5 Hz
 /// at a tenth of its rate (`crates/acim/src/offset_tracker.rs`, "On the far side"). The
-/// 20 mA that drift in over 4-5 s are then held within the issue's 2 rpm at 17-19 s,
+/// 20 mA that drift in over 4-5 s are then held within the required 2 rpm at 17-19 s,
 /// 12-14 s after the drift ended (measured -0.95 rpm; untracked -4.1 rpm there and -5.4
 /// in the matrix's window at 7-9 s, where the tracked drive still reads -4.2 rpm).
 #[test]

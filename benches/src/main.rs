@@ -76,7 +76,7 @@ const BUDGET_TOLERANCE: f64 = 0.05;
 const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
-/// order of the issue.
+/// order of the step.
 const REPORT_REGIONS: [&str; 13] = [
     "sincos",
     "clarke_park",

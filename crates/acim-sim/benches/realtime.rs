@@ -1,6 +1,6 @@
 //! Real-time factor of the simulator: simulated seconds per wall-clock second for the
 //! 10 s paper scenarios (closed loop, averaged inverter, 5 RK4 sub-steps per period,
-//! 12-bit noisy sensors), one core. The target is 100x.
+//! 12-bit noisy sensors), one core. The target is 100x.
 //!
 //! `cargo bench -p acim-sim` (a plain harness: median of repeated runs; the figure is a
 //! throughput, so a statistics framework would add little).

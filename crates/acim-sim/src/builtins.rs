@@ -1,7 +1,7 @@
 //! Built-in scenarios: the paper's Figs. 6-12, open-loop V/f, regeneration (the subject of
 //! a later issue: run and reported here), fault cases and flying starts.
 //!
-//! Common settings of the paper cases (design notes section 4 and the issue's defaults):
+//! Common settings of the paper cases (design notes section 4 and the project's defaults):
 //! Table 1 machine, J = 0.01 kg m^2, viscous friction 2e-3 N m s/rad, 325 V stiff bus,
 //! 1.5 us dead time and 1 V device drop (compensated by the drive with its nominal values),
 //! 12-bit current sensors with 10 mA rms noise, the paper's load as a passive brake.

@@ -17,7 +17,7 @@ use acim_plant::{LoadTorque, PwmPreload};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-/// Longest commissioning, simulated s (the bound is 60 s).
+/// Longest commissioning, simulated s (the bound is 60 s).
 pub const TIMEOUT_S: f32 = 60.0;
 
 /// Identified against true values, with the identification's own bound on its error.

@@ -92,8 +92,8 @@ pub struct Setup {
 
 /// The setups the report compares: earlier (the standstill Rs mode, no regeneration
 /// limit), Rs while running, Rs while running with the 1.5 Hz regeneration limit (the
-/// drive's defaults), and the standstill Rs mode with the limit (the defaults from issue
-/// 12's overhauling-load sweep until Rs tracking became the default).
+/// drive's defaults), and the standstill Rs mode with the limit (the defaults the
+/// overhauling-load sweep set, before Rs tracking became the default).
 pub const SETUPS: [(Setup, &str); 4] = [
     (
         Setup {

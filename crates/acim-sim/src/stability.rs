@@ -308,16 +308,16 @@ pub fn map(gains: &[f32]) -> Result<Vec<GrowthPoint>, ScenarioError> {
     Ok(out)
 }
 
-/// Speeds of the issue-13 map, rpm (forward; the map is symmetric under reversal).
+/// Speeds of the robust-stability map, rpm (forward; the map is symmetric under reversal).
 pub const ROBUST_SPEEDS_RPM: [f32; 6] = [15.0, 30.0, 60.0, 120.0, 250.0, 500.0];
-/// Active load torques of the issue-13 map, N m (positive: motoring, negative:
+/// Active load torques of the robust-stability map, N m (positive: motoring, negative:
 /// regenerating at forward speed).
 pub const ROBUST_LOADS_NM: [f32; 7] = [-4.5, -3.0, -1.5, 0.0, 1.5, 3.0, 4.5];
 
 /// A change applied to a scenario before it is built.
 pub type ScenarioChange = Box<dyn Fn(&mut Scenario)>;
 
-/// The parameter and inverter errors of the issue-13 map: a name and the change to the
+/// The parameter and inverter errors of the robust-stability map: a name and the change to the
 /// scenario (the controller's model or the compensation differs from the plant).
 pub fn robust_errors() -> Vec<(&'static str, ScenarioChange)> {
     fn with_inverter(s: &mut Scenario, comp: f32) {
@@ -414,7 +414,7 @@ fn margin_row(t: f32, i_sq: f32, k: f32, c: f32, i_sd: f32) -> String {
     )
 }
 
-/// The issue-13 map as Markdown: for each error of [`robust_errors`] and each Rs mode
+/// The robust-stability map as Markdown: for each error of [`robust_errors`] and each Rs mode
 /// (estimator off, as in the paper's scheme with the correction, and the running mode),
 /// the measured growth rate of a 2 degree orientation step at every point of
 /// [`ROBUST_SPEEDS_RPM`] x [`ROBUST_LOADS_NM`] with the drive's orientation gain.

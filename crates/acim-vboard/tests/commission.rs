@@ -52,7 +52,7 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     run(&mut b, 2.0);
     let p = say(&mut b, "commission");
     assert!(p[0].starts_with("ok commissioning: DC steps"), "{p:?}");
-    // the whole sequence within the 60 s
+    // the whole sequence within the required 60 s
     let mut t = 2.0;
     while say(&mut b, "status")[0] == "ok state 5 fault 00" {
         assert!(t < 60.0, "commissioning should end within 60 s");

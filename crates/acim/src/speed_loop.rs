@@ -40,7 +40,7 @@ use crate::pi::{PiConfig, PiController};
 
 /// The far-side transit: with [`DriveConfig::far_side_gain`] on, the
 /// regeneration limit is released while the load torque estimate puts the speed target's
-/// operating point at least this far beyond the line w_s = 0, Hz (the observable
+/// operating point at least this far beyond the line w_s = 0, Hz (the observable
 /// bound, |f_s| >= 1 Hz).
 pub const FAR_SIDE_ENTER_HZ: f32 = 1.0;
 /// ... and applies again once that point comes within this of the line, Hz (the start of
