@@ -325,9 +325,6 @@ struct Sensing<N: Num> {
     off_steps: u32,
     /// The offsets' drift since the start, tracked while turning.
     tracker: OffsetTracker<N>,
-    /// A start asked for before the switches-off offset measurement had settled: the idle
-    /// step performs it once the measurement has (offsets measured before every start).
-    pending_start: Option<DriveState>,
 }
 
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
@@ -471,7 +468,6 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                 compensation: [N::ZERO; 3],
                 off_steps: u32::MAX,
                 tracker: OffsetTracker::default(),
-                pending_start: None,
             },
             telemetry: DriveTelemetry {
                 stator_resistance_estimate: rs_initial,
@@ -591,7 +587,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
 
     /// Whether a start is waiting for the switches-off offset measurement to settle.
     pub fn start_pending(&self) -> bool {
-        self.sensing.pending_start.is_some()
+        self.refs.start.waiting().is_some()
     }
 
     /// Idle only (the state machine refuses a start elsewhere): a start sooner than
@@ -608,7 +604,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             return Err(CommandError::Demagnetizing);
         }
         if !self.sensing.offsets.settled(limits) {
-            self.sensing.pending_start = Some(to);
+            self.refs.start.wait_for_offsets(to);
             return Ok(());
         }
         self.begin_start(to)
@@ -619,7 +615,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// offsets are subtracted from the samples until the next stop, and every controller
     /// and estimator is reset.
     fn begin_start(&mut self, to: DriveState) -> Result<(), CommandError> {
-        self.sensing.pending_start = None;
+        self.refs.start.cancel_wait();
         let limits = &self.cfg.coeffs.limits;
         if let Some(reason) = self
             .supervision
@@ -651,7 +647,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// Any active state -> Idle, switches off at once (the machine coasts). A faulted drive
     /// stays faulted.
     pub fn stop(&mut self) {
-        self.sensing.pending_start = None;
+        self.refs.start.cancel_wait();
         self.supervision.sup.stop();
     }
 
@@ -768,7 +764,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
     /// Trips the supervisor and switches off. The speed target is cleared: a restart
     /// after a fault needs a new speed command.
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
-        self.sensing.pending_start = None;
+        self.refs.start.cancel_wait();
         self.supervision.sup.trip(reason);
         self.prev.voltage = Applied::default();
         self.refs.speed.speed_target = N::ZERO;
@@ -928,10 +924,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
                     .offsets
                     .idle_sample(&self.cfg.coeffs.limits, inp.phase_currents);
             }
-            if let Some(to) = self.sensing.pending_start {
-                if self.sensing.offsets.settled(&self.cfg.coeffs.limits) {
-                    let _ = self.begin_start(to);
-                }
+            // the start sequence's first phase: a waiting start goes once they have
+            let settled = self.sensing.offsets.settled(&self.cfg.coeffs.limits);
+            if let Some(to) = self.refs.start.offsets_settled(settled) {
+                let _ = self.begin_start(to);
             }
         }
         PwmOutput::OFF

@@ -8,8 +8,10 @@
 //! value, [`StartOutput`]: the drive applies the catch, the resistance preset and the
 //! handover to its estimators and speed loop.
 //!
-//! The phases, in order ([`StartPhase`]): the speed search (at the flux current it is
-//! designed for), then either the catch of a turning rotor (the frame turns with it and
+//! The phases, in order ([`StartPhase`]): with the switches still off, the wait for
+//! the current channels' zero offsets (a start asked for before the idle measurement has
+//! settled waits for it: the drive performs it once it has); then the speed search (at
+//! the flux current it is designed for), then either the catch of a turning rotor (the frame turns with it and
 //! the flux builds again in that frame) or, at rest, the inverter test's levels and the
 //! Rs identification; magnetized when the flux has settled and every test is done.
 
@@ -18,7 +20,7 @@ use crate::gain_calibration::{GainCalibration, GainCalibrationConfig};
 use crate::inverter_test::{InverterTest, InverterTestDesign, InverterTestOutcome};
 use crate::num::Num;
 use crate::speed_search::{SearchOutcome, SpeedSearch, SpeedSearchDesign};
-use crate::supervisor::FaultReason;
+use crate::supervisor::{DriveState, FaultReason};
 
 /// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,6 +98,8 @@ pub struct StartOutput<N> {
 /// Where the start sequence is (telemetry and tests).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StartPhase {
+    /// Switches off: a start waits for the idle offset measurement to settle.
+    WaitOffsets,
     /// The flying start's speed search.
     SpeedSearch,
     /// A turning rotor caught: the flux builds in the frame turning with it.
@@ -123,6 +127,9 @@ pub struct StartSequence<N: Num> {
     pub inverter: InverterTest<N>,
     /// The current sensors' relative gain, calibrated while magnetizing at rest.
     pub gain_cal: GainCalibration<N>,
+    /// A start asked for before the switches-off offset measurement had settled: the
+    /// state it goes to once it has.
+    waiting: Option<DriveState>,
 }
 
 impl<N: Num> StartSequence<N> {
@@ -133,6 +140,32 @@ impl<N: Num> StartSequence<N> {
         self.rs_settled_steps = 0;
         self.search = SpeedSearch::new();
         self.flying = false;
+    }
+
+    /// A start to `to` waits for the switches-off offsets to settle.
+    pub fn wait_for_offsets(&mut self, to: DriveState) {
+        self.waiting = Some(to);
+    }
+
+    /// The state a waiting start goes to, if one waits.
+    pub fn waiting(&self) -> Option<DriveState> {
+        self.waiting
+    }
+
+    /// No start waits any more (a stop, or the start performed).
+    pub fn cancel_wait(&mut self) {
+        self.waiting = None;
+    }
+
+    /// One step with the switches off: once the offsets have `settled`, the waiting start
+    /// (taken: the drive performs it now).
+    #[inline(always)]
+    pub fn offsets_settled(&mut self, settled: bool) -> Option<DriveState> {
+        if settled {
+            self.waiting.take()
+        } else {
+            None
+        }
     }
 
     /// A flying start is magnetizing in the frame turning with the rotor.
@@ -151,7 +184,9 @@ impl<N: Num> StartSequence<N> {
 
     /// The phase the sequence is in.
     pub fn phase(&self, cfg: &StartSequenceConfig<'_, N>) -> StartPhase {
-        if !self.search.done(&cfg.magnetizing.search) {
+        if self.waiting.is_some() {
+            StartPhase::WaitOffsets
+        } else if !self.search.done(&cfg.magnetizing.search) {
             StartPhase::SpeedSearch
         } else if self.flying {
             StartPhase::Catch
@@ -275,6 +310,25 @@ mod tests {
             referred_rotor_resistance: c.referred_rotor_resistance,
             inv_rotor_time_constant: c.inv_rotor_time_constant,
         }
+    }
+
+    /// The first phase: a start asked for before the offsets settled waits with the
+    /// switches off and is handed to the drive once they have, once; a stop cancels it.
+    #[test]
+    fn a_start_waits_for_the_offsets_then_goes_once() {
+        let c = coeffs(true, true, true);
+        let mut s = StartSequence::<f32>::default();
+        assert_eq!(s.waiting(), None);
+        s.wait_for_offsets(DriveState::Magnetizing);
+        assert_eq!(s.phase(&config(&c)), StartPhase::WaitOffsets);
+        assert_eq!(s.offsets_settled(false), None);
+        assert_eq!(s.waiting(), Some(DriveState::Magnetizing));
+        assert_eq!(s.offsets_settled(true), Some(DriveState::Magnetizing));
+        assert_eq!(s.offsets_settled(true), None);
+        assert_ne!(s.phase(&config(&c)), StartPhase::WaitOffsets);
+        s.wait_for_offsets(DriveState::OpenLoop);
+        s.cancel_wait();
+        assert_eq!(s.offsets_settled(true), None);
     }
 
     fn at_rest(c: &DriveCoeffs, flux_settled: bool) -> StartInputs<f32> {
