@@ -480,37 +480,84 @@ struct HoldSums {
     n: u32,
 }
 
-/// The sequence's state.
+/// The fixed part: what the nameplate and the board give (set by
+/// [`Commissioning::new`]).
 #[derive(Clone, Debug)]
-pub struct Commissioning {
+struct Setup {
+    /// The nameplate's rated point.
     rated: RatedPoint,
+    /// The nameplate's power factor, if printed.
     power_factor: Option<f32>,
+    /// The board.
     board: Board,
+    /// The control period, s.
     ts: f32,
+    /// The over-current trip level, A peak.
     trip: f32,
-    pi: PiConfig,
+    /// The modulator.
     pwm: SvpwmConfig,
+    /// The current channels measured.
     sensing: CurrentSensing,
-    stage: Stage,
-    steps: u32,
+}
+
+/// The current loops of the standstill tests (alpha and beta, stationary frame).
+#[derive(Clone, Debug)]
+struct CurrentLoops {
+    /// Their gains, for an unknown machine.
+    pi: PiConfig,
+    /// The alpha current's loop.
     alpha: PiController,
+    /// The beta current's loop.
     beta: PiController,
-    offsets: [f32; 3],
-    /// Per DC level and half of its measuring time: mean current and voltage; the mean bus.
-    dc: [[(f32, f32); 2]; 4],
+}
+
+/// The DC steps (Rs and the inverter error): their sums and the line's fit.
+#[derive(Clone, Debug)]
+struct DcSteps {
+    /// Per DC level and half of its measuring time: mean current and voltage.
+    levels: [[(f32, f32); 2]; 4],
+    /// The bus voltage summed over the measuring times, V (the mean bus, with `bus_n`).
     bus_sum: f32,
+    /// The bus samples in `bus_sum`.
     bus_n: u32,
-    /// The present DC step's sums per half, and their sample counts.
+    /// The present DC step's sums per half (current, A; voltage, V).
     acc: [(f32, f32); 2],
+    /// Their sample counts.
     acc_n: [u32; 2],
-    /// Impedance tests' Fourier sums, per half of the window.
+    /// The line's Rs, ohm (after the last DC step).
+    rs_fit: f32,
+    /// The inverter error V_e from the line's intercept, V (after the last DC step).
+    inverter_fit: f32,
+}
+
+/// Impedance tests' Fourier sums, per half of the window.
+#[derive(Clone, Debug)]
+struct ImpedanceSums {
+    /// At the low frequency.
     low: [Fourier; 2],
+    /// At the rated frequency.
     high: [Fourier; 2],
+}
+
+/// The V/f stabiliser of the no-load test ([`VF_STABILISER_GAIN`]).
+#[derive(Clone, Debug)]
+struct Stabiliser {
+    /// Its gain, rad/s electrical per N m.
+    gain: f32,
+    /// Its low-pass factor, Ts / [`VF_STABILISER_TIME`].
+    alpha: f32,
+    /// The low-passed air-gap torque, N m.
+    torque: f32,
+    /// The frequency offset, rad/s electrical.
+    offset: f32,
+}
+
+/// The no-load test (V/f ramp and hold): its sums, its frequency and its stabiliser.
+#[derive(Clone, Debug)]
+struct NoLoadTest {
     /// No-load hold: per half, the mean voltage (alpha: its magnitude) and current in the
     /// voltage's frame.
-    no_load: [Fourier; 2],
-    rs_fit: f32,
-    inverter_fit: f32,
+    sums: [Fourier; 2],
     /// Ramp, per speed half (below and above 60 % of the end frequency): the air-gap
     /// torque's impulse in parts (N m s), the half's speed change (rad/s mechanical), the
     /// integral of the speed over it (rad).
@@ -519,15 +566,35 @@ pub struct Commissioning {
     hold: [HoldSums; 2],
     /// The last step's air-gap torque estimate, N m (the no-load test; 0 before it).
     torque: f32,
-    angle: f32,
+    /// The V/f stator frequency (without the stabiliser's offset), rad/s electrical.
     frequency: f32,
+    /// The stabiliser.
+    stab: Stabiliser,
+}
+
+/// The sequence's state.
+#[derive(Clone, Debug)]
+pub struct Commissioning {
+    /// The fixed part.
+    setup: Setup,
+    /// The current loops.
+    loops: CurrentLoops,
+    /// The stage the sequence is in.
+    stage: Stage,
+    /// Steps spent in the present stage.
+    steps: u32,
+    /// The current channels' offsets, A (the first stage's means).
+    offsets: [f32; 3],
+    /// The DC steps.
+    dc: DcSteps,
+    /// The impedance tests.
+    impedance: ImpedanceSums,
+    /// The no-load test.
+    no_load: NoLoadTest,
+    /// The test sinusoid's (or the V/f voltage's) angle, rad.
+    angle: f32,
+    /// The voltage commanded by the last step (alpha, beta), V.
     last_v: AlphaBeta,
-    /// The stabiliser: its gain (rad/s electrical per N m), low-pass factor Ts / time,
-    /// low-passed air-gap torque (N m) and frequency offset (rad/s electrical).
-    stab_gain: f32,
-    stab_alpha: f32,
-    stab_torque: f32,
-    stab_offset: f32,
 }
 
 impl Commissioning {
@@ -547,39 +614,51 @@ impl Commissioning {
             VF_STABILISER_GAIN * rated.pole_pairs as f32 * (rated.synchronous_speed - rated.speed)
                 / rated.torque;
         Ok(Self {
-            rated,
-            power_factor: nameplate.power_factor,
-            board: *board,
-            ts,
-            trip: crate::nameplate::TRIP_OVER_LIMIT * rated.current,
-            pi,
-            pwm: SvpwmConfig::new(0.0, ts, 0.0, 0.05),
-            sensing: CurrentSensing::TwoPhase,
+            setup: Setup {
+                rated,
+                power_factor: nameplate.power_factor,
+                board: *board,
+                ts,
+                trip: crate::nameplate::TRIP_OVER_LIMIT * rated.current,
+                pwm: SvpwmConfig::new(0.0, ts, 0.0, 0.05),
+                sensing: CurrentSensing::TwoPhase,
+            },
+            loops: CurrentLoops {
+                pi,
+                alpha: PiController::new(),
+                beta: PiController::new(),
+            },
             stage: Stage::Offsets,
             steps: 0,
-            alpha: PiController::new(),
-            beta: PiController::new(),
             offsets: [0.0; 3],
-            dc: [[(0.0, 0.0); 2]; 4],
-            bus_sum: 0.0,
-            bus_n: 0,
-            acc: [(0.0, 0.0); 2],
-            acc_n: [0; 2],
-            low: [Fourier::default(); 2],
-            high: [Fourier::default(); 2],
-            no_load: [Fourier::default(); 2],
-            rs_fit: 0.0,
-            inverter_fit: 0.0,
-            ramp: [RampSums::default(); 2],
-            hold: [HoldSums::default(); 2],
-            torque: 0.0,
+            dc: DcSteps {
+                levels: [[(0.0, 0.0); 2]; 4],
+                bus_sum: 0.0,
+                bus_n: 0,
+                acc: [(0.0, 0.0); 2],
+                acc_n: [0; 2],
+                rs_fit: 0.0,
+                inverter_fit: 0.0,
+            },
+            impedance: ImpedanceSums {
+                low: [Fourier::default(); 2],
+                high: [Fourier::default(); 2],
+            },
+            no_load: NoLoadTest {
+                sums: [Fourier::default(); 2],
+                ramp: [RampSums::default(); 2],
+                hold: [HoldSums::default(); 2],
+                torque: 0.0,
+                frequency: 0.0,
+                stab: Stabiliser {
+                    gain: stab_gain,
+                    alpha: ts / VF_STABILISER_TIME,
+                    torque: 0.0,
+                    offset: 0.0,
+                },
+            },
             angle: 0.0,
-            frequency: 0.0,
             last_v: AlphaBeta::default(),
-            stab_gain,
-            stab_alpha: ts / VF_STABILISER_TIME,
-            stab_torque: 0.0,
-            stab_offset: 0.0,
         })
     }
 
@@ -587,9 +666,9 @@ impl Commissioning {
     /// steps: ramp impulse (N m s), ramp speed change (rad/s), ramp angle (rad), hold
     /// torque (N m), hold speed (rad/s).
     pub fn mechanics_sums(&self) -> [f32; 5] {
-        let (rs, ve) = (self.rs_fit, self.inverter_fit);
-        let [a, b] = &self.ramp;
-        let [h0, h1] = &self.hold;
+        let (rs, ve) = (self.dc.rs_fit, self.dc.inverter_fit);
+        let [a, b] = &self.no_load.ramp;
+        let [h0, h1] = &self.no_load.hold;
         [
             a.impulse.torque(rs, ve) + b.impulse.torque(rs, ve),
             a.speed_change + b.speed_change,
@@ -612,12 +691,12 @@ impl Commissioning {
     /// The no-load test's air-gap torque estimate of the last step (power balance with the
     /// DC steps' Rs and inverter error), N m; 0 outside the test.
     pub fn air_gap_torque(&self) -> f32 {
-        self.torque
+        self.no_load.torque
     }
 
     /// The V/f test's stator frequency (without the stabiliser's offset), rad/s electrical.
     pub fn frequency(&self) -> f32 {
-        self.frequency
+        self.no_load.frequency
     }
 
     /// The DC steps (after [`Stage::DcStep`] 3): mean alpha current (A) and voltage (V)
@@ -626,6 +705,7 @@ impl Commissioning {
         // the step calls this from the interrupt: a plain array map (a zipped iterator's
         // generic `next` would be instantiated out of line, in flash)
         self.dc
+            .levels
             .map(|d| (0.5 * (d[0].0 + d[1].0), 0.5 * (d[0].1 + d[1].1)))
     }
 
@@ -642,7 +722,7 @@ impl Commissioning {
 
     /// Time spent so far in the present stage, s.
     pub fn stage_time(&self) -> f32 {
-        self.steps as f32 * self.ts
+        self.steps as f32 * self.setup.ts
     }
 
     fn fail(&mut self, e: CommissioningError) -> PwmOutput {
@@ -653,12 +733,12 @@ impl Commissioning {
     fn next(&mut self, s: Stage) {
         self.stage = s;
         self.steps = 0;
-        self.acc = [(0.0, 0.0); 2];
-        self.acc_n = [0; 2];
+        self.dc.acc = [(0.0, 0.0); 2];
+        self.dc.acc_n = [0; 2];
     }
 
     fn steps_of(&self, t: f32) -> u32 {
-        (t / self.ts) as u32
+        (t / self.setup.ts) as u32
     }
 
     /// One control period: samples in, PWM out (switches off once done or failed).
@@ -670,20 +750,21 @@ impl Commissioning {
         if !(is_finite(a) && is_finite(b) && is_finite(c) && is_finite(inp.dc_bus)) {
             return self.fail(CommissioningError::NonFiniteInput);
         }
-        if a.abs() > self.trip || b.abs() > self.trip || (a + b).abs() > self.trip {
+        if a.abs() > self.setup.trip || b.abs() > self.setup.trip || (a + b).abs() > self.setup.trip
+        {
             return self.fail(CommissioningError::OverCurrent);
         }
         let bus = inp.dc_bus;
-        if !(bus > 0.6 * self.board.dc_bus_v && bus < 1.25 * self.board.dc_bus_v) {
+        if !(bus > 0.6 * self.setup.board.dc_bus_v && bus < 1.25 * self.setup.board.dc_bus_v) {
             return self.fail(CommissioningError::DcBus);
         }
         self.steps = self.steps.saturating_add(1);
         let [oa, ob, oc] = self.offsets;
-        let i = match self.sensing {
+        let i = match self.setup.sensing {
             CurrentSensing::TwoPhase => clarke_two(a - oa, b - ob),
             CurrentSensing::ThreePhase => clarke_three(a - oa, b - ob, c - oc),
         };
-        let i_r = self.rated.current;
+        let i_r = self.setup.rated.current;
         let v = match self.stage {
             Stage::Offsets => {
                 let n = self.steps as f32;
@@ -691,7 +772,7 @@ impl Commissioning {
                     *o += (x - *o) / n;
                 }
                 if self.steps >= self.steps_of(0.2) {
-                    let limit = 0.02 * self.trip;
+                    let limit = 0.02 * self.setup.trip;
                     if self.offsets.iter().any(|o| o.abs() > limit) {
                         return self.fail(CommissioningError::SensorOffset);
                     }
@@ -716,19 +797,19 @@ impl Commissioning {
                     let h = usize::from(
                         self.steps > measure_from + self.steps_of(0.5 * DC_MEASURE_TIME),
                     );
-                    if let (Some(a), Some(n)) = (self.acc.get_mut(h), self.acc_n.get_mut(h)) {
+                    if let (Some(a), Some(n)) = (self.dc.acc.get_mut(h), self.dc.acc_n.get_mut(h)) {
                         a.0 += i.alpha;
                         a.1 += self.last_v.alpha;
                         *n += 1;
                     }
-                    self.bus_sum += bus;
-                    self.bus_n += 1;
+                    self.dc.bus_sum += bus;
+                    self.dc.bus_n += 1;
                 }
                 if self.steps >= self.steps_of(DC_STEP_TIME) {
-                    if let Some(d) = self.dc.get_mut(k as usize) {
+                    if let Some(d) = self.dc.levels.get_mut(k as usize) {
                         // indexed: the interrupt runs this, and a zipped iterator's generic
                         // `next` would be instantiated out of line, in flash
-                        let (acc, acc_n) = (self.acc, self.acc_n);
+                        let (acc, acc_n) = (self.dc.acc, self.dc.acc_n);
                         let mean = |h: usize| {
                             let n = acc_n[h].max(1) as f32;
                             (acc[h].0 / n, acc[h].1 / n)
@@ -739,8 +820,8 @@ impl Commissioning {
                         self.next(Stage::DcStep(k + 1));
                     } else {
                         let (rs, c, _) = line_fit(&self.dc_points());
-                        self.rs_fit = rs;
-                        self.inverter_fit = 0.75 * c;
+                        self.dc.rs_fit = rs;
+                        self.dc.inverter_fit = 0.75 * c;
                         self.next(Stage::ImpedanceLow);
                         self.angle = 0.0;
                     }
@@ -748,7 +829,7 @@ impl Commissioning {
                 v
             }
             Stage::ImpedanceLow => {
-                let w = LOW_FREQUENCY * self.rated.frequency;
+                let w = LOW_FREQUENCY * self.setup.rated.frequency;
                 let sc = FastSinCos.sin_cos(self.angle);
                 let i_ref = (AC_BIAS + AC_AMPLITUDE * sc.cos) * i_r;
                 let v = self.regulate(i_ref, i, bus);
@@ -757,11 +838,11 @@ impl Commissioning {
                 let settle = self.steps_of(period);
                 if self.steps > settle {
                     let h = usize::from(self.steps > settle + self.steps_of(2.0 * period));
-                    if let Some(f) = self.low.get_mut(h) {
-                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.ts);
+                    if let Some(f) = self.impedance.low.get_mut(h) {
+                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.setup.ts);
                     }
                 }
-                self.angle = wrap_angle_step(self.angle + w * self.ts);
+                self.angle = wrap_angle_step(self.angle + w * self.setup.ts);
                 if self.steps >= settle + self.steps_of(4.0 * period) {
                     self.next(Stage::ImpedanceHigh);
                     self.angle = 0.0;
@@ -769,40 +850,42 @@ impl Commissioning {
                 v
             }
             Stage::ImpedanceHigh => {
-                let w = self.rated.frequency;
+                let w = self.setup.rated.frequency;
                 let sc = FastSinCos.sin_cos(self.angle);
                 let mut v = self.regulate(AC_BIAS * i_r, i, bus);
                 // the loops hold the bias; the injected voltage rides over them
-                let z_guess = 2.0 * self.rs_fit
-                    + w * 0.1 * self.rated.phase_voltage / (w * 0.4 * self.rated.current);
+                let z_guess = 2.0 * self.dc.rs_fit
+                    + w * 0.1 * self.setup.rated.phase_voltage
+                        / (w * 0.4 * self.setup.rated.current);
                 v.alpha += AC_INJECTION * i_r * z_guess * sc.cos;
                 let period = core::f32::consts::TAU / w;
                 let settle = self.steps_of(0.1);
                 if self.steps > settle {
                     let h = usize::from(self.steps > settle + self.steps_of(5.0 * period));
-                    if let Some(f) = self.high.get_mut(h) {
-                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.ts);
+                    if let Some(f) = self.impedance.high.get_mut(h) {
+                        accumulate(f, self.last_v.alpha, i.alpha, self.angle, w, self.setup.ts);
                     }
                 }
-                self.angle = wrap_angle_step(self.angle + w * self.ts);
+                self.angle = wrap_angle_step(self.angle + w * self.setup.ts);
                 if self.steps >= settle + self.steps_of(10.0 * period) {
                     self.next(Stage::NoLoad);
                     self.angle = 0.0;
-                    self.frequency = 0.0;
+                    self.no_load.frequency = 0.0;
                 }
                 v
             }
             Stage::NoLoad => {
-                let w_end = NO_LOAD_FREQUENCY * self.rated.frequency;
+                let w_end = NO_LOAD_FREQUENCY * self.setup.rated.frequency;
                 let ramp = self.steps_of(NO_LOAD_RAMP_TIME);
-                self.frequency = if self.steps < ramp {
+                self.no_load.frequency = if self.steps < ramp {
                     w_end * self.steps as f32 / ramp as f32
                 } else {
                     w_end
                 };
                 // rated volts per hertz plus the drop of the no-load current in Rs
-                let mag = self.rated.phase_voltage / self.rated.frequency * self.frequency
-                    + self.rs_fit * 0.4 * i_r;
+                let mag = self.setup.rated.phase_voltage / self.setup.rated.frequency
+                    * self.no_load.frequency
+                    + self.dc.rs_fit * 0.4 * i_r;
                 let sc = FastSinCos.sin_cos(self.angle);
                 let v = AlphaBeta {
                     alpha: mag * sc.cos,
@@ -817,36 +900,41 @@ impl Commissioning {
                 let i_d = i.alpha * c_ + i.beta * s_;
                 let i_q = -i.alpha * s_ + i.beta * c_;
                 let i_mag = sqrt(i_d * i_d + i_q * i_q);
-                let p = self.rated.pole_pairs as f32;
-                let w = self.frequency;
+                let p = self.setup.rated.pole_pairs as f32;
+                let w = self.no_load.frequency;
                 if w > 0.0 {
                     // the voltage commanded at this angle acts 1.5 periods later, so in
                     // the current's frame it lags by phi = 1.5 w Ts:
                     // P_in = 1.5 Re(v e^(-j phi) conj(i)) = 1.5 v (i_d cos phi - i_q sin phi)
-                    let phi = FastSinCos.sin_cos(1.5 * w * self.ts);
+                    let phi = FastSinCos.sin_cos(1.5 * w * self.setup.ts);
                     let p_in = 1.5 * mag * (i_d * phi.cos - i_q * phi.sin);
                     let parts = TorqueParts {
                         input: p * p_in / w,
                         copper: p * 1.5 * i_mag * i_mag / w,
                         inverter: p * 6.0 / core::f32::consts::PI * i_mag / w,
                     };
-                    let torque = parts.torque(self.rs_fit, self.inverter_fit);
-                    self.torque = torque;
+                    let torque = parts.torque(self.dc.rs_fit, self.dc.inverter_fit);
+                    self.no_load.torque = torque;
                     // V/f stabiliser (VF_STABILISER_GAIN): the frequency the voltage turns
                     // at yields to the torque's swing about its low-pass
-                    self.stab_torque += (torque - self.stab_torque) * self.stab_alpha;
-                    self.stab_offset = -self.stab_gain * (torque - self.stab_torque);
+                    self.no_load.stab.torque +=
+                        (torque - self.no_load.stab.torque) * self.no_load.stab.alpha;
+                    self.no_load.stab.offset =
+                        -self.no_load.stab.gain * (torque - self.no_load.stab.torque);
                     let in_band = w > 0.3 * w_end && w < 0.9 * w_end && self.steps < ramp;
                     if in_band {
-                        if let Some(r) = self.ramp.get_mut(usize::from(w >= 0.6 * w_end)) {
-                            r.impulse.add(&parts, self.ts);
+                        if let Some(r) = self.no_load.ramp.get_mut(usize::from(w >= 0.6 * w_end)) {
+                            r.impulse.add(&parts, self.setup.ts);
                             r.speed_change += w_end / ramp as f32 / p;
-                            r.angle += w / p * self.ts;
+                            r.angle += w / p * self.setup.ts;
                         }
                     }
                     if self.steps > settle {
                         let half = self.steps_of(0.5 * NO_LOAD_MEASURE_TIME);
-                        if let Some(h) = self.hold.get_mut(usize::from(self.steps > settle + half))
+                        if let Some(h) = self
+                            .no_load
+                            .hold
+                            .get_mut(usize::from(self.steps > settle + half))
                         {
                             h.torque.add(&parts, 1.0);
                             h.speed += w / p;
@@ -861,7 +949,9 @@ impl Commissioning {
                     let i_q = -i.alpha * s + i.beta * c;
                     let half = self.steps_of(0.5 * NO_LOAD_MEASURE_TIME);
                     let h = usize::from(self.steps > settle + half);
-                    if let (Some(f), Some(hs)) = (self.no_load.get_mut(h), self.hold.get_mut(h)) {
+                    if let (Some(f), Some(hs)) =
+                        (self.no_load.sums.get_mut(h), self.no_load.hold.get_mut(h))
+                    {
                         f.i.alpha += i_d;
                         f.i.beta += i_q;
                         f.v.alpha += mag;
@@ -870,7 +960,7 @@ impl Commissioning {
                 }
                 if self.steps >= settle + self.steps_of(NO_LOAD_MEASURE_TIME) {
                     for k in 0..2 {
-                        let (f, h) = (&mut self.no_load[k], &mut self.hold[k]);
+                        let (f, h) = (&mut self.no_load.sums[k], &mut self.no_load.hold[k]);
                         let n = h.n.max(1) as f32;
                         f.i.alpha /= n;
                         f.i.beta /= n;
@@ -882,18 +972,20 @@ impl Commissioning {
                         };
                         h.speed /= n;
                     }
-                    self.torque = 0.0;
+                    self.no_load.torque = 0.0;
                     self.next(Stage::Done);
                     return PwmOutput::OFF;
                 }
-                self.angle =
-                    wrap_angle_step(self.angle + (self.frequency + self.stab_offset) * self.ts);
+                self.angle = wrap_angle_step(
+                    self.angle
+                        + (self.no_load.frequency + self.no_load.stab.offset) * self.setup.ts,
+                );
                 v
             }
             Stage::Done | Stage::Failed(_) => return PwmOutput::OFF,
         };
         self.last_v = v;
-        let m = modulate(&self.pwm, v, bus, inverse_clarke(i));
+        let m = modulate(&self.setup.pwm, v, bus, inverse_clarke(i));
         PwmOutput {
             duties: m.duties,
             enabled: true,
@@ -904,12 +996,17 @@ impl Commissioning {
     fn regulate(&mut self, i_ref: f32, i: AlphaBeta, bus: f32) -> AlphaBeta {
         let lim = 0.95 * linear_limit(bus);
         AlphaBeta {
-            alpha: self
-                .alpha
-                .update_with_limits(&self.pi, i_ref - i.alpha, 0.0, -lim, lim),
+            alpha: self.loops.alpha.update_with_limits(
+                &self.loops.pi,
+                i_ref - i.alpha,
+                0.0,
+                -lim,
+                lim,
+            ),
             beta: self
+                .loops
                 .beta
-                .update_with_limits(&self.pi, -i.beta, 0.0, -lim, lim),
+                .update_with_limits(&self.loops.pi, -i.beta, 0.0, -lim, lim),
         }
     }
 
@@ -932,7 +1029,7 @@ impl Commissioning {
         if let Stage::Failed(e) = self.stage {
             return Err(e);
         }
-        let r = &self.rated;
+        let r = &self.setup.rated;
         let z_nom = r.phase_voltage / r.current;
         // 1. Rs and the inverter error: the line, its standard errors, its two halves
         let pts = self.dc_points();
@@ -945,7 +1042,7 @@ impl Commissioning {
         }
         let half_line = |h: usize| {
             let mut p = [(0.0, 0.0); 4];
-            for (o, d) in p.iter_mut().zip(&self.dc) {
+            for (o, d) in p.iter_mut().zip(&self.dc.levels) {
                 *o = if h == 0 { d[0] } else { d[1] };
             }
             line_fit(&p)
@@ -956,17 +1053,17 @@ impl Commissioning {
         let u_c = 3.0 * se_c + spread(c_a, c_b);
         let v_e = 0.75 * c;
         let u_ve = 0.75 * u_c;
-        let bus = if self.bus_n > 0 {
-            self.bus_sum / self.bus_n as f32
+        let bus = if self.dc.bus_n > 0 {
+            self.dc.bus_sum / self.dc.bus_n as f32
         } else {
-            self.board.dc_bus_v
+            self.setup.board.dc_bus_v
         };
-        let dead_time = ((v_e - self.board.device_drop_v) / bus * self.ts).max(0.0);
-        let u_dead = u_ve / bus * self.ts;
+        let dead_time = ((v_e - self.setup.board.device_drop_v) / bus * self.setup.ts).max(0.0);
+        let u_dead = u_ve / bus * self.setup.ts;
 
         // 2. the standstill impedances: both halves, Rs moved, the timing moved
-        let [l0, l1] = &self.low;
-        let [h0, h1] = &self.high;
+        let [l0, l1] = &self.impedance.low;
+        let [h0, h1] = &self.impedance.high;
         let (low, high) = (l0.plus(l1), h0.plus(h1));
         let e0 = self.electrical(rs, &low, &high, 0.0)?;
         let mut u_e = halves(
@@ -989,7 +1086,7 @@ impl Commissioning {
         let u_ls = u_e[1];
 
         // 3. the no-load test: both halves, Rs, the inverter error, L_sigma and the timing
-        let [n0, n1] = &self.no_load;
+        let [n0, n1] = &self.no_load.sums;
         let mut nl = n0.plus(n1);
         nl.v.alpha *= 0.5;
         nl.i.alpha *= 0.5;
@@ -1012,7 +1109,7 @@ impl Commissioning {
         }
         let [l_m, i_flux] = m0;
         // one converter step over the no-load current (CURRENT_ADC_BITS)
-        let lsb = 2.0 * self.board.current_full_scale_a / (1u32 << CURRENT_ADC_BITS) as f32;
+        let lsb = 2.0 * self.setup.board.current_full_scale_a / (1u32 << CURRENT_ADC_BITS) as f32;
         let i_nl = sqrt(nl.i.alpha * nl.i.alpha + nl.i.beta * nl.i.beta);
         if i_nl > 0.0 {
             u_m[0] += l_m * lsb / i_nl;
@@ -1021,7 +1118,7 @@ impl Commissioning {
 
         // 4. inertia and friction: the ramp's halves, the hold's halves, Rs and V_e moved
         let mech = self.mechanics(rs, v_e);
-        let [hh0, hh1] = &self.hold;
+        let [hh0, hh1] = &self.no_load.hold;
         let b_half = |h: &HoldSums| {
             if h.speed > 0.0 {
                 h.torque.torque(rs, v_e) / h.speed
@@ -1032,7 +1129,7 @@ impl Commissioning {
         let mut u_b = spread(b_half(hh0), b_half(hh1));
         let mut u_j = match mech.inertia {
             Some(_) => {
-                let [ra, rb] = &self.ramp;
+                let [ra, rb] = &self.no_load.ramp;
                 let dw = ra.speed_change + rb.speed_change;
                 // the halves' disagreement, and the friction's spread acting on J
                 0.5 * (mech.inertia_halves.0 - mech.inertia_halves.1).abs()
@@ -1113,7 +1210,7 @@ impl Commissioning {
         };
         let resolved = mech.inertia.is_some();
         let flux = i_flux / r.current;
-        let reactive = match self.power_factor {
+        let reactive = match self.setup.power_factor {
             Some(pf) if pf < 1.0 => i_flux / (r.current * sqrt(1.0 - pf * pf)),
             _ => 0.0,
         };
@@ -1160,7 +1257,7 @@ impl Commissioning {
             check(
                 Concern::FluxCurrentHigh,
                 reactive,
-                if self.power_factor.is_some() {
+                if self.setup.power_factor.is_some() {
                     (0.0, FLUX_OVER_REACTIVE_MAX)
                 } else {
                     OPEN
@@ -1210,11 +1307,11 @@ impl Commissioning {
         high: &Fourier,
         delay: f32,
     ) -> Result<[f32; 3], CommissioningError> {
-        let r = &self.rated;
+        let r = &self.setup.rated;
         let w_l = LOW_FREQUENCY * r.frequency;
         let w_h = r.frequency;
-        let zl = impedance(low, rs, w_l * delay * self.ts);
-        let zh = impedance(high, rs, w_h * delay * self.ts);
+        let zl = impedance(low, rs, w_l * delay * self.setup.ts);
+        let zh = impedance(high, rs, w_h * delay * self.setup.ts);
         let (Some(zl), Some(zh)) = (zl, zh) else {
             return Err(CommissioningError::ResultOutOfRange("impedance"));
         };
@@ -1265,9 +1362,9 @@ impl Commissioning {
         l_sigma: f32,
         delay: f32,
     ) -> Result<[f32; 2], CommissioningError> {
-        let w_n = NO_LOAD_FREQUENCY * self.rated.frequency;
+        let w_n = NO_LOAD_FREQUENCY * self.setup.rated.frequency;
         // the voltage commanded at an angle acts 1.5 periods later: V e^(-j 1.5 w Ts)
-        let lead = FastSinCos.sin_cos(w_n * (1.5 + delay) * self.ts);
+        let lead = FastSinCos.sin_cos(w_n * (1.5 + delay) * self.setup.ts);
         let (vd, vq) = (nl.v.alpha * lead.cos, -nl.v.alpha * lead.sin);
         let (id, iq) = (nl.i.alpha, nl.i.beta);
         let i2 = id * id + iq * iq;
@@ -1292,7 +1389,7 @@ impl Commissioning {
 
     /// J and B from the no-load test's sums with Rs `rs` and inverter error `v_e`.
     fn mechanics(&self, rs: f32, v_e: f32) -> Mechanics {
-        let [h0, h1] = &self.hold;
+        let [h0, h1] = &self.no_load.hold;
         let hold_torque = 0.5 * (h0.torque.torque(rs, v_e) + h1.torque.torque(rs, v_e));
         let speed = 0.5 * (h0.speed + h1.speed);
         let friction = if speed > 0.0 {
@@ -1307,7 +1404,7 @@ impl Commissioning {
                 0.0
             }
         };
-        let [a, b] = &self.ramp;
+        let [a, b] = &self.no_load.ramp;
         let dw = a.speed_change + b.speed_change;
         let inertia = if dw > 0.0 {
             let j = (a.impulse.torque(rs, v_e) + b.impulse.torque(rs, v_e)

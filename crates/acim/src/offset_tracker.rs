@@ -282,19 +282,42 @@ impl OffsetTrackerConfig<f32> {
     }
 }
 
-/// The tracker's state.
+/// The fundamental's model (module docs, "The estimator").
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OffsetTracker<N: Num = f32> {
+struct Model<N: Num> {
     /// The fundamental's model, stationary frame, V.
     fundamental: AlphaBeta<N>,
     /// Its frequency, the stator frequency low-passed, rad/s.
     frequency: N,
-    alpha: N::Fine,
-    beta: N::Fine,
+}
+
+/// Whether the references are steady (module docs, "Gates, bound and what it reports").
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Steadiness<N: Num> {
     /// Steps since the references were last unsteady (saturating).
     steady_steps: u32,
     /// The torque-current reference low-passed over tau_r, A.
     torque_reference_slow: N,
+}
+
+/// The offset estimate's integrators, in the finer integrator format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Integrators<N: Num> {
+    /// The alpha offset's integrator, A (fine format).
+    alpha: N::Fine,
+    /// The beta offset's integrator, A (fine format).
+    beta: N::Fine,
+}
+
+/// The tracker's state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OffsetTracker<N: Num = f32> {
+    /// The fundamental's model and its frequency.
+    model: Model<N>,
+    /// The steadiness gate's filter and count.
+    steadiness: Steadiness<N>,
+    /// The offset estimate's integrators.
+    integrators: Integrators<N>,
     /// The residual's magnitude low-passed over 1 / mu_f, V.
     pub residual: N,
     /// The residual's floor: its smallest recent mean, rising slowly, V.
@@ -310,15 +333,21 @@ pub struct OffsetTracker<N: Num = f32> {
 impl<N: Num> Default for OffsetTracker<N> {
     fn default() -> Self {
         Self {
-            fundamental: AlphaBeta {
-                alpha: N::ZERO,
-                beta: N::ZERO,
+            model: Model {
+                fundamental: AlphaBeta {
+                    alpha: N::ZERO,
+                    beta: N::ZERO,
+                },
+                frequency: N::ZERO,
             },
-            frequency: N::ZERO,
-            alpha: N::to_fine(N::ZERO),
-            beta: N::to_fine(N::ZERO),
-            steady_steps: 0,
-            torque_reference_slow: N::ZERO,
+            steadiness: Steadiness {
+                steady_steps: 0,
+                torque_reference_slow: N::ZERO,
+            },
+            integrators: Integrators {
+                alpha: N::to_fine(N::ZERO),
+                beta: N::to_fine(N::ZERO),
+            },
             residual: N::ZERO,
             residual_floor: N::ZERO,
             offset: AlphaBeta {
@@ -365,15 +394,19 @@ impl<N: Num> OffsetTracker<N> {
         if !(cfg.enabled && running) {
             return;
         }
-        let w = self.frequency + N::gain(cfg.frequency_filter, stator_frequency - self.frequency);
-        self.frequency = w.finite_or(N::ZERO);
+        let w = self.model.frequency
+            + N::gain(
+                cfg.frequency_filter,
+                stator_frequency - self.model.frequency,
+            );
+        self.model.frequency = w.finite_or(N::ZERO);
         // the model turns by phi = w Ts: cos ~ 1 - phi^2/2, sin ~ phi (1 - phi^2/6), whose
         // angle is phi + O(phi^5) (a phase error would be a residual at the fundamental)
-        let phi = N::gain(cfg.ts, self.frequency);
+        let phi = N::gain(cfg.ts, self.model.frequency);
         let phi2 = phi * phi;
         let c = N::ONE - phi2.half();
         let s = phi - phi * N::gain(cfg.one_sixth, phi2);
-        let x = self.fundamental;
+        let x = self.model.fundamental;
         let x = AlphaBeta {
             alpha: x.alpha * c - x.beta * s,
             beta: x.beta * c + x.alpha * s,
@@ -383,13 +416,13 @@ impl<N: Num> OffsetTracker<N> {
             beta: u_ab.beta - x.beta,
         };
         if !(eps.alpha.is_finite() && eps.beta.is_finite()) {
-            self.fundamental = AlphaBeta {
+            self.model.fundamental = AlphaBeta {
                 alpha: N::ZERO,
                 beta: N::ZERO,
             };
             return;
         }
-        self.fundamental = AlphaBeta {
+        self.model.fundamental = AlphaBeta {
             alpha: x.alpha + N::gain(cfg.fundamental_gain, eps.alpha),
             beta: x.beta + N::gain(cfg.fundamental_gain, eps.beta),
         };
@@ -401,16 +434,20 @@ impl<N: Num> OffsetTracker<N> {
         } else {
             floor
         };
-        let slow = self.torque_reference_slow
-            + N::gain(cfg.steady_filter, i_sq_ref - self.torque_reference_slow);
-        self.torque_reference_slow = slow.finite_or(N::ZERO);
-        let steady = !ramping && (i_sq_ref - self.torque_reference_slow).abs() <= cfg.steady_band;
-        self.steady_steps = if steady {
-            self.steady_steps.saturating_add(1)
+        let slow = self.steadiness.torque_reference_slow
+            + N::gain(
+                cfg.steady_filter,
+                i_sq_ref - self.steadiness.torque_reference_slow,
+            );
+        self.steadiness.torque_reference_slow = slow.finite_or(N::ZERO);
+        let steady =
+            !ramping && (i_sq_ref - self.steadiness.torque_reference_slow).abs() <= cfg.steady_band;
+        self.steadiness.steady_steps = if steady {
+            self.steadiness.steady_steps.saturating_add(1)
         } else {
             0
         };
-        let f = self.frequency.abs();
+        let f = self.model.frequency.abs();
         let gain = if f >= cfg.min_frequency {
             Some(cfg.offset_gain)
         } else if far_side && f >= cfg.far_side_min_frequency {
@@ -419,15 +456,15 @@ impl<N: Num> OffsetTracker<N> {
             None
         };
         if let Some(g) = gain.filter(|_| {
-            self.steady_steps >= cfg.holdoff_steps
+            self.steadiness.steady_steps >= cfg.holdoff_steps
                 && self.residual <= cfg.residual_limit
                 && self.residual <= self.residual_floor + self.residual_floor.half()
         }) {
             let (lo, hi) = cfg.bounds;
-            let (a, at_a) = N::fine_step(self.alpha, g, eps.alpha, false, lo, hi);
-            let (b, at_b) = N::fine_step(self.beta, g, eps.beta, false, lo, hi);
-            self.alpha = a;
-            self.beta = b;
+            let (a, at_a) = N::fine_step(self.integrators.alpha, g, eps.alpha, false, lo, hi);
+            let (b, at_b) = N::fine_step(self.integrators.beta, g, eps.beta, false, lo, hi);
+            self.integrators.alpha = a;
+            self.integrators.beta = b;
             self.at_bound = at_a || at_b;
             self.adapting = true;
             self.offset = AlphaBeta {
@@ -624,6 +661,6 @@ mod tests {
             },
         );
         assert!(t.offset.alpha.is_finite() && t.offset.beta.is_finite());
-        assert!(t.frequency.is_finite());
+        assert!(t.model.frequency.is_finite());
     }
 }

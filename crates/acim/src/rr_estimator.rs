@@ -229,6 +229,16 @@ pub struct RrEstimator<N: Num = f32> {
     pub last_window_error: f32,
     /// The last solved window's fit residual, RMS, rad/s mechanical.
     pub last_fit_rms: f32,
+    /// The torque current's filters and the steadiness that opens a window.
+    filters: Filters<N>,
+    /// The open window's state and sums.
+    window: Window<N>,
+}
+
+/// The torque current's filters and the steadiness judged from them (what may open a
+/// window).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Filters<N> {
     /// i_sq low-passed over [`RR_CURRENT_FILTER_TIME`], A.
     current: N,
     /// That low-passed again over [`RR_STEADY_FILTER_TIME`], A.
@@ -237,8 +247,13 @@ pub struct RrEstimator<N: Num = f32> {
     quiet: u32,
     /// The reference ramped at the last step.
     was_ramping: bool,
+}
+
+/// The open window: where it started, the mechanical model since, and the fit's sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Window<N> {
     /// Steps into the open window (0: none open).
-    window: u32,
+    steps: u32,
     /// Steps of the open window since the ramp ended.
     settled: u32,
     /// Omega_hat at the window's start, rad/s.
@@ -251,6 +266,7 @@ pub struct RrEstimator<N: Num = f32> {
     model: N,
     /// The largest |di| in the window, A.
     peak: N,
+    /// The fit's running sums over the window.
     sums: Sums<N>,
 }
 
@@ -343,54 +359,67 @@ impl<N: Num> RrEstimator<N> {
             self.restart();
             return;
         }
-        let quiet_before = self.quiet;
-        self.current = self.current + N::gain(cfg.current_filter, u.i_sq - self.current);
-        self.current_slow =
-            self.current_slow + N::gain(cfg.steady_filter, self.current - self.current_slow);
-        let steady = !u.ramping && (self.current - self.current_slow).abs() <= cfg.steady_band;
-        self.quiet = if steady {
-            self.quiet.saturating_add(1)
+        let quiet_before = self.filters.quiet;
+        self.filters.current =
+            self.filters.current + N::gain(cfg.current_filter, u.i_sq - self.filters.current);
+        self.filters.current_slow = self.filters.current_slow
+            + N::gain(
+                cfg.steady_filter,
+                self.filters.current - self.filters.current_slow,
+            );
+        let steady = !u.ramping
+            && (self.filters.current - self.filters.current_slow).abs() <= cfg.steady_band;
+        self.filters.quiet = if steady {
+            self.filters.quiet.saturating_add(1)
         } else {
             0
         };
         let fast_enough = u.stator_frequency.abs() >= cfg.min_frequency;
-        if self.window > 0 {
+        if self.window.steps > 0 {
             if fast_enough {
                 self.sample(cfg, obs, u);
             } else {
-                self.window = 0;
+                self.window.steps = 0;
             }
-        } else if u.ramping && !self.was_ramping && quiet_before >= cfg.quiet_steps && fast_enough {
+        } else if u.ramping
+            && !self.filters.was_ramping
+            && quiet_before >= cfg.quiet_steps
+            && fast_enough
+        {
             // the window opens: the load torque is the steady torque balance's
-            self.window = 1;
-            self.settled = 0;
-            self.speed0 = u.speed;
-            self.current0 = self.current;
-            self.model = N::ZERO;
-            self.peak = N::ZERO;
-            self.sums = Sums::default();
-            self.load0 = N::gain_mul(obs.ts_torque_per_inertia, u.rotor_flux, self.current)
-                - N::gain(obs.ts_friction_rate, u.speed);
+            self.window.steps = 1;
+            self.window.settled = 0;
+            self.window.speed0 = u.speed;
+            self.window.current0 = self.filters.current;
+            self.window.model = N::ZERO;
+            self.window.peak = N::ZERO;
+            self.window.sums = Sums::default();
+            self.window.load0 = N::gain_mul(
+                obs.ts_torque_per_inertia,
+                u.rotor_flux,
+                self.filters.current,
+            ) - N::gain(obs.ts_friction_rate, u.speed);
         }
-        self.was_ramping = u.ramping;
+        self.filters.was_ramping = u.ramping;
     }
 
     /// A step of the open window: the model's speed change, a sample of the fit every
     /// [`RR_DECIMATION`] steps, and the window's end.
     #[inline(always)]
     fn sample(&mut self, cfg: &RrEstimatorConfig<N>, obs: &ObserverCoeffs<N>, u: &RrInputs<N>) {
-        self.model = self.model + N::gain_mul(obs.ts_torque_per_inertia, u.rotor_flux, u.i_sq)
+        self.window.model = self.window.model
+            + N::gain_mul(obs.ts_torque_per_inertia, u.rotor_flux, u.i_sq)
             - N::gain(obs.ts_friction_rate, u.speed)
-            - self.load0;
-        self.window += 1;
-        let di = self.current - self.current0;
-        let m = self.model;
-        if di.abs() > self.peak {
-            self.peak = di.abs();
+            - self.window.load0;
+        self.window.steps += 1;
+        let di = self.filters.current - self.window.current0;
+        let m = self.window.model;
+        if di.abs() > self.window.peak {
+            self.window.peak = di.abs();
         }
-        if self.window.is_multiple_of(RR_DECIMATION) {
-            let d = (u.speed - self.speed0) - m;
-            let s = &mut self.sums;
+        if self.window.steps.is_multiple_of(RR_DECIMATION) {
+            let d = (u.speed - self.window.speed0) - m;
+            let s = &mut self.window.sums;
             s.aa = s.aa + di * di;
             s.ab = s.ab + di * m;
             s.bb = s.bb + m * m;
@@ -400,13 +429,15 @@ impl<N: Num> RrEstimator<N> {
             s.n += 1;
         }
         if !u.ramping {
-            self.settled += 1;
+            self.window.settled += 1;
         }
-        if self.settled > cfg.settle_steps || self.window > cfg.window_steps {
-            if self.window > cfg.min_window_steps && self.peak >= cfg.min_current_change {
+        if self.window.settled > cfg.settle_steps || self.window.steps > cfg.window_steps {
+            if self.window.steps > cfg.min_window_steps
+                && self.window.peak >= cfg.min_current_change
+            {
                 self.close(cfg, u.rotor_flux);
             }
-            self.window = 0;
+            self.window.steps = 0;
         }
     }
 
@@ -416,7 +447,7 @@ impl<N: Num> RrEstimator<N> {
     #[inline(always)]
     fn close(&mut self, cfg: &RrEstimatorConfig<N>, rotor_flux: N) {
         let (cu, su) = (cfg.current_unit, cfg.speed_unit);
-        let s = self.sums;
+        let s = self.window.sums;
         let raw = [s.aa, s.ab, s.bb, s.ad, s.bd, s.dd];
         if raw
             .iter()

@@ -308,22 +308,33 @@ fn channels<N: Num>(inp: &SensorCheckInputs<N>) -> [N; 3] {
     [a + zero, b + zero, c + zero]
 }
 
-/// The check's state: the previous sample, the bias and the running window.
+/// The running window: its length so far, where it started and the stator equation's
+/// sums over it.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
-pub struct SensorCheck<N: Num = f32> {
-    /// A previous switching sample exists (`previous` is valid).
-    primed: bool,
-    previous: Dq<N>,
-    /// The model's steady error over a window (the increment it misses), filtered, A.
-    bias: Dq<N>,
+struct Window<N: Num> {
     /// Periods in the running window.
     count: u32,
+    /// The current at the window's start, in the drive's frame, A.
     start_current: Dq<N>,
+    /// The phase channels at the window's start, A.
     start_phases: [N; 3],
     /// The applied voltage summed over the window, V.
     voltage_sum: Dq<N>,
     /// The current at the start of each period summed over the window, A.
     current_sum: Dq<N>,
+}
+
+/// The check's state: the previous sample, the bias and the running window.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct SensorCheck<N: Num = f32> {
+    /// A previous switching sample exists (`previous` is valid).
+    primed: bool,
+    /// The previous switching sample's current, in the drive's frame, A.
+    previous: Dq<N>,
+    /// The model's steady error over a window (the increment it misses), filtered, A.
+    bias: Dq<N>,
+    /// The running window.
+    window: Window<N>,
     /// The measured current, low-pass filtered like the bias (once per window), A.
     filtered: Dq<N>,
     /// Windows left before a standing channel may be judged a failed sensor again, after
@@ -344,9 +355,9 @@ impl<N: Num> SensorCheck<N> {
         self.primed = false;
         self.astray_hold = 0;
         self.astray_last = false;
-        self.count = 0;
-        self.voltage_sum = Dq::default();
-        self.current_sum = Dq::default();
+        self.window.count = 0;
+        self.window.voltage_sum = Dq::default();
+        self.window.current_sum = Dq::default();
     }
 
     /// The model's steady error per window (the bias filter), A, for telemetry.
@@ -356,11 +367,11 @@ impl<N: Num> SensorCheck<N> {
 
     /// A window starts at this sample, whose channels are `phases`.
     fn start_window(&mut self, inp: &SensorCheckInputs<N>, phases: [N; 3]) {
-        self.count = 0;
-        self.voltage_sum = Dq::default();
-        self.current_sum = Dq::default();
-        self.start_current = inp.current;
-        self.start_phases = phases;
+        self.window.count = 0;
+        self.window.voltage_sum = Dq::default();
+        self.window.current_sum = Dq::default();
+        self.window.start_current = inp.current;
+        self.window.start_phases = phases;
     }
 
     /// One period: `Some(FaultReason::CurrentSensor)` when a measured channel did not
@@ -390,19 +401,19 @@ impl<N: Num> SensorCheck<N> {
         // frequency, the flux and the speed are taken at the window's end (they move
         // little over 1.6 ms)
         let i0 = self.previous;
-        self.voltage_sum.d = self.voltage_sum.d + inp.voltage.d;
-        self.voltage_sum.q = self.voltage_sum.q + inp.voltage.q;
-        self.current_sum.d = self.current_sum.d + i0.d;
-        self.current_sum.q = self.current_sum.q + i0.q;
+        self.window.voltage_sum.d = self.window.voltage_sum.d + inp.voltage.d;
+        self.window.voltage_sum.q = self.window.voltage_sum.q + inp.voltage.q;
+        self.window.current_sum.d = self.window.current_sum.d + i0.d;
+        self.window.current_sum.q = self.window.current_sum.q + i0.q;
         self.previous = inp.current;
-        self.count = self.count.saturating_add(1);
-        if self.count < cfg.window {
+        self.window.count = self.window.count.saturating_add(1);
+        if self.window.count < cfg.window {
             return None;
         }
         // the window's end: sigma Ls di/dt summed over it (forward Euler from each
         // period's start), the increment the model predicts, the measured one, and the
         // prediction (the model's increment corrected by the bias of the windows before)
-        let (v, i) = (self.voltage_sum, self.current_sum);
+        let (v, i) = (self.window.voltage_sum, self.window.current_sum);
         let drive_d = v.d - N::gain(cfg.r_sigma, i.d)
             + N::gain_mul(cfg.sigma_ls, inp.stator_frequency, i.q)
             + N::gain(cfg.rr_over_lm, inp.rotor_flux);
@@ -415,12 +426,12 @@ impl<N: Num> SensorCheck<N> {
             q: N::gain(cfg.ts_over_sigma_ls, drive_q),
         };
         let end = Dq {
-            d: self.start_current.d + model.d + self.bias.d,
-            q: self.start_current.q + model.q + self.bias.q,
+            d: self.window.start_current.d + model.d + self.bias.d,
+            q: self.window.start_current.q + model.q + self.bias.q,
         };
         let eps = Dq {
-            d: (inp.current.d - self.start_current.d) - model.d,
-            q: (inp.current.q - self.start_current.q) - model.q,
+            d: (inp.current.d - self.window.start_current.d) - model.d,
+            q: (inp.current.q - self.window.start_current.q) - model.q,
         };
         if !(end.d.is_finite()
             && end.q.is_finite()
@@ -447,7 +458,7 @@ impl<N: Num> SensorCheck<N> {
         let mut astray = false;
         for ((&p, &start), &meas) in phases
             .iter()
-            .zip(self.start_phases.iter())
+            .zip(self.window.start_phases.iter())
             .zip(measured.iter())
             .take(judged)
         {
