@@ -1249,38 +1249,26 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         } else {
             m.applied.v_dq.d
         };
+        let inputs = RsEstimatorInputs {
+            i_sd: i.d,
+            i_sq: i.q,
+            v_sd,
+            stator_frequency: ws_prev,
+            flux_settled,
+        };
         if c.rs_running.enabled {
             // Rs also while running (the default mode)
-            // (the inputs built in place: the estimator's step is inlined)
-            est.rs.update_running(
-                &c.rs,
-                &c.rs_running,
-                &RsEstimatorInputs {
-                    i_sd: i.d,
-                    i_sq: i.q,
-                    v_sd,
-                    stator_frequency: ws_prev,
-                    flux_settled,
-                },
-                &RsRunningInputs {
-                    v_sq: m.applied.v_dq.q,
-                    rotor_flux: est.flux.rotor_flux,
-                    frame_held,
-                    i_sq_ref: self.prev.i_sq_ref,
-                    low_frequency_only: !O::RS_RUNNING_AT_SPEED,
-                },
-            );
+            let running = RsRunningInputs {
+                v_sq: m.applied.v_dq.q,
+                rotor_flux: est.flux.rotor_flux,
+                frame_held,
+                i_sq_ref: self.prev.i_sq_ref,
+                low_frequency_only: !O::RS_RUNNING_AT_SPEED,
+            };
+            est.rs
+                .update_running(&c.rs, &c.rs_running, &inputs, &running);
         } else {
-            est.rs.update(
-                &c.rs,
-                &RsEstimatorInputs {
-                    i_sd: i.d,
-                    i_sq: i.q,
-                    v_sd,
-                    stator_frequency: ws_prev,
-                    flux_settled,
-                },
-            );
+            est.rs.update(&c.rs, &inputs);
         }
         let rs = est.rs.stator_resistance_estimate;
         est.filtered_residual = est.filtered_residual
