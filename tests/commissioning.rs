@@ -136,6 +136,14 @@ fn krause_50hp() {
     check("krause-50hp", &sc, true);
 }
 
+#[test]
+fn simscape_7k5() {
+    let sc = machine(include_str!(
+        "../crates/acim-sim/machines/simscape-7k5.toml"
+    ));
+    check("simscape-7k5", &sc, true);
+}
+
 /// TI's benchmark motor: the shared file's assumed 750 W rating is refused (more torque
 /// than the machine makes at 3 A); with 600 W it is identified, the inertia of its bare
 /// rotor (0.001 kg m^2) too. Without the V/f stabiliser of the no-load test

@@ -16,13 +16,14 @@
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case): at
 //! most 1.5 us above the trip in every case (the comparator's delay); the sensor check
-//! first in 58 of the 76 reached cases (dead channels after at most 14 periods, a stuck
+//! first in 73 of the 92 reached cases (dead channels after at most 16 periods, a stuck
 //! one after at most 99 at 500 rpm and above, 612 at 60 rpm), the comparator first in
-//! the other 18 (dead channels under load, where the loops drive the current to the trip
-//! within 2 ms). Without the comparator (the second test) 16 cases stay above the trip
-//! for more than a period while switching (longest: TI's motor at 60 rpm with channel b
+//! the other 19 (dead channels under load, where the loops drive the current to the trip
+//! within 2 ms, and the 7.5 kW machine's stuck channel in field weakening with two
+//! shunts). Without the comparator (the second test) 17 cases stay above the trip for
+//! more than a period while switching (longest: TI's motor at 60 rpm with channel b
 //! stuck, two shunts, 8.8 A for 5.48 ms against 7.4 A); without the sensor check as well,
-//! 46 (longest: TI's motor at 60 rpm with channel b stuck, two shunts, 9.2 A for
+//! 56 (longest: TI's motor at 60 rpm with channel b stuck, two shunts, 9.2 A for
 //! 6.88 ms against 7.4 A).
 
 use acim_sim::faults::{run_sensor_cases, SensorCase};
@@ -38,7 +39,7 @@ use acim_sim::metrics::Metrics;
 /// phase's true current has left the stuck reading (the current's rotation, then the
 /// loops acting on the wrong reading, move the prediction by 0.15 I_max within a window),
 /// which the electrical frequency sets: 120 periods (24 ms) at 500 rpm and above, 650
-/// (130 ms) at 60 rpm (measured: at most 12-14 periods dead, 99 and 612 stuck). Until then the reading
+/// (130 ms) at 60 rpm (measured: at most 12-16 periods dead, 99 and 612 stuck). Until then the reading
 /// is near the true current: the drive controls it, and the comparator bounds it.
 fn max_detection_periods(c: &SensorCase) -> f32 {
     if c.fault.contains("stuck") {
@@ -68,7 +69,7 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     let rows = run_all();
     assert_eq!(
         rows.len(),
-        5 * 4 * 4,
+        6 * 4 * 4,
         "every machine, point, fault and sensing"
     );
     let mut failures = Vec::new();

@@ -18,7 +18,7 @@ pub struct MachineFile {
 }
 
 /// The acceptance machines.
-pub const MACHINES: [MachineFile; 5] = [
+pub const MACHINES: [MachineFile; 6] = [
     MachineFile {
         name: "paper-750w",
         text: include_str!("../machines/paper-750w.toml"),
@@ -38,6 +38,10 @@ pub const MACHINES: [MachineFile; 5] = [
     MachineFile {
         name: "krause-50hp",
         text: include_str!("../machines/krause-50hp.toml"),
+    },
+    MachineFile {
+        name: "simscape-7k5",
+        text: include_str!("../machines/simscape-7k5.toml"),
     },
 ];
 
