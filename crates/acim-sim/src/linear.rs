@@ -219,7 +219,8 @@ impl Model {
             obs_g2: f64::from(o.ts_g2) / ts,
             obs_g3: f64::from(o.ts_g3) / ts,
             kp: f64::from(c.speed_loop.pi.kp),
-            ki: f64::from(c.speed_loop.pi.ki_ts) / ts,
+            // the speed loop runs once per slow period
+            ki: f64::from(c.speed_loop.pi.ki_ts) / f64::from(drive.design().slow_ts),
             k_per_flux: f64::from(c.orientation.gain_per_flux),
             load_factor: f64::from(c.orientation.load_factor_per_current),
             fade_start: f64::from(c.orientation.fade_start),

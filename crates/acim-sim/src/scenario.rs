@@ -261,6 +261,9 @@ pub struct DriveSpec {
     pub mode: ControlMode,
     /// Control period, s.
     pub control_period_s: f32,
+    /// The slow task's period (speed loop, field weakening, slow supervision), s:
+    /// 0.5-2 ms (`acim::DriveConfig::slow_period`).
+    pub slow_period_s: f32,
     /// Flux current reference, A peak.
     pub flux_current_a: f32,
     /// Stator current limit, A peak.
@@ -373,6 +376,7 @@ impl Default for DriveSpec {
         Self {
             mode: ControlMode::Sensorless,
             control_period_s: d.control_period,
+            slow_period_s: d.slow_period,
             flux_current_a: d.flux_current,
             current_limit_a: d.current_limit,
             continuous_current_a: None,
@@ -822,7 +826,7 @@ pub struct Scenario {
     /// `mode`, `arithmetic`, `observer`, `rs_estimation`, `rs_estimation_mode`,
     /// `rs_initial_ohm`, `orientation_gain`, `current_sensing`, `field_weakening`,
     /// `overvoltage_control`, `flux_optimisation`, `zero_speed_policy`,
-    /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm` and the
+    /// `zero_speed_dwell_s`, `regen_min_frequency_hz`, `max_speed_rpm`, `slow_period_s` and the
     /// `inverter_identification`, `offset_tracking`, `inverter_tracking`, `current_gain_calibration`,
     /// `rr_adaptation`, `sensor_check`, `speed_oscillation_check`, `far_side_gain`, `load_torque_feedforward`, `overload_duration_s`
     /// and `overload_time_s`; the plant's sensors take the board's full
@@ -1281,6 +1285,7 @@ impl Scenario {
         let mut drive = acim::DriveConfig::paper_defaults();
         drive.machine = ctl;
         drive.control_period = d.control_period_s;
+        drive.slow_period = d.slow_period_s;
         drive.flux_current = d.flux_current_a;
         drive.current_limit = d.current_limit_a;
         if let Some(i) = d.continuous_current_a {
@@ -1408,6 +1413,7 @@ impl Scenario {
             cfg.rr_adaptation = drive.rr_adaptation;
             cfg.sensor_check = drive.sensor_check;
             cfg.speed_oscillation_check = drive.speed_oscillation_check;
+            cfg.slow_period = drive.slow_period;
             if d.max_speed_rpm.is_some() {
                 cfg.max_speed = drive.max_speed;
             }

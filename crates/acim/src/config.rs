@@ -74,6 +74,13 @@ pub struct DriveConfig {
     pub machine: MachineParams,
     /// Control and PWM period, s.
     pub control_period: f32,
+    /// The slow task's period, s: 0 (the default) runs every stage every control period;
+    /// 0.5-2 ms runs the speed loop, field weakening and the slow supervision (stall,
+    /// overload, blind, estimate plausibility, limit cycle, zero-speed policy) once per
+    /// slow period, rounded to a whole number of control periods (at least one), and the
+    /// current loop, the estimators and the fast protections every control period
+    /// (`crate::drive`, "Two rates").
+    pub slow_period: f32,
     /// d-axis (flux) current reference i_sd*, A peak.
     pub flux_current: f32,
     /// Stator current vector limit I_max, A peak.
@@ -282,6 +289,7 @@ impl DriveConfig {
         Self {
             machine,
             control_period: params::DEFAULT_CONTROL_PERIOD,
+            slow_period: 0.0,
             flux_current: params::DEFAULT_FLUX_CURRENT,
             current_limit: params::DEFAULT_CURRENT_LIMIT,
             continuous_current: 0.0,
@@ -398,6 +406,23 @@ pub const MAX_CONTROL_PERIOD: f32 = 10e-3;
 /// Shortest control period, s (50 kHz: below it no step fits a Cortex-M4 and the dead
 /// time would eat the period).
 pub const MIN_CONTROL_PERIOD: f32 = 20e-6;
+/// The slow task's usual period, s (1 kHz, as production drives run their speed loop).
+pub const TYPICAL_SLOW_PERIOD: f32 = 1e-3;
+/// Shortest slow-task period accepted, s (2 kHz).
+pub const MIN_SLOW_PERIOD: f32 = 0.5e-3;
+/// Longest slow-task period accepted, s (500 Hz).
+pub const MAX_SLOW_PERIOD: f32 = 2e-3;
+/// Largest speed-loop bandwidth x slow period (rad): the sampled speed loop's output
+/// reaches the current loop over one slow period, which costs the crossover (about twice
+/// the bandwidth) that many radians of phase (0.1: 11 degrees at most).
+pub const MAX_SPEED_BANDWIDTH_SLOW_PERIODS: f32 = 0.1;
+/// Control periods per slow period: `slow_period` / `control_period` rounded, at least
+/// one (both s, `control_period` positive; a `slow_period` of 0 gives one:
+/// [`DriveConfig::slow_period`]).
+pub fn slow_divider(slow_period: f32, control_period: f32) -> u32 {
+    ((slow_period / control_period + 0.5) as u32).max(1)
+}
+
 /// The over-current trip may be at most this multiple of `current_limit`: a trip far
 /// above the regulated current protects nothing (it is a protection switched off by
 /// configuration).

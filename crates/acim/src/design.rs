@@ -211,8 +211,8 @@ pub struct DriveCoeffs<N: Num = f32> {
     // the additions last, so that the default path's field offsets stay as they were
     /// The running Rs law ([`crate::rs_estimator`], "While running").
     pub rs_running: RsRunningConfig<N>,
-    /// Steps a zero speed target and reference last before the zero-speed policy acts
-    /// (`zero_speed_dwell`, >= 1).
+    /// Slow periods a zero speed target and reference last before the zero-speed policy
+    /// acts (`zero_speed_dwell`, >= 1).
     pub zero_dwell_steps: u32,
     /// [`ZeroSpeedPolicy::Stop`]: switch off after the dwell (false: `Hold`, which keeps
     /// the flux and reports the hold, [`crate::DriveTelemetry::zero_speed_held`]).
@@ -229,6 +229,11 @@ pub struct DriveCoeffs<N: Num = f32> {
     pub rr: RrEstimatorConfig<N>,
     /// Dead or stuck current sensors ([`DriveConfig::sensor_check`]).
     pub sensor_check: SensorCheckConfig<N>,
+    /// Control periods per slow period ([`DriveDesign::slow_divider`]).
+    pub slow_divider: u32,
+    /// 1 / `slow_divider`: the slow task's current reference is reached in that many
+    /// equal steps.
+    pub inv_slow_divider: N::Gain,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -240,6 +245,11 @@ pub struct DriveDesign {
     pub config: DriveConfig,
     /// Control period Ts, s.
     pub ts: f32,
+    /// Control periods per slow period (>= 1; [`DriveConfig::slow_period`]).
+    pub slow_divider: u32,
+    /// The slow period, s: `slow_divider` Ts. The speed loop, field weakening, the
+    /// thermal model and the slow supervision's counts are designed for it.
+    pub slow_ts: f32,
     /// The current loop ([`crate::current_loop`]).
     pub current_loop: CurrentLoopConfig,
     /// Speed loop (J, k_t at the flux reference; [`crate::speed_loop`]).
@@ -277,7 +287,8 @@ pub struct DriveDesign {
     pub pole_pairs: f32,
     /// 1.5 p (Te = 1.5 p lambda_r i_sq).
     pub torque_factor: f32,
-    /// Steps at a zero target and reference before the zero-speed policy acts (>= 1).
+    /// Slow periods at a zero target and reference before the zero-speed policy acts
+    /// (>= 1).
     pub zero_dwell_steps: u32,
     /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
     pub zero_speed_stop: bool,
@@ -363,7 +374,7 @@ impl DriveDesign {
         )?;
         positive(cfg.overload_duration, "overload_duration")?;
         check(
-            is_finite(cfg.overload_time) && cfg.overload_time >= ts,
+            is_finite(cfg.overload_time) && cfg.overload_time >= cfg.control_period,
             "overload_time",
             "finite and at least one control period",
         )?;
@@ -376,6 +387,25 @@ impl DriveDesign {
             cfg.speed_bandwidth * MIN_LOOP_SEPARATION <= cfg.current_bandwidth,
             "speed_bandwidth",
             "at most a quarter of current_bandwidth (MIN_LOOP_SEPARATION)",
+        )?;
+        check(
+            cfg.slow_period == 0.0
+                || (is_finite(cfg.slow_period)
+                    && cfg.slow_period >= MIN_SLOW_PERIOD
+                    && cfg.slow_period <= MAX_SLOW_PERIOD),
+            "slow_period",
+            "0 (every stage every control period) or 0.5 to 2 ms (MIN_SLOW_PERIOD, \
+             MAX_SLOW_PERIOD)",
+        )?;
+        // a whole number of control periods, at least one (a control period above the
+        // slow period runs everything at the control rate)
+        let slow_divider = slow_divider(cfg.slow_period, ts);
+        let slow_ts = slow_divider as f32 * ts;
+        check(
+            slow_divider == 1 || cfg.speed_bandwidth * slow_ts <= MAX_SPEED_BANDWIDTH_SLOW_PERIODS,
+            "speed_bandwidth",
+            "times the slow period at most 0.1 (MAX_SPEED_BANDWIDTH_SLOW_PERIODS): lower \
+             it or shorten slow_period",
         )?;
         positive(cfg.rs_initial, "rs_initial")?;
         positive(cfg.rs_convergence_time, "rs_convergence_time")?;
@@ -502,22 +532,24 @@ impl DriveDesign {
         Ok(Self {
             config: cfg,
             ts,
+            slow_divider,
+            slow_ts,
             current_loop: CurrentLoopConfig::new(&cfg, v_static),
             speed_loop: SpeedLoopConfig::new(
                 &m,
                 flux_reference,
                 cfg.speed_bandwidth,
-                ts,
+                slow_ts,
                 i_sq_limit,
                 cfg.load_torque_feedforward,
             )
-            .with_reference_limits(&cfg, flux_reference),
+            .with_reference_limits(&cfg, flux_reference, slow_ts),
             thermal: ThermalConfig::new(
                 cfg.current_limit,
                 cfg.continuous_current,
                 cfg.overload_duration,
                 i_d,
-                ts,
+                slow_ts,
             ),
             flux: FluxModelConfig::new(&m, ts, flux_reference),
             observer,
@@ -539,7 +571,7 @@ impl DriveDesign {
             inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
             pole_pairs: pp,
             torque_factor: 1.5 * pp,
-            zero_dwell_steps: ((cfg.zero_speed_dwell / ts) as u32).max(1),
+            zero_dwell_steps: ((cfg.zero_speed_dwell / slow_ts) as u32).max(1),
             zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
             inverter_test: InverterTestDesign::new(
                 inverter_test_on,
@@ -621,7 +653,7 @@ impl DriveDesign {
                 residual_filter: (ts / RESIDUAL_FILTER_TIME).min(1.0),
                 search,
             },
-            field_weakening: FieldWeakeningDesign::new(&cfg, base_speed),
+            field_weakening: FieldWeakeningDesign::new(&cfg, base_speed, slow_ts),
             limits: SupervisionLimits {
                 current_sensing: cfg.current_sensing,
                 overcurrent_trip: cfg.overcurrent_trip,
@@ -629,13 +661,13 @@ impl DriveDesign {
                 dc_bus_max: cfg.dc_bus_max,
                 max_speed: cfg.max_speed,
                 max_load_torque: cfg.max_load_torque_estimate,
-                implausible_steps: (IMPLAUSIBLE_TIME / ts) as u32,
-                stall_steps: (cfg.stall_time / ts) as u32,
-                overload_steps: (cfg.overload_time / ts) as u32,
+                implausible_steps: (IMPLAUSIBLE_TIME / slow_ts) as u32,
+                stall_steps: (cfg.stall_time / slow_ts) as u32,
+                overload_steps: (cfg.overload_time / slow_ts) as u32,
                 overload_fraction: OVERLOAD_FRACTION,
                 overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
                 blind_frequency: fa,
-                blind_steps: (m.rotor_time_constant() / ts) as u32,
+                blind_steps: (m.rotor_time_constant() / slow_ts) as u32,
                 stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.rs_estimation,
                 monitor_filter: (ts * cfg.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
@@ -649,8 +681,8 @@ impl DriveDesign {
                 // rounded: 0.1 s / 0.2 ms is 499.99.. in f32
                 offset_settle_steps: ((OFFSET_MEASUREMENT_TIME / ts + 0.5) as u32).max(1),
                 offset_skip_steps: ((OFFSET_SWITCH_OFF_SKIP_TIME / ts + 0.5) as u32).max(1),
-                oscillation_steps: ((OSCILLATION_BLOCK_TIME / ts + 0.5) as u32).max(1),
-                oscillation_filter: (ts / OSCILLATION_FILTER_TIME).min(1.0),
+                oscillation_steps: ((OSCILLATION_BLOCK_TIME / slow_ts + 0.5) as u32).max(1),
+                oscillation_filter: (slow_ts / OSCILLATION_FILTER_TIME).min(1.0),
                 oscillation_check: cfg.speed_oscillation_check,
                 oscillation_swing: OSCILLATION_FRACTION * cfg.max_speed,
                 offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
@@ -753,6 +785,8 @@ impl DriveCoeffs<f32> {
             gain_calibration: d.gain_calibration,
             rr: d.rr_estimator,
             sensor_check: d.sensor_check,
+            slow_divider: d.slow_divider,
+            inv_slow_divider: 1.0 / d.slow_divider as f32,
         }
     }
 }

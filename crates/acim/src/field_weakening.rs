@@ -137,8 +137,9 @@ pub struct FieldWeakeningDesign<N: Num = f32> {
 
 impl FieldWeakeningDesign {
     /// The design for the settings `cfg` with the base speed `base_speed` (rad/s
-    /// mechanical: the no-load speed the linear voltage limit reaches at `dc_bus_max`).
-    pub fn new(cfg: &DriveConfig, base_speed: f32) -> Self {
+    /// mechanical: the no-load speed the linear voltage limit reaches at `dc_bus_max`),
+    /// updated every `ts` (s, the slow period).
+    pub fn new(cfg: &DriveConfig, base_speed: f32, ts: f32) -> Self {
         let m = cfg.machine;
         let band = (OVC_END_FRACTION - OVC_START_FRACTION) * cfg.dc_bus_max;
         Self {
@@ -150,8 +151,7 @@ impl FieldWeakeningDesign {
             inv_stator_inductance: 1.0 / m.stator_inductance(),
             stator_inductance: m.stator_inductance(),
             flux_voltage: 1.0,
-            trim_gain: FW_TRIM_BANDWIDTH * cfg.control_period
-                / (2.0 * FW_VOLTAGE_FRACTION * m.stator_inductance()),
+            trim_gain: FW_TRIM_BANDWIDTH * ts / (2.0 * FW_VOLTAGE_FRACTION * m.stator_inductance()),
             trim_gate: FW_TRIM_GATE,
             trim_fraction: FW_TRIM_FRACTION,
             rated_linkage: m.stator_inductance() * cfg.flux_current,
@@ -162,8 +162,7 @@ impl FieldWeakeningDesign {
                 (m.stator_resistance() + m.referred_rotor_resistance()) / m.stator_resistance(),
             ),
             optimum_min_current: FLUX_OPT_MIN_FRACTION * cfg.flux_current,
-            optimum_fall: (cfg.control_period / (FLUX_OPT_FALL_TAU_R * m.rotor_time_constant()))
-                .min(1.0),
+            optimum_fall: (ts / (FLUX_OPT_FALL_TAU_R * m.rotor_time_constant())).min(1.0),
             regen_start: OVC_START_FRACTION * cfg.dc_bus_max,
             inv_regen_band: 1.0 / band,
         }

@@ -125,11 +125,16 @@ impl SpeedLoopConfig<f32> {
     };
 
     /// This design with the reference's limits for the settings `cfg` at the flux
-    /// reference `flux_reference` (Wb): the ramp, the reachable speed, the regeneration
-    /// limit, the far-side transit and the speed hold.
-    pub fn with_reference_limits(mut self, cfg: &DriveConfig, flux_reference: f32) -> Self {
+    /// reference `flux_reference` (Wb), updated every `ts` (s, the slow period): the
+    /// ramp, the reachable speed, the regeneration limit, the far-side transit and the
+    /// speed hold.
+    pub fn with_reference_limits(
+        mut self,
+        cfg: &DriveConfig,
+        flux_reference: f32,
+        ts: f32,
+    ) -> Self {
         let m = cfg.machine;
-        let ts = cfg.control_period;
         let pp = m.pole_pairs_f32();
         self.ramp_step = cfg.speed_ramp * ts;
         self.speed_per_volt = 1.0 / (pp * flux_reference);
@@ -153,8 +158,7 @@ impl SpeedLoopConfig<f32> {
         };
         self.far_side_leave = 2.0 * core::f32::consts::PI * FAR_SIDE_LEAVE_HZ;
         self.hold_band = FW_HOLD_BAND_FRACTION * cfg.max_speed;
-        self.report_steps =
-            (FW_REPORT_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * cfg.control_period)) as u32;
+        self.report_steps = (FW_REPORT_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32;
         self
     }
 

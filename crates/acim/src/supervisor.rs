@@ -400,6 +400,23 @@ impl Supervisor {
         }
     }
 
+    /// The part of [`Self::plausibility`] that runs every control period: the estimates
+    /// finite and the Rs estimate off its bounds (with `rs_bound_faults`);
+    /// `EstimatorOutOfRange` otherwise.
+    #[inline(always)]
+    pub fn estimates_valid<N: Num>(
+        limits: &SupervisionLimits<N>,
+        h: &EstimatorHealth<N>,
+    ) -> Option<FaultReason> {
+        if !(h.speed.is_finite() && h.load_torque.is_finite() && h.current.is_finite())
+            || (limits.rs_bound_faults && h.rs_at_bound)
+        {
+            Some(FaultReason::EstimatorOutOfRange)
+        } else {
+            None
+        }
+    }
+
     /// Estimator plausibility: a non-finite state, or Rs at its bound while it adapts,
     /// faults at once; an implausible load estimate must persist for
     /// `implausible_steps` (a current transient, e.g. a short, must trip on over-current
@@ -412,10 +429,8 @@ impl Supervisor {
         h: &EstimatorHealth<N>,
         speed_pi_saturated: bool,
     ) -> Option<FaultReason> {
-        if !(h.speed.is_finite() && h.load_torque.is_finite() && h.current.is_finite())
-            || (limits.rs_bound_faults && h.rs_at_bound)
-        {
-            return Some(FaultReason::EstimatorOutOfRange);
+        if let Some(reason) = Self::estimates_valid(limits, h) {
+            return Some(reason);
         }
         self.implausible_steps = if h.load_torque.abs() > limits.max_load_torque {
             self.implausible_steps.saturating_add(1)

@@ -532,6 +532,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
         sensor_check: sensor_check(&d.sensor_check, b).ok_or(missing("machine"))?,
         zero_dwell_steps: d.zero_dwell_steps,
         zero_speed_stop: d.zero_speed_stop,
+        slow_divider: d.slow_divider,
+        inv_slow_divider: gain(1.0 / d.slow_divider as f32, "slow_period")?,
         inverter_test: InverterTestDesign {
             level_steps: d.inverter_test.level_steps,
             settle_steps: d.inverter_test.settle_steps,
