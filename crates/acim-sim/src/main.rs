@@ -754,7 +754,19 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let file = table_file(&o, "faults.md");
             let out = o.out();
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
-            let mut md = acim_sim::faults::markdown(&rows);
+            // the same scenarios with a 1 kHz slow task (unless the overrides choose one)
+            let slow = if o.sets.iter().any(|s| s.starts_with("drive.slow_period_s")) {
+                Vec::new()
+            } else {
+                let mut sets = o.sets.clone();
+                sets.push(acim_sim::faults::slow_task_override());
+                acim_sim::faults::run_all_with(&sets, &mut |sc| {
+                    acim_sim::run_with_metrics(sc)
+                        .map(|r| r.1)
+                        .map_err(|e| format!("{}: {e}", sc.name))
+                })?
+            };
+            let mut md = acim_sim::faults::markdown(&rows, &slow);
             // the current-sensor matrix on every acceptance machine (its own machines and
             // settings: the --set overrides apply to the fault-* scenarios only)
             let sensor = acim_sim::faults::run_sensor_cases(&mut |sc| run_one(sc, &out, &o))?;
