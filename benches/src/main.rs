@@ -77,7 +77,7 @@ const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
 /// order of the step.
-const REPORT_REGIONS: [&str; 13] = [
+const REPORT_REGIONS: [&str; 15] = [
     "sincos",
     "clarke_park",
     "current_pi",
@@ -91,6 +91,8 @@ const REPORT_REGIONS: [&str; 13] = [
     "fault_checks",
     "drive_step",
     "overmodulation",
+    "two_rate_fast",
+    "two_rate_tick",
 ];
 
 fn main() {
@@ -175,11 +177,14 @@ fn run(
     let drive_root = dis
         .function_named(|n| n == "bench_region_drive_step")
         .ok_or("cannot find bench_region_drive_step")?;
+    let two_rate_root = dis
+        .function_named(|n| n == "bench_region_two_rates")
+        .ok_or("cannot find bench_region_two_rates")?;
     let step_graph = dis.reachable(&[drive_root]);
     let calib_root = dis
         .function_named(|n| n == "bench_calibrate")
         .ok_or("cannot find bench_calibrate")?;
-    let mut roots = vec![shadow_root, drive_root, calib_root];
+    let mut roots = vec![shadow_root, drive_root, two_rate_root, calib_root];
     roots.extend(markers.values().map(|m| m.func));
     let measured_graph = dis.reachable(&roots);
 
@@ -430,8 +435,11 @@ fn run(
     if !measured_graph.indirect.is_empty() {
         println!("  warning: indirect calls in the measured code; -dfilter may hide callees");
     }
-    if !summary.contains("mismatches=0") || summary.contains("drive_faulted=1") {
-        println!("  PROBED STEP: the probed clone diverged from Drive::step or the drive faulted");
+    if !summary.contains("mismatches=0")
+        || summary.contains("drive_faulted=1")
+        || summary.contains("two_rate_faulted=1")
+    {
+        println!("  PROBED STEP: the probed clone diverged from Drive::step or a drive faulted");
         ok = false;
     }
 
@@ -2323,6 +2331,8 @@ mod tests {
         assert_eq!(s.mismatches, 0, "{s:?}");
         assert_eq!(s.replica_faults, 0, "{s:?}");
         assert!(!s.drive_faulted, "{s:?}");
+        assert_eq!(s.two_rate_measured, scenario::MEASURED_STEPS, "{s:?}");
+        assert!(!s.two_rate_faulted, "{s:?}");
         assert!(s.full_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.reduced_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.flux_mean_abs_err_rpm < 10.0, "{s:?}");

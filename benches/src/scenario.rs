@@ -33,7 +33,7 @@ use acim::svpwm::SvpwmConfig;
 use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
-pub const REGIONS: [&str; 14] = [
+pub const REGIONS: [&str; 16] = [
     "empty",
     "fault_checks",
     "sincos",
@@ -48,6 +48,8 @@ pub const REGIONS: [&str; 14] = [
     "drive_step",
     "overmodulation",
     "observer_flux",
+    "two_rate_fast",
+    "two_rate_tick",
 ];
 
 /// Steps from `start()` on (magnetising, with the speed search, the inverter test at
@@ -165,6 +167,8 @@ markers! {
     11 => bench_begin_drive_step, bench_end_drive_step;
     12 => bench_begin_overmodulation, bench_end_overmodulation;
     13 => bench_begin_observer_flux, bench_end_observer_flux;
+    14 => bench_begin_two_rate_fast, bench_end_two_rate_fast;
+    15 => bench_begin_two_rate_tick, bench_end_two_rate_tick;
 }
 
 /// Calls the marker pair of each region of `Drive::step_probed`.
@@ -204,6 +208,17 @@ impl StepProbe for MarkerProbe {
 pub fn bench_config() -> DriveConfig {
     let mut c = DriveConfig::paper_defaults();
     c.rs_estimation = true;
+    c
+}
+
+/// The slow task's period of the two-rate run, s (1 kHz).
+pub const TWO_RATE_SLOW_PERIOD: f32 = 1e-3;
+
+/// [`bench_config`] with a 1 kHz slow task (`DriveConfig::slow_period`): the two-rate
+/// run measures its fast periods and its slow ticks apart.
+pub fn bench_config_two_rates() -> DriveConfig {
+    let mut c = bench_config();
+    c.slow_period = TWO_RATE_SLOW_PERIOD;
     c
 }
 
@@ -331,6 +346,31 @@ pub fn bench_region_drive_step(drive: &mut Drive, inp: &DriveInputs, on: bool) -
     out
 }
 
+/// One step of the two-rate drive, as the firmware calls it, measured as a fast period
+/// (`two_rate_fast`) or a slow tick (`two_rate_tick`).
+#[inline(never)]
+#[no_mangle]
+pub fn bench_region_two_rates(drive: &mut Drive, inp: &DriveInputs, on: bool) -> PwmOutput {
+    let tick = drive.slow_tick_due();
+    if on {
+        if tick {
+            bench_begin_two_rate_tick();
+        } else {
+            bench_begin_two_rate_fast();
+        }
+    }
+    let out = drive.step(black_box(inp));
+    let out = black_box(out);
+    if on {
+        if tick {
+            bench_end_two_rate_tick();
+        } else {
+            bench_end_two_rate_fast();
+        }
+    }
+    out
+}
+
 /// The calibration region: begin immediately followed by end, eight times.
 #[inline(never)]
 #[no_mangle]
@@ -366,6 +406,10 @@ pub struct Summary {
     pub reduced_mean_abs_err_rpm: f32,
     /// Mean |flux observer - true| over the measured steps, rpm.
     pub flux_mean_abs_err_rpm: f32,
+    /// Running steps of the two-rate run measured.
+    pub two_rate_measured: u32,
+    /// Whether the two-rate drive faulted.
+    pub two_rate_faulted: bool,
 }
 
 /// Runs the scenario: start, magnetise, ramp to [`SPEED_TARGET_RPM`], load step; the
@@ -465,5 +509,49 @@ pub fn run() -> Summary {
     s.full_mean_abs_err_rpm = err_full / n / RPM_TO_RAD_S;
     s.reduced_mean_abs_err_rpm = err_red / n / RPM_TO_RAD_S;
     s.flux_mean_abs_err_rpm = err_flux / n / RPM_TO_RAD_S;
+    let (measured, faulted) = run_two_rates();
+    s.two_rate_measured = measured;
+    s.two_rate_faulted = faulted;
     s
+}
+
+/// The same scenario closed by the two-rate drive ([`bench_config_two_rates`]), with its
+/// own plant: (running steps measured, whether it faulted).
+fn run_two_rates() -> (u32, bool) {
+    let cfg = black_box(bench_config_two_rates());
+    let Ok(mut drive) = Drive::new(cfg) else {
+        return (0, true);
+    };
+    let mut plant = Plant::paper_default(1);
+    plant.set_substeps(PLANT_SUBSTEPS);
+    let mut pwm = PwmPreload::new();
+    let _ = drive.set_speed_target(SPEED_TARGET_RPM * RPM_TO_RAD_S);
+    let _ = drive.start();
+    let drive = black_box(&mut drive);
+    let (mut steps, mut measured) = (0, 0);
+    while steps < MAX_STEPS && measured < MEASURED_STEPS {
+        let meas = plant.sample();
+        let inp = DriveInputs {
+            phase_currents: meas.phase_currents,
+            dc_bus: meas.dc_bus,
+        };
+        let on = drive.state() == DriveState::Running;
+        let out = bench_region_two_rates(drive, &inp, on);
+        let load = if measured >= LOAD_FROM_STEP {
+            LoadTorque::Passive {
+                torque: LOAD_TORQUE,
+            }
+        } else {
+            LoadTorque::None
+        };
+        plant.run_pwm_period(pwm.advance(out), load);
+        steps += 1;
+        if on {
+            measured += 1;
+        }
+        if drive.state() == DriveState::Fault {
+            return (measured, true);
+        }
+    }
+    (measured, false)
 }

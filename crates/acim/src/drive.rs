@@ -715,6 +715,12 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         self.request_start(DriveState::OpenLoop)
     }
 
+    /// Whether the next running period is a slow tick ([`DriveConfig::slow_period`];
+    /// always, with no slow task): for measuring the two paths apart.
+    pub fn slow_tick_due(&self) -> bool {
+        self.refs.slow_count == 0
+    }
+
     /// Whether a start is waiting for the switches-off offset measurement to settle.
     pub fn start_pending(&self) -> bool {
         self.refs.start.waiting().is_some()
@@ -1018,14 +1024,14 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
             inv_dc_bus,
             magnetizing,
             zero_held,
-            ..
+            slow,
         } = *step;
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
         let v = self.current_control(m, e, i_ref, limit);
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
-        if let Some(reason) = self.monitor_control(m, e, v, step) {
+        if let Some(reason) = self.monitor_control(m, e, i_ref, v, magnetizing, slow) {
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -1136,10 +1142,11 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         &mut self,
         m: &Measured<N>,
         e: &Estimate<N>,
+        i_ref: Dq<N>,
         v: Dq<N>,
-        step: &StepReferences<N>,
+        magnetizing: bool,
+        slow: bool,
     ) -> Option<FaultReason> {
-        let (i_ref, magnetizing) = (step.i_ref, step.magnetizing);
         let residual = Dq {
             d: self.loops.cur.d().integral(),
             q: self.loops.cur.q().integral(),
@@ -1172,7 +1179,7 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         }
         // a limit cycle: the estimate swinging around a steady reference (slow)
         let speed = &self.refs.speed;
-        if step.slow {
+        if slow {
             if let Some(reason) = self.supervision.oscillation.update(
                 &self.cfg.coeffs.limits,
                 e.observer.speed - speed.speed_reference,
@@ -1566,20 +1573,47 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         limit: VoltageLimit<N>,
         slow: bool,
     ) -> Result<Dq<N>, FaultReason> {
+        let periods = self.cfg.coeffs.slow_divider;
         if magnetizing {
             let i_ref = self.magnetize(m, e)?;
-            self.refs.current.set(i_ref);
-            self.refs.means = SlowMeans::default();
+            if periods > 1 {
+                self.refs.current.set(i_ref);
+                self.refs.means = SlowMeans::default();
+            }
             return Ok(i_ref);
         }
         // running: the slow task's references, reached over its period, from the
-        // estimates' means over it
-        let c = &self.cfg.coeffs;
-        self.refs.means.add(&e.observer, c.inv_slow_divider);
-        if !slow {
-            return Ok(self.refs.current.advance());
+        // estimates' means over it (with no slow task every period is a tick, on this
+        // period's estimates; one call site, so that the slow stages are inlined once)
+        let inv_periods = self.cfg.coeffs.inv_slow_divider;
+        let means;
+        let e = if periods > 1 {
+            self.refs.means.add(&e.observer, inv_periods);
+            if !slow {
+                return Ok(self.refs.current.advance());
+            }
+            means = self.refs.means.take(e, periods);
+            &means
+        } else {
+            e
+        };
+        let target = self.slow_references(m, e, limit)?;
+        if periods == 1 {
+            return Ok(target);
         }
-        let e = &self.refs.means.take(e, c.slow_divider);
+        self.refs.current.aim(target, periods, inv_periods);
+        Ok(self.refs.current.advance())
+    }
+
+    /// The slow task's references: field weakening, the speed loop and the stall and
+    /// blind checks; i_dq*, A.
+    #[inline(always)]
+    fn slow_references(
+        &mut self,
+        m: &Measured<N>,
+        e: &Estimate<N>,
+        limit: VoltageLimit<N>,
+    ) -> Result<Dq<N>, FaultReason> {
         let fw = self.field_weakening(m, e, limit);
         let i_sq_ref = self.speed_loop(m, e, fw, limit.steady);
         let c = &self.cfg.coeffs;
@@ -1599,14 +1633,10 @@ impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<
         };
         match stall {
             Some(reason) => Err(reason),
-            None => {
-                let target = Dq {
-                    d: fw.i_sd_ref,
-                    q: i_sq_ref,
-                };
-                r.current.aim(target, c.slow_divider, c.inv_slow_divider);
-                Ok(r.current.advance())
-            }
+            None => Ok(Dq {
+                d: fw.i_sd_ref,
+                q: i_sq_ref,
+            }),
         }
     }
 
