@@ -12,6 +12,29 @@ pub fn run(name: &str, sets: &[&str]) -> Metrics {
     acim_sim::run_with_metrics(&sc).expect("valid scenario").1
 }
 
+/// Every steady window of `m` keeps control with |speed_est - speed| <= `est_max` rpm
+/// and, if given, |speed - ref| <= `speed_max` rpm (maxima of 10 ms moving averages).
+pub fn check_windows(m: &Metrics, est_max: f32, speed_max: Option<f32>) {
+    assert!(m.control_kept, "{}: control lost: {m:#?}", m.name);
+    assert!(!m.windows.is_empty());
+    for (name, w) in &m.windows {
+        assert!(
+            w.speed_est_err_max_rpm <= est_max,
+            "{} {name}: |speed_est - speed| = {} rpm > {est_max}",
+            m.name,
+            w.speed_est_err_max_rpm
+        );
+        if let Some(s) = speed_max {
+            assert!(
+                w.speed_err_max_rpm <= s,
+                "{} {name}: |speed - ref| = {} rpm > {s}",
+                m.name,
+                w.speed_err_max_rpm
+            );
+        }
+    }
+}
+
 /// The load-step acceptance of Fig. 7: after the 1.5 N m step, the load estimate is
 /// within 0.05 N m of the real load within 0.5 s and the speed back within 5 rpm of the
 /// reference within 0.5 s.

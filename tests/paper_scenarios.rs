@@ -6,28 +6,7 @@
 
 use acim_sim::metrics::Metrics;
 
-use acim_tests::{assert_load_step_tracked, run};
-
-fn check_windows(m: &Metrics, est_max: f32, speed_max: Option<f32>) {
-    assert!(m.control_kept, "{}: control lost: {m:#?}", m.name);
-    assert!(!m.windows.is_empty());
-    for (name, w) in &m.windows {
-        assert!(
-            w.speed_est_err_max_rpm <= est_max,
-            "{} {name}: |speed_est - speed| = {} rpm > {est_max}",
-            m.name,
-            w.speed_est_err_max_rpm
-        );
-        if let Some(s) = speed_max {
-            assert!(
-                w.speed_err_max_rpm <= s,
-                "{} {name}: |speed - ref| = {} rpm > {s}",
-                m.name,
-                w.speed_err_max_rpm
-            );
-        }
-    }
-}
+use acim_tests::{assert_load_step_tracked, check_windows, run};
 
 #[test]
 fn fig6_startup_and_reversal_at_500_rpm() {

@@ -6,35 +6,13 @@
 //! drive finds it.
 
 use acim_sim::builtins;
-use acim_sim::metrics::Metrics;
 
-use acim_tests::{assert_load_step_tracked, run};
+use acim_tests::{assert_load_step_tracked, check_windows, run};
 
 /// A 1 kHz slow task.
 const SLOW: &str = "drive.slow_period_s=0.001";
 /// The slow period, s.
 const SLOW_PERIOD_S: f32 = 1e-3;
-
-fn check_windows(m: &Metrics, est_max: f32, speed_max: Option<f32>) {
-    assert!(m.control_kept, "{}: control lost: {m:#?}", m.name);
-    assert!(!m.windows.is_empty());
-    for (name, w) in &m.windows {
-        assert!(
-            w.speed_est_err_max_rpm <= est_max,
-            "{} {name}: |speed_est - speed| = {} rpm > {est_max}",
-            m.name,
-            w.speed_est_err_max_rpm
-        );
-        if let Some(s) = speed_max {
-            assert!(
-                w.speed_err_max_rpm <= s,
-                "{} {name}: |speed - ref| = {} rpm > {s}",
-                m.name,
-                w.speed_err_max_rpm
-            );
-        }
-    }
-}
 
 /// The bounds of `paper_scenarios.rs`, with the speed loop at 1 kHz.
 #[test]

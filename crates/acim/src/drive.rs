@@ -1945,6 +1945,18 @@ mod tests {
         }
     }
 
+    /// Steps `d` with [`following`] samples up to and through its next slow tick (at
+    /// most one slow period).
+    fn slow_period(d: &mut Drive) {
+        for _ in 0..d.design().slow_divider {
+            let tick = d.slow_tick_due();
+            d.step(&following(d));
+            if tick {
+                break;
+            }
+        }
+    }
+
     fn idle_inputs() -> DriveInputs {
         DriveInputs {
             phase_currents: [0.0; 3],
@@ -2079,38 +2091,28 @@ mod tests {
                 steps += 1;
             }
             assert_eq!(d.state(), DriveState::Running);
-            // the policy counts slow periods: each `slow` below runs up to and
-            // through the next slow tick
-            let k = d.design().slow_divider;
-            let slow = |d: &mut Drive| {
-                for _ in 0..k {
-                    let tick = d.refs.slow_count == 0;
-                    d.step(&following(d));
-                    if tick {
-                        break;
-                    }
-                }
-            };
+            // the policy counts slow periods: each `slow_period` below runs up
+            // to and through the next slow tick
             let dwell = (0.5 / d.design().slow_ts) as u32;
             // started with a zero target, the drive waits for one with either policy,
             // the hold reported once the dwell has passed
             for _ in 0..dwell + 2 {
-                slow(&mut d);
+                slow_period(&mut d);
             }
             assert_eq!(d.state(), DriveState::Running, "{policy:?}");
             assert!(d.telemetry().zero_speed_held, "{policy:?}");
             // commanded to turn, then back to zero: the ramp reaches it in a few steps
             d.set_speed_target(0.05).unwrap();
-            slow(&mut d);
+            slow_period(&mut d);
             assert!(!d.telemetry().zero_speed_held, "{policy:?}");
             d.set_speed_target(0.0).unwrap();
             for _ in 0..dwell - 2 {
-                slow(&mut d);
+                slow_period(&mut d);
             }
             assert_eq!(d.state(), DriveState::Running, "{policy:?}");
             assert!(!d.telemetry().zero_speed_held, "{policy:?}");
             for _ in 0..4 {
-                slow(&mut d);
+                slow_period(&mut d);
             }
             match policy {
                 ZeroSpeedPolicy::Stop => {
@@ -2123,7 +2125,7 @@ mod tests {
                     assert!(d.telemetry().zero_speed_held);
                     // a nonzero target ends the hold at once
                     d.set_speed_target(1.0).unwrap();
-                    slow(&mut d);
+                    slow_period(&mut d);
                     assert!(!d.telemetry().zero_speed_held);
                 }
             }
@@ -2232,32 +2234,22 @@ mod tests {
             n += 1;
         }
         assert_eq!(d.state(), DriveState::Running);
-        // the speed loop runs once per slow period: each `slow` below runs up to and through
-        // the next slow tick
-        let k = d.design().slow_divider;
-        let slow = |d: &mut Drive| {
-            for _ in 0..k {
-                let tick = d.refs.slow_count == 0;
-                d.step(&following(d));
-                if tick {
-                    break;
-                }
-            }
-        };
-        slow(&mut d);
+        // the speed loop runs once per slow period: each `slow_period` below runs up to
+        // and through the next slow tick
+        slow_period(&mut d);
         let reach = linear_limit(325.0) / (2.0 * d.design().flux_reference);
         assert!(d.telemetry().speed_target_limited);
         // the ramp heads for the reachable speed, not for 1800 rpm
         d.refs.speed.speed_reference = 0.99 * reach;
-        slow(&mut d);
-        slow(&mut d);
+        slow_period(&mut d);
+        slow_period(&mut d);
         assert!(
             d.refs.speed.speed_reference <= reach * (1.0 + 1e-5),
             "{reach}"
         );
         d.set_speed_target(500.0 * crate::math::RPM_TO_RAD_S)
             .unwrap();
-        slow(&mut d);
+        slow_period(&mut d);
         assert_eq!(d.state(), DriveState::Running, "{:?}", d.fault());
         assert!(!d.telemetry().speed_target_limited);
     }
