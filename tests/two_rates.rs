@@ -12,7 +12,7 @@ use acim_tests::{assert_load_step_tracked, check_windows, run};
 /// A 1 kHz slow task.
 const SLOW: &str = "drive.slow_period_s=0.001";
 /// The slow period, s.
-const SLOW_PERIOD_S: f32 = 1e-3;
+const SLOW_PERIOD_S: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
 /// The bounds of `paper_scenarios.rs`, with the speed loop at 1 kHz.
 #[test]

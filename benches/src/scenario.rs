@@ -212,7 +212,7 @@ pub fn bench_config() -> DriveConfig {
 }
 
 /// The slow task's period of the two-rate run, s (1 kHz).
-pub const TWO_RATE_SLOW_PERIOD: f32 = 1e-3;
+pub const TWO_RATE_SLOW_PERIOD: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
 /// [`bench_config`] with a 1 kHz slow task (`DriveConfig::slow_period`): the two-rate
 /// run measures its fast periods and its slow ticks apart.

@@ -64,7 +64,7 @@ pub fn run_all_with(
 }
 
 /// The slow task of the fault table's last column (`drive.slow_period_s`), s.
-pub const TABLE_SLOW_PERIOD_S: f32 = 1e-3;
+pub const TABLE_SLOW_PERIOD_S: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
 /// The `--set` override that runs a scenario with [`TABLE_SLOW_PERIOD_S`].
 pub fn slow_task_override() -> String {

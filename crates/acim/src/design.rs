@@ -374,7 +374,7 @@ impl DriveDesign {
         )?;
         positive(cfg.overload_duration, "overload_duration")?;
         check(
-            is_finite(cfg.overload_time) && cfg.overload_time >= cfg.control_period,
+            is_finite(cfg.overload_time) && cfg.overload_time >= ts,
             "overload_time",
             "finite and at least one control period",
         )?;

@@ -2067,13 +2067,19 @@ mod tests {
     /// started with a zero target, the drive waits for one with either
     /// policy and reports the hold; after turning, a zero target held for the dwell
     /// (0.5 s) switches it off with `Stop` (the default) and is reported with `Hold`,
-    /// which keeps running; before the dwell neither acts.
+    /// which keeps running; before the dwell neither acts. Without and with a 1 kHz slow
+    /// task (the policy counts slow periods).
     #[test]
     fn a_held_zero_target_stops_or_is_reported() {
         use crate::ZeroSpeedPolicy;
-        for policy in [ZeroSpeedPolicy::Stop, ZeroSpeedPolicy::Hold] {
+        let schedules = [0.0, crate::design::TYPICAL_SLOW_PERIOD];
+        for (policy, slow) in [ZeroSpeedPolicy::Stop, ZeroSpeedPolicy::Hold]
+            .into_iter()
+            .flat_map(|p| schedules.map(|s| (p, s)))
+        {
             let mut cfg = synthetic_defaults();
             cfg.zero_speed_policy = policy;
+            cfg.slow_period = slow;
             // no machine: the currents follow their references exactly (`following`),
             // which the observer and the sensor check, reading the voltage, do not
             // believe; the policy is what is tested here
@@ -2214,8 +2220,16 @@ mod tests {
     /// weakening the reachable speed depends on the load: tests/field_weakening.rs.)
     #[test]
     fn unreachable_speed_targets_are_limited_and_reported() {
+        for slow in [0.0, crate::design::TYPICAL_SLOW_PERIOD] {
+            unreachable_targets_with(slow);
+        }
+    }
+
+    /// [`unreachable_speed_targets_are_limited_and_reported`] with the slow period `slow`, s.
+    fn unreachable_targets_with(slow: f32) {
         let mut cfg = synthetic_defaults();
         cfg.field_weakening = false;
+        cfg.slow_period = slow;
         // no machine: running, the currents follow their references exactly
         // (`following`), which the sensor check, reading the voltage, does not believe
         cfg.sensor_check = false;
