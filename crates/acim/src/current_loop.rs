@@ -4,7 +4,9 @@
 
 use crate::config::DriveConfig;
 use crate::frames::Dq;
+use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::ThreePhase;
 use crate::pi::{PiConfig, PiController};
 use crate::svpwm::VoltageLimit;
 
@@ -81,13 +83,13 @@ pub struct CurrentLoop<N> {
     reserve: u32,
 }
 
-impl<N: Num> Default for CurrentLoop<N> {
+impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> Default for CurrentLoop<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num> CurrentLoop<N> {
+impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> CurrentLoop<N> {
     /// Integrals zero, no reserve.
     pub fn new() -> Self {
         Self {

@@ -11,7 +11,7 @@ use crate::flux::FluxModelConfig;
 use crate::gain_calibration::GainCalibrationConfig;
 use crate::inverter_tracker::InverterTrackerConfig;
 use crate::math::{is_finite, sqrt};
-use crate::num::Num;
+use crate::num::{Arithmetic, Num};
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::rr_estimator::RrEstimatorConfig;
@@ -151,7 +151,7 @@ pub struct VfDesign<N: Num = f32> {
 /// for f32 SI; a conversion with the per-unit bases in fixed point, which checks that
 /// every value fits).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DriveCoeffs<N: Num = f32> {
+pub struct DriveCoeffs<N: Arithmetic = f32> {
     /// The current loop (d/q PIs, overmodulation reserve).
     pub current_loop: CurrentLoopConfig<N>,
     /// Speed loop: the disturbance PI and the feed-forwards.
@@ -732,7 +732,7 @@ impl DriveDesign {
 /// An arithmetic the design converts its step coefficients to: f32 SI here, Q7.24 per
 /// unit in [`crate::fixed`]. Apart from [`Num`] so that the blocks, which need only the
 /// arithmetic, do not depend on the design.
-pub trait DesignArithmetic: Num {
+pub trait DesignArithmetic: Arithmetic {
     /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
     /// fixed point checks that every value fits its per-unit range.
     fn coeffs(design: &DriveDesign, bases: &Self::Bases) -> Result<DriveCoeffs<Self>, ConfigError>;

@@ -79,7 +79,7 @@ use crate::frames::{
 use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::{InverterTest, InverterTestOutcome};
 use crate::inverter_tracker::{sign_vector, InverterTracker, InverterTrackerInputs};
-use crate::num::Num;
+use crate::num::Arithmetic;
 use crate::observer::{
     ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
 };
@@ -101,7 +101,7 @@ use crate::thermal::ThermalModel;
 /// What the front of a running step hands its back end: the current reference, the
 /// voltage limit at this period's bus, 1/V_dc, the phase and the zero-speed report.
 #[derive(Clone, Copy, Debug)]
-struct StepReferences<N: Num> {
+struct StepReferences<N: Arithmetic> {
     i_ref: Dq<N>,
     limit: VoltageLimit<N>,
     inv_dc_bus: N,
@@ -131,7 +131,7 @@ pub struct PwmOutput<N = f32> {
     pub enabled: bool,
 }
 
-impl<N: Num> PwmOutput<N> {
+impl<N: Arithmetic> PwmOutput<N> {
     /// All switches off.
     pub const OFF: Self = Self {
         duties: [N::HALF; 3],
@@ -143,7 +143,7 @@ impl<N: Num> PwmOutput<N> {
 /// point).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct DriveTelemetry<N: Num = f32> {
+pub struct DriveTelemetry<N: Arithmetic = f32> {
     /// Ramped speed reference, rad/s.
     pub speed_reference: N,
     /// Estimated speed Omega_hat, rad/s.
@@ -232,7 +232,7 @@ impl StepProbe for NoProbe {
 
 /// Output of the sense stage: this step's samples in both frames.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Measured<N: Num = f32> {
+pub struct Measured<N: Arithmetic = f32> {
     /// Stator current, stationary frame, A.
     pub i_ab: AlphaBeta<N>,
     /// Stator current, rotor-flux frame, A.
@@ -306,7 +306,7 @@ pub struct Previous<N = f32> {
 
 /// The checks that judge the control without trusting the estimates.
 #[derive(Clone, Copy, Debug, Default)]
-struct Supervision<N: Num> {
+struct Supervision<N: Arithmetic> {
     /// The drive's state machine and the raw-sample checks ([`Supervisor`]).
     sup: Supervisor,
     /// Current error, model residual, current sum, offset drift ([`ControlMonitor`]).
@@ -323,7 +323,7 @@ struct Supervision<N: Num> {
 
 /// The drive's fixed part: the design, its coefficients in `N`, the per-unit bases.
 #[derive(Clone, Debug)]
-struct DriveParts<N: Num> {
+struct DriveParts<N: Arithmetic> {
     design: DriveDesign,
     coeffs: DriveCoeffs<N>,
     bases: N::Bases,
@@ -332,7 +332,7 @@ struct DriveParts<N: Num> {
 /// The output side of a step: the current loops, the modulator, sin/cos and the tracker
 /// of the inverter error the modulator's correction leaves.
 #[derive(Clone, Debug)]
-struct Loops<N: Num, S, M> {
+struct Loops<N: Arithmetic, S, M> {
     cur: CurrentLoop<N>,
     modulator: M,
     sincos: S,
@@ -343,7 +343,7 @@ struct Loops<N: Num, S, M> {
 
 /// The current channels' zero offsets.
 #[derive(Clone, Copy, Debug)]
-struct Sensing<N: Num> {
+struct Sensing<N: Arithmetic> {
     /// Measured with the switches off ([`OffsetMonitor`]).
     offsets: OffsetMonitor<N>,
     /// The offsets subtracted from the samples since the last start.
@@ -358,7 +358,7 @@ struct Sensing<N: Num> {
 /// Estimation stage state: speed observer, Rs estimator, flux model and the residual
 /// filter of the standstill Rs identification.
 #[derive(Clone, Debug)]
-struct Estimator<N: Num, O> {
+struct Estimator<N: Arithmetic, O> {
     observer: O,
     rs: RsEstimator<N>,
     flux: FluxModel<N>,
@@ -369,7 +369,7 @@ struct Estimator<N: Num, O> {
 
 /// Reference stage state: speed target and ramp, speed PI, magnetizing counters.
 #[derive(Clone, Debug)]
-struct References<N: Num> {
+struct References<N: Arithmetic> {
     /// The speed loop ([`crate::speed_loop`]).
     speed: SpeedLoop<N>,
     /// Field weakening, over-voltage control and flux optimisation
@@ -399,14 +399,14 @@ struct References<N: Num> {
 /// that the slow task reads the estimates averaged, not sampled (their period-to-period
 /// ripple would alias into the speed loop).
 #[derive(Clone, Copy, Debug, Default)]
-struct SlowMeans<N: Num> {
+struct SlowMeans<N: Arithmetic> {
     speed: N,
     load_torque: N,
     /// Periods gathered since the last slow tick.
     count: u32,
 }
 
-impl<N: Num> SlowMeans<N> {
+impl<N: Arithmetic> SlowMeans<N> {
     /// Adds one period's estimate, weighted by `inv_periods` = 1/`slow_divider`.
     #[inline(always)]
     fn add(&mut self, e: &SpeedEstimate<N>, inv_periods: N::Gain) {
@@ -435,7 +435,7 @@ impl<N: Num> SlowMeans<N> {
 /// speed loop sees one slow period of delay). With one control period per slow period it
 /// is reached at once.
 #[derive(Clone, Copy, Debug, Default)]
-struct ReferenceRamp<N: Num> {
+struct ReferenceRamp<N: Arithmetic> {
     /// This period's reference, A.
     now: Dq<N>,
     /// The value the last slow tick set, A.
@@ -446,7 +446,7 @@ struct ReferenceRamp<N: Num> {
     left: u32,
 }
 
-impl<N: Num> ReferenceRamp<N> {
+impl<N: Arithmetic> ReferenceRamp<N> {
     /// Starts the ramp from `now` to `target` over `periods` (>= 1) control periods;
     /// `inv_periods` = 1 / `periods`.
     #[inline(always)]
@@ -488,7 +488,7 @@ impl<N: Num> ReferenceRamp<N> {
 
 /// Open-loop V/f state.
 #[derive(Clone, Copy, Debug, Default)]
-struct OpenLoop<N: Num> {
+struct OpenLoop<N: Arithmetic> {
     angle: N::Angle,
     frequency: N,
 }
@@ -498,7 +498,7 @@ struct OpenLoop<N: Num> {
 /// (f32 SI by default, [`crate::fixed::Q24`] per unit), `O` estimates the speed (the
 /// paper's reduced-order observer by default), `M` modulates (SVPWM by default).
 #[derive(Clone, Debug)]
-pub struct Drive<S = FastSinCos, N: Num = f32, O = ReducedOrderObserver<N>, M = Svpwm> {
+pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = ReducedOrderObserver<N>, M = Svpwm> {
     /// The design, its coefficients in `N` and the per-unit bases: fixed once built.
     cfg: DriveParts<N>,
     /// The state machine and the monitors that judge the running control.
@@ -536,7 +536,9 @@ impl<S: SinCos> Drive<S> {
     }
 }
 
-impl<S: SinCos<N>, N: LeadRotation, O: SpeedObserver<N>, M: Modulator<N>> Drive<S, N, O, M> {
+impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulator<N>>
+    Drive<S, N, O, M>
+{
     /// An idle drive from a validated design (converted to `N` with `bases`) and its parts.
     pub fn with_parts(
         design: DriveDesign,

@@ -5,6 +5,7 @@
 use crate::config::DriveConfig;
 use crate::frames::Dq;
 use crate::math::sqrt;
+use crate::num::DivSqrt;
 use crate::num::Num;
 use crate::svpwm::{VoltageLimit, FW_TRIM_FRACTION};
 
@@ -232,7 +233,7 @@ pub struct FieldWeakening<N> {
     active: bool,
 }
 
-impl<N: Num> FieldWeakening<N> {
+impl<N: Num + DivSqrt + DivSqrt> FieldWeakening<N> {
     /// The state of a start: no trim, the optimiser at the rated flux current
     /// `flux_current` (A).
     pub fn new(flux_current: N) -> Self {

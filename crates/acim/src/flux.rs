@@ -9,6 +9,8 @@
 //! `min_flux` (a configured fraction of the nominal flux), so start-up from zero flux cannot
 //! produce an infinite slip.
 
+use crate::num::Angles;
+use crate::num::DivSqrt;
 use crate::num::Num;
 use crate::params::MachineParams;
 
@@ -63,7 +65,7 @@ pub(crate) fn one_minus_exp_neg_small(x: f32) -> f32 {
 /// State of the flux model and frame angle.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FluxModel<N: Num = f32> {
+pub struct FluxModel<N: Num + Angles = f32> {
     /// Estimated rotor flux amplitude lambda_r (Wb, referred to the stator).
     pub rotor_flux: N,
     /// 1 / max(lambda_r, min_flux), 1/Wb, refreshed every step (also used by the observer).
@@ -77,7 +79,7 @@ pub struct FluxModel<N: Num = f32> {
     pub angle: N::Angle,
 }
 
-impl<N: Num> FluxModel<N> {
+impl<N: Num + DivSqrt + Angles + DivSqrt + Angles> FluxModel<N> {
     /// Zero flux, angle 0.
     pub fn new() -> Self {
         Self::default()

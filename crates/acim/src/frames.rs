@@ -5,7 +5,7 @@
 //! |i_alpha_beta| = |i_dq| = I. Hence Te = 1.5 p lambda_r i_sq (design notes section 2).
 //! The q axis leads the d axis by 90 degrees; Park rotates by -theta.
 
-use crate::num::Num;
+use crate::num::{Angles, Num, ThreePhase};
 
 /// A vector in the stationary alpha-beta frame (A or V, peak-value scaling; pu in fixed
 /// point).
@@ -43,7 +43,7 @@ pub struct SinCosValue<N = f32> {
 /// [`crate::fixed::trig`]. Implementations take any angle (the library passes angles
 /// already wrapped to one turn) and must not panic; for a non-finite input they return
 /// some finite value of unit magnitude.
-pub trait SinCos<N: Num = f32> {
+pub trait SinCos<N: Angles = f32> {
     /// sin and cos of `theta` (rad in f32, a turn fraction in fixed point).
     fn sin_cos(&mut self, theta: N::Angle) -> SinCosValue<N>;
 }
@@ -107,7 +107,7 @@ impl SinCos for FastSinCos {
 /// Clarke transform from two measured phase currents, assuming i_a + i_b + i_c = 0:
 /// i_alpha = i_a, i_beta = (i_a + 2 i_b)/sqrt(3).
 #[inline(always)]
-pub fn clarke_two<N: Num>(i_a: N, i_b: N) -> AlphaBeta<N> {
+pub fn clarke_two<N: ThreePhase>(i_a: N, i_b: N) -> AlphaBeta<N> {
     AlphaBeta {
         alpha: i_a,
         beta: (i_a + i_b.twice()) * N::INV_SQRT3,
@@ -117,7 +117,7 @@ pub fn clarke_two<N: Num>(i_a: N, i_b: N) -> AlphaBeta<N> {
 /// Clarke transform of three phase quantities (zero sequence rejected):
 /// alpha = (2a - b - c)/3, beta = (b - c)/sqrt(3).
 #[inline(always)]
-pub fn clarke_three<N: Num>(a: N, b: N, c: N) -> AlphaBeta<N> {
+pub fn clarke_three<N: ThreePhase>(a: N, b: N, c: N) -> AlphaBeta<N> {
     AlphaBeta {
         alpha: (a.twice() - b - c) * N::ONE_THIRD,
         beta: (b - c) * N::INV_SQRT3,
@@ -126,7 +126,7 @@ pub fn clarke_three<N: Num>(a: N, b: N, c: N) -> AlphaBeta<N> {
 
 /// Inverse amplitude-invariant Clarke (no zero sequence): phase values a, b, c.
 #[inline(always)]
-pub fn inverse_clarke<N: Num>(v: AlphaBeta<N>) -> [N; 3] {
+pub fn inverse_clarke<N: ThreePhase>(v: AlphaBeta<N>) -> [N; 3] {
     let half_alpha = v.alpha.half();
     let k = N::SQRT3_2 * v.beta;
     [v.alpha, k - half_alpha, -half_alpha - k]
@@ -170,7 +170,7 @@ pub fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
 
 /// An arithmetic's sin/cos at the angle the voltage acts at: the frame angle advanced by
 /// the computation and PWM delay (the modulation stage's lead).
-pub trait LeadRotation: Num {
+pub trait LeadRotation: Angles {
     /// `theta` (with `sc` its sin/cos) advanced by the lead of `frequency` (rad/s
     /// electrical) over `lead` (the delay).
     fn rotate_ahead<S: SinCos<Self>>(

@@ -61,6 +61,8 @@
 //! Not on a flying start (the frame turns), not with three-phase sensing (one ratio out of
 //! two), and off in the paper's scheme (figs. 6-12).
 
+use crate::num::DivSqrt;
+use crate::num::FineIntegrator;
 use crate::num::Num;
 
 /// The filter's time constant, s: longer than any magnetizing (0.4-1 s), so that the
@@ -81,7 +83,7 @@ pub const GAIN_CALIBRATION_MIN_FRACTION: f32 = 0.5;
 /// The calibration's design (immutable; [`crate::design::DriveDesign`] builds it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct GainCalibrationConfig<N: Num = f32> {
+pub struct GainCalibrationConfig<N: Num + FineIntegrator = f32> {
     /// Calibrate at all: [`crate::design::DriveConfig::current_gain_calibration`] with
     /// two-phase sensing.
     pub enabled: bool,
@@ -126,7 +128,7 @@ impl GainCalibrationConfig<f32> {
 /// magnetizing under way.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct GainCalibration<N: Num = f32> {
+pub struct GainCalibration<N: Num + FineIntegrator = f32> {
     /// k = g_a / g_b as calibrated (1 until a calibration).
     pub ratio: N,
     /// The factors on the a and b samples, `(1 + 1/k) / 2` and `(1 + k) / 2`.
@@ -139,7 +141,7 @@ pub struct GainCalibration<N: Num = f32> {
     usable: bool,
 }
 
-impl<N: Num> Default for GainCalibration<N> {
+impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> Default for GainCalibration<N> {
     fn default() -> Self {
         Self {
             ratio: N::ONE,
@@ -151,7 +153,7 @@ impl<N: Num> Default for GainCalibration<N> {
     }
 }
 
-impl<N: Num> GainCalibration<N> {
+impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> GainCalibration<N> {
     /// A magnetizing starts: the filters from zero (the flux builds from zero too).
     #[inline(always)]
     pub fn restart(&mut self, c: &GainCalibrationConfig<N>) {

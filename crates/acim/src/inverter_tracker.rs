@@ -47,7 +47,9 @@
 //! after the load (docs/robustness.md, "A trusted tracker stands in for the start test").
 
 use crate::frames::{clarke_three, park, Dq, SinCosValue};
+use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::ThreePhase;
 use crate::svpwm::current_sign;
 
 /// Below this stator frequency the tracker holds, Hz.
@@ -114,7 +116,11 @@ impl InverterTrackerConfig<f32> {
 /// `sat(i_x / i_band)`, from the phase currents `i_abc` (A) the modulator compensates
 /// with, `inv_band` its 1/i_band (the modulator's own linearised sign).
 #[inline(always)]
-pub fn sign_vector<N: Num>(i_abc: [N; 3], inv_band: N::Gain, rot: SinCosValue<N>) -> Dq<N> {
+pub fn sign_vector<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    i_abc: [N; 3],
+    inv_band: N::Gain,
+    rot: SinCosValue<N>,
+) -> Dq<N> {
     let sign = |i: N| current_sign(inv_band, i);
     park(
         clarke_three(sign(i_abc[0]), sign(i_abc[1]), sign(i_abc[2])),
@@ -153,7 +159,7 @@ pub struct InverterTrackerInputs<N: Num = f32> {
     pub gate: bool,
 }
 
-impl<N: Num> InverterTracker<N> {
+impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
     /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`] and its `correction` (duty)
     /// is inside the bound: the drive then takes the correction as known, as after a
     /// start test that identified the error (the far-side mode's condition,

@@ -92,7 +92,7 @@ pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
     StepRegion,
 };
-pub use num::Num;
+pub use num::{Arithmetic, DivSqrt, FineIntegrator, Num, Units};
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
 pub use params::{InverseGamma, MachineData, MachineParams, ParamError};
 pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};

@@ -1,8 +1,9 @@
 //! The arithmetic the cascade is generic over: [`f32`] in SI units and
 //! [`Q24`](crate::fixed::Q24) (saturating Q7.24 in per unit).
 //!
-//! Every block and the drive itself are written once, over [`Num`]; the two arithmetics
-//! differ only where this trait says so. The methods exist because the two arithmetics
+//! Every block and the drive itself are written once, over [`Num`] and the domain formats
+//! they need ([`Arithmetic`] is all of them); the two arithmetics differ only where these
+//! traits say so. The methods exist because the two arithmetics
 //! need different operations for the same equation (a gain with its own binary point, a
 //! reciprocal by Newton iteration, a turn-fraction angle, a finer integrator for Rs),
 //! and because each instantiation reproduces the hand-written code it replaced bit for
@@ -27,8 +28,11 @@ pub trait MaybeFormat {}
 impl<T> MaybeFormat for T {}
 
 /// A number the control step computes with: plain `+ - *` (saturating in fixed point), a
-/// constant-factor type, an angle type and the few operations the arithmetics do
-/// differently.
+/// constant-factor type and the few operations the arithmetics do differently. The
+/// domain formats each arithmetic also defines are traits of their own: [`DivSqrt`],
+/// [`FineIntegrator`], [`Units`], [`Angles`] and
+/// [`ThreePhase`]; [`Arithmetic`] is all of them, what
+/// the drive is written over.
 pub trait Num:
     Copy
     + Debug
@@ -44,14 +48,6 @@ pub trait Num:
     /// A constant factor (a design coefficient): `f32`, or a fixed-point gain with its own
     /// binary point that also carries the per-unit base conversion.
     type Gain: Copy + Debug + PartialEq + MaybeFormat;
-    /// The frame angle: radians in `f32`, a `u32` turn fraction in fixed point.
-    type Angle: Copy + Debug + Default + PartialEq + MaybeFormat;
-    /// What the voltage-lead rotation needs (see [`crate::frames::LeadRotation::rotate_ahead`]).
-    type Lead: Copy + Debug + PartialEq + MaybeFormat;
-    /// The Rs integrator's state (`f32`, or Q1.30 for six more bits than the signal).
-    type Fine: Copy + Debug + PartialEq + MaybeFormat;
-    /// Per-unit bases of this arithmetic (`()` for SI f32).
-    type Bases: Copy + Debug + PartialEq + MaybeFormat;
 
     /// 0.
     const ZERO: Self;
@@ -59,19 +55,14 @@ pub trait Num:
     const ONE: Self;
     /// 0.5 (the neutral duty).
     const HALF: Self;
-    /// 1/sqrt(3) (Clarke).
-    const INV_SQRT3: Self;
-    /// sqrt(3)/2 (inverse Clarke).
-    const SQRT3_2: Self;
-    /// 1/3 (three-phase Clarke).
-    const ONE_THIRD: Self;
-    /// sqrt(3) (the chord of the q-voltage limit).
-    const SQRT3: Self;
 
     /// `g x`.
     fn gain(g: Self::Gain, x: Self) -> Self;
     /// `g a b`: `(g a) b` in f32, `g (a b)` in fixed point (one gain on a product).
     fn gain_mul(g: Self::Gain, a: Self, b: Self) -> Self;
+    /// `(a + b) x`: distributed as `a x + b x` in f32 (the order its feed-forward always
+    /// had), one product in fixed point.
+    fn sum_times(a: Self, b: Self, x: Self) -> Self;
     /// |x| (saturating).
     fn abs(self) -> Self;
     /// x / 2 (exact in f32; an arithmetic shift in fixed point).
@@ -96,6 +87,11 @@ pub trait Num:
             fallback
         }
     }
+}
+
+/// The operations f32 does with its divide and square-root unit and fixed point by
+/// Newton iteration or integer division.
+pub trait DivSqrt: Num {
     /// 1/x for x above the caller's guard (> 0): a division in f32, a Newton reciprocal in
     /// fixed point.
     fn recip(self) -> Self;
@@ -106,30 +102,18 @@ pub trait Num:
     /// sqrt(x) for x >= 0 (0 for x <= 0): the field-weakening limits of
     /// [`crate::Drive`].
     fn sqrt(self) -> Self;
-    /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
-    fn neg_mean(a: Self, b: Self) -> Self;
+}
 
-    /// The angle advanced by `frequency` over one period (`per_step` is Ts, or its
-    /// turn-count equivalent), wrapped to one turn.
-    fn advance(angle: Self::Angle, frequency: Self, per_step: Self::Gain) -> Self::Angle;
-    /// The angle in radians (telemetry).
-    fn angle_to_rad(a: Self::Angle) -> f32;
-    /// The value as an f32 in this arithmetic's units (SI in f32, per unit in fixed
-    /// point): for the rare per-event arithmetic that needs a range no signal format has
-    /// (the rotor-resistance adaptation's least-squares solve, [`crate::rr_estimator`]).
-    fn to_f32(self) -> f32;
-    /// The signal holding `x` (in this arithmetic's units; rounded and saturated).
-    fn from_f32(x: f32) -> Self;
-
-    /// `(a + b) x`: distributed as `a x + b x` in f32 (the order its feed-forward always
-    /// had), one product in fixed point.
-    fn sum_times(a: Self, b: Self, x: Self) -> Self;
-
-    /// The Rs integrator state holding `x`.
+/// The slow integrators' finer format: the Rs estimate, the offset tracker's and the gain
+/// calibration's integrators, whose steps per period are below the signal's resolution.
+pub trait FineIntegrator: Num {
+    /// The integrator state (`f32`, or Q1.30 for six more bits than the signal).
+    type Fine: Copy + Debug + PartialEq + MaybeFormat;
+    /// The integrator state holding `x`.
     fn to_fine(x: Self) -> Self::Fine;
-    /// The signal value of an Rs integrator state (rounded).
+    /// The signal value of an integrator state (rounded).
     fn from_fine(x: Self::Fine) -> Self;
-    /// One Rs adaptation step, eq. (19) with the corrected sign: `acc + sign * g e`,
+    /// One adaptation step (for Rs eq. (19) with the corrected sign): `acc + sign * g e`,
     /// clamped to [lo, hi]; returns the new state and whether it sits at a bound.
     fn fine_step(
         acc: Self::Fine,
@@ -141,21 +125,58 @@ pub trait Num:
     ) -> (Self::Fine, bool);
 }
 
+/// The units an arithmetic's signals are in: SI in f32, per unit of its bases in fixed
+/// point.
+pub trait Units: Num {
+    /// The per-unit bases (`()` for SI f32).
+    type Bases: Copy + Debug + PartialEq + MaybeFormat;
+    /// The value as an f32 in this arithmetic's units (SI in f32, per unit in fixed
+    /// point): for the rare per-event arithmetic that needs a range no signal format has
+    /// (the rotor-resistance adaptation's least-squares solve, [`crate::rr_estimator`]).
+    fn to_f32(self) -> f32;
+    /// The signal holding `x` (in this arithmetic's units; rounded and saturated).
+    fn from_f32(x: f32) -> Self;
+}
+
+/// An arithmetic's frame angle and what the voltage lead needs.
+pub trait Angles: Num {
+    /// The frame angle: radians in `f32`, a `u32` turn fraction in fixed point.
+    type Angle: Copy + Debug + Default + PartialEq + MaybeFormat;
+    /// What the voltage-lead rotation needs (see [`crate::frames::LeadRotation::rotate_ahead`]).
+    type Lead: Copy + Debug + PartialEq + MaybeFormat;
+    /// The angle advanced by `frequency` over one period (`per_step` is Ts, or its
+    /// turn-count equivalent), wrapped to one turn.
+    fn advance(angle: Self::Angle, frequency: Self, per_step: Self::Gain) -> Self::Angle;
+    /// The angle in radians (telemetry).
+    fn angle_to_rad(a: Self::Angle) -> f32;
+}
+
+/// The three-phase constants of Clarke, its inverse and the modulator in an arithmetic.
+pub trait ThreePhase: Num {
+    /// 1/sqrt(3) (Clarke).
+    const INV_SQRT3: Self;
+    /// sqrt(3)/2 (inverse Clarke).
+    const SQRT3_2: Self;
+    /// 1/3 (three-phase Clarke).
+    const ONE_THIRD: Self;
+    /// sqrt(3) (the chord of the q-voltage limit).
+    const SQRT3: Self;
+    /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
+    fn neg_mean(a: Self, b: Self) -> Self;
+}
+
+/// Everything the cascade computes with: the arithmetic and its domain formats (the
+/// bound of [`crate::Drive`] and of the blocks that need more than [`Num`]).
+pub trait Arithmetic: Num + DivSqrt + FineIntegrator + Units + Angles + ThreePhase {}
+
+impl<T> Arithmetic for T where T: Num + DivSqrt + FineIntegrator + Units + Angles + ThreePhase {}
+
 impl Num for f32 {
     type Gain = f32;
-    type Angle = f32;
-    /// (Ts, delay in periods): the lead is w_s Ts delay.
-    type Lead = (f32, f32);
-    type Fine = f32;
-    type Bases = ();
 
     const ZERO: Self = 0.0;
     const ONE: Self = 1.0;
     const HALF: Self = 0.5;
-    const INV_SQRT3: Self = 0.577_350_26;
-    const SQRT3_2: Self = 0.866_025_4;
-    const ONE_THIRD: Self = 1.0 / 3.0;
-    const SQRT3: Self = 1.732_050_8;
 
     #[inline(always)]
     fn gain(g: f32, x: f32) -> f32 {
@@ -164,6 +185,10 @@ impl Num for f32 {
     #[inline(always)]
     fn gain_mul(g: f32, a: f32, b: f32) -> f32 {
         g * a * b
+    }
+    #[inline(always)]
+    fn sum_times(a: f32, b: f32, x: f32) -> f32 {
+        a * x + b * x
     }
     #[inline(always)]
     fn abs(self) -> f32 {
@@ -193,13 +218,12 @@ impl Num for f32 {
     fn is_nan(self) -> bool {
         f32::is_nan(self)
     }
+}
+
+impl DivSqrt for f32 {
     #[inline(always)]
     fn recip(self) -> f32 {
         1.0 / self
-    }
-    #[inline(always)]
-    fn sqrt(self) -> f32 {
-        crate::math::sqrt(self)
     }
     #[inline(always)]
     fn ratio(num: f32, den: f32) -> f32 {
@@ -214,29 +238,13 @@ impl Num for f32 {
         }
     }
     #[inline(always)]
-    fn neg_mean(a: f32, b: f32) -> f32 {
-        -0.5 * (a + b)
+    fn sqrt(self) -> f32 {
+        crate::math::sqrt(self)
     }
-    #[inline(always)]
-    fn advance(angle: f32, frequency: f32, per_step: f32) -> f32 {
-        crate::math::wrap_angle_step(angle + frequency * per_step)
-    }
-    #[inline(always)]
-    fn angle_to_rad(a: f32) -> f32 {
-        a
-    }
-    #[inline(always)]
-    fn to_f32(self) -> f32 {
-        self
-    }
-    #[inline(always)]
-    fn from_f32(x: f32) -> f32 {
-        x
-    }
-    #[inline(always)]
-    fn sum_times(a: f32, b: f32, x: f32) -> f32 {
-        a * x + b * x
-    }
+}
+
+impl FineIntegrator for f32 {
+    type Fine = f32;
     #[inline(always)]
     fn to_fine(x: f32) -> f32 {
         x
@@ -251,5 +259,42 @@ impl Num for f32 {
         let signed = if positive { step } else { -step };
         let next = crate::math::clamp(acc + signed, lo, hi);
         (next, next <= lo || next >= hi)
+    }
+}
+
+impl Units for f32 {
+    type Bases = ();
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> f32 {
+        x
+    }
+}
+
+impl Angles for f32 {
+    type Angle = f32;
+    /// (Ts, delay in periods): the lead is w_s Ts delay.
+    type Lead = (f32, f32);
+    #[inline(always)]
+    fn advance(angle: f32, frequency: f32, per_step: f32) -> f32 {
+        crate::math::wrap_angle_step(angle + frequency * per_step)
+    }
+    #[inline(always)]
+    fn angle_to_rad(a: f32) -> f32 {
+        a
+    }
+}
+
+impl ThreePhase for f32 {
+    const INV_SQRT3: Self = 0.577_350_26;
+    const SQRT3_2: Self = 0.866_025_4;
+    const ONE_THIRD: Self = 1.0 / 3.0;
+    const SQRT3: Self = 1.732_050_8;
+    #[inline(always)]
+    fn neg_mean(a: f32, b: f32) -> f32 {
+        -0.5 * (a + b)
     }
 }

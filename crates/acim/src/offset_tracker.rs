@@ -174,6 +174,7 @@
 //! voltage (5 s per `Rs offset_limit`), and until then shows as a torque ripple at f_s.
 
 use crate::frames::AlphaBeta;
+use crate::num::FineIntegrator;
 use crate::num::Num;
 
 /// The fundamental tracker's rate `mu_f`, rad/s: 1 Hz (module docs).
@@ -206,7 +207,7 @@ pub const OFFSET_TRACKER_FREQUENCY_FILTER: f32 = 0.1;
 /// The tracker's design (immutable; [`crate::design::DriveDesign`] builds it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct OffsetTrackerConfig<N: Num = f32> {
+pub struct OffsetTrackerConfig<N: Num + FineIntegrator = f32> {
     /// Track at all ([`crate::design::DriveConfig::offset_tracking`]).
     pub enabled: bool,
     /// `mu_f Ts`, per step.
@@ -302,7 +303,7 @@ struct Steadiness<N: Num> {
 
 /// The offset estimate's integrators, in the finer integrator format.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Integrators<N: Num> {
+struct Integrators<N: Num + FineIntegrator> {
     /// The alpha offset's integrator, A (fine format).
     alpha: N::Fine,
     /// The beta offset's integrator, A (fine format).
@@ -311,7 +312,7 @@ struct Integrators<N: Num> {
 
 /// The tracker's state.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OffsetTracker<N: Num = f32> {
+pub struct OffsetTracker<N: Num + FineIntegrator = f32> {
     /// The fundamental's model and its frequency.
     model: Model<N>,
     /// The steadiness gate's filter and count.
@@ -330,7 +331,7 @@ pub struct OffsetTracker<N: Num = f32> {
     pub adapting: bool,
 }
 
-impl<N: Num> Default for OffsetTracker<N> {
+impl<N: Num + FineIntegrator + FineIntegrator> Default for OffsetTracker<N> {
     fn default() -> Self {
         Self {
             model: Model {
@@ -378,7 +379,7 @@ pub struct OffsetTrackerInputs<N: Num = f32> {
     pub far_side: bool,
 }
 
-impl<N: Num> OffsetTracker<N> {
+impl<N: Num + FineIntegrator + FineIntegrator> OffsetTracker<N> {
     /// One step on the inputs `x`.
     #[inline(always)]
     pub fn update(&mut self, cfg: &OffsetTrackerConfig<N>, x: &OffsetTrackerInputs<N>) {

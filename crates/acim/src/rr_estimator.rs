@@ -71,7 +71,9 @@
 //! In fixed point the sums are Q7.24 per unit and the 2 x 2 solve runs once per window in
 //! f32 ([`Num::to_f32`]; software floating point on a core without an FPU).
 
+use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::Units;
 use crate::observer::ObserverCoeffs;
 
 /// The reference and the torque current must have been steady this long before a ramp
@@ -287,7 +289,7 @@ pub struct RrReport {
     pub last_fit_rms: f32,
 }
 
-impl<N: Num> RrEstimator<N> {
+impl<N: Num + DivSqrt + Units + DivSqrt + Units> RrEstimator<N> {
     /// The state in SI: `configured` the configured R_R (ohm), `resistance_unit` ohm per
     /// unit of this arithmetic's resistance.
     pub fn report(&self, configured: f32, resistance_unit: f32) -> RrReport {
@@ -319,7 +321,7 @@ pub struct RrInputs<N> {
     pub usable: bool,
 }
 
-impl<N: Num> RrEstimator<N> {
+impl<N: Num + DivSqrt + Units + DivSqrt + Units> RrEstimator<N> {
     /// No adaptation yet: `R_R_hat` the configured `cfg.referred_rotor_resistance`.
     pub fn new(cfg: &RrEstimatorConfig<N>) -> Self {
         Self {
@@ -519,7 +521,7 @@ mod tests {
     /// observer's speed is off by the slip error of `R_R_hat - R_R`, `R_R_hat` the configured
     /// R_R plus the estimate and `R_R` the configured plus `r_true` (module docs), lagging
     /// the current by the observer's 1/120 s. `load_step`: (time, N m) added to the load.
-    fn synthetic<N: Num>(
+    fn synthetic<N: Num + DivSqrt + Units + DivSqrt + Units>(
         cfg: &RrEstimatorConfig<N>,
         obs: &ObserverCoeffs<N>,
         to_n: &dyn Fn(f32, Unit) -> N,

@@ -107,6 +107,8 @@
 //! for a rated step; a torque current moving slower than band / tau_r (2.25 A/s on the
 //! paper machine, about 5 N m/s) or a thermal drift never closes it.
 
+use crate::num::DivSqrt;
+use crate::num::FineIntegrator;
 use crate::num::Num;
 use crate::params::MachineParams;
 
@@ -127,7 +129,7 @@ pub const RUNNING_STEADY_TORQUE_FRACTION: f32 = 0.1;
 /// integrator format, [`Num::Fine`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct RsEstimatorConfig<N: Num = f32> {
+pub struct RsEstimatorConfig<N: Num + FineIntegrator = f32> {
     /// Control period Ts, s: (stator frequency x current) -> current.
     pub ts: N::Gain,
     /// Ts/(sigma Ls), s/H.
@@ -286,7 +288,7 @@ pub struct RsRunningInputs<N = f32> {
 /// State of the stator-resistance estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct RsEstimator<N: Num = f32> {
+pub struct RsEstimator<N: Num + FineIntegrator = f32> {
     /// The integrator of eq. (19) ([`Num::Fine`]: the estimate itself in f32).
     resistance: N::Fine,
     /// Rs_hat, ohm.
@@ -309,7 +311,7 @@ pub struct RsEstimator<N: Num = f32> {
     pub torque_reference_slow: N,
 }
 
-impl<N: Num> RsEstimator<N> {
+impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N> {
     /// Starts from an initial resistance `r0` (ohm) (eq. 19's R0).
     pub fn new(r0: N) -> Self {
         let resistance = N::to_fine(r0);

@@ -121,7 +121,9 @@
 //! bases).
 
 use crate::frames::{inverse_clarke, inverse_park, AlphaBeta, Dq, SinCosValue};
+use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::ThreePhase;
 use crate::params::MachineParams;
 use crate::supervisor::FaultReason;
 
@@ -302,7 +304,9 @@ pub struct SensorCheckInputs<N: Num = f32> {
 /// The phase channels as measured: the inverse Clarke of the alpha-beta current plus the
 /// zero sequence (a + b + c)/3 that the three-shunt Clarke removes (exact for both
 /// sensings: with two shunts the third is the derived -a - b).
-fn channels<N: Num>(inp: &SensorCheckInputs<N>) -> [N; 3] {
+fn channels<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    inp: &SensorCheckInputs<N>,
+) -> [N; 3] {
     let zero = inp.current_sum * N::ONE_THIRD;
     let [a, b, c] = inverse_clarke(inp.current_ab);
     [a + zero, b + zero, c + zero]
@@ -344,7 +348,7 @@ pub struct SensorCheck<N: Num = f32> {
     astray_last: bool,
 }
 
-impl<N: Num> SensorCheck<N> {
+impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
     /// A check with no history.
     pub fn new() -> Self {
         Self::default()

@@ -48,6 +48,7 @@
 //! Cost: a few multiply-adds per step, during the search window only.
 
 use crate::frames::Dq;
+use crate::num::DivSqrt;
 use crate::num::Num;
 
 /// The search's constants, from the configuration ([`crate::DriveDesign`]).
@@ -206,13 +207,13 @@ pub struct SpeedSearch<N: Num = f32> {
     pub measured_speed: N,
 }
 
-impl<N: Num> Default for SpeedSearch<N> {
+impl<N: Num + DivSqrt + DivSqrt> Default for SpeedSearch<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num> SpeedSearch<N> {
+impl<N: Num + DivSqrt + DivSqrt> SpeedSearch<N> {
     /// Before the start.
     pub fn new() -> Self {
         let z = Dq {

@@ -18,13 +18,13 @@
 use crate::frames::Dq;
 use crate::gain_calibration::{GainCalibration, GainCalibrationConfig};
 use crate::inverter_test::{InverterTest, InverterTestDesign, InverterTestOutcome};
-use crate::num::Num;
+use crate::num::Arithmetic;
 use crate::speed_search::{SearchOutcome, SpeedSearch, SpeedSearchDesign};
 use crate::supervisor::{DriveState, FaultReason};
 
 /// The magnetizing sequence's constants (flux build-up and standstill Rs identification).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MagnetizingDesign<N: Num = f32> {
+pub struct MagnetizingDesign<N: Arithmetic = f32> {
     /// Whether magnetizing waits for the Rs identification.
     pub identify_rs: bool,
     /// Longest identification, steps from the start: `rs_identification_timeout`, plus the
@@ -43,7 +43,7 @@ pub struct MagnetizingDesign<N: Num = f32> {
 
 /// The designs the start sequence runs with (the drive's, by reference).
 #[derive(Clone, Copy, Debug)]
-pub struct StartSequenceConfig<'a, N: Num> {
+pub struct StartSequenceConfig<'a, N: Arithmetic> {
     /// Flux build-up, Rs identification and the speed search.
     pub magnetizing: &'a MagnetizingDesign<N>,
     /// The inverter test at rest.
@@ -112,7 +112,7 @@ pub enum StartPhase {
 
 /// The start sequence's state.
 #[derive(Clone, Debug, Default)]
-pub struct StartSequence<N: Num> {
+pub struct StartSequence<N: Arithmetic> {
     /// Steps since magnetizing began.
     steps: u32,
     /// Steps the identification's residual has been settled.
@@ -132,7 +132,7 @@ pub struct StartSequence<N: Num> {
     waiting: Option<DriveState>,
 }
 
-impl<N: Num> StartSequence<N> {
+impl<N: Arithmetic> StartSequence<N> {
     /// Back to the start of magnetizing (the inverter test's and the calibration's
     /// results are kept: a start restarts them with their designs).
     pub fn reset(&mut self) {

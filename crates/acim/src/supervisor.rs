@@ -10,6 +10,7 @@
 
 use crate::config::CurrentSensing;
 use crate::frames::{AlphaBeta, Dq};
+use crate::num::DivSqrt;
 use crate::num::Num;
 
 /// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
@@ -205,7 +206,7 @@ pub struct SpeedOscillation<N: Num = f32> {
     blocks: u32,
 }
 
-impl<N: Num> SpeedOscillation<N> {
+impl<N: Num + DivSqrt + DivSqrt> SpeedOscillation<N> {
     /// One period: `error` = Omega_hat - Omega* (rad/s); `steady` false while the
     /// reference ramps (or the drive magnetizes), which restarts the count. Never
     /// reports with the check off.
@@ -375,7 +376,7 @@ impl Supervisor {
     /// still fault on a non-finite or over-current sample (bus limits apply only when the
     /// drive is about to switch); otherwise check the raw samples and run.
     #[inline(always)]
-    pub fn gate<N: Num>(
+    pub fn gate<N: Num + DivSqrt + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         currents: [N; 3],
@@ -404,7 +405,7 @@ impl Supervisor {
     /// finite and the Rs estimate off its bounds (with `rs_bound_faults`);
     /// `EstimatorOutOfRange` otherwise.
     #[inline(always)]
-    pub fn estimates_valid<N: Num>(
+    pub fn estimates_valid<N: Num + DivSqrt + DivSqrt>(
         limits: &SupervisionLimits<N>,
         h: &EstimatorHealth<N>,
     ) -> Option<FaultReason> {
@@ -423,7 +424,7 @@ impl Supervisor {
     /// first), and while the speed PI is saturated it means a stall; an estimated speed
     /// beyond `max_speed` is over-speed.
     #[inline(always)]
-    pub fn plausibility<N: Num>(
+    pub fn plausibility<N: Num + DivSqrt + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         h: &EstimatorHealth<N>,
@@ -453,7 +454,7 @@ impl Supervisor {
     /// Magnetizing timeout: the flux (and the standstill Rs identification) must settle
     /// within `magnetizing_timeout_steps`.
     #[inline(always)]
-    pub fn magnetizing<N: Num>(
+    pub fn magnetizing<N: Num + DivSqrt + DivSqrt>(
         &self,
         limits: &SupervisionLimits<N>,
         magnetizing_steps: u32,
@@ -475,7 +476,7 @@ impl Supervisor {
     /// rotor speed) while the rotor runs away. A reversal at the torque limit crosses the
     /// band in a few milliseconds.
     #[inline(always)]
-    pub fn blind<N: Num>(
+    pub fn blind<N: Num + DivSqrt + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         speed_pi_saturated: bool,
@@ -498,7 +499,7 @@ impl Supervisor {
     /// below 10 % of the reference, integrated with a leak (up one step while stalled,
     /// down one step otherwise) beyond `stall_steps`.
     #[inline(always)]
-    pub fn stall<N: Num>(
+    pub fn stall<N: Num + DivSqrt + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         speed_pi_saturated: bool,
@@ -590,13 +591,13 @@ pub struct ControlMonitor<N: Num = f32> {
     pub dc_current: AlphaBeta<N>,
 }
 
-impl<N: Num> Default for ControlMonitor<N> {
+impl<N: Num + DivSqrt + DivSqrt> Default for ControlMonitor<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num> ControlMonitor<N> {
+impl<N: Num + DivSqrt + DivSqrt> ControlMonitor<N> {
     /// All means at zero.
     pub fn new() -> Self {
         Self {
@@ -699,13 +700,13 @@ pub struct OffsetMonitor<N: Num = f32> {
     pub idle_steps: u32,
 }
 
-impl<N: Num> Default for OffsetMonitor<N> {
+impl<N: Num + DivSqrt + DivSqrt> Default for OffsetMonitor<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num> OffsetMonitor<N> {
+impl<N: Num + DivSqrt + DivSqrt> OffsetMonitor<N> {
     /// Nothing measured yet.
     pub fn new() -> Self {
         Self {
@@ -751,7 +752,7 @@ impl<N: Num> OffsetMonitor<N> {
 impl Supervisor {
     /// Start check of the current sensors: a settled idle offset beyond `offset_limit`
     /// on a measured channel is a sensor fault.
-    pub fn check_offsets<N: Num>(
+    pub fn check_offsets<N: Num + DivSqrt + DivSqrt>(
         &self,
         limits: &SupervisionLimits<N>,
         m: &OffsetMonitor<N>,
@@ -774,7 +775,7 @@ impl Supervisor {
 /// Checks on the raw samples, before anything uses them: non-finite, over-current (the
 /// third phase derived with two shunts), bus window.
 #[inline(always)]
-pub fn check_samples<N: Num>(
+pub fn check_samples<N: Num + DivSqrt + DivSqrt>(
     limits: &SupervisionLimits<N>,
     currents: [N; 3],
     dc_bus: N,
@@ -800,7 +801,7 @@ pub fn check_samples<N: Num>(
 
 #[cold]
 #[inline(never)]
-fn classify_bad_samples<N: Num>(
+fn classify_bad_samples<N: Num + DivSqrt + DivSqrt>(
     limits: &SupervisionLimits<N>,
     a: N,
     b: N,

@@ -37,7 +37,9 @@
 
 use crate::frames::{inverse_clarke, AlphaBeta};
 use crate::math::{clamp, sqrt};
+use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::ThreePhase;
 
 /// 1/sqrt(3): the linear limit per volt of bus.
 pub const INV_SQRT3: f32 = 0.577_350_26;
@@ -93,7 +95,7 @@ pub struct Modulation<N = f32> {
 
 /// Largest voltage vector magnitude in the linear range at bus `dc_bus`: V_dc/sqrt(3).
 #[inline]
-pub fn linear_limit<N: Num>(dc_bus: N) -> N {
+pub fn linear_limit<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(dc_bus: N) -> N {
     dc_bus * N::INV_SQRT3
 }
 
@@ -102,7 +104,7 @@ pub fn linear_limit<N: Num>(dc_bus: N) -> N {
 /// `min_bus_voltage` (one reciprocal here; the drive's step uses
 /// [`modulate_with_inverse`] with the reciprocal it already has).
 #[inline]
-pub fn modulate<N: Num>(
+pub fn modulate<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     cfg: &SvpwmConfig<N>,
     v: AlphaBeta<N>,
     dc_bus: N,
@@ -120,7 +122,7 @@ pub fn modulate<N: Num>(
 /// and `dead_time_correction` (duty; 0 for none) added to the configured dead-time duty of
 /// every leg (the inverter test's correction).
 #[inline(always)]
-pub fn modulate_with_inverse<N: Num>(
+pub fn modulate_with_inverse<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     cfg: &SvpwmConfig<N>,
     v: AlphaBeta<N>,
     dc_bus: N,
@@ -167,14 +169,24 @@ pub fn modulate_with_inverse<N: Num>(
 /// phase current `i` (A) and `inv_band` = 1/i_band (the running inverter tracker's sign
 /// vector uses the same, [`crate::inverter_tracker::sign_vector`]).
 #[inline(always)]
-pub fn current_sign<N: Num>(inv_band: N::Gain, i: N) -> N {
+pub fn current_sign<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    inv_band: N::Gain,
+    i: N,
+) -> N {
     N::gain(inv_band, i).clamp(-N::ONE, N::ONE)
 }
 
 /// One phase: base duty plus the phase voltage over the bus plus the dead-time and
 /// device-drop compensation times the linearised current sign, clamped to [0, 1].
 #[inline(always)]
-fn phase_duty<N: Num>(base: N, vx: N, inv_vdc: N, comp: N, inv_band: N::Gain, i: N) -> N {
+fn phase_duty<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    base: N,
+    vx: N,
+    inv_vdc: N,
+    comp: N,
+    inv_band: N::Gain,
+    i: N,
+) -> N {
     let sign = current_sign(inv_band, i);
     (base + vx * inv_vdc + comp * sign).clamp(N::ZERO, N::ONE)
 }
@@ -208,7 +220,7 @@ pub struct VoltageLimit<N = f32> {
 /// The seam for the PWM stage: turns an alpha-beta voltage into duties and supplies the
 /// voltage limit of the current controllers, so the two cannot disagree. Chosen by type
 /// parameter of [`crate::Drive`] (zero cost in the interrupt).
-pub trait Modulator<N: Num = f32> {
+pub trait Modulator<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase = f32> {
     /// Whether the modulator goes beyond its sustained limit in normal operation (its
     /// output then differs from the command: the drive gives the estimators the limited
     /// vector and keeps a time-limited reserve, `VoltageLimit::sustained`). A constant, so

@@ -21,6 +21,7 @@
 //! A model of the motor's thermal rating, not of the inverter's: it is not a protection
 //! of the switches, which the over-current trip and the break input are.
 
+use crate::num::DivSqrt;
 use crate::num::Num;
 
 /// Heat at which the fold-back is released (half the allowance).
@@ -90,7 +91,7 @@ pub struct ThermalModel<N = f32> {
     folded: bool,
 }
 
-impl<N: Num> ThermalModel<N> {
+impl<N: Num + DivSqrt + DivSqrt> ThermalModel<N> {
     /// A cold machine.
     pub fn new() -> Self {
         Self {

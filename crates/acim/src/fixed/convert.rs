@@ -217,7 +217,7 @@ pub fn offset_tracker(
     cfg: &OffsetTrackerConfig,
     b: &PerUnitBases,
 ) -> Option<OffsetTrackerConfig<Q24>> {
-    let limit = <Q24 as crate::num::Num>::to_fine(Q24(to_q24(cfg.bounds.1 / b.current)));
+    let limit = <Q24 as crate::num::FineIntegrator>::to_fine(Q24(to_q24(cfg.bounds.1 / b.current)));
     Some(OffsetTrackerConfig {
         enabled: cfg.enabled,
         fundamental_gain: Gain::from_f32(cfg.fundamental_gain)?,
@@ -513,8 +513,8 @@ pub fn coeffs(d: &DriveDesign, b: &PerUnitBases) -> Result<DriveCoeffs<Q24>, Con
             filter: gain(d.gain_calibration.filter * RS_EXTRA, "control_period")?,
             // the finer format's whole range, +/-2 pu
             fine_bounds: (
-                <Q24 as crate::num::Num>::to_fine(Q24(-(1 << 25))),
-                <Q24 as crate::num::Num>::to_fine(Q24((1 << 25) - 1)),
+                <Q24 as crate::num::FineIntegrator>::to_fine(Q24(-(1 << 25))),
+                <Q24 as crate::num::FineIntegrator>::to_fine(Q24((1 << 25) - 1)),
             ),
             min_voltage: pu(d.gain_calibration.min_voltage, b.voltage, "flux_current")?,
             ratio_scale: gain(

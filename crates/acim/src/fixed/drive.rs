@@ -18,6 +18,7 @@ use crate::drive::{Drive, DriveInputs, DriveTelemetry, PwmOutput};
 use crate::frames::SinCos;
 use crate::frames::{AlphaBeta, Dq};
 use crate::math::is_finite;
+use crate::num::Angles;
 use crate::num::Num;
 use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
@@ -205,7 +206,10 @@ mod tests {
         // the two irrational literals were computed from the exact values (0.98/sqrt 3 is
         // 9 492 603.5 codes, sqrt 3 is 29 058 990.9); the f32 constants land one code away
         assert_eq!(V_MAX_PER_BUS.0 + 1, to_q24(VOLTAGE_MARGIN * INV_SQRT3));
-        assert_eq!(Q24::SQRT3.0 - 1, to_q24(1.732_050_8));
+        assert_eq!(
+            <Q24 as crate::num::ThreePhase>::SQRT3.0 - 1,
+            to_q24(1.732_050_8)
+        );
         let d = DriveDesign::new(DriveConfig::paper_defaults()).unwrap();
         let c = <Q24 as crate::design::DesignArithmetic>::coeffs(&d, &PerUnitBases::PAPER).unwrap();
         assert_eq!(c.limits.stall_fraction.0, to_q24(STALL_SPEED_FRACTION));

@@ -409,21 +409,10 @@ const RS_EXTRA_BITS: u32 = 6;
 
 impl crate::num::Num for Q24 {
     type Gain = Gain;
-    type Angle = Angle;
-    /// Angle counts of the voltage lead per frequency pu.
-    type Lead = Gain;
-    /// Q1.30: six bits finer than the signal, so that alpha Ts e (1e-6 pu per step at a
-    /// settled residual) still moves it.
-    type Fine = i32;
-    type Bases = PerUnitBases;
 
     const ZERO: Self = Q24(0);
     const ONE: Self = Q24(ONE);
     const HALF: Self = Q24(HALF);
-    const INV_SQRT3: Self = Q24(9_686_330);
-    const SQRT3_2: Self = Q24(14_529_495);
-    const ONE_THIRD: Self = Q24(5_592_405);
-    const SQRT3: Self = Q24(29_058_991);
 
     #[inline(always)]
     fn gain(g: Gain, x: Q24) -> Q24 {
@@ -432,6 +421,10 @@ impl crate::num::Num for Q24 {
     #[inline(always)]
     fn gain_mul(g: Gain, a: Q24, b: Q24) -> Q24 {
         Q24(g.apply(mul(a.0, b.0)))
+    }
+    #[inline(always)]
+    fn sum_times(a: Q24, b: Q24, x: Q24) -> Q24 {
+        (a + b) * x
     }
     #[inline(always)]
     fn abs(self) -> Q24 {
@@ -461,13 +454,12 @@ impl crate::num::Num for Q24 {
     fn is_nan(self) -> bool {
         false
     }
+}
+
+impl crate::num::DivSqrt for Q24 {
     #[inline(always)]
     fn recip(self) -> Q24 {
         Q24(reciprocal(self.0))
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Q24 {
-        Q24(sqrt_q24(self.0))
     }
     #[inline(always)]
     fn ratio(num: Q24, den: Q24) -> Q24 {
@@ -491,28 +483,15 @@ impl crate::num::Num for Q24 {
         }
     }
     #[inline(always)]
-    fn neg_mean(a: Q24, b: Q24) -> Q24 {
-        // each halved first: no overflow
-        Q24(0i32.saturating_sub((a.0 >> 1).saturating_add(b.0 >> 1)))
+    fn sqrt(self) -> Q24 {
+        Q24(sqrt_q24(self.0))
     }
-    #[inline(always)]
-    fn advance(angle: u32, frequency: Q24, per_step: Gain) -> u32 {
-        // a signed increment added modulo one turn: the intended wrap of an angle
-        angle.wrapping_add(per_step.apply(frequency.0) as u32)
-    }
-    fn angle_to_rad(a: u32) -> f32 {
-        angle_to_rad(a)
-    }
-    fn to_f32(self) -> f32 {
-        from_q24(self.0)
-    }
-    fn from_f32(x: f32) -> Q24 {
-        Q24(to_q24(x))
-    }
-    #[inline(always)]
-    fn sum_times(a: Q24, b: Q24, x: Q24) -> Q24 {
-        (a + b) * x
-    }
+}
+
+impl crate::num::FineIntegrator for Q24 {
+    /// Q1.30: six bits finer than the signal, so that alpha Ts e (1e-6 pu per step at a
+    /// settled residual) still moves it.
+    type Fine = i32;
     #[inline(always)]
     fn to_fine(x: Q24) -> i32 {
         let r0 = clamp(x.0, -(1 << 25), (1 << 25) - 1);
@@ -533,6 +512,42 @@ impl crate::num::Num for Q24 {
         };
         let next = clamp(acc.saturating_add(signed), lo, hi);
         (next, next <= lo || next >= hi)
+    }
+}
+
+impl crate::num::Units for Q24 {
+    type Bases = PerUnitBases;
+    fn to_f32(self) -> f32 {
+        from_q24(self.0)
+    }
+    fn from_f32(x: f32) -> Q24 {
+        Q24(to_q24(x))
+    }
+}
+
+impl crate::num::Angles for Q24 {
+    type Angle = Angle;
+    /// Angle counts of the voltage lead per frequency pu.
+    type Lead = Gain;
+    #[inline(always)]
+    fn advance(angle: u32, frequency: Q24, per_step: Gain) -> u32 {
+        // a signed increment added modulo one turn: the intended wrap of an angle
+        angle.wrapping_add(per_step.apply(frequency.0) as u32)
+    }
+    fn angle_to_rad(a: u32) -> f32 {
+        angle_to_rad(a)
+    }
+}
+
+impl crate::num::ThreePhase for Q24 {
+    const INV_SQRT3: Self = Q24(9_686_330);
+    const SQRT3_2: Self = Q24(14_529_495);
+    const ONE_THIRD: Self = Q24(5_592_405);
+    const SQRT3: Self = Q24(29_058_991);
+    #[inline(always)]
+    fn neg_mean(a: Q24, b: Q24) -> Q24 {
+        // each halved first: no overflow
+        Q24(0i32.saturating_sub((a.0 >> 1).saturating_add(b.0 >> 1)))
     }
 }
 

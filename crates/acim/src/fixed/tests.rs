@@ -33,7 +33,7 @@ use super::trig::{angle_from_rad, angle_to_rad, sin_cos};
 use super::PerUnitBases;
 use crate::flux::{FluxModel, FluxModelConfig};
 use crate::frames::{self, AlphaBeta, Dq, FastSinCos};
-use crate::num::Num;
+use crate::num::DivSqrt;
 use crate::observer::{ObserverConfig, ObserverInputs, ObserverPoles, ReducedOrderObserver};
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
