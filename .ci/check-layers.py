@@ -22,7 +22,7 @@ SRC = sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file_
 # the composition layer: may import anything below it
 COMPOSITION = {
     "lib", "design", "drive", "controller", "commissioning", "nameplate",
-    "fixed", "fixed::drive", "fixed::convert",
+    "fixed", "fixed::drive",
 }
 FORBIDDEN_FOR_BLOCKS = {"design", "drive"}
 

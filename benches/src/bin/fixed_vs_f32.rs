@@ -320,7 +320,7 @@ mod fw {
             loop {}
         };
         let obs_cfg = *f32_drive.observer_config();
-        let obs_fixed_cfg = acim::fixed::convert::observer(&obs_cfg, &bases);
+        let obs_fixed_cfg = obs_cfg.convert::<acim::fixed::Q24>(&bases);
         let mut st32 = Stats {
             s: [NEW; REGIONS.len()],
             t0: 0,

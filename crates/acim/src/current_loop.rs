@@ -6,7 +6,9 @@ use crate::config::DriveConfig;
 use crate::frames::Dq;
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
 use crate::num::ThreePhase;
+use crate::num::Units;
 use crate::pi::{PiConfig, PiController};
 use crate::svpwm::VoltageLimit;
 
@@ -180,6 +182,18 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> CurrentLoop<N> {
             self.q
                 .update_with_limits(&cfg.pi_q, i_sq_ref - x.current.q, ff_q, -v_q_max, v_q_max);
         Dq { d: v_d, q: v_q }
+    }
+}
+
+impl CurrentLoopConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b` (current error in, voltage
+    /// out); `None` if a gain is not representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<CurrentLoopConfig<N>> {
+        Some(CurrentLoopConfig {
+            pi_d: self.pi_d.convert(b.current, b.voltage)?,
+            pi_q: self.pi_q.convert(b.current, b.voltage)?,
+            overmodulation_reserve_steps: self.overmodulation_reserve_steps,
+        })
     }
 }
 

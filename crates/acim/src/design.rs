@@ -147,9 +147,9 @@ pub struct VfDesign<N: Num = f32> {
 }
 
 /// What the control step reads, in the arithmetic `N`: every gain, reciprocal and limit
-/// of the cascade. Built once from a [`DriveDesign`] by [`DesignArithmetic::coeffs`] (the identity
-/// for f32 SI; a conversion with the per-unit bases in fixed point, which checks that
-/// every value fits).
+/// of the cascade. Built once from a [`DriveDesign`] by [`DriveCoeffs::new`]: each block converts
+/// its own design (the identity for f32 SI; a conversion with the per-unit bases in
+/// fixed point, which checks that every value fits).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveCoeffs<N: Arithmetic = f32> {
     /// The current loop (d/q PIs, overmodulation reserve).
@@ -713,11 +713,8 @@ impl DriveDesign {
 
     /// This design's step coefficients in the arithmetic `N` (`bases`: `()` for f32 SI,
     /// the per-unit bases in fixed point).
-    pub fn coeffs<N: DesignArithmetic>(
-        &self,
-        bases: &N::Bases,
-    ) -> Result<DriveCoeffs<N>, ConfigError> {
-        N::coeffs(self, bases)
+    pub fn coeffs<N: Arithmetic>(&self, bases: &N::Bases) -> Result<DriveCoeffs<N>, ConfigError> {
+        DriveCoeffs::new(self, bases)
     }
 
     /// This design with another orientation gain (run-time tuning, built outside the
@@ -729,65 +726,139 @@ impl DriveDesign {
     }
 }
 
-/// An arithmetic the design converts its step coefficients to: f32 SI here, Q7.24 per
-/// unit in [`crate::fixed`]. Apart from [`Num`] so that the blocks, which need only the
-/// arithmetic, do not depend on the design.
-pub trait DesignArithmetic: Arithmetic {
-    /// The step coefficients of `design` in this arithmetic (`bases`: `()` for f32 SI);
-    /// fixed point checks that every value fits its per-unit range.
-    fn coeffs(design: &DriveDesign, bases: &Self::Bases) -> Result<DriveCoeffs<Self>, ConfigError>;
-}
-
-impl DesignArithmetic for f32 {
-    fn coeffs(design: &DriveDesign, _: &()) -> Result<DriveCoeffs<f32>, ConfigError> {
-        Ok(DriveCoeffs::si(design))
-    }
-}
-
-impl DriveCoeffs<f32> {
-    /// The f32 SI coefficients of `d` (copies: the design is already in SI).
-    pub(crate) fn si(d: &DriveDesign) -> Self {
-        let cfg = &d.config;
-        Self {
-            current_loop: d.current_loop,
-            speed_loop: d.speed_loop,
-            thermal: d.thermal,
-            flux: d.flux,
-            observer: d.observer.coeffs,
-            rs: d.rs,
-            pwm: d.pwm,
-            rs_initial: cfg.rs_initial,
-            i_sd_ref: d.i_sd_ref,
-            settled_flux: d.settled_flux,
-            transient_inductance: d.transient_inductance,
-            sample_ripple: d.sample_ripple,
-            referred_rotor_resistance: d.referred_rotor_resistance,
-            inv_rotor_time_constant: d.inv_rotor_time_constant,
-            pole_pairs: d.pole_pairs,
-            back_emf: d.pole_pairs,
-            torque_factor: d.torque_factor,
+impl<N: Arithmetic> DriveCoeffs<N> {
+    /// The step coefficients of `design` in the arithmetic `N` (`bases`: `()` for f32
+    /// SI, the per-unit bases in fixed point): each block converts its own design
+    /// ([`crate::num::Units`]); in fixed point every value the drive compares against or
+    /// limits to must fit its per-unit range, and a failure names the setting.
+    #[inline(never)]
+    pub fn new(design: &DriveDesign, bases: &N::Bases) -> Result<Self, ConfigError> {
+        let d = design;
+        let b = &N::unit_bases(bases);
+        let cfg = d.config;
+        let m = cfg.machine;
+        let pp = d.pole_pairs;
+        let named = |field: &'static str| ConfigError::Invalid {
+            field,
+            rule: "does not fit the per-unit bases (above 2 pu, or a gain beyond 2^30)",
+        };
+        let pu = |x: f32, base: f32, field: &'static str| {
+            N::checked_from_f32(x / base).ok_or_else(|| named(field))
+        };
+        let gain = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or_else(|| named(field));
+        // range checks: everything the drive compares against or limits to must fit
+        pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
+        pu(cfg.current_limit, b.current, "current_limit")?;
+        pu(cfg.dc_bus_max, b.voltage, "dc_bus_max")?;
+        pu(cfg.max_speed, b.speed, "max_speed")?;
+        pu(cfg.max_speed * pp * 1.25, b.frequency, "max_speed")?;
+        pu(1.2 * d.flux_reference, b.flux, "flux_current")?;
+        pu(
+            cfg.max_load_torque_estimate,
+            b.torque,
+            "max_load_torque_estimate",
+        )?;
+        pu(
+            m.torque_constant(d.flux_reference) * cfg.current_limit,
+            b.torque,
+            "current_limit",
+        )?;
+        pu(
+            2.5 * m.stator_resistance() + m.referred_rotor_resistance(),
+            b.resistance(),
+            "machine",
+        )?;
+        // the reciprocals' domain
+        if cfg.dc_bus_min / b.voltage < N::RECIP_FLOOR {
+            return Err(named("dc_bus_min"));
+        }
+        if d.flux.min_flux / b.flux < N::RECIP_FLOOR {
+            return Err(named("flux_current"));
+        }
+        Ok(DriveCoeffs {
+            current_loop: d
+                .current_loop
+                .convert(b)
+                .ok_or_else(|| named("current_bandwidth"))?,
+            speed_loop: d
+                .speed_loop
+                .convert(b, pp, d.flux_reference)
+                .map_err(named)?,
+            thermal: d.thermal.convert(b.current).map_err(named)?,
+            flux: d.flux.convert(b).ok_or_else(|| named("machine"))?,
+            observer: d
+                .observer
+                .convert(b)
+                .ok_or_else(|| named("observer_poles"))?,
+            rs: d
+                .rs
+                .convert(b)
+                .ok_or_else(|| named("rs_convergence_time"))?,
+            pwm: d
+                .pwm
+                .convert(b)
+                .ok_or_else(|| named("dead_time_current_band"))?,
+            rs_initial: pu(cfg.rs_initial, b.resistance(), "rs_initial")?,
+            i_sd_ref: pu(d.i_sd_ref, b.current, "flux_current")?,
+            settled_flux: pu(d.settled_flux, b.flux, "flux_current")?,
+            transient_inductance: gain(
+                d.transient_inductance * b.frequency * b.current / b.voltage,
+                "machine",
+            )?,
+            sample_ripple: gain(
+                d.sample_ripple * b.frequency * b.voltage / b.current,
+                "machine",
+            )?,
+            referred_rotor_resistance: pu(d.referred_rotor_resistance, b.resistance(), "machine")?,
+            // 1/tau_r, as the flux base over tau_r times the voltage base (the f32
+            // design's 1/tau_r in SI)
+            inv_rotor_time_constant: gain(
+                b.flux / (m.rotor_time_constant() * b.voltage),
+                "machine",
+            )?,
+            pole_pairs: gain(pp * b.speed / b.frequency, "machine")?,
+            back_emf: gain(pp * b.speed * b.flux / b.voltage, "machine")?,
+            torque_factor: gain(d.torque_factor * b.flux * b.current / b.torque, "machine")?,
+            speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
+            lead: N::lead(d.ts, cfg.delay_periods, b).ok_or_else(|| named("delay_periods"))?,
+            orientation: d
+                .orientation
+                .convert(b, cfg.orientation_fade)
+                .map_err(named)?,
+            magnetizing: d.magnetizing.convert(b).map_err(named)?,
+            limits: d.limits.convert(b).map_err(named)?,
+            vf: VfDesign {
+                volts_per_rad_s: gain(
+                    cfg.vf.volts_per_rad_s * b.frequency / b.voltage,
+                    "vf.volts_per_rad_s",
+                )?,
+                boost: pu(cfg.vf.boost, b.voltage, "vf.boost")?,
+            },
+            fw: d.field_weakening.convert(b).map_err(named)?,
+            rs_running: d
+                .rs_running
+                .convert(b)
+                .ok_or_else(|| named("rs_convergence_time"))?,
+            offset_tracker: d
+                .offset_tracker
+                .convert(b)
+                .ok_or_else(|| named("overcurrent_trip"))?,
+            inverter_tracker: d
+                .inverter_tracker
+                .convert(b)
+                .ok_or_else(|| named("flux_current"))?,
+            gain_calibration: d.gain_calibration.convert(b).map_err(named)?,
+            rr: d
+                .rr_estimator
+                .convert(b)
+                .ok_or_else(|| named("machine.rotor_resistance"))?,
+            sensor_check: d.sensor_check.convert(b).ok_or_else(|| named("machine"))?,
             zero_dwell_steps: d.zero_dwell_steps,
             zero_speed_stop: d.zero_speed_stop,
-            speed_target_limit: d.speed_target_limit,
-            lead: (d.ts, cfg.delay_periods),
-            orientation: d.orientation,
-            magnetizing: d.magnetizing,
-            limits: d.limits,
-            vf: VfDesign {
-                volts_per_rad_s: cfg.vf.volts_per_rad_s,
-                boost: cfg.vf.boost,
-            },
-            fw: d.field_weakening,
-            rs_running: d.rs_running,
-            inverter_test: d.inverter_test,
-            offset_tracker: d.offset_tracker,
-            inverter_tracker: d.inverter_tracker,
-            gain_calibration: d.gain_calibration,
-            rr: d.rr_estimator,
-            sensor_check: d.sensor_check,
             slow_divider: d.slow_divider,
-            inv_slow_divider: 1.0 / d.slow_divider as f32,
-        }
+            inv_slow_divider: gain(1.0 / d.slow_divider as f32, "slow_period")?,
+            inverter_test: d.inverter_test.convert(b).map_err(named)?,
+        })
     }
 }
 

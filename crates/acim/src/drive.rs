@@ -68,8 +68,8 @@
 //! step k-1, which is what the observer and the Rs estimator use.
 
 use crate::current_loop::{CurrentLoop, CurrentLoopInputs};
+use crate::design::DriveCoeffs;
 pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
-use crate::design::{DesignArithmetic, DriveCoeffs};
 use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
 use crate::flux::FluxModel;
 use crate::frames::{
@@ -546,11 +546,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         sincos: S,
         observer: O,
         modulator: M,
-    ) -> Result<Self, ConfigError>
-    where
-        N: DesignArithmetic,
-    {
-        let coeffs = N::coeffs(&design, &bases)?;
+    ) -> Result<Self, ConfigError> {
+        let coeffs = DriveCoeffs::new(&design, &bases)?;
         let rs_initial = coeffs.rs_initial;
         let mut drive = Self {
             supervision: Supervision {
@@ -801,10 +798,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// arithmetic is refused and the old one kept. A design with another inverter
     /// compensation (dead time, device drop or current band) drops the correction the
     /// start test or the running tracker found beyond the old one.
-    pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError>
-    where
-        N: DesignArithmetic,
-    {
+    pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
         let (old, new) = (&self.cfg.design.config, &design.config);
         let retune = old.machine == new.machine
             && old.control_period == new.control_period
@@ -814,7 +808,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             return Err(CommandError::WrongState(state));
         }
         self.cfg.coeffs =
-            N::coeffs(&design, &self.cfg.bases).map_err(|_| CommandError::OutOfRange)?;
+            DriveCoeffs::new(&design, &self.cfg.bases).map_err(|_| CommandError::OutOfRange)?;
         // the inverter test's and the tracker's correction is the error beyond the
         // configured compensation: with another compensation (e.g. a commissioned dead
         // time) it is meaningless, and a trusted tracker's or an identified test's would
@@ -839,10 +833,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// Changes the orientation-correction gain k at run time (outside the interrupt:
     /// tuning or analysis; 0 restores the paper's scheme) by swapping in a new design.
     /// Rejects non-finite or negative values and values above 50, keeping the old gain.
-    pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError>
-    where
-        N: DesignArithmetic,
-    {
+    pub fn set_orientation_gain(&mut self, gain: f32) -> Result<(), CommandError> {
         if !crate::math::is_finite(gain) {
             return Err(CommandError::NotFinite);
         }

@@ -7,6 +7,8 @@ use crate::frames::Dq;
 use crate::math::sqrt;
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 use crate::svpwm::{VoltageLimit, FW_TRIM_FRACTION};
 
 /// Field weakening keeps the steady-state stator voltage within this fraction of the
@@ -407,6 +409,58 @@ impl<N: Num + DivSqrt + DivSqrt> FieldWeakening<N> {
             out.torque_limited = true;
         }
         out
+    }
+}
+
+impl FieldWeakeningDesign<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: voltages of V_base, currents
+    /// of I_base, frequencies of w_base; flux linkage V/w comes out of the ratio in
+    /// V_base/w_base. The frequency floor must be inside the reciprocal's domain. Fails
+    /// naming the setting the value depends on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<FieldWeakeningDesign<N>, &'static str> {
+        if self.min_frequency / b.frequency < N::RECIP_FLOOR {
+            return Err("max_speed");
+        }
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let pu =
+            |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
+        Ok(FieldWeakeningDesign {
+            enabled: self.enabled,
+            voltage_fraction: g(self.voltage_fraction, "field_weakening")?,
+            min_frequency: pu(self.min_frequency, b.frequency, "max_speed")?,
+            min_flux_current: pu(self.min_flux_current, b.current, "flux_current")?,
+            current_limit: pu(self.current_limit, b.current, "current_limit")?,
+            inv_stator_inductance: g(
+                self.inv_stator_inductance * b.voltage / (b.frequency * b.current),
+                "machine",
+            )?,
+            stator_inductance: g(
+                self.stator_inductance * b.frequency * b.current / b.voltage,
+                "machine",
+            )?,
+            flux_voltage: g(
+                self.flux_voltage * b.frequency * b.flux / b.voltage,
+                "machine",
+            )?,
+            trim_gain: g(
+                self.trim_gain * b.voltage / (b.frequency * b.current),
+                "field_weakening",
+            )?,
+            trim_gate: g(self.trim_gate, "field_weakening")?,
+            trim_fraction: g(self.trim_fraction, "field_weakening")?,
+            rated_linkage: pu(self.rated_linkage, b.flux, "flux_current")?,
+            flux_reference: pu(self.flux_reference, b.flux, "flux_current")?,
+            overvoltage_control: self.overvoltage_control,
+            flux_optimisation: self.flux_optimisation,
+            optimum_ratio: g(self.optimum_ratio, "machine")?,
+            optimum_min_current: pu(self.optimum_min_current, b.current, "flux_current")?,
+            optimum_fall: g(self.optimum_fall, "machine")?,
+            regen_start: pu(self.regen_start, b.voltage, "dc_bus_max")?,
+            inv_regen_band: g(self.inv_regen_band * b.voltage, "dc_bus_max")?,
+        })
     }
 }
 

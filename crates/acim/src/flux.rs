@@ -12,6 +12,8 @@
 use crate::num::Angles;
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 use crate::params::MachineParams;
 
 /// Precomputed coefficients of the flux model and slip law (designed in f32 SI; in fixed
@@ -116,6 +118,22 @@ impl<N: Num + DivSqrt + Angles + DivSqrt + Angles> FluxModel<N> {
         let next = self.rotor_flux + N::gain(cfg.blend, target - self.rotor_flux);
         // a non-finite current would poison the state: keep the last flux instead
         self.rotor_flux = next.finite_or(self.rotor_flux);
+    }
+}
+
+impl FluxModelConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`; `None` if a gain is not
+    /// representable.
+    pub fn convert<N: Num + Units + Angles>(&self, b: &PerUnitBases) -> Option<FluxModelConfig<N>> {
+        Some(FluxModelConfig {
+            blend: N::gain_from_f32(self.blend)?,
+            magnetizing_inductance: N::gain_from_f32(
+                self.magnetizing_inductance * b.current / b.flux,
+            )?,
+            slip_gain: N::gain_from_f32(self.slip_gain * b.current / (b.flux * b.frequency))?,
+            min_flux: N::from_f32(self.min_flux / b.flux),
+            ts: N::angle_gain(b.frequency * self.ts)?,
+        })
     }
 }
 

@@ -64,6 +64,8 @@
 use crate::num::DivSqrt;
 use crate::num::FineIntegrator;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// The filter's time constant, s: longer than any magnetizing (0.4-1 s), so that the
 /// filter is nearly a plain sum of every step's sample scaled by `Ts / tau` (bounded like
@@ -202,6 +204,36 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> GainCalibrati
         }
         self.usable = false;
         used
+    }
+}
+
+impl GainCalibrationConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: the filter into the finer
+    /// integrator format over the whole of its range; where the reciprocal has a floor
+    /// (fixed point) the ratio's scale brings `min_voltage` to 0.5. Fails naming the
+    /// setting the value depends on.
+    pub fn convert<N: Num + Units + FineIntegrator>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<GainCalibrationConfig<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        Ok(GainCalibrationConfig {
+            enabled: self.enabled,
+            filter: g(self.filter * N::FINE_SCALE, "control_period")?,
+            fine_bounds: N::FINE_RANGE,
+            min_voltage: N::checked_from_f32(self.min_voltage / b.voltage).ok_or("flux_current")?,
+            ratio_scale: g(
+                if N::RECIP_FLOOR > 0.0 {
+                    0.5 * b.voltage / self.min_voltage
+                } else {
+                    self.ratio_scale
+                },
+                "current_gain_calibration",
+            )?,
+            sqrt3: g(self.sqrt3, "current_gain_calibration")?,
+            // dimensionless
+            bounds: (N::from_f32(self.bounds.0), N::from_f32(self.bounds.1)),
+        })
     }
 }
 

@@ -13,6 +13,8 @@
 //! carrying the rest as an apparent resistance.
 
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// The inverter test's d-axis current levels, fractions of `flux_current` (rising, so
 /// that the last is the magnetizing current and the flux build-up goes on from it).
@@ -247,6 +249,53 @@ impl<N: Num> InverterTest<N> {
         } else {
             self.outcome = InverterTestOutcome::Rejected;
         }
+    }
+}
+
+impl InverterTestDesign<f32> {
+    /// This design in the arithmetic `N` with the bases `b`; fails naming the setting the
+    /// value depends on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<InverterTestDesign<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let pu =
+            |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
+        let current = |x: f32| pu(x, b.current, "flux_current");
+        let r = b.resistance();
+        Ok(InverterTestDesign {
+            level_steps: self.level_steps,
+            settle_steps: self.settle_steps,
+            levels: [
+                current(self.levels[0])?,
+                current(self.levels[1])?,
+                current(self.levels[2])?,
+            ],
+            tolerances: [
+                current(self.tolerances[0])?,
+                current(self.tolerances[1])?,
+                current(self.tolerances[2])?,
+            ],
+            filter: g(self.filter, "control_period")?,
+            // dimensionless: voltage in, voltage out
+            error_weights: [
+                g(self.error_weights[0], "inverter_identification")?,
+                g(self.error_weights[1], "inverter_identification")?,
+                g(self.error_weights[2], "inverter_identification")?,
+            ],
+            // 1/A: V_base y w / R_base = y (w I_base) in resistance per unit
+            slope_weights: [
+                g(self.slope_weights[0] * b.current, "flux_current")?,
+                g(self.slope_weights[1] * b.current, "flux_current")?,
+                g(self.slope_weights[2] * b.current, "flux_current")?,
+            ],
+            resistance_window: (
+                pu(self.resistance_window.0, r, "inverter_identification")?,
+                pu(self.resistance_window.1, r, "inverter_identification")?,
+            ),
+            max_duty: N::from_f32(self.max_duty),
+        })
     }
 }
 

@@ -49,7 +49,9 @@
 use crate::frames::{clarke_three, park, Dq, SinCosValue};
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
 use crate::num::ThreePhase;
+use crate::num::Units;
 use crate::svpwm::current_sign;
 
 /// Below this stator frequency the tracker holds, Hz.
@@ -206,6 +208,26 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
         let i2 = i_ref.d * i_ref.d + i_ref.q * i_ref.q + cfg.current_floor;
         let step = N::gain(cfg.rate, N::ratio(x * (y - self.dc) * inv_dc_bus, i2));
         (correction + step).clamp(-cfg.limit, cfg.limit)
+    }
+}
+
+impl InverterTrackerConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: its rate needs no scaling
+    /// (the per-unit bases of `x (y - b) / (V_dc |i_ref|^2)` cancel: the step is a duty
+    /// either way); its current floor is in current units squared. `None` if a gain is
+    /// not representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<InverterTrackerConfig<N>> {
+        Some(InverterTrackerConfig {
+            enabled: self.enabled,
+            dc_filter: N::gain_from_f32(self.dc_filter)?,
+            rate: N::gain_from_f32(self.rate)?,
+            current_floor: N::from_f32(self.current_floor / (b.current * b.current)),
+            min_frequency: N::from_f32(self.min_frequency / b.frequency),
+            max_frequency: N::from_f32(self.max_frequency / b.frequency),
+            limit: N::from_f32(self.limit),
+            holdoff_steps: self.holdoff_steps,
+            trust_steps: self.trust_steps,
+        })
     }
 }
 

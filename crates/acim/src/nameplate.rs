@@ -760,3 +760,93 @@ mod tests {
         assert!(rel(g.rotor_time_constant(), m.rotor_time_constant()) < 1e-5);
     }
 }
+
+#[cfg(test)]
+mod conversion {
+    use super::tests::machines;
+    use super::*;
+    use crate::design::{CurrentSensing, DriveCoeffs, DriveDesign};
+    use crate::fixed::Q24;
+
+    /// Each block converts its own design: in f32 (SI, every base 1) that is the identity
+    /// on every block's design and scalar; in fixed point every acceptance machine's
+    /// design fits its nameplate bases, with and without a slow task and the optional
+    /// features.
+    #[test]
+    fn f32_conversion_is_the_identity_and_every_machine_fits_fixed_point() {
+        for (name, m, n, b) in machines() {
+            let base = drive_config(m, &n, &b).unwrap();
+            let bases = per_unit_bases(&base, &b);
+            let mut variants = [base; 6];
+            variants[1].slow_period = 1e-3;
+            variants[2].current_sensing = CurrentSensing::ThreePhase;
+            variants[3].current_gain_calibration = true;
+            variants[4].rr_adaptation = true;
+            variants[5].field_weakening = !base.field_weakening;
+            for (k, v) in variants.iter().enumerate() {
+                let d = DriveDesign::new(*v).unwrap();
+                let c = DriveCoeffs::<f32>::new(&d, &()).unwrap();
+                assert_eq!(c.current_loop, d.current_loop, "{name} {k}");
+                assert_eq!(c.speed_loop, d.speed_loop, "{name} {k}");
+                assert_eq!(c.thermal, d.thermal, "{name} {k}");
+                assert_eq!(c.flux, d.flux, "{name} {k}");
+                assert_eq!(c.observer, d.observer.coeffs, "{name} {k}");
+                assert_eq!(c.rs, d.rs, "{name} {k}");
+                assert_eq!(c.pwm, d.pwm, "{name} {k}");
+                assert_eq!(c.orientation, d.orientation, "{name} {k}");
+                assert_eq!(c.magnetizing, d.magnetizing, "{name} {k}");
+                assert_eq!(c.limits, d.limits, "{name} {k}");
+                assert_eq!(c.fw, d.field_weakening, "{name} {k}");
+                assert_eq!(c.rs_running, d.rs_running, "{name} {k}");
+                assert_eq!(c.inverter_test, d.inverter_test, "{name} {k}");
+                assert_eq!(c.offset_tracker, d.offset_tracker, "{name} {k}");
+                assert_eq!(c.inverter_tracker, d.inverter_tracker, "{name} {k}");
+                assert_eq!(c.gain_calibration, d.gain_calibration, "{name} {k}");
+                assert_eq!(c.rr, d.rr_estimator, "{name} {k}");
+                assert_eq!(c.sensor_check, d.sensor_check, "{name} {k}");
+                assert_eq!(
+                    (
+                        c.transient_inductance,
+                        c.sample_ripple,
+                        c.referred_rotor_resistance
+                    ),
+                    (
+                        d.transient_inductance,
+                        d.sample_ripple,
+                        d.referred_rotor_resistance
+                    ),
+                );
+                assert_eq!(
+                    (
+                        c.inv_rotor_time_constant,
+                        c.pole_pairs,
+                        c.back_emf,
+                        c.torque_factor
+                    ),
+                    (
+                        d.inv_rotor_time_constant,
+                        d.pole_pairs,
+                        d.pole_pairs,
+                        d.torque_factor
+                    ),
+                );
+                assert_eq!(
+                    (
+                        c.i_sd_ref,
+                        c.settled_flux,
+                        c.speed_target_limit,
+                        c.rs_initial
+                    ),
+                    (
+                        d.i_sd_ref,
+                        d.settled_flux,
+                        d.speed_target_limit,
+                        v.rs_initial
+                    ),
+                );
+                assert_eq!(c.lead, (d.ts, v.delay_periods));
+                assert!(DriveCoeffs::<Q24>::new(&d, &bases).is_ok(), "{name} {k}");
+            }
+        }
+    }
+}

@@ -109,6 +109,14 @@ pub trait DivSqrt: Num {
 pub trait FineIntegrator: Num {
     /// The integrator state (`f32`, or Q1.30 for six more bits than the signal).
     type Fine: Copy + Debug + PartialEq + MaybeFormat;
+    /// How much finer the integrator format is than the signal's (1 in f32; 64, six
+    /// more bits, in fixed point): a gain into it carries this factor.
+    const FINE_SCALE: f32;
+    /// The whole range of the integrator format (unbounded in f32).
+    const FINE_RANGE: (Self::Fine, Self::Fine);
+    /// The integrator state holding `x` (in this arithmetic's units), if representable
+    /// (design time).
+    fn fine_from_f32(x: f32) -> Option<Self::Fine>;
     /// The integrator state holding `x`.
     fn to_fine(x: Self) -> Self::Fine;
     /// The signal value of an integrator state (rounded).
@@ -130,6 +138,21 @@ pub trait FineIntegrator: Num {
 pub trait Units: Num {
     /// The per-unit bases (`()` for SI f32).
     type Bases: Copy + Debug + PartialEq + MaybeFormat;
+    /// The smallest value (in this arithmetic's units) a reciprocal may be taken of: 0
+    /// in f32, 0.02 pu in fixed point (the Newton reciprocal's domain, 2^-6 pu).
+    const RECIP_FLOOR: f32;
+    /// The largest magnitude a running sum may reach before a once-per-window solve
+    /// refuses it (f32: any finite value; fixed point: 100 pu, below saturation at 128).
+    const SUM_LIMIT: f32;
+    /// The bases a design value in SI is divided by to be in this arithmetic's units
+    /// ([`PerUnitBases::SI`] for f32).
+    fn unit_bases(bases: &Self::Bases) -> PerUnitBases;
+    /// `x` (in this arithmetic's units) as a signal, if it fits the range configured
+    /// values may have (2 pu in fixed point, 64 times below saturation; any value in
+    /// f32). Design time.
+    fn checked_from_f32(x: f32) -> Option<Self>;
+    /// `x` as a gain, if representable (design time).
+    fn gain_from_f32(x: f32) -> Option<Self::Gain>;
     /// The value as an f32 in this arithmetic's units (SI in f32, per unit in fixed
     /// point): for the rare per-event arithmetic that needs a range no signal format has
     /// (the rotor-resistance adaptation's least-squares solve, [`crate::rr_estimator`]).
@@ -149,6 +172,11 @@ pub trait Angles: Num {
     fn advance(angle: Self::Angle, frequency: Self, per_step: Self::Gain) -> Self::Angle;
     /// The angle in radians (telemetry).
     fn angle_to_rad(a: Self::Angle) -> f32;
+    /// The per-step gain of [`Angles::advance`] for `rad_per_unit` radians per period
+    /// per unit of frequency (f32: Ts itself), if representable (design time).
+    fn angle_gain(rad_per_unit: f32) -> Option<Self::Gain>;
+    /// The voltage lead of `delay` periods of `ts` (s) with the bases `b` (design time).
+    fn lead(ts: f32, delay: f32, b: &PerUnitBases) -> Option<Self::Lead>;
 }
 
 /// The three-phase constants of Clarke, its inverse and the modulator in an arithmetic.
@@ -163,6 +191,58 @@ pub trait ThreePhase: Num {
     const SQRT3: Self;
     /// -(a + b)/2 without overflow (the SVPWM zero-sequence offset).
     fn neg_mean(a: Self, b: Self) -> Self;
+}
+
+/// Per-unit bases: the physical value of 1.0 pu of each quantity (SI). Fixed point runs
+/// in per unit of them; [`PerUnitBases::SI`] (every base 1) is the f32 drive's. Each
+/// block converts its SI design to an arithmetic with them (its `convert`). Resistance is
+/// V_base / I_base, so R i products are volts in pu directly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PerUnitBases {
+    /// Current base, A (phase peak, amplitude-invariant dq).
+    pub current: f32,
+    /// Voltage base, V (DC bus and phase peak).
+    pub voltage: f32,
+    /// Mechanical speed base, rad/s.
+    pub speed: f32,
+    /// Electrical (frame) frequency base, rad/s.
+    pub frequency: f32,
+    /// Rotor-flux base (inverse-Gamma lambda_r), Wb.
+    pub flux: f32,
+    /// Torque base, N m.
+    pub torque: f32,
+}
+
+impl PerUnitBases {
+    /// SI: every base 1 (the f32 drive; dividing by it is exact).
+    pub const SI: Self = Self {
+        current: 1.0,
+        voltage: 1.0,
+        speed: 1.0,
+        frequency: 1.0,
+        flux: 1.0,
+        torque: 1.0,
+    };
+
+    /// The bases for the paper's machine (Table 1) and drive: 10 A (the current sensors'
+    /// full scale, trip at 8 A = 0.8 pu), 400 V (the highest bus, 1.0 pu), 2000 rpm
+    /// mechanical (the over-speed trip, 1.0 pu), 2 pi 100 rad/s electrical (2000 rpm at
+    /// p = 2 is 0.67 pu), 1 Wb (nominal flux 0.781 Wb, 1.2x nominal = 0.94 pu), 10 N m
+    /// (twice rated; the largest plausible load estimate, 15 N m, is 1.5 pu).
+    pub const PAPER: Self = Self {
+        current: 10.0,
+        voltage: 400.0,
+        speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+        frequency: 2.0 * core::f32::consts::PI * 100.0,
+        flux: 1.0,
+        torque: 10.0,
+    };
+
+    /// Resistance base V_base / I_base, ohm.
+    pub fn resistance(&self) -> f32 {
+        self.voltage / self.current
+    }
 }
 
 /// Everything the cascade computes with: the arithmetic and its domain formats (the
@@ -245,6 +325,11 @@ impl DivSqrt for f32 {
 
 impl FineIntegrator for f32 {
     type Fine = f32;
+    const FINE_SCALE: f32 = 1.0;
+    const FINE_RANGE: (f32, f32) = (f32::MIN, f32::MAX);
+    fn fine_from_f32(x: f32) -> Option<f32> {
+        Some(x)
+    }
     #[inline(always)]
     fn to_fine(x: f32) -> f32 {
         x
@@ -264,6 +349,17 @@ impl FineIntegrator for f32 {
 
 impl Units for f32 {
     type Bases = ();
+    const RECIP_FLOOR: f32 = 0.0;
+    const SUM_LIMIT: f32 = f32::MAX;
+    fn unit_bases(_: &()) -> PerUnitBases {
+        PerUnitBases::SI
+    }
+    fn checked_from_f32(x: f32) -> Option<f32> {
+        Some(x)
+    }
+    fn gain_from_f32(x: f32) -> Option<f32> {
+        Some(x)
+    }
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
@@ -285,6 +381,12 @@ impl Angles for f32 {
     #[inline(always)]
     fn angle_to_rad(a: f32) -> f32 {
         a
+    }
+    fn angle_gain(rad_per_unit: f32) -> Option<f32> {
+        Some(rad_per_unit)
+    }
+    fn lead(ts: f32, delay: f32, _: &PerUnitBases) -> Option<(f32, f32)> {
+        Some((ts, delay))
     }
 }
 

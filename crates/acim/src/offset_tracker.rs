@@ -176,6 +176,8 @@
 use crate::frames::AlphaBeta;
 use crate::num::FineIntegrator;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// The fundamental tracker's rate `mu_f`, rad/s: 1 Hz (module docs).
 pub const OFFSET_TRACKER_FUNDAMENTAL_RATE: f32 = 2.0 * core::f32::consts::PI;
@@ -473,6 +475,39 @@ impl<N: Num + FineIntegrator + FineIntegrator> OffsetTracker<N> {
                 beta: N::from_fine(b),
             };
         }
+    }
+}
+
+impl OffsetTrackerConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: its offset gain takes a
+    /// voltage into the finer integrator format of a current. `None` if a gain is not
+    /// representable.
+    pub fn convert<N: Num + Units + FineIntegrator>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Option<OffsetTrackerConfig<N>> {
+        let g = N::gain_from_f32;
+        let limit = N::to_fine(N::from_f32(self.bounds.1 / b.current));
+        let lower = N::to_fine(N::from_f32(self.bounds.0 / b.current));
+        Some(OffsetTrackerConfig {
+            enabled: self.enabled,
+            fundamental_gain: g(self.fundamental_gain)?,
+            offset_gain: g(self.offset_gain * b.voltage / b.current * N::FINE_SCALE)?,
+            far_side_offset_gain: g(
+                self.far_side_offset_gain * b.voltage / b.current * N::FINE_SCALE
+            )?,
+            frequency_filter: g(self.frequency_filter)?,
+            ts: g(self.ts * b.frequency)?,
+            one_sixth: g(self.one_sixth)?,
+            min_frequency: N::from_f32(self.min_frequency / b.frequency),
+            far_side_min_frequency: N::from_f32(self.far_side_min_frequency / b.frequency),
+            holdoff_steps: self.holdoff_steps,
+            steady_filter: g(self.steady_filter)?,
+            steady_band: N::from_f32(self.steady_band / b.current),
+            residual_limit: N::from_f32(self.residual_limit / b.voltage),
+            floor_rise: N::from_f32(self.floor_rise / b.voltage),
+            bounds: (lower, limit),
+        })
     }
 }
 

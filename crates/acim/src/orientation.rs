@@ -13,6 +13,8 @@
 //! stability map and before/after figures: `docs/orientation-stability.md`.
 
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// The orientation correction's constants ([`crate::orientation`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,6 +74,36 @@ pub fn correction<N: Num>(
     let load = N::gain(d.load_factor_per_current, torque_current.abs());
     let scale = if load > N::ONE { load } else { N::ONE };
     (N::gain_mul(d.gain_per_flux, w, signed) * scale).clamp(-d.limit, d.limit)
+}
+
+impl OrientationDesign<f32> {
+    /// This design in the arithmetic `N` with the bases `b`, for the fade band `fade`
+    /// (rad/s electrical, its start and end); fails naming the setting the value depends
+    /// on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+        fade: (f32, f32),
+    ) -> Result<OrientationDesign<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let pu =
+            |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
+        Ok(OrientationDesign {
+            gain_per_flux: g(
+                self.gain_per_flux * b.voltage / b.frequency,
+                "orientation_gain",
+            )?,
+            load_factor_per_current: g(
+                self.load_factor_per_current * b.current,
+                "orientation_gain",
+            )?,
+            fade_start: pu(self.fade_start, b.frequency, "orientation_fade")?,
+            inv_fade_width: g(b.frequency / (fade.1 - fade.0), "orientation_fade")?,
+            limit: pu(self.limit, b.frequency, "max_speed")?,
+            far_side_gain: g(self.far_side_gain, "far_side_gain")?,
+            far_side_load_factor: g(self.far_side_load_factor * b.current, "far_side_gain")?,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@
 //! continuous function of the inputs and the two stay within their rounding.
 
 use crate::num::Num;
+use crate::num::Units;
 use crate::params::MachineParams;
 
 /// Gains and limits of one PI controller (configuration, apart from state). Designed in
@@ -162,6 +163,25 @@ impl<N: Num> PiController<N> {
     /// Whether the last output was at a limit.
     pub fn saturated(&self) -> bool {
         self.saturated
+    }
+}
+
+impl PiConfig<f32> {
+    /// This design in the arithmetic `N`: the error in units of `error_base`, the output
+    /// in units of `output_base` (SI values; 1 and 1 for f32). `None` if a gain is not
+    /// representable.
+    pub fn convert<N: Num + Units>(
+        &self,
+        error_base: f32,
+        output_base: f32,
+    ) -> Option<PiConfig<N>> {
+        let k = error_base / output_base;
+        Some(PiConfig {
+            kp: N::gain_from_f32(self.kp * k)?,
+            ki_ts: N::gain_from_f32(self.ki_ts * k)?,
+            out_min: N::from_f32(self.out_min / output_base),
+            out_max: N::from_f32(self.out_max / output_base),
+        })
     }
 }
 

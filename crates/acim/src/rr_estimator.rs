@@ -73,6 +73,7 @@
 
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
 use crate::num::Units;
 use crate::observer::ObserverCoeffs;
 
@@ -497,6 +498,39 @@ impl<N: Num + DivSqrt + Units + DivSqrt + Units> RrEstimator<N> {
     }
 }
 
+impl RrEstimatorConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: its slip term takes
+    /// `resistance x current / flux` to a frequency; its once-per-window solve converts
+    /// the sums to SI with the bases. `None` if a gain is not representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<RrEstimatorConfig<N>> {
+        let r = b.resistance();
+        Some(RrEstimatorConfig {
+            enabled: self.enabled,
+            quiet_steps: self.quiet_steps,
+            settle_steps: self.settle_steps,
+            window_steps: self.window_steps,
+            min_window_steps: self.min_window_steps,
+            current_filter: N::gain_from_f32(self.current_filter)?,
+            steady_filter: N::gain_from_f32(self.steady_filter)?,
+            steady_band: N::from_f32(self.steady_band / b.current),
+            min_current_change: N::from_f32(self.min_current_change / b.current),
+            min_frequency: N::from_f32(self.min_frequency / b.frequency),
+            slip_gain: N::gain_from_f32(self.slip_gain * r * b.current / (b.flux * b.frequency))?,
+            bounds: (
+                N::from_f32(self.bounds.0 / r),
+                N::from_f32(self.bounds.1 / r),
+            ),
+            referred_rotor_resistance: N::from_f32(self.referred_rotor_resistance / r),
+            pole_pairs: self.pole_pairs,
+            current_unit: b.current,
+            speed_unit: b.speed,
+            flux_unit: b.flux,
+            resistance_unit: r,
+            sum_limit: N::SUM_LIMIT,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -621,10 +655,10 @@ mod tests {
     fn the_q24_adaptation_matches() {
         let (cfg, _) = f32_design();
         let b = PerUnitBases::PAPER;
-        let cfg = crate::fixed::convert::rr_estimator(&cfg, &b).unwrap();
+        let cfg = cfg.convert::<crate::fixed::Q24>(&b).unwrap();
         let m = MachineParams::paper_table1();
         let obs_cfg = ObserverConfig::new(&m, ObserverPoles::DEFAULT, TS).unwrap();
-        let obs = crate::fixed::convert::observer(&obs_cfg, &b).unwrap();
+        let obs = obs_cfg.convert::<crate::fixed::Q24>(&b).unwrap();
         let q = |x: f32, u: Unit| {
             Q24::from_f32(
                 x / match u {

@@ -110,6 +110,8 @@
 use crate::num::DivSqrt;
 use crate::num::FineIntegrator;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 use crate::params::MachineParams;
 
 /// The running law adapts from this stator frequency up, Hz ("from about 1 Hz").
@@ -448,6 +450,51 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
         self.q_current_estimate = next.finite_or(u.i_sq.finite_or(N::ZERO));
         self.d_model_step(cfg, u, rs);
         self.stator_resistance_estimate
+    }
+}
+
+impl RsEstimatorConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`; its clamps in the
+    /// integrator's finer format. `None` if a value is not representable.
+    pub fn convert<N: Num + Units + FineIntegrator>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Option<RsEstimatorConfig<N>> {
+        let r_base = b.resistance();
+        Some(RsEstimatorConfig {
+            ts: N::gain_from_f32(self.ts * b.frequency)?,
+            ts_over_transient_inductance: N::gain_from_f32(
+                self.ts_over_transient_inductance * b.voltage / b.current,
+            )?,
+            alpha_ts: N::gain_from_f32(self.alpha_ts * b.current / r_base * N::FINE_SCALE)?,
+            min_resistance: N::fine_from_f32(self.min_resistance / r_base)?,
+            max_resistance: N::fine_from_f32(self.max_resistance / r_base)?,
+            min_flux_current: N::from_f32(self.min_flux_current / b.current),
+            max_torque_current: N::from_f32(self.max_torque_current / b.current),
+            max_stator_frequency: N::from_f32(self.max_stator_frequency / b.frequency),
+            adapt: self.adapt,
+        })
+    }
+}
+
+impl RsRunningConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`; its input is a voltage: ohm
+    /// per V per step. `None` if a gain is not representable.
+    pub fn convert<N: Num + Units + FineIntegrator>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Option<RsRunningConfig<N>> {
+        Some(RsRunningConfig {
+            enabled: self.enabled,
+            standstill: self.standstill,
+            alpha_ts: N::gain_from_f32(self.alpha_ts * b.voltage / b.resistance() * N::FINE_SCALE)?,
+            min_frequency: N::from_f32(self.min_frequency / b.frequency),
+            min_torque_current: N::from_f32(self.min_torque_current / b.current),
+            flux_voltage: N::gain_from_f32(self.flux_voltage * b.frequency * b.flux / b.voltage)?,
+            steady_filter: N::gain_from_f32(self.steady_filter)?,
+            steady_band: N::from_f32(self.steady_band / b.current),
+            max_frequency: N::from_f32(self.max_frequency / b.frequency),
+        })
     }
 }
 

@@ -123,7 +123,9 @@
 use crate::frames::{inverse_clarke, inverse_park, AlphaBeta, Dq, SinCosValue};
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
 use crate::num::ThreePhase;
+use crate::num::Units;
 use crate::params::MachineParams;
 use crate::supervisor::FaultReason;
 
@@ -496,6 +498,36 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         self.filtered.q = self.filtered.q + N::gain(cfg.bias_gain, inp.current.q - self.filtered.q);
         self.start_window(inp, measured);
         fault
+    }
+}
+
+impl SensorCheckConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: its gains rescaled by the
+    /// bases of what they multiply. `None` if a value is not representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<SensorCheckConfig<N>> {
+        let g = N::gain_from_f32;
+        Some(SensorCheckConfig {
+            // volt -> current increment
+            ts_over_sigma_ls: g(self.ts_over_sigma_ls * b.voltage / b.current)?,
+            // current -> voltage
+            r_sigma: g(self.r_sigma * b.current / b.voltage)?,
+            // (frequency x current) -> voltage
+            sigma_ls: g(self.sigma_ls * b.frequency * b.current / b.voltage)?,
+            // flux -> voltage
+            rr_over_lm: g(self.rr_over_lm * b.flux / b.voltage)?,
+            // (mechanical speed x flux) -> voltage
+            back_emf: g(self.back_emf * b.speed * b.flux / b.voltage)?,
+            window_gain: g(self.window_gain)?,
+            enabled: self.enabled,
+            window: self.window,
+            change_threshold: N::checked_from_f32(self.change_threshold / b.current)?,
+            // dimensionless
+            response_ratio: g(self.response_ratio)?,
+            astray_ratio: g(self.astray_ratio)?,
+            still_threshold: N::from_f32(self.still_threshold / b.current),
+            bias_gain: g(self.bias_gain)?,
+            resistance_allowance: g(self.resistance_allowance)?,
+        })
     }
 }
 

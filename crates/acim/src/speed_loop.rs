@@ -30,11 +30,13 @@
 //!   estimator lost control with the feed-forward where the PI holds it: the
 //!   feed-forward is for a drive that estimates R_s (the nameplate path's default).
 //!
-//! The design is f32 SI; the fixed-point drive rescales it (`fixed::convert`).
+//! The design is f32 SI; each arithmetic converts it with its bases (`SpeedLoopConfig::convert`).
 
 use crate::config::{DriveConfig, RsEstimationMode};
 use crate::field_weakening::FieldWeakeningOutput;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
 
@@ -447,6 +449,50 @@ fn regen_limit<N: Num>(
         (lo, i, true)
     } else {
         (lo, hi, false)
+    }
+}
+
+impl SpeedLoopConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b`, for a machine of `pole_pairs`
+    /// and the rotor-flux reference `flux_reference` (Wb); fails naming the setting the
+    /// value that does not fit depends on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+        pole_pairs: f32,
+        flux_reference: f32,
+    ) -> Result<SpeedLoopConfig<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let bandwidth = "speed_bandwidth";
+        Ok(SpeedLoopConfig {
+            pi: self.pi.convert(b.speed, b.current).ok_or(bandwidth)?,
+            acceleration_feedforward: g(
+                self.acceleration_feedforward * b.speed / b.current,
+                bandwidth,
+            )?,
+            friction_feedforward: g(self.friction_feedforward * b.speed / b.current, bandwidth)?,
+            load_feedforward: g(self.load_feedforward * b.torque / b.current, bandwidth)?,
+            feedforward: self.feedforward,
+            ramp_step: N::from_f32(self.ramp_step / b.speed),
+            // 1/(p lambda_ref) in the order the design has always converted it
+            speed_per_volt: g(
+                b.voltage / (pole_pairs * flux_reference * b.speed),
+                "flux_current",
+            )?,
+            regen_min_frequency: N::from_f32(self.regen_min_frequency / b.frequency),
+            regen_current_per_frequency: g(
+                self.regen_current_per_frequency * b.frequency / b.current,
+                "regen_min_frequency",
+            )?,
+            far_side_torque_per_frequency: g(
+                self.far_side_torque_per_frequency * b.frequency / b.torque,
+                "far_side_gain",
+            )?,
+            far_side_enter: N::from_f32(self.far_side_enter / b.frequency),
+            far_side_leave: N::from_f32(self.far_side_leave / b.frequency),
+            hold_band: N::checked_from_f32(self.hold_band / b.speed).ok_or("max_speed")?,
+            report_steps: self.report_steps,
+        })
     }
 }
 

@@ -50,6 +50,8 @@
 use crate::frames::Dq;
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// The search's constants, from the configuration ([`crate::DriveDesign`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -317,6 +319,32 @@ impl<N: Num + DivSqrt + DivSqrt> SpeedSearch<N> {
         } else {
             SearchOutcome::Turning(speed)
         }
+    }
+}
+
+impl SpeedSearchDesign<f32> {
+    /// This design in the arithmetic `N` with the bases `b`: voltages of V_base in,
+    /// speeds of Omega_base out; the normalised covariance and the arc tangent's argument
+    /// are dimensionless. Fails naming the setting the value depends on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<SpeedSearchDesign<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        Ok(SpeedSearchDesign {
+            enabled: self.enabled,
+            begin_step: self.begin_step,
+            block_len: self.block_len,
+            pairs: self.pairs,
+            sample_gain: g(self.sample_gain * b.voltage, "flux_current")?,
+            pair_weight: g(self.pair_weight, "machine")?,
+            signal_floor: N::from_f32(self.signal_floor),
+            speed_per_rad: g(self.speed_per_rad / b.speed, "control_period")?,
+            standstill_speed: N::checked_from_f32(self.standstill_speed / b.speed)
+                .ok_or("rs_max_frequency")?,
+            max_speed: N::checked_from_f32(self.max_speed / b.speed).ok_or("max_speed")?,
+            atan: self.atan.map(N::from_f32),
+        })
     }
 }
 

@@ -19,6 +19,7 @@ use crate::frames::Dq;
 use crate::gain_calibration::{GainCalibration, GainCalibrationConfig};
 use crate::inverter_test::{InverterTest, InverterTestDesign, InverterTestOutcome};
 use crate::num::Arithmetic;
+use crate::num::PerUnitBases;
 use crate::speed_search::{SearchOutcome, SpeedSearch, SpeedSearchDesign};
 use crate::supervisor::{DriveState, FaultReason};
 
@@ -287,6 +288,25 @@ impl<N: Arithmetic> StartSequence<N> {
     }
 }
 
+impl MagnetizingDesign<f32> {
+    /// This design in the arithmetic `N` with the bases `b`; fails naming the setting the
+    /// value depends on.
+    pub fn convert<N: Arithmetic>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<MagnetizingDesign<N>, &'static str> {
+        Ok(MagnetizingDesign {
+            identify_rs: self.identify_rs,
+            rs_timeout_steps: self.rs_timeout_steps,
+            rs_settle_steps: self.rs_settle_steps,
+            rs_settled_error: N::checked_from_f32(self.rs_settled_error / b.current)
+                .ok_or("flux_current")?,
+            residual_filter: N::gain_from_f32(self.residual_filter).ok_or("control_period")?,
+            search: self.search.convert(b)?,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -297,7 +317,7 @@ mod tests {
         cfg.flying_start = flying;
         cfg.inverter_identification = inverter;
         cfg.rs_standstill_identification = identify_rs;
-        DriveCoeffs::si(&DriveDesign::new(cfg).unwrap())
+        DriveCoeffs::new(&DriveDesign::new(cfg).unwrap(), &()).unwrap()
     }
 
     fn config(c: &DriveCoeffs) -> StartSequenceConfig<'_, f32> {

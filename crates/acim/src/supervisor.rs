@@ -12,6 +12,8 @@ use crate::config::CurrentSensing;
 use crate::frames::{AlphaBeta, Dq};
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
+use crate::num::Units;
 
 /// Limits and step counts the [`crate::Supervisor`] judges against: every fault decision
 /// of the step reads only these.
@@ -822,6 +824,63 @@ fn classify_bad_samples<N: Num + DivSqrt + DivSqrt>(
         return Some(FaultReason::DcBusUnderVoltage);
     }
     None
+}
+
+impl SupervisionLimits<f32> {
+    /// These limits in the arithmetic `N` with the bases `b`; fails naming the setting
+    /// the value depends on.
+    pub fn convert<N: Num + Units>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<SupervisionLimits<N>, &'static str> {
+        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let pu =
+            |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
+        let r = b.resistance();
+        Ok(SupervisionLimits {
+            current_sensing: self.current_sensing,
+            overcurrent_trip: pu(self.overcurrent_trip, b.current, "overcurrent_trip")?,
+            dc_bus_min: pu(self.dc_bus_min, b.voltage, "dc_bus_min")?,
+            dc_bus_max: pu(self.dc_bus_max, b.voltage, "dc_bus_max")?,
+            max_speed: pu(self.max_speed, b.speed, "max_speed")?,
+            max_load_torque: pu(self.max_load_torque, b.torque, "max_load_torque_estimate")?,
+            implausible_steps: self.implausible_steps,
+            stall_steps: self.stall_steps,
+            overload_steps: self.overload_steps,
+            overload_fraction: N::from_f32(self.overload_fraction),
+            overload_speed_floor: pu(self.overload_speed_floor, b.speed, "speed_bandwidth")?,
+            blind_frequency: pu(self.blind_frequency, b.frequency, "orientation_fade")?,
+            blind_steps: self.blind_steps,
+            stall_fraction: N::from_f32(self.stall_fraction),
+            rs_bound_faults: self.rs_bound_faults,
+            monitor_filter: g(self.monitor_filter, "current_bandwidth")?,
+            current_error_limit: pu(self.current_error_limit, b.current, "flux_current")?,
+            current_sum_limit: pu(self.current_sum_limit, b.current, "overcurrent_trip")?,
+            model_residual_limit: pu(self.model_residual_limit, b.voltage, "dc_bus_max")?,
+            magnetizing_timeout_steps: self.magnetizing_timeout_steps,
+            demagnetize_steps: self.demagnetize_steps,
+            offset_filter: g(self.offset_filter, "control_period")?,
+            offset_settle_steps: self.offset_settle_steps,
+            offset_skip_steps: self.offset_skip_steps,
+            oscillation_steps: self.oscillation_steps,
+            oscillation_filter: g(self.oscillation_filter, "control_period")?,
+            oscillation_check: self.oscillation_check,
+            oscillation_swing: pu(self.oscillation_swing, b.speed, "max_speed")?,
+            offset_limit: pu(self.offset_limit, b.current, "overcurrent_trip")?,
+            running_offset_filter: g(self.running_offset_filter, "control_period")?,
+            running_offset_min_frequency: pu(
+                self.running_offset_min_frequency,
+                b.frequency,
+                "overcurrent_trip",
+            )?,
+            impedance_resistance: pu(self.impedance_resistance, r, "machine.stator_resistance")?,
+            impedance_inductance: g(
+                self.impedance_inductance * b.frequency * b.current / b.voltage,
+                "machine.stator_inductance",
+            )?,
+            impedance_voltage_floor: pu(self.impedance_voltage_floor, b.voltage, "current_limit")?,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -39,7 +39,9 @@ use crate::frames::{inverse_clarke, AlphaBeta};
 use crate::math::{clamp, sqrt};
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::PerUnitBases;
 use crate::num::ThreePhase;
+use crate::num::Units;
 
 /// 1/sqrt(3): the linear limit per volt of bus.
 pub const INV_SQRT3: f32 = 0.577_350_26;
@@ -458,6 +460,21 @@ pub fn overmodulate_corrected(
         ],
         voltage,
         saturated: true,
+    }
+}
+
+impl SvpwmConfig<f32> {
+    /// This design in the arithmetic `N` with the bases `b` (duties are dimensionless;
+    /// voltages of V_base, currents of I_base). `None` if a gain is not representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<SvpwmConfig<N>> {
+        Some(SvpwmConfig {
+            dead_time_duty: N::from_f32(self.dead_time_duty),
+            device_drop: N::from_f32(self.device_drop / b.voltage),
+            inv_current_band: N::gain_from_f32(self.inv_current_band * b.current)?,
+            min_bus_voltage: N::from_f32(self.min_bus_voltage / b.voltage),
+            // dimensionless
+            voltage_limit_per_inv_bus: N::gain_from_f32(self.voltage_limit_per_inv_bus)?,
+        })
     }
 }
 

@@ -23,6 +23,7 @@
 
 use crate::num::DivSqrt;
 use crate::num::Num;
+use crate::num::Units;
 
 /// Heat at which the fold-back is released (half the allowance).
 pub const RELEASE_HEAT: f32 = 0.5;
@@ -128,6 +129,27 @@ impl<N: Num + DivSqrt + DivSqrt> ThermalModel<N> {
     /// Whether the current limit is folded back to the continuous current.
     pub fn folded(&self) -> bool {
         self.folded
+    }
+}
+
+impl ThermalConfig<f32> {
+    /// This design in the arithmetic `N` with the current base `current` (A); fails
+    /// naming the setting the value depends on.
+    pub fn convert<N: Num + Units>(&self, current: f32) -> Result<ThermalConfig<N>, &'static str> {
+        let pu =
+            |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
+        Ok(ThermalConfig {
+            heat_gain: N::gain_from_f32(self.heat_gain * current * current)
+                .ok_or("overload_duration")?,
+            continuous_squared: pu(
+                self.continuous_squared,
+                current * current,
+                "continuous_current",
+            )?,
+            continuous_ratio: pu(self.continuous_ratio, 1.0, "continuous_current")?,
+            release: pu(self.release, 1.0, "overload_duration")?,
+            enabled: self.enabled,
+        })
     }
 }
 

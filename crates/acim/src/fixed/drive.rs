@@ -7,8 +7,8 @@
 //!
 //! Configuration: [`FixedDrive::with_bases`] takes the same [`DriveConfig`] as the f32 drive and
 //! builds the same [`DriveDesign`] (validated once, every derived constant computed
-//! once); [`super::convert`] rescales it with the per-unit bases, checking that the
-//! configured ranges fit them.
+//! once); [`crate::design::DriveCoeffs::new`] rescales it with the per-unit bases, each
+//! block its own design, checking that the configured ranges fit them.
 
 use super::q::{clamp, to_q24, ONE, Q24};
 use super::trig::TableSinCos;
@@ -211,7 +211,7 @@ mod tests {
             to_q24(1.732_050_8)
         );
         let d = DriveDesign::new(DriveConfig::paper_defaults()).unwrap();
-        let c = <Q24 as crate::design::DesignArithmetic>::coeffs(&d, &PerUnitBases::PAPER).unwrap();
+        let c = crate::design::DriveCoeffs::<Q24>::new(&d, &PerUnitBases::PAPER).unwrap();
         assert_eq!(c.limits.stall_fraction.0, to_q24(STALL_SPEED_FRACTION));
         assert_eq!(c.limits.stall_fraction.0, 1_677_722);
     }

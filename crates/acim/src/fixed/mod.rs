@@ -6,8 +6,9 @@
 //! drive's cascade itself are written once over [`crate::num::Num`] and instantiated
 //! here with [`Q24`]. This module holds only what the arithmetic itself needs: the Q7.24
 //! type and its saturating operations, gains and reciprocal ([`q`]), the turn-fraction
-//! angle and table sin/cos ([`trig`]), the conversion of the f32 design to per unit
-//! ([`convert`]) and the fixed-point specifics of the drive (the modulator's voltage
+//! angle and table sin/cos ([`trig`]), the arithmetic's conversions of design values
+//! ([`crate::num::Units`]; each block converts its own design with them) and the
+//! fixed-point specifics of the drive (the modulator's voltage
 //! limit, Q15 duties, the SI boundary: [`drive`]). The designs stay single-sourced in
 //! f32. The step uses no float, no division beyond one hardware `UDIV` per reciprocal, no
 //! allocation and no panicking operation.
@@ -60,7 +61,6 @@
 //! in `tests/fixed_point.rs` (the closed-loop paper scenarios with
 //! `drive.arithmetic = "fixed"` in the simulator).
 
-pub mod convert;
 pub mod drive;
 pub mod q;
 pub mod trig;

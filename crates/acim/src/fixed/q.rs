@@ -293,47 +293,7 @@ pub fn reciprocal(x: i32) -> i32 {
     saturate(r as i64)
 }
 
-/// Per-unit bases: the physical value of 1.0 pu of each quantity (SI). Chosen for the
-/// paper's machine so every signal over the whole operating range stays below 2 pu,
-/// leaving at least 64x (36 dB) before Q7.24 saturates at 128 pu (see the module docs).
-/// Resistance is V_base / I_base, so R i products are volts in pu directly.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct PerUnitBases {
-    /// Current base, A (phase peak, amplitude-invariant dq).
-    pub current: f32,
-    /// Voltage base, V (DC bus and phase peak).
-    pub voltage: f32,
-    /// Mechanical speed base, rad/s.
-    pub speed: f32,
-    /// Electrical (frame) frequency base, rad/s.
-    pub frequency: f32,
-    /// Rotor-flux base (inverse-Gamma lambda_r), Wb.
-    pub flux: f32,
-    /// Torque base, N m.
-    pub torque: f32,
-}
-
-impl PerUnitBases {
-    /// The bases for the paper's machine (Table 1) and drive: 10 A (the current sensors'
-    /// full scale, trip at 8 A = 0.8 pu), 400 V (the highest bus, 1.0 pu), 2000 rpm
-    /// mechanical (the over-speed trip, 1.0 pu), 2 pi 100 rad/s electrical (2000 rpm at
-    /// p = 2 is 0.67 pu), 1 Wb (nominal flux 0.781 Wb, 1.2x nominal = 0.94 pu), 10 N m
-    /// (twice rated; the largest plausible load estimate, 15 N m, is 1.5 pu).
-    pub const PAPER: Self = Self {
-        current: 10.0,
-        voltage: 400.0,
-        speed: 2000.0 * crate::math::RPM_TO_RAD_S,
-        frequency: 2.0 * core::f32::consts::PI * 100.0,
-        flux: 1.0,
-        torque: 10.0,
-    };
-
-    /// Resistance base V_base / I_base, ohm.
-    pub fn resistance(&self) -> f32 {
-        self.voltage / self.current
-    }
-}
+pub use crate::num::PerUnitBases;
 
 /// Frame angle: fraction of one electrical turn, 2^32 counts per turn (wraps by design).
 pub type Angle = u32;
@@ -492,6 +452,17 @@ impl crate::num::FineIntegrator for Q24 {
     /// Q1.30: six bits finer than the signal, so that alpha Ts e (1e-6 pu per step at a
     /// settled residual) still moves it.
     type Fine = i32;
+    const FINE_SCALE: f32 = (1u32 << RS_EXTRA_BITS) as f32;
+    /// The signal's +/-2 pu in Q1.30: `to_fine` of -2^25 and 2^25 - 1.
+    const FINE_RANGE: (i32, i32) = (i32::MIN, i32::MAX - 63);
+    /// Below 2 pu (a margin under Q1.30's limit).
+    fn fine_from_f32(x: f32) -> Option<i32> {
+        if crate::math::is_finite(x) && x.abs() < 1.99 {
+            Some(to_q24(x * Self::FINE_SCALE))
+        } else {
+            None
+        }
+    }
     #[inline(always)]
     fn to_fine(x: Q24) -> i32 {
         let r0 = clamp(x.0, -(1 << 25), (1 << 25) - 1);
@@ -517,6 +488,23 @@ impl crate::num::FineIntegrator for Q24 {
 
 impl crate::num::Units for Q24 {
     type Bases = PerUnitBases;
+    const RECIP_FLOOR: f32 = 0.02;
+    /// Q7.24 saturates at 128 pu.
+    const SUM_LIMIT: f32 = 100.0;
+    fn unit_bases(bases: &PerUnitBases) -> PerUnitBases {
+        *bases
+    }
+    /// Within 2 pu (64x below saturation, the module docs' headroom).
+    fn checked_from_f32(x: f32) -> Option<Q24> {
+        if crate::math::is_finite(x) && x.abs() <= 2.0 {
+            Some(Q24(to_q24(x)))
+        } else {
+            None
+        }
+    }
+    fn gain_from_f32(x: f32) -> Option<Gain> {
+        Gain::from_f32(x)
+    }
     fn to_f32(self) -> f32 {
         from_q24(self.0)
     }
@@ -529,6 +517,13 @@ impl crate::num::Angles for Q24 {
     type Angle = Angle;
     /// Angle counts of the voltage lead per frequency pu.
     type Lead = Gain;
+    /// Angle counts per step per frequency pu.
+    fn angle_gain(rad_per_unit: f32) -> Option<Gain> {
+        Gain::from_f32(rad_per_unit * COUNTS_PER_RAD / (1u32 << FRAC_BITS) as f32)
+    }
+    fn lead(ts: f32, delay: f32, b: &PerUnitBases) -> Option<Gain> {
+        Self::angle_gain(b.frequency * ts * delay)
+    }
     #[inline(always)]
     fn advance(angle: u32, frequency: Q24, per_step: Gain) -> u32 {
         // a signed increment added modulo one turn: the intended wrap of an angle
@@ -678,7 +673,7 @@ mod tests {
     fn apply_matches_for_the_design_gains() {
         let d =
             crate::design::DriveDesign::new(crate::design::DriveConfig::paper_defaults()).unwrap();
-        let c = super::super::convert::coeffs(&d, &PerUnitBases::PAPER).unwrap();
+        let c = crate::design::DriveCoeffs::<Q24>::new(&d, &PerUnitBases::PAPER).unwrap();
         let gains = [
             c.current_loop.pi_d.kp,
             c.current_loop.pi_d.ki_ts,

@@ -27,7 +27,6 @@
 
 extern crate std;
 
-use super::convert;
 use super::q::{to_q24, Q24};
 use super::trig::{angle_from_rad, angle_to_rad, sin_cos};
 use super::PerUnitBases;
@@ -176,7 +175,7 @@ proptest! {
         let spd = crate::speed_loop::SpeedLoopConfig::new(&m, m.rotor_flux_for(1.5), speed_bw, TS, 4.42, true).pi;
         // (design, error base, output base, error scale in SI)
         for (c, eb, ob, scale) in [(cur, B.current, B.voltage, 2.0f32), (spd, B.speed, B.current, 50.0)] {
-            let cq = convert::pi(&c, eb, ob).unwrap();
+            let cq = c.convert::<Q24>(eb, ob).unwrap();
             let (mut pf, mut pq) = (PiController::new(), PiController::<Q24>::new());
             let (lo, hi) = (-lim * ob, lim * ob);
             for (k, e) in errors.iter().enumerate() {
@@ -214,7 +213,7 @@ proptest! {
         let m = m();
         let nominal = m.rotor_flux_for(1.5);
         let cf = FluxModelConfig::new(&m, TS, nominal);
-        let cq = convert::flux(&cf, &B).unwrap();
+        let cq = cf.convert::<Q24>(&B).unwrap();
         let (mut f, mut x) = (FluxModel::new(), FluxModel::<Q24>::new());
         let w_elec = 2.0 * rpm * crate::math::RPM_TO_RAD_S;
         // the f32 angle itself rounds to its ulp at pi (2.4e-7 rad) every step; both are
@@ -250,7 +249,7 @@ proptest! {
     ) {
         let m = m();
         let c = ObserverConfig::new(&m, ObserverPoles::DEFAULT, TS).unwrap();
-        let cq = convert::observer(&c, &B).unwrap();
+        let cq = c.convert::<Q24>(&B).unwrap();
         let lambda = flux_frac * m.rotor_flux_for(1.5);
         let rseq = m.stator_resistance() * rs_scale + m.referred_rotor_resistance();
         let speed = rpm * crate::math::RPM_TO_RAD_S;
@@ -292,7 +291,7 @@ proptest! {
     ) {
         let m = m();
         let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
-        let cq = convert::rs_estimator(&c, &B).unwrap();
+        let cq = c.convert::<Q24>(&B).unwrap();
         let v_sd = rs_true * i_sd - m.transient_inductance() * ws * i_sq;
         let (mut f, mut x) = (RsEstimator::new(r0), RsEstimator::<Q24>::new(q(r0, B.resistance())));
         for k in 0..5000usize {
@@ -317,7 +316,7 @@ proptest! {
         ia in -0.2f32..0.2, ib in -8.0f32..8.0,
     ) {
         let c = SvpwmConfig::new(1.5e-6, TS, 1.0, 0.05);
-        let cq = convert::svpwm(&c, &B).unwrap();
+        let cq = c.convert::<Q24>(&B).unwrap();
         let lim = svpwm::linear_limit(vdc);
         let v = AlphaBeta { alpha: mag * lim * ang.cos(), beta: mag * lim * ang.sin() };
         let cur = [ia, ib, -ia - ib];
@@ -341,10 +340,10 @@ proptest! {
 fn rs_running_law_matches_f32() {
     let m = m();
     let c = RsEstimatorConfig::new(&m, TS, 0.2, 1.5);
-    let cq = convert::rs_estimator(&c, &B).unwrap();
+    let cq = c.convert::<Q24>(&B).unwrap();
     let mut run = RsRunningConfig::new(TS, 0.2, 1.5, m.rotor_time_constant());
     run.enabled = true;
-    let runq = convert::rs_running(&run, &B).unwrap();
+    let runq = run.convert::<Q24>(&B).unwrap();
     let l = m.transient_inductance();
     let lambda = m.rotor_flux_for(1.5);
     for (i_sq, ws) in [(0.64f32, 60.0f32), (-0.64, 40.0), (1.9, -20.0)] {
