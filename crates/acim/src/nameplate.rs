@@ -777,7 +777,14 @@ mod conversion {
         for (name, m, n, b) in machines() {
             let base = drive_config(m, &n, &b).unwrap();
             let bases = per_unit_bases(&base, &b);
-            let mut variants = [base; 6];
+            let mut variants = [base; 9];
+            variants[6].flying_start = true;
+            variants[7].offset_tracking = false;
+            variants[8] = crate::config::DriveConfig::paper_defaults();
+            variants[8].flying_start = true;
+            let mut data = variants[8].machine.data();
+            data.inertia = 0.1;
+            variants[8].machine = MachineParams::new(data).unwrap();
             variants[1].slow_period = 1e-3;
             variants[2].current_sensing = CurrentSensing::ThreePhase;
             variants[3].current_gain_calibration = true;
@@ -845,7 +852,80 @@ mod conversion {
                     ),
                 );
                 assert_eq!(c.lead, (d.ts, v.delay_periods));
-                assert!(DriveCoeffs::<Q24>::new(&d, &bases).is_ok(), "{name} {k}");
+                assert!(
+                    k == 8 || DriveCoeffs::<Q24>::new(&d, &bases).is_ok(),
+                    "{name} {k}"
+                );
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+        /// The f32 conversion is the identity on any valid design: machines scaled from the
+        /// paper's (resistances, inductances, inertia, friction), with the optional stages
+        /// on or off.
+        #[test]
+        fn f32_conversion_is_the_identity_on_any_design(
+            r in 0.2f32..5.0, l in 0.3f32..3.0, j in 0.001f32..2.0, f in 0.0f32..0.05,
+            flags in 0u32..64,
+        ) {
+            let mut cfg = crate::config::DriveConfig::paper_defaults();
+            let mut data = cfg.machine.data();
+            data.stator_resistance *= r;
+            data.rotor_resistance *= r;
+            data.stator_inductance *= l;
+            data.rotor_inductance *= l;
+            data.mutual_inductance *= l;
+            data.inertia = j;
+            data.viscous_friction = f;
+            cfg.machine = MachineParams::new(data).unwrap();
+            cfg.flying_start = flags & 1 != 0;
+            cfg.field_weakening = flags & 2 != 0;
+            cfg.current_gain_calibration = flags & 4 != 0;
+            cfg.rr_adaptation = flags & 8 != 0;
+            cfg.offset_tracking = flags & 16 != 0;
+            if flags & 32 != 0 {
+                cfg.slow_period = 1e-3;
+            }
+            let design = DriveDesign::new(cfg);
+            proptest::prop_assume!(design.is_ok());
+            if let Ok(d) = design {
+                let c = DriveCoeffs::<f32>::new(&d, &()).unwrap();
+                proptest::prop_assert_eq!(c.current_loop, d.current_loop);
+                proptest::prop_assert_eq!(c.speed_loop, d.speed_loop);
+                proptest::prop_assert_eq!(c.thermal, d.thermal);
+                proptest::prop_assert_eq!(c.flux, d.flux);
+                proptest::prop_assert_eq!(c.observer, d.observer.coeffs);
+                proptest::prop_assert_eq!(c.rs, d.rs);
+                proptest::prop_assert_eq!(c.pwm, d.pwm);
+                proptest::prop_assert_eq!(c.orientation, d.orientation);
+                proptest::prop_assert_eq!(c.magnetizing, d.magnetizing);
+                proptest::prop_assert_eq!(c.limits, d.limits);
+                proptest::prop_assert_eq!(c.fw, d.field_weakening);
+                proptest::prop_assert_eq!(c.rs_running, d.rs_running);
+                proptest::prop_assert_eq!(c.inverter_test, d.inverter_test);
+                proptest::prop_assert_eq!(c.offset_tracker, d.offset_tracker);
+                proptest::prop_assert_eq!(c.inverter_tracker, d.inverter_tracker);
+                proptest::prop_assert_eq!(c.gain_calibration, d.gain_calibration);
+                proptest::prop_assert_eq!(c.rr, d.rr_estimator);
+                proptest::prop_assert_eq!(c.sensor_check, d.sensor_check);
+                proptest::prop_assert_eq!(
+                    (c.transient_inductance, c.sample_ripple, c.referred_rotor_resistance),
+                    (d.transient_inductance, d.sample_ripple, d.referred_rotor_resistance)
+                );
+                proptest::prop_assert_eq!(
+                    (c.inv_rotor_time_constant, c.pole_pairs, c.back_emf, c.torque_factor),
+                    (d.inv_rotor_time_constant, d.pole_pairs, d.pole_pairs, d.torque_factor)
+                );
+                proptest::prop_assert_eq!(
+                    (c.i_sd_ref, c.settled_flux, c.speed_target_limit, c.rs_initial),
+                    (d.i_sd_ref, d.settled_flux, d.speed_target_limit, cfg.rs_initial)
+                );
+                proptest::prop_assert_eq!(c.vf.volts_per_rad_s, cfg.vf.volts_per_rad_s);
+                proptest::prop_assert_eq!(c.vf.boost, cfg.vf.boost);
+                proptest::prop_assert_eq!(c.inv_slow_divider, 1.0 / d.slow_divider as f32);
+                proptest::prop_assert_eq!(c.lead, (d.ts, cfg.delay_periods));
             }
         }
     }

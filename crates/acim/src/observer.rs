@@ -467,25 +467,23 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
 }
 
 impl ObserverConfig {
-    /// The step's coefficients (eq. 12) in the arithmetic `N` with the bases `b`:
-    /// currents of I_base, speed of Omega_base (mechanical), load of T_base, voltage of
-    /// V_base, Rseq of R_base = V_base/I_base, flux of lambda_base, w_s of the electrical
-    /// frequency base. `None` if a gain is not representable.
+    /// The step's coefficients (eq. 12, [`ObserverConfig::coeffs`]) in the arithmetic `N`
+    /// with the bases `b`: currents of I_base, speed of Omega_base (mechanical), load of
+    /// T_base, voltage of V_base, flux of lambda_base, w_s of the electrical frequency
+    /// base. `None` if a gain is not representable.
     pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<ObserverCoeffs<N>> {
-        let ts = self.ts;
+        let c = &self.coeffs;
         let g = N::gain_from_f32;
         Some(ObserverCoeffs {
-            ts_a: g(ts * self.a)?,
-            ts_inv_l: g(ts * self.inv_transient_inductance * b.voltage / b.current)?,
-            ts_p_inv_l: g(
-                ts * self.pole_pairs * self.inv_transient_inductance * b.flux * b.speed / b.current,
-            )?,
-            ts: g(ts * b.frequency)?,
-            ts_torque_per_inertia: g(ts * self.torque_per_inertia * b.flux * b.current / b.speed)?,
-            ts_inv_inertia: g(ts * self.inv_inertia * b.torque / b.speed)?,
-            ts_friction_rate: g(ts * self.friction_rate)?,
-            ts_g2: g(ts * self.g2 * b.current / (b.flux * b.speed))?,
-            ts_g3: g(ts * self.g3 * b.current / (b.flux * b.torque))?,
+            ts_a: g(c.ts_a)?,
+            ts_inv_l: g(c.ts_inv_l * b.voltage / b.current)?,
+            ts_p_inv_l: g(c.ts_p_inv_l * b.flux * b.speed / b.current)?,
+            ts: g(c.ts * b.frequency)?,
+            ts_torque_per_inertia: g(c.ts_torque_per_inertia * b.flux * b.current / b.speed)?,
+            ts_inv_inertia: g(c.ts_inv_inertia * b.torque / b.speed)?,
+            ts_friction_rate: g(c.ts_friction_rate)?,
+            ts_g2: g(c.ts_g2 * b.current / (b.flux * b.speed))?,
+            ts_g3: g(c.ts_g3 * b.current / (b.flux * b.torque))?,
         })
     }
 }
