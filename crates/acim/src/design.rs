@@ -742,10 +742,9 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             field,
             rule: "does not fit the per-unit bases (above 2 pu, or a gain beyond 2^30)",
         };
-        let pu = |x: f32, base: f32, field: &'static str| {
-            N::checked_from_f32(x / base).ok_or_else(|| named(field))
-        };
-        let gain = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or_else(|| named(field));
+        let pu =
+            |x: f32, base: f32, field| crate::num::signal_in::<N>(x, base, field).map_err(named);
+        let gain = |x: f32, field| crate::num::gain_in::<N>(x, field).map_err(named);
         // range checks: everything the drive compares against or limits to must fit
         pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
         pu(cfg.current_limit, b.current, "current_limit")?;

@@ -424,7 +424,7 @@ impl FieldWeakeningDesign<f32> {
         if self.min_frequency / b.frequency < N::RECIP_FLOOR {
             return Err("max_speed");
         }
-        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let g = crate::num::gain_in::<N>;
         let pu =
             |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
         Ok(FieldWeakeningDesign {

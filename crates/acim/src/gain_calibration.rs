@@ -216,7 +216,7 @@ impl GainCalibrationConfig<f32> {
         &self,
         b: &PerUnitBases,
     ) -> Result<GainCalibrationConfig<N>, &'static str> {
-        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let g = crate::num::gain_in::<N>;
         Ok(GainCalibrationConfig {
             enabled: self.enabled,
             filter: g(self.filter * N::FINE_SCALE, "control_period")?,

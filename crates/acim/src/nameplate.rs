@@ -768,6 +768,77 @@ mod conversion {
     use crate::design::{CurrentSensing, DriveCoeffs, DriveDesign};
     use crate::fixed::Q24;
 
+    /// The f32 conversion of `d` (SI bases) is the identity on every block's design and
+    /// scalar.
+    fn assert_f32_identity(d: &DriveDesign) {
+        let c = DriveCoeffs::<f32>::new(d, &()).unwrap();
+        let cfg = &d.config;
+        assert_eq!(c.current_loop, d.current_loop);
+        assert_eq!(c.speed_loop, d.speed_loop);
+        assert_eq!(c.thermal, d.thermal);
+        assert_eq!(c.flux, d.flux);
+        assert_eq!(c.observer, d.observer.coeffs);
+        assert_eq!(c.rs, d.rs);
+        assert_eq!(c.pwm, d.pwm);
+        assert_eq!(c.orientation, d.orientation);
+        assert_eq!(c.magnetizing, d.magnetizing);
+        assert_eq!(c.limits, d.limits);
+        assert_eq!(c.fw, d.field_weakening);
+        assert_eq!(c.rs_running, d.rs_running);
+        assert_eq!(c.inverter_test, d.inverter_test);
+        assert_eq!(c.offset_tracker, d.offset_tracker);
+        assert_eq!(c.inverter_tracker, d.inverter_tracker);
+        assert_eq!(c.gain_calibration, d.gain_calibration);
+        assert_eq!(c.rr, d.rr_estimator);
+        assert_eq!(c.sensor_check, d.sensor_check);
+        assert_eq!(
+            (
+                c.transient_inductance,
+                c.sample_ripple,
+                c.referred_rotor_resistance
+            ),
+            (
+                d.transient_inductance,
+                d.sample_ripple,
+                d.referred_rotor_resistance
+            ),
+        );
+        assert_eq!(
+            (
+                c.inv_rotor_time_constant,
+                c.pole_pairs,
+                c.back_emf,
+                c.torque_factor
+            ),
+            (
+                d.inv_rotor_time_constant,
+                d.pole_pairs,
+                d.pole_pairs,
+                d.torque_factor
+            ),
+        );
+        assert_eq!(
+            (
+                c.i_sd_ref,
+                c.settled_flux,
+                c.speed_target_limit,
+                c.rs_initial
+            ),
+            (
+                d.i_sd_ref,
+                d.settled_flux,
+                d.speed_target_limit,
+                cfg.rs_initial
+            ),
+        );
+        assert_eq!(
+            (c.vf.volts_per_rad_s, c.vf.boost),
+            (cfg.vf.volts_per_rad_s, cfg.vf.boost)
+        );
+        assert_eq!(c.inv_slow_divider, 1.0 / d.slow_divider as f32);
+        assert_eq!(c.lead, (d.ts, cfg.delay_periods));
+    }
+
     /// Each block converts its own design: in f32 (SI, every base 1) that is the identity
     /// on every block's design and scalar; in fixed point every acceptance machine's
     /// design fits its nameplate bases, with and without a slow task and the optional
@@ -792,66 +863,7 @@ mod conversion {
             variants[5].field_weakening = !base.field_weakening;
             for (k, v) in variants.iter().enumerate() {
                 let d = DriveDesign::new(*v).unwrap();
-                let c = DriveCoeffs::<f32>::new(&d, &()).unwrap();
-                assert_eq!(c.current_loop, d.current_loop, "{name} {k}");
-                assert_eq!(c.speed_loop, d.speed_loop, "{name} {k}");
-                assert_eq!(c.thermal, d.thermal, "{name} {k}");
-                assert_eq!(c.flux, d.flux, "{name} {k}");
-                assert_eq!(c.observer, d.observer.coeffs, "{name} {k}");
-                assert_eq!(c.rs, d.rs, "{name} {k}");
-                assert_eq!(c.pwm, d.pwm, "{name} {k}");
-                assert_eq!(c.orientation, d.orientation, "{name} {k}");
-                assert_eq!(c.magnetizing, d.magnetizing, "{name} {k}");
-                assert_eq!(c.limits, d.limits, "{name} {k}");
-                assert_eq!(c.fw, d.field_weakening, "{name} {k}");
-                assert_eq!(c.rs_running, d.rs_running, "{name} {k}");
-                assert_eq!(c.inverter_test, d.inverter_test, "{name} {k}");
-                assert_eq!(c.offset_tracker, d.offset_tracker, "{name} {k}");
-                assert_eq!(c.inverter_tracker, d.inverter_tracker, "{name} {k}");
-                assert_eq!(c.gain_calibration, d.gain_calibration, "{name} {k}");
-                assert_eq!(c.rr, d.rr_estimator, "{name} {k}");
-                assert_eq!(c.sensor_check, d.sensor_check, "{name} {k}");
-                assert_eq!(
-                    (
-                        c.transient_inductance,
-                        c.sample_ripple,
-                        c.referred_rotor_resistance
-                    ),
-                    (
-                        d.transient_inductance,
-                        d.sample_ripple,
-                        d.referred_rotor_resistance
-                    ),
-                );
-                assert_eq!(
-                    (
-                        c.inv_rotor_time_constant,
-                        c.pole_pairs,
-                        c.back_emf,
-                        c.torque_factor
-                    ),
-                    (
-                        d.inv_rotor_time_constant,
-                        d.pole_pairs,
-                        d.pole_pairs,
-                        d.torque_factor
-                    ),
-                );
-                assert_eq!(
-                    (
-                        c.i_sd_ref,
-                        c.settled_flux,
-                        c.speed_target_limit,
-                        c.rs_initial
-                    ),
-                    (
-                        d.i_sd_ref,
-                        d.settled_flux,
-                        d.speed_target_limit,
-                        v.rs_initial
-                    ),
-                );
-                assert_eq!(c.lead, (d.ts, v.delay_periods));
+                assert_f32_identity(&d);
                 assert!(
                     k == 8 || DriveCoeffs::<Q24>::new(&d, &bases).is_ok(),
                     "{name} {k}"
@@ -891,41 +903,7 @@ mod conversion {
             let design = DriveDesign::new(cfg);
             proptest::prop_assume!(design.is_ok());
             if let Ok(d) = design {
-                let c = DriveCoeffs::<f32>::new(&d, &()).unwrap();
-                proptest::prop_assert_eq!(c.current_loop, d.current_loop);
-                proptest::prop_assert_eq!(c.speed_loop, d.speed_loop);
-                proptest::prop_assert_eq!(c.thermal, d.thermal);
-                proptest::prop_assert_eq!(c.flux, d.flux);
-                proptest::prop_assert_eq!(c.observer, d.observer.coeffs);
-                proptest::prop_assert_eq!(c.rs, d.rs);
-                proptest::prop_assert_eq!(c.pwm, d.pwm);
-                proptest::prop_assert_eq!(c.orientation, d.orientation);
-                proptest::prop_assert_eq!(c.magnetizing, d.magnetizing);
-                proptest::prop_assert_eq!(c.limits, d.limits);
-                proptest::prop_assert_eq!(c.fw, d.field_weakening);
-                proptest::prop_assert_eq!(c.rs_running, d.rs_running);
-                proptest::prop_assert_eq!(c.inverter_test, d.inverter_test);
-                proptest::prop_assert_eq!(c.offset_tracker, d.offset_tracker);
-                proptest::prop_assert_eq!(c.inverter_tracker, d.inverter_tracker);
-                proptest::prop_assert_eq!(c.gain_calibration, d.gain_calibration);
-                proptest::prop_assert_eq!(c.rr, d.rr_estimator);
-                proptest::prop_assert_eq!(c.sensor_check, d.sensor_check);
-                proptest::prop_assert_eq!(
-                    (c.transient_inductance, c.sample_ripple, c.referred_rotor_resistance),
-                    (d.transient_inductance, d.sample_ripple, d.referred_rotor_resistance)
-                );
-                proptest::prop_assert_eq!(
-                    (c.inv_rotor_time_constant, c.pole_pairs, c.back_emf, c.torque_factor),
-                    (d.inv_rotor_time_constant, d.pole_pairs, d.pole_pairs, d.torque_factor)
-                );
-                proptest::prop_assert_eq!(
-                    (c.i_sd_ref, c.settled_flux, c.speed_target_limit, c.rs_initial),
-                    (d.i_sd_ref, d.settled_flux, d.speed_target_limit, cfg.rs_initial)
-                );
-                proptest::prop_assert_eq!(c.vf.volts_per_rad_s, cfg.vf.volts_per_rad_s);
-                proptest::prop_assert_eq!(c.vf.boost, cfg.vf.boost);
-                proptest::prop_assert_eq!(c.inv_slow_divider, 1.0 / d.slow_divider as f32);
-                proptest::prop_assert_eq!(c.lead, (d.ts, cfg.delay_periods));
+                assert_f32_identity(&d);
             }
         }
     }

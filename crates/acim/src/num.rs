@@ -245,6 +245,18 @@ impl PerUnitBases {
     }
 }
 
+/// `x / base` (a design value in SI) as a signal of the arithmetic `N`, if it fits the
+/// configured range ([`Units::checked_from_f32`]); else the setting `field` it depends on.
+pub fn signal_in<N: Units>(x: f32, base: f32, field: &'static str) -> Result<N, &'static str> {
+    N::checked_from_f32(x / base).ok_or(field)
+}
+
+/// `x` (a design gain with its bases already applied) as a gain of the arithmetic `N`, if
+/// representable; else the setting `field` it depends on.
+pub fn gain_in<N: Units>(x: f32, field: &'static str) -> Result<N::Gain, &'static str> {
+    N::gain_from_f32(x).ok_or(field)
+}
+
 /// Everything the cascade computes with: the arithmetic and its domain formats (the
 /// bound of [`crate::Drive`] and of the blocks that need more than [`Num`]).
 pub trait Arithmetic: Num + DivSqrt + FineIntegrator + Units + Angles + ThreePhase {}

@@ -462,7 +462,7 @@ impl SpeedLoopConfig<f32> {
         pole_pairs: f32,
         flux_reference: f32,
     ) -> Result<SpeedLoopConfig<N>, &'static str> {
-        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let g = crate::num::gain_in::<N>;
         let bandwidth = "speed_bandwidth";
         Ok(SpeedLoopConfig {
             pi: self.pi.convert(b.speed, b.current).ok_or(bandwidth)?,

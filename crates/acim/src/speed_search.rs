@@ -330,7 +330,7 @@ impl SpeedSearchDesign<f32> {
         &self,
         b: &PerUnitBases,
     ) -> Result<SpeedSearchDesign<N>, &'static str> {
-        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let g = crate::num::gain_in::<N>;
         Ok(SpeedSearchDesign {
             enabled: self.enabled,
             begin_step: self.begin_step,

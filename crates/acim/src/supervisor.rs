@@ -833,7 +833,7 @@ impl SupervisionLimits<f32> {
         &self,
         b: &PerUnitBases,
     ) -> Result<SupervisionLimits<N>, &'static str> {
-        let g = |x: f32, field: &'static str| N::gain_from_f32(x).ok_or(field);
+        let g = crate::num::gain_in::<N>;
         let pu =
             |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
         let r = b.resistance();
