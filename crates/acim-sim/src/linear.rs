@@ -204,7 +204,7 @@ impl Model {
             p: f64::from(m.pole_pairs_f32()),
             i_sd: f64::from(c.i_sd_ref),
             rs_hat: f64::from(v.drive.rs_initial),
-            rr_hat: f64::from(c.referred_rotor_resistance),
+            rr_hat: f64::from(c.model.referred_rotor_resistance),
             blend: f64::from(c.flux.blend) / ts,
             lm_hat: f64::from(c.flux.magnetizing_inductance),
             slip_gain: f64::from(c.flux.slip_gain),

@@ -92,7 +92,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, 
     }
     fn rotor_resistance(&self) -> RrReport {
         self.rotor_resistance_estimator()
-            .report(self.design().referred_rotor_resistance, 1.0)
+            .report(self.design().model.referred_rotor_resistance, 1.0)
     }
     fn current_gain_correction(&self) -> f32 {
         Drive::current_gain_correction(self)
@@ -144,7 +144,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Dr
     }
     fn rotor_resistance(&self) -> RrReport {
         self.rotor_resistance_estimator().report(
-            self.design().referred_rotor_resistance,
+            self.design().model.referred_rotor_resistance,
             self.bases().resistance(),
         )
     }

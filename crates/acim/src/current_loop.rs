@@ -223,9 +223,9 @@ mod tests {
         lim: VoltageLimit,
     ) -> CurrentLoopInputs<f32> {
         CurrentLoopInputs {
-            referred_rotor_resistance: d.referred_rotor_resistance,
-            inv_rotor_time_constant: d.inv_rotor_time_constant,
-            transient_inductance: d.transient_inductance,
+            referred_rotor_resistance: d.model.referred_rotor_resistance,
+            inv_rotor_time_constant: d.model.inv_rotor_time_constant,
+            transient_inductance: d.model.transient_inductance,
             back_emf: d.pole_pairs,
             stator_resistance: d.config.machine.stator_resistance(),
             stator_frequency: 150.0,

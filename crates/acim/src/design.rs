@@ -14,6 +14,7 @@ use crate::math::{is_finite, sqrt};
 use crate::num::{Arithmetic, Num};
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
+use crate::params::ModelGains;
 use crate::rr_estimator::RrEstimatorConfig;
 use crate::rs_estimator::{RsEstimatorConfig, RsRunningConfig};
 use crate::sensor_check::{SensorCheckConfig, SensorCheckError};
@@ -172,28 +173,8 @@ pub struct DriveCoeffs<N: Arithmetic = f32> {
     pub i_sd_ref: N,
     /// Flux above which it counts as settled, Wb.
     pub settled_flux: N,
-    /// sigma Ls: (frequency x current) -> voltage.
-    pub transient_inductance: N::Gain,
-    /// Ts^2 / (12 sigma Ls): frequency -> admittance (A per V). The voltage is held
-    /// constant in the stationary frame over each period (a staircase) while the machine's
-    /// back-EMF turns smoothly, so the stator current carries a ripple that is quadratic
-    /// in time within the period; sampled at the period boundary it reads
-    /// Delta i = -j w_s Ts^2 v / (12 sigma Ls) away from the fundamental (the ripple's
-    /// mean over the period is zero: sigma Ls d(Delta i)/dt = -j w_s (t - t_mid) v).
-    /// Negligible at low frequency, it is 2 % of i_sd at twice base speed in field
-    /// weakening (i_sd small, v large), where it made the flux model read 1 % high and
-    /// the speed estimate 1.2 % low. The sense stage removes it.
-    pub sample_ripple: N::Gain,
-    /// R_R, ohm.
-    pub referred_rotor_resistance: N,
-    /// 1/tau_r: flux -> voltage (lambda_r / tau_r).
-    pub inv_rotor_time_constant: N::Gain,
-    /// p: mechanical speed -> electrical frequency.
-    pub pole_pairs: N::Gain,
-    /// p: (speed x flux) -> voltage (the back-EMF p Omega lambda_r).
-    pub back_emf: N::Gain,
-    /// 1.5 p: (flux x current) -> torque.
-    pub torque_factor: N::Gain,
+    /// The machine model's gains (sigma Ls, the sample ripple, R_R, 1/tau_r, p, 1.5 p).
+    pub model: ModelGains<N>,
     /// Largest |speed target|, rad/s.
     pub speed_target_limit: N,
     /// The voltage lead of the inverse Park (delay compensation).
@@ -274,19 +255,10 @@ pub struct DriveDesign {
     pub flux_reference: f32,
     /// Flux above which it counts as settled, Wb.
     pub settled_flux: f32,
-    /// sigma Ls (L_sigma), H.
-    pub transient_inductance: f32,
-    /// Ts^2 / (12 sigma Ls), A / (rad/s x V): the current ripple a sample at the period
-    /// boundary carries (see [`DriveCoeffs::sample_ripple`]).
-    pub sample_ripple: f32,
-    /// R_R = (Lm/Lr)^2 Rr, ohm.
-    pub referred_rotor_resistance: f32,
-    /// 1 / tau_r, 1/s.
-    pub inv_rotor_time_constant: f32,
+    /// The machine model's gains (sigma Ls, the sample ripple, R_R, 1/tau_r, p, 1.5 p).
+    pub model: ModelGains,
     /// p.
     pub pole_pairs: f32,
-    /// 1.5 p (Te = 1.5 p lambda_r i_sq).
-    pub torque_factor: f32,
     /// Slow periods at a zero target and reference before the zero-speed policy acts
     /// (>= 1).
     pub zero_dwell_steps: u32,
@@ -565,12 +537,8 @@ impl DriveDesign {
             i_sq_limit,
             flux_reference,
             settled_flux: flux_reference * (1.0 - tol),
-            transient_inductance: m.transient_inductance(),
-            sample_ripple: ts * ts / (12.0 * m.transient_inductance()),
-            referred_rotor_resistance: m.referred_rotor_resistance(),
-            inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
+            model: ModelGains::new(&m, ts),
             pole_pairs: pp,
-            torque_factor: 1.5 * pp,
             zero_dwell_steps: ((cfg.zero_speed_dwell / slow_ts) as u32).max(1),
             zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
             inverter_test: InverterTestDesign::new(
@@ -800,24 +768,7 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             rs_initial: pu(cfg.rs_initial, b.resistance(), "rs_initial")?,
             i_sd_ref: pu(d.i_sd_ref, b.current, "flux_current")?,
             settled_flux: pu(d.settled_flux, b.flux, "flux_current")?,
-            transient_inductance: gain(
-                d.transient_inductance * b.frequency * b.current / b.voltage,
-                "machine",
-            )?,
-            sample_ripple: gain(
-                d.sample_ripple * b.frequency * b.voltage / b.current,
-                "machine",
-            )?,
-            referred_rotor_resistance: pu(d.referred_rotor_resistance, b.resistance(), "machine")?,
-            // 1/tau_r, as the flux base over tau_r times the voltage base (the f32
-            // design's 1/tau_r in SI)
-            inv_rotor_time_constant: gain(
-                b.flux / (m.rotor_time_constant() * b.voltage),
-                "machine",
-            )?,
-            pole_pairs: gain(pp * b.speed / b.frequency, "machine")?,
-            back_emf: gain(pp * b.speed * b.flux / b.voltage, "machine")?,
-            torque_factor: gain(d.torque_factor * b.flux * b.current / b.torque, "machine")?,
+            model: d.model.convert(b).ok_or_else(|| named("machine"))?,
             speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
             lead: N::lead(d.ts, cfg.delay_periods, b).ok_or_else(|| named("delay_periods"))?,
             orientation: d

@@ -1254,10 +1254,13 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let sc = self.loops.sincos.sin_cos(angle);
         let i_ab = self.track_offsets(i_ab, applied.v_ab, running);
         // the fundamental's sample: the staircase ripple at the period boundary,
-        // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (DriveCoeffs::sample_ripple)
+        // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (ModelGains::sample_ripple)
         let i = park(i_ab, sc);
         let v = applied.v_dq;
-        let k = N::gain(self.cfg.coeffs.sample_ripple, self.prev.stator_frequency);
+        let k = N::gain(
+            self.cfg.coeffs.model.sample_ripple,
+            self.prev.stator_frequency,
+        );
         Measured {
             i_ab,
             i_dq: Dq {
@@ -1407,8 +1410,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // taken out of v_sd so that the residual stays the orientation's
         let weakened = self.prev.fw_active;
         let v_sd = if weakened {
-            m.applied.v_dq.d - c.referred_rotor_resistance * i.d
-                + N::gain(c.inv_rotor_time_constant, est.flux.rotor_flux)
+            m.applied.v_dq.d - c.model.referred_rotor_resistance * i.d
+                + N::gain(c.model.inv_rotor_time_constant, est.flux.rotor_flux)
         } else {
             m.applied.v_dq.d
         };
@@ -1477,7 +1480,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             N::ZERO
         };
         // the rotor's electrical speed the frame turns with (sensorless: p Omega_hat)
-        let mut rotor_speed = N::gain(c.pole_pairs, observer.speed) + correction;
+        let mut rotor_speed = N::gain(c.model.pole_pairs, observer.speed) + correction;
         // rotor resistance: adapts at the start of speed ramps; its
         // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (skipped when off, so
         // the default step neither pays for it nor changes by a rounding)
@@ -1519,8 +1522,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 gain_calibration: &c.gain_calibration,
                 preset_rs: c.rs.adapt,
                 flux_current: c.i_sd_ref,
-                referred_rotor_resistance: c.referred_rotor_resistance,
-                inv_rotor_time_constant: c.inv_rotor_time_constant,
+                referred_rotor_resistance: c.model.referred_rotor_resistance,
+                inv_rotor_time_constant: c.model.inv_rotor_time_constant,
             },
             &StartInputs {
                 applied_voltage: m.applied.v_dq,
@@ -1648,7 +1651,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             &c.fw,
             &FieldWeakeningInputs {
                 flux_current: c.i_sd_ref,
-                transient_inductance: c.transient_inductance,
+                transient_inductance: c.model.transient_inductance,
                 torque_current_min: c.speed_loop.pi.out_min,
                 torque_current_max: c.speed_loop.pi.out_max,
                 stator_frequency: e.stator_frequency,
@@ -1690,7 +1693,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         r.speed.update(
             &c.speed_loop,
             &SpeedLoopInputs {
-                pole_pairs: c.pole_pairs,
+                pole_pairs: c.model.pole_pairs,
                 speed: e.observer.speed,
                 load_torque: e.observer.load_torque,
                 limits: fw,
@@ -1741,10 +1744,10 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.loops.cur.update(
             &c.current_loop,
             &CurrentLoopInputs {
-                referred_rotor_resistance: c.referred_rotor_resistance,
-                inv_rotor_time_constant: c.inv_rotor_time_constant,
-                transient_inductance: c.transient_inductance,
-                back_emf: c.back_emf,
+                referred_rotor_resistance: c.model.referred_rotor_resistance,
+                inv_rotor_time_constant: c.model.inv_rotor_time_constant,
+                transient_inductance: c.model.transient_inductance,
+                back_emf: c.model.back_emf,
                 stator_resistance: e.rs,
                 stator_frequency: e.stator_frequency,
                 rotor_flux: e.rotor_flux,
@@ -1835,7 +1838,11 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             speed_reference: self.refs.speed.speed_reference,
             speed_estimate: e.observer.speed,
             load_torque_estimate: e.observer.load_torque,
-            torque_estimate: N::gain_mul(self.cfg.coeffs.torque_factor, e.rotor_flux, m.i_dq.q),
+            torque_estimate: N::gain_mul(
+                self.cfg.coeffs.model.torque_factor,
+                e.rotor_flux,
+                m.i_dq.q,
+            ),
             current: m.i_dq,
             current_reference: i_ref,
             voltage: v,
@@ -1871,7 +1878,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             r.speed.speed_reference = r.speed.speed_reference + dv;
         }
         let ol = &mut r.open_loop;
-        ol.frequency = N::gain(c.pole_pairs, r.speed.speed_reference);
+        ol.frequency = N::gain(c.model.pole_pairs, r.speed.speed_reference);
         let mag = (c.vf.boost + N::gain(c.vf.volts_per_rad_s, ol.frequency.abs()))
             .clamp(N::ZERO, linear_limit(inp.dc_bus));
         let sc = self.loops.sincos.sin_cos(ol.angle);

@@ -480,7 +480,7 @@ mod tests {
         let v = linear_limit(dc_bus) * 0.98;
         FieldWeakeningInputs {
             flux_current: d.i_sd_ref,
-            transient_inductance: d.transient_inductance,
+            transient_inductance: d.model.transient_inductance,
             torque_current_min: d.speed_loop.pi.out_min,
             torque_current_max: d.speed_loop.pi.out_max,
             stator_frequency: ws,

@@ -791,32 +791,7 @@ mod conversion {
         assert_eq!(c.gain_calibration, d.gain_calibration);
         assert_eq!(c.rr, d.rr_estimator);
         assert_eq!(c.sensor_check, d.sensor_check);
-        assert_eq!(
-            (
-                c.transient_inductance,
-                c.sample_ripple,
-                c.referred_rotor_resistance
-            ),
-            (
-                d.transient_inductance,
-                d.sample_ripple,
-                d.referred_rotor_resistance
-            ),
-        );
-        assert_eq!(
-            (
-                c.inv_rotor_time_constant,
-                c.pole_pairs,
-                c.back_emf,
-                c.torque_factor
-            ),
-            (
-                d.inv_rotor_time_constant,
-                d.pole_pairs,
-                d.pole_pairs,
-                d.torque_factor
-            ),
-        );
+        assert_eq!(c.model, d.model);
         assert_eq!(
             (
                 c.i_sd_ref,

@@ -6,6 +6,7 @@
 //! L_M = (1 - sigma) Ls = Lm^2/Lr, which is the `(1 - sigma) Ls` of eqs. (4), (8), (13).
 
 use crate::math::is_finite;
+use crate::num::{Num, PerUnitBases, Units};
 
 /// Why a set of machine parameters was rejected by [`MachineParams::new`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -279,6 +280,71 @@ pub const DEFAULT_FLUX_CURRENT: f32 = 1.5;
 pub const DEFAULT_CURRENT_LIMIT: f32 = 4.67;
 /// Default control (sampling and PWM) period, s: 5 kHz as in the paper.
 pub const DEFAULT_CONTROL_PERIOD: f32 = 200e-6;
+
+/// The machine model's constants the control step multiplies by (the inverse-Gamma
+/// model, design notes section 1), designed once in SI ([`ModelGains::new`]) and
+/// converted to the drive's arithmetic ([`ModelGains::convert`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ModelGains<N: Num = f32> {
+    /// sigma Ls (L_sigma), H: (frequency x current) -> voltage.
+    pub transient_inductance: N::Gain,
+    /// Ts^2 / (12 sigma Ls), A / (rad/s x V): frequency -> admittance. The voltage is
+    /// held constant in the stationary frame over each period (a staircase) while the
+    /// machine's back-EMF turns smoothly, so the stator current carries a ripple that is
+    /// quadratic in time within the period; sampled at the period boundary it reads
+    /// Delta i = -j w_s Ts^2 v / (12 sigma Ls) away from the fundamental (the ripple's
+    /// mean over the period is zero: sigma Ls d(Delta i)/dt = -j w_s (t - t_mid) v).
+    /// Negligible at low frequency, it is 2 % of i_sd at twice base speed in field
+    /// weakening (i_sd small, v large), where it made the flux model read 1 % high and
+    /// the speed estimate 1.2 % low. The sense stage removes it.
+    pub sample_ripple: N::Gain,
+    /// R_R = (Lm/Lr)^2 Rr, ohm.
+    pub referred_rotor_resistance: N,
+    /// 1 / tau_r, 1/s: flux -> voltage (lambda_r / tau_r).
+    pub inv_rotor_time_constant: N::Gain,
+    /// p: mechanical speed -> electrical frequency.
+    pub pole_pairs: N::Gain,
+    /// p: (speed x flux) -> voltage (the back-EMF p Omega lambda_r).
+    pub back_emf: N::Gain,
+    /// 1.5 p: (flux x current) -> torque (Te = 1.5 p lambda_r i_sq).
+    pub torque_factor: N::Gain,
+}
+
+impl ModelGains<f32> {
+    /// The gains of machine `m` at the control period `ts` (s).
+    pub fn new(m: &MachineParams, ts: f32) -> Self {
+        let pp = m.pole_pairs_f32();
+        Self {
+            transient_inductance: m.transient_inductance(),
+            sample_ripple: ts * ts / (12.0 * m.transient_inductance()),
+            referred_rotor_resistance: m.referred_rotor_resistance(),
+            inv_rotor_time_constant: 1.0 / m.rotor_time_constant(),
+            pole_pairs: pp,
+            back_emf: pp,
+            torque_factor: 1.5 * pp,
+        }
+    }
+
+    /// These gains in the arithmetic `N` with the bases `b`; `None` if one is not
+    /// representable.
+    pub fn convert<N: Num + Units>(&self, b: &PerUnitBases) -> Option<ModelGains<N>> {
+        let g = N::gain_from_f32;
+        Some(ModelGains {
+            transient_inductance: g(
+                self.transient_inductance * b.frequency * b.current / b.voltage
+            )?,
+            sample_ripple: g(self.sample_ripple * b.frequency * b.voltage / b.current)?,
+            referred_rotor_resistance: N::checked_from_f32(
+                self.referred_rotor_resistance / b.resistance(),
+            )?,
+            inv_rotor_time_constant: g(self.inv_rotor_time_constant * b.flux / b.voltage)?,
+            pole_pairs: g(self.pole_pairs * b.speed / b.frequency)?,
+            back_emf: g(self.back_emf * b.speed * b.flux / b.voltage)?,
+            torque_factor: g(self.torque_factor * b.flux * b.current / b.torque)?,
+        })
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -69,7 +69,7 @@
 //! - The flux model's `tau_r` keeps the configured R_R (it matters in flux transients only).
 //!
 //! In fixed point the sums are Q7.24 per unit and the 2 x 2 solve runs once per window in
-//! f32 ([`Num::to_f32`]; software floating point on a core without an FPU).
+//! f32 ([`Units::to_f32`]; software floating point on a core without an FPU).
 
 use crate::num::DivSqrt;
 use crate::num::Num;

@@ -128,7 +128,7 @@ pub const RUNNING_STEADY_TORQUE_FRACTION: f32 = 0.1;
 
 /// Configuration of the stator-resistance estimator (designed in f32 SI; in fixed point
 /// the gains carry the per-unit base conversions and the clamps are in the finer
-/// integrator format, [`Num::Fine`]).
+/// integrator format, [`FineIntegrator::Fine`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RsEstimatorConfig<N: Num + FineIntegrator = f32> {
@@ -291,7 +291,7 @@ pub struct RsRunningInputs<N = f32> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RsEstimator<N: Num + FineIntegrator = f32> {
-    /// The integrator of eq. (19) ([`Num::Fine`]: the estimate itself in f32).
+    /// The integrator of eq. (19) ([`FineIntegrator::Fine`]: the estimate itself in f32).
     resistance: N::Fine,
     /// Rs_hat, ohm.
     pub stator_resistance_estimate: N,

@@ -327,8 +327,8 @@ mod tests {
             gain_calibration: &c.gain_calibration,
             preset_rs: c.rs.adapt,
             flux_current: c.i_sd_ref,
-            referred_rotor_resistance: c.referred_rotor_resistance,
-            inv_rotor_time_constant: c.inv_rotor_time_constant,
+            referred_rotor_resistance: c.model.referred_rotor_resistance,
+            inv_rotor_time_constant: c.model.inv_rotor_time_constant,
         }
     }
 
