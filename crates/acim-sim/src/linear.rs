@@ -202,7 +202,7 @@ impl Model {
             j: f64::from(m.inertia()),
             b: f64::from(m.viscous_friction()),
             p: f64::from(m.pole_pairs_f32()),
-            i_sd: f64::from(c.i_sd_ref),
+            i_sd: f64::from(c.cascade.i_sd_ref),
             rs_hat: f64::from(v.drive.rs_initial),
             rr_hat: f64::from(c.model.referred_rotor_resistance),
             blend: f64::from(c.flux.blend) / ts,

@@ -11,7 +11,7 @@ use crate::flux::FluxModelConfig;
 use crate::gain_calibration::GainCalibrationConfig;
 use crate::inverter_tracker::InverterTrackerConfig;
 use crate::math::{is_finite, sqrt};
-use crate::num::{Arithmetic, Num};
+use crate::num::{Angles, Arithmetic, Num, PerUnitBases, Units};
 use crate::observer::{ObserverCoeffs, ObserverConfig};
 use crate::offset_tracker::OffsetTrackerConfig;
 use crate::params::ModelGains;
@@ -147,12 +147,72 @@ pub struct VfDesign<N: Num = f32> {
     pub boost: N,
 }
 
+/// The cascade's own settings the step reads, beside its blocks' designs: designed in
+/// [`DriveDesign::new`], converted by [`CascadeDesign::convert`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CascadeDesign<N: Num + Angles = f32> {
+    /// i_sd*, A.
+    pub i_sd_ref: N,
+    /// Flux above which it counts as settled, Wb.
+    pub settled_flux: N,
+    /// Largest |speed target|, rad/s.
+    pub speed_target_limit: N,
+    /// Initial Rs estimate R0, ohm.
+    pub rs_initial: N,
+    /// The voltage lead of the inverse Park (delay compensation).
+    pub lead: N::Lead,
+    /// Open-loop V/f (commissioning).
+    pub vf: VfDesign<N>,
+    /// Slow periods at a zero target and reference before the zero-speed policy acts
+    /// (>= 1).
+    pub zero_dwell_steps: u32,
+    /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
+    pub zero_speed_stop: bool,
+    /// Control periods per slow period (>= 1; [`DriveConfig::slow_period`]).
+    pub slow_divider: u32,
+    /// 1 / `slow_divider`: the per-period weight of the slow task's means, and the step
+    /// of its current reference's ramp.
+    pub inv_slow_divider: N::Gain,
+}
+
+impl CascadeDesign<f32> {
+    /// These settings in the arithmetic `N` with the bases `b`; fails naming the setting
+    /// the value depends on.
+    pub fn convert<N: Num + Units + Angles>(
+        &self,
+        b: &PerUnitBases,
+    ) -> Result<CascadeDesign<N>, &'static str> {
+        let pu = crate::num::signal_in::<N>;
+        let g = crate::num::gain_in::<N>;
+        Ok(CascadeDesign {
+            i_sd_ref: pu(self.i_sd_ref, b.current, "flux_current")?,
+            settled_flux: pu(self.settled_flux, b.flux, "flux_current")?,
+            speed_target_limit: pu(self.speed_target_limit, b.speed, "max_speed")?,
+            rs_initial: pu(self.rs_initial, b.resistance(), "rs_initial")?,
+            lead: N::lead(self.lead.0, self.lead.1, b).ok_or("delay_periods")?,
+            vf: VfDesign {
+                volts_per_rad_s: g(
+                    self.vf.volts_per_rad_s * b.frequency / b.voltage,
+                    "vf.volts_per_rad_s",
+                )?,
+                boost: pu(self.vf.boost, b.voltage, "vf.boost")?,
+            },
+            zero_dwell_steps: self.zero_dwell_steps,
+            zero_speed_stop: self.zero_speed_stop,
+            slow_divider: self.slow_divider,
+            inv_slow_divider: g(self.inv_slow_divider, "slow_period")?,
+        })
+    }
+}
+
 /// What the control step reads, in the arithmetic `N`: every gain, reciprocal and limit
 /// of the cascade. Built once from a [`DriveDesign`] by [`DriveCoeffs::new`]: each block converts
 /// its own design (the identity for f32 SI; a conversion with the per-unit bases in
 /// fixed point, which checks that every value fits).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveCoeffs<N: Arithmetic = f32> {
+    /// The cascade's own settings ([`CascadeDesign`]).
+    pub cascade: CascadeDesign<N>,
     /// The current loop (d/q PIs, overmodulation reserve).
     pub current_loop: CurrentLoopConfig<N>,
     /// Speed loop: the disturbance PI and the feed-forwards.
@@ -167,37 +227,19 @@ pub struct DriveCoeffs<N: Arithmetic = f32> {
     pub rs: RsEstimatorConfig<N>,
     /// Modulator.
     pub pwm: SvpwmConfig<N>,
-    /// Initial Rs estimate R0, ohm.
-    pub rs_initial: N,
-    /// i_sd*, A.
-    pub i_sd_ref: N,
-    /// Flux above which it counts as settled, Wb.
-    pub settled_flux: N,
     /// The machine model's gains (sigma Ls, the sample ripple, R_R, 1/tau_r, p, 1.5 p).
     pub model: ModelGains<N>,
-    /// Largest |speed target|, rad/s.
-    pub speed_target_limit: N,
-    /// The voltage lead of the inverse Park (delay compensation).
-    pub lead: N::Lead,
     /// Orientation correction.
     pub orientation: OrientationDesign<N>,
     /// Magnetizing sequence.
     pub magnetizing: MagnetizingDesign<N>,
     /// What the supervisor judges against.
     pub limits: SupervisionLimits<N>,
-    /// Open-loop V/f.
-    pub vf: VfDesign<N>,
     /// Field weakening and over-voltage control.
     pub fw: FieldWeakeningDesign<N>,
     // the additions last, so that the default path's field offsets stay as they were
     /// The running Rs law ([`crate::rs_estimator`], "While running").
     pub rs_running: RsRunningConfig<N>,
-    /// Slow periods a zero speed target and reference last before the zero-speed policy
-    /// acts (`zero_speed_dwell`, >= 1).
-    pub zero_dwell_steps: u32,
-    /// [`ZeroSpeedPolicy::Stop`]: switch off after the dwell (false: `Hold`, which keeps
-    /// the flux and reports the hold, [`crate::DriveTelemetry::zero_speed_held`]).
-    pub zero_speed_stop: bool,
     /// The inverter test at start ([`DriveConfig::inverter_identification`]).
     pub inverter_test: InverterTestDesign<N>,
     /// The running offset tracker ([`DriveConfig::offset_tracking`]).
@@ -210,11 +252,6 @@ pub struct DriveCoeffs<N: Arithmetic = f32> {
     pub rr: RrEstimatorConfig<N>,
     /// Dead or stuck current sensors ([`DriveConfig::sensor_check`]).
     pub sensor_check: SensorCheckConfig<N>,
-    /// Control periods per slow period ([`DriveDesign::slow_divider`]).
-    pub slow_divider: u32,
-    /// 1 / `slow_divider`: the slow task's current reference is reached in that many
-    /// equal steps.
-    pub inv_slow_divider: N::Gain,
 }
 
 /// Every derived constant of the drive, built once from a [`DriveConfig`] (outside the
@@ -226,8 +263,9 @@ pub struct DriveDesign {
     pub config: DriveConfig,
     /// Control period Ts, s.
     pub ts: f32,
-    /// Control periods per slow period (>= 1; [`DriveConfig::slow_period`]).
-    pub slow_divider: u32,
+    /// The cascade's own settings: the flux current and its settled threshold, the speed
+    /// target's limit, R0, the lead, V/f, the zero-speed policy, the slow task's divider.
+    pub cascade: CascadeDesign,
     /// The slow period, s: `slow_divider` Ts. The speed loop, field weakening, the
     /// thermal model and the slow supervision's counts are designed for it.
     pub slow_ts: f32,
@@ -247,23 +285,14 @@ pub struct DriveDesign {
     pub rs_running: RsRunningConfig,
     /// Modulator (SVPWM with dead-time compensation).
     pub pwm: SvpwmConfig,
-    /// i_sd*, A.
-    pub i_sd_ref: f32,
     /// q-current limit sqrt(I_max^2 - i_sd*^2), A.
     pub i_sq_limit: f32,
     /// Rotor-flux reference L_M i_sd*, Wb.
     pub flux_reference: f32,
-    /// Flux above which it counts as settled, Wb.
-    pub settled_flux: f32,
     /// The machine model's gains (sigma Ls, the sample ripple, R_R, 1/tau_r, p, 1.5 p).
     pub model: ModelGains,
     /// p.
     pub pole_pairs: f32,
-    /// Slow periods at a zero target and reference before the zero-speed policy acts
-    /// (>= 1).
-    pub zero_dwell_steps: u32,
-    /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
-    pub zero_speed_stop: bool,
     /// The inverter test at start.
     pub inverter_test: InverterTestDesign,
     /// The running current-sensor offset tracker.
@@ -276,8 +305,6 @@ pub struct DriveDesign {
     pub rr_estimator: RrEstimatorConfig,
     /// The dead or stuck current-sensor check.
     pub sensor_check: SensorCheckConfig,
-    /// Largest |speed target|, rad/s.
-    pub speed_target_limit: f32,
     /// Orientation correction.
     pub orientation: OrientationDesign,
     /// Magnetizing sequence.
@@ -504,7 +531,21 @@ impl DriveDesign {
         Ok(Self {
             config: cfg,
             ts,
-            slow_divider,
+            cascade: CascadeDesign {
+                i_sd_ref: i_d,
+                settled_flux: flux_reference * (1.0 - tol),
+                speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
+                rs_initial: cfg.rs_initial,
+                lead: (ts, cfg.delay_periods),
+                vf: VfDesign {
+                    volts_per_rad_s: cfg.vf.volts_per_rad_s,
+                    boost: cfg.vf.boost,
+                },
+                zero_dwell_steps: ((cfg.zero_speed_dwell / slow_ts) as u32).max(1),
+                zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
+                slow_divider,
+                inv_slow_divider: 1.0 / slow_divider as f32,
+            },
             slow_ts,
             current_loop: CurrentLoopConfig::new(&cfg, v_static),
             speed_loop: SpeedLoopConfig::new(
@@ -533,14 +574,10 @@ impl DriveDesign {
                 cfg.device_drop,
                 cfg.dead_time_current_band,
             ),
-            i_sd_ref: i_d,
             i_sq_limit,
             flux_reference,
-            settled_flux: flux_reference * (1.0 - tol),
             model: ModelGains::new(&m, ts),
             pole_pairs: pp,
-            zero_dwell_steps: ((cfg.zero_speed_dwell / slow_ts) as u32).max(1),
-            zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
             inverter_test: InverterTestDesign::new(
                 inverter_test_on,
                 ts,
@@ -590,7 +627,6 @@ impl DriveDesign {
                     rule: "the current-sensor check needs it positive and finite",
                 })?
             },
-            speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
             orientation: OrientationDesign {
                 gain_per_flux: cfg.orientation_gain / flux_reference,
                 // k(i_sq) = max(k, margin |i_sq| / i_sd*) = k max(1, c |i_sq|); the
@@ -712,7 +748,6 @@ impl<N: Arithmetic> DriveCoeffs<N> {
         };
         let pu =
             |x: f32, base: f32, field| crate::num::signal_in::<N>(x, base, field).map_err(named);
-        let gain = |x: f32, field| crate::num::gain_in::<N>(x, field).map_err(named);
         // range checks: everything the drive compares against or limits to must fit
         pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
         pu(cfg.current_limit, b.current, "current_limit")?;
@@ -743,6 +778,7 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             return Err(named("flux_current"));
         }
         Ok(DriveCoeffs {
+            cascade: d.cascade.convert(b).map_err(named)?,
             current_loop: d
                 .current_loop
                 .convert(b)
@@ -765,25 +801,13 @@ impl<N: Arithmetic> DriveCoeffs<N> {
                 .pwm
                 .convert(b)
                 .ok_or_else(|| named("dead_time_current_band"))?,
-            rs_initial: pu(cfg.rs_initial, b.resistance(), "rs_initial")?,
-            i_sd_ref: pu(d.i_sd_ref, b.current, "flux_current")?,
-            settled_flux: pu(d.settled_flux, b.flux, "flux_current")?,
             model: d.model.convert(b).ok_or_else(|| named("machine"))?,
-            speed_target_limit: pu(d.speed_target_limit, b.speed, "max_speed")?,
-            lead: N::lead(d.ts, cfg.delay_periods, b).ok_or_else(|| named("delay_periods"))?,
             orientation: d
                 .orientation
                 .convert(b, cfg.orientation_fade)
                 .map_err(named)?,
             magnetizing: d.magnetizing.convert(b).map_err(named)?,
             limits: d.limits.convert(b).map_err(named)?,
-            vf: VfDesign {
-                volts_per_rad_s: gain(
-                    cfg.vf.volts_per_rad_s * b.frequency / b.voltage,
-                    "vf.volts_per_rad_s",
-                )?,
-                boost: pu(cfg.vf.boost, b.voltage, "vf.boost")?,
-            },
             fw: d.field_weakening.convert(b).map_err(named)?,
             rs_running: d
                 .rs_running
@@ -803,10 +827,6 @@ impl<N: Arithmetic> DriveCoeffs<N> {
                 .convert(b)
                 .ok_or_else(|| named("machine.rotor_resistance"))?,
             sensor_check: d.sensor_check.convert(b).ok_or_else(|| named("machine"))?,
-            zero_dwell_steps: d.zero_dwell_steps,
-            zero_speed_stop: d.zero_speed_stop,
-            slow_divider: d.slow_divider,
-            inv_slow_divider: gain(1.0 / d.slow_divider as f32, "slow_period")?,
             inverter_test: d.inverter_test.convert(b).map_err(named)?,
         })
     }

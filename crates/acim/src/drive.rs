@@ -32,7 +32,7 @@
 //!
 //! With [`DriveConfig::slow_period`] set (0.5-2 ms; 0, the default, runs every stage every
 //! control period), the step runs a slow tick once every
-//! [`DriveDesign::slow_divider`] control periods, as production drives schedule a
+//! [`crate::design::CascadeDesign::slow_divider`] control periods, as production drives schedule a
 //! medium-frequency task beside the current-loop interrupt:
 //!
 //! - **Every period (fast)**: the gate (non-finite samples, over-current, bus window), sense,
@@ -548,7 +548,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         modulator: M,
     ) -> Result<Self, ConfigError> {
         let coeffs = DriveCoeffs::new(&design, &bases)?;
-        let rs_initial = coeffs.rs_initial;
+        let rs_initial = coeffs.cascade.rs_initial;
         let mut drive = Self {
             supervision: Supervision {
                 sup: Supervisor::new(),
@@ -689,7 +689,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if !speed.is_finite() {
             return Err(CommandError::NotFinite);
         }
-        let lim = self.cfg.coeffs.speed_target_limit;
+        let lim = self.cfg.coeffs.cascade.speed_target_limit;
         self.refs.speed.speed_target = speed.clamp(-lim, lim);
         Ok(())
     }
@@ -856,7 +856,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.refs.speed.far_side = false;
         self.refs.speed.pi.reset();
         self.refs.speed.i_sq_ref = N::ZERO;
-        self.refs.fw = FieldWeakening::new(self.cfg.coeffs.i_sd_ref);
+        self.refs.fw = FieldWeakening::new(self.cfg.coeffs.cascade.i_sd_ref);
         self.refs.zero_steps = 0;
         self.refs.commanded = false;
         self.loops.cur = CurrentLoop::new();
@@ -954,7 +954,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // 5b. zero-speed policy: a zero target and reference held for the dwell switch off
         // (`Stop`) or are reported (`Hold`)
         let zero_held = self.zero_speed_held(magnetizing, slow);
-        if zero_held && self.cfg.coeffs.zero_speed_stop && self.refs.commanded {
+        if zero_held && self.cfg.coeffs.cascade.zero_speed_stop && self.refs.commanded {
             return self.stop_at_zero_speed();
         }
         // 6-7. current control and modulation
@@ -1082,7 +1082,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     fn zero_speed_held(&mut self, magnetizing: bool, slow: bool) -> bool {
         let r = &mut self.refs;
         if !slow {
-            return r.zero_steps >= self.cfg.coeffs.zero_dwell_steps;
+            return r.zero_steps >= self.cfg.coeffs.cascade.zero_dwell_steps;
         }
         if !magnetizing && r.speed.speed_target == N::ZERO && r.speed.speed_reference == N::ZERO {
             r.zero_steps = r.zero_steps.saturating_add(1);
@@ -1090,7 +1090,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             r.zero_steps = 0;
             r.commanded = r.commanded || !magnetizing;
         }
-        r.zero_steps >= self.cfg.coeffs.zero_dwell_steps
+        r.zero_steps >= self.cfg.coeffs.cascade.zero_dwell_steps
     }
 
     /// The supervisor's plausibility check of this step's estimates: finite and Rs
@@ -1119,7 +1119,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     fn slow_tick(&mut self) -> bool {
         let r = &mut self.refs;
         if r.slow_count == 0 {
-            r.slow_count = self.cfg.coeffs.slow_divider.saturating_sub(1);
+            r.slow_count = self.cfg.coeffs.cascade.slow_divider.saturating_sub(1);
             true
         } else {
             r.slow_count -= 1;
@@ -1329,7 +1329,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
         // (its error is the d-axis residual), the resistance adapts only inside its gate
         probe.begin(StepRegion::RsEstimator);
-        let flux_settled = self.est.flux.rotor_flux >= self.cfg.coeffs.settled_flux;
+        let flux_settled = self.est.flux.rotor_flux >= self.cfg.coeffs.cascade.settled_flux;
         let ws_prev = self.est.flux.stator_frequency;
         let rs = self.estimate_rs(m, frame_held, flux_settled, ws_prev);
         probe.end(StepRegion::RsEstimator);
@@ -1364,7 +1364,11 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let far_side_error = {
             let ws = est.flux.stator_frequency;
             let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
-            if far_side_mode && against && !frame_held && est.flux.rotor_flux >= c.settled_flux {
+            if far_side_mode
+                && against
+                && !frame_held
+                && est.flux.rotor_flux >= c.cascade.settled_flux
+            {
                 let o = &c.orientation;
                 let w = crate::orientation::fade(o, ws);
                 let load = N::gain(o.far_side_load_factor, m.i_dq.q.abs());
@@ -1460,7 +1464,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let c = &self.cfg.coeffs;
         let est = &mut self.est;
         let i = m.i_dq;
-        let flux_settled = est.flux.rotor_flux >= c.settled_flux;
+        let flux_settled = est.flux.rotor_flux >= c.cascade.settled_flux;
         let ws_prev = est.flux.stator_frequency;
         let weakened = self.prev.fw_active;
         // (also while a flying start magnetizes in the turning frame: the residual of a
@@ -1521,7 +1525,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 inverter_test: &c.inverter_test,
                 gain_calibration: &c.gain_calibration,
                 preset_rs: c.rs.adapt,
-                flux_current: c.i_sd_ref,
+                flux_current: c.cascade.i_sd_ref,
                 referred_rotor_resistance: c.model.referred_rotor_resistance,
                 inv_rotor_time_constant: c.model.inv_rotor_time_constant,
             },
@@ -1569,7 +1573,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         limit: VoltageLimit<N>,
         slow: bool,
     ) -> Result<Dq<N>, FaultReason> {
-        let periods = self.cfg.coeffs.slow_divider;
+        let periods = self.cfg.coeffs.cascade.slow_divider;
         if magnetizing {
             let i_ref = self.magnetize(m, e)?;
             if periods > 1 {
@@ -1581,7 +1585,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // running: the slow task's references, reached over its period, from the
         // estimates' means over it (with no slow task every period is a tick, on this
         // period's estimates; one call site, so that the slow stages are inlined once)
-        let inv_periods = self.cfg.coeffs.inv_slow_divider;
+        let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
         let means;
         let e = if periods > 1 {
             self.refs.means.add(&e.observer, inv_periods);
@@ -1650,7 +1654,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         r.fw.update(
             &c.fw,
             &FieldWeakeningInputs {
-                flux_current: c.i_sd_ref,
+                flux_current: c.cascade.i_sd_ref,
                 transient_inductance: c.model.transient_inductance,
                 torque_current_min: c.speed_loop.pi.out_min,
                 torque_current_max: c.speed_loop.pi.out_max,
@@ -1778,7 +1782,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             m.sc,
             m.angle,
             e.stator_frequency,
-            c.lead,
+            c.cascade.lead,
         );
         let v_ab = inverse_park(v, rot);
         // dead-time compensation needs the current sign while the voltage acts: predict it
@@ -1879,7 +1883,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         }
         let ol = &mut r.open_loop;
         ol.frequency = N::gain(c.model.pole_pairs, r.speed.speed_reference);
-        let mag = (c.vf.boost + N::gain(c.vf.volts_per_rad_s, ol.frequency.abs()))
+        let mag = (c.cascade.vf.boost + N::gain(c.cascade.vf.volts_per_rad_s, ol.frequency.abs()))
             .clamp(N::ZERO, linear_limit(inp.dc_bus));
         let sc = self.loops.sincos.sin_cos(ol.angle);
         let v = Dq { d: mag, q: N::ZERO };
@@ -1948,7 +1952,7 @@ mod tests {
     /// Steps `d` with [`following`] samples up to and through its next slow tick (at
     /// most one slow period).
     fn slow_period(d: &mut Drive) {
-        for _ in 0..d.design().slow_divider {
+        for _ in 0..d.design().cascade.slow_divider {
             let tick = d.slow_tick_due();
             d.step(&following(d));
             if tick {

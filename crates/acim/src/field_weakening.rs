@@ -479,7 +479,7 @@ mod tests {
     fn inputs(d: &DriveDesign, ws: f32, dc_bus: f32, settled: bool) -> FieldWeakeningInputs<f32> {
         let v = linear_limit(dc_bus) * 0.98;
         FieldWeakeningInputs {
-            flux_current: d.i_sd_ref,
+            flux_current: d.cascade.i_sd_ref,
             transient_inductance: d.model.transient_inductance,
             torque_current_min: d.speed_loop.pi.out_min,
             torque_current_max: d.speed_loop.pi.out_max,
@@ -505,12 +505,12 @@ mod tests {
     #[test]
     fn below_base_speed_the_static_limits_pass_unchanged() {
         let d = design(false);
-        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let mut fw = FieldWeakening::new(d.cascade.i_sd_ref);
         let out = fw.update(
             &d.field_weakening,
             &inputs(&d, 50.0, d.config.dc_bus_max, true),
         );
-        assert_eq!(out.i_sd_ref, d.i_sd_ref);
+        assert_eq!(out.i_sd_ref, d.cascade.i_sd_ref);
         assert_eq!(
             (out.i_sq_min, out.i_sq_max),
             (d.speed_loop.pi.out_min, d.speed_loop.pi.out_max)
@@ -521,13 +521,15 @@ mod tests {
     #[test]
     fn beyond_base_speed_the_flux_falls_inside_the_current_circle_and_latches() {
         let d = design(false);
-        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let mut fw = FieldWeakening::new(d.cascade.i_sd_ref);
         let base = linear_limit(d.config.dc_bus_max) / d.flux_reference;
         let out = fw.update(
             &d.field_weakening,
             &inputs(&d, 2.0 * base, d.config.dc_bus_max, true),
         );
-        assert!(out.i_sd_ref < d.i_sd_ref && out.i_sd_ref >= d.field_weakening.min_flux_current);
+        assert!(
+            out.i_sd_ref < d.cascade.i_sd_ref && out.i_sd_ref >= d.field_weakening.min_flux_current
+        );
         let i_max = d.field_weakening.current_limit;
         assert!(out.i_sd_ref.powi(2) + out.i_sq_max.powi(2) <= i_max * i_max * 1.0001);
         assert!(fw.active());
@@ -549,7 +551,7 @@ mod tests {
     fn over_voltage_control_folds_back_the_regenerative_side_only() {
         let d = design(true);
         let f = &d.field_weakening;
-        let mut fw = FieldWeakening::new(d.i_sd_ref);
+        let mut fw = FieldWeakening::new(d.cascade.i_sd_ref);
         let mid = f.regen_start + 0.5 / f.inv_regen_band;
         let x = inputs(&d, 50.0, mid, true);
         let out = fw.update(f, &x);

@@ -545,7 +545,7 @@ mod tests {
             speed,
             load_torque: load,
             limits: FieldWeakeningOutput {
-                i_sd_ref: d.i_sd_ref,
+                i_sd_ref: d.cascade.i_sd_ref,
                 i_sq_min: d.speed_loop.pi.out_min,
                 i_sq_max: d.speed_loop.pi.out_max,
                 torque_limited: false,

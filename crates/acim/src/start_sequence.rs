@@ -326,7 +326,7 @@ mod tests {
             inverter_test: &c.inverter_test,
             gain_calibration: &c.gain_calibration,
             preset_rs: c.rs.adapt,
-            flux_current: c.i_sd_ref,
+            flux_current: c.cascade.i_sd_ref,
             referred_rotor_resistance: c.model.referred_rotor_resistance,
             inv_rotor_time_constant: c.model.inv_rotor_time_constant,
         }
@@ -356,10 +356,10 @@ mod tests {
             applied_voltage: Dq { d: 0.0, q: 0.0 },
             inv_dc_bus: 1.0 / 325.0,
             current: Dq {
-                d: c.i_sd_ref,
+                d: c.cascade.i_sd_ref,
                 q: 0.0,
             },
-            stator_resistance: c.rs_initial,
+            stator_resistance: c.cascade.rs_initial,
             rotor_flux: 0.0,
             flux_settled,
             filtered_residual: 1.0,
@@ -376,7 +376,7 @@ mod tests {
             assert_eq!(s.count(), k);
             let out = s.update(&cfg, &at_rest(&c, false)).unwrap();
             assert!(!out.magnetized && out.caught.is_none() && out.rs_preset.is_none());
-            assert_eq!(out.i_sd_ref, c.i_sd_ref);
+            assert_eq!(out.i_sd_ref, c.cascade.i_sd_ref);
         }
         s.count();
         assert!(s.update(&cfg, &at_rest(&c, true)).unwrap().magnetized);
@@ -423,7 +423,7 @@ mod tests {
             s.count();
             let out = s.update(&cfg, &at_rest(&c, true)).unwrap();
             if s.phase(&cfg) == StartPhase::InverterTest {
-                levels |= out.i_sd_ref < c.i_sd_ref;
+                levels |= out.i_sd_ref < c.cascade.i_sd_ref;
             }
             if out.magnetized {
                 handed = true;

@@ -1047,7 +1047,7 @@ mod tests {
             // over-speed trip: above the speed targets, below a runaway, and not reached
             // from rest at full torque within the observer's slowest time constant
             let rpm = l.max_speed * RAD_S_TO_RPM;
-            assert!(rpm <= 3600.0 && d.speed_target_limit < l.max_speed);
+            assert!(rpm <= 3600.0 && d.cascade.speed_target_limit < l.max_speed);
             let m = &cfg.machine;
             let torque = m.torque_constant(d.flux_reference) * d.i_sq_limit;
             assert!(torque / m.inertia() <= l.max_speed * 120.0 * 1.0001);

@@ -114,7 +114,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
         if !is_finite(speed) {
             return Err(CommandError::NotFinite);
         }
-        let limit = self.design().speed_target_limit;
+        let limit = self.design().cascade.speed_target_limit;
         let s = crate::math::clamp(speed, -limit, limit);
         self.set_speed_target(Q24(to_q24(s / self.bases().speed)))
     }

@@ -705,7 +705,7 @@ mod tests {
             c.model.back_emf,
             c.model.torque_factor,
             c.speed_loop.speed_per_volt,
-            c.lead,
+            c.cascade.lead,
             c.pwm.voltage_limit_per_inv_bus,
         ];
         let mut shifts = [false; 63];
