@@ -584,14 +584,18 @@ impl DriveDesign {
                 i_d,
                 m.stator_resistance(),
             ),
-            offset_tracker: OffsetTrackerConfig::new(
-                cfg.offset_tracking,
-                ts,
-                m.stator_resistance(),
-                OFFSET_FRACTION * cfg.overcurrent_trip,
-                i_d,
-                m.rotor_time_constant(),
-            ),
+            // with a slow task the tracker adapts once per slow period, on its mean
+            offset_tracker: OffsetTrackerConfig {
+                exact_turn: slow_divider > 1,
+                ..OffsetTrackerConfig::new(
+                    cfg.offset_tracking,
+                    slow_ts,
+                    m.stator_resistance(),
+                    OFFSET_FRACTION * cfg.overcurrent_trip,
+                    i_d,
+                    m.rotor_time_constant(),
+                )
+            },
             // the tracker moves the voltage error the Rs estimate carries (as an apparent
             // resistance) into the correction: only with the running Rs law, which takes
             // it back out of the estimate (crate::inverter_tracker, "Gates")

@@ -38,8 +38,10 @@
 //! - **Every period (fast)**: the gate (non-finite samples, over-current, bus window), sense,
 //!   the observer, the Rs estimator, flux and angle, the estimates finite
 //!   ([`Supervisor::estimates_valid`]), the magnetizing sequence, current control, the
-//!   control monitor and the current-sensor check, modulation and the trackers.
-//! - **Each slow tick**: field weakening, the speed loop (ramp, hold, regeneration limit,
+//!   control monitor and the current-sensor check, modulation, the inverter tracker, and
+//!   the offset drift subtracted from the samples.
+//! - **Each slow tick**: the offset tracker's model on the slow period's mean of its
+//!   voltage signature (summed every period), field weakening, the speed loop (ramp, hold, regeneration limit,
 //!   far-side mode, PI, thermal fold-back), stall, overload and blind detection, the load
 //!   and speed ranges of [`Supervisor::plausibility`], the limit-cycle check and the
 //!   zero-speed policy. Their designs are made for the slow period
@@ -930,7 +932,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let slow = self.slow_tick();
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
-        let m = self.sense(inp, !magnetizing);
+        let m = self.sense(inp, !magnetizing, slow);
         probe.end(StepRegion::ClarkePark);
         // 3. estimate; the frame is held while magnetizing at rest and turns with the
         // rotor on a flying start
@@ -1224,7 +1226,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// Sense stage: Clarke (two or three phases), the tracked offset drift subtracted
     /// while `running` ([`crate::offset_tracker`]), and Park at the frame angle.
     #[inline(always)]
-    fn sense(&mut self, inp: &DriveInputs<N>, running: bool) -> Measured<N> {
+    fn sense(&mut self, inp: &DriveInputs<N>, running: bool, slow: bool) -> Measured<N> {
         // the last step's duties were made for the bus measured then; they act over the
         // period this sample opens, at the bus measured now: a rippling or sagging bus
         // scales the voltage they apply (duty x bus), and the estimators use that voltage
@@ -1252,7 +1254,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         };
         let angle = self.est.flux.angle;
         let sc = self.loops.sincos.sin_cos(angle);
-        let i_ab = self.track_offsets(i_ab, applied.v_ab, running);
+        let i_ab = self.track_offsets(i_ab, applied.v_ab, running, slow);
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (ModelGains::sample_ripple)
         let i = park(i_ab, sc);
@@ -1278,35 +1280,51 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// The running offset tracker ([`crate::offset_tracker`]): the tracked drift (last
     /// step's estimate) out of the current `i_ab` (A); the tracker reads the voltage `v_ab`
     /// applied over the past period (V) less Rs_hat times that current (its DC part: the
-    /// drift's). Returns the corrected current.
+    /// drift's). With a slow task it sums that every period and adapts on the slow
+    /// period's mean at the tick (`slow`). Returns the corrected current.
     #[inline(always)]
     fn track_offsets(
         &mut self,
         i_ab: AlphaBeta<N>,
         v_ab: AlphaBeta<N>,
         running: bool,
+        slow: bool,
     ) -> AlphaBeta<N> {
         let prev = &self.prev;
-        let o = self.sensing.tracker.offset;
+        let tracker = &mut self.sensing.tracker;
+        let o = tracker.offset;
         let i_ab = AlphaBeta {
             alpha: i_ab.alpha - o.alpha,
             beta: i_ab.beta - o.beta,
         };
         let rs = prev.stator_resistance;
-        let v = v_ab;
-        self.sensing.tracker.update(
+        let mut u_ab = AlphaBeta {
+            alpha: v_ab.alpha - rs * i_ab.alpha,
+            beta: v_ab.beta - rs * i_ab.beta,
+        };
+        let cascade = &self.cfg.coeffs.cascade;
+        if cascade.slow_divider > 1 {
+            if !running {
+                tracker.take_mean();
+            } else {
+                tracker.accumulate(u_ab, cascade.inv_slow_divider);
+                if !slow {
+                    return i_ab;
+                }
+                u_ab = tracker.take_mean();
+            }
+        }
+        tracker.update(
             &self.cfg.coeffs.offset_tracker,
             &OffsetTrackerInputs {
-                u_ab: AlphaBeta {
-                    alpha: v.alpha - rs * i_ab.alpha,
-                    beta: v.beta - rs * i_ab.beta,
-                },
+                u_ab,
                 stator_frequency: prev.stator_frequency,
                 running,
                 ramping: prev.ramping,
                 i_sq_ref: prev.i_sq_ref,
                 far_side: prev.far_side,
             },
+            &mut self.loops.sincos,
         );
         i_ab
     }
@@ -2426,6 +2444,7 @@ mod tests {
                 phase_currents: [0.05, 0.0, 0.0],
                 dc_bus: 325.0,
             },
+            false,
             false,
         );
         assert!(

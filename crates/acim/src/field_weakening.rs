@@ -235,7 +235,7 @@ pub struct FieldWeakening<N> {
     active: bool,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> FieldWeakening<N> {
+impl<N: Num + DivSqrt> FieldWeakening<N> {
     /// The state of a start: no trim, the optimiser at the rated flux current
     /// `flux_current` (A).
     pub fn new(flux_current: N) -> Self {

@@ -209,13 +209,13 @@ pub struct SpeedSearch<N: Num = f32> {
     pub measured_speed: N,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> Default for SpeedSearch<N> {
+impl<N: Num + DivSqrt> Default for SpeedSearch<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num + DivSqrt + DivSqrt> SpeedSearch<N> {
+impl<N: Num + DivSqrt> SpeedSearch<N> {
     /// Before the start.
     pub fn new() -> Self {
         let z = Dq {

@@ -208,7 +208,7 @@ pub struct SpeedOscillation<N: Num = f32> {
     blocks: u32,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> SpeedOscillation<N> {
+impl<N: Num + DivSqrt> SpeedOscillation<N> {
     /// One period: `error` = Omega_hat - Omega* (rad/s); `steady` false while the
     /// reference ramps (or the drive magnetizes), which restarts the count. Never
     /// reports with the check off.
@@ -378,7 +378,7 @@ impl Supervisor {
     /// still fault on a non-finite or over-current sample (bus limits apply only when the
     /// drive is about to switch); otherwise check the raw samples and run.
     #[inline(always)]
-    pub fn gate<N: Num + DivSqrt + DivSqrt>(
+    pub fn gate<N: Num + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         currents: [N; 3],
@@ -407,7 +407,7 @@ impl Supervisor {
     /// finite and the Rs estimate off its bounds (with `rs_bound_faults`);
     /// `EstimatorOutOfRange` otherwise.
     #[inline(always)]
-    pub fn estimates_valid<N: Num + DivSqrt + DivSqrt>(
+    pub fn estimates_valid<N: Num + DivSqrt>(
         limits: &SupervisionLimits<N>,
         h: &EstimatorHealth<N>,
     ) -> Option<FaultReason> {
@@ -426,7 +426,7 @@ impl Supervisor {
     /// first), and while the speed PI is saturated it means a stall; an estimated speed
     /// beyond `max_speed` is over-speed.
     #[inline(always)]
-    pub fn plausibility<N: Num + DivSqrt + DivSqrt>(
+    pub fn plausibility<N: Num + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         h: &EstimatorHealth<N>,
@@ -456,7 +456,7 @@ impl Supervisor {
     /// Magnetizing timeout: the flux (and the standstill Rs identification) must settle
     /// within `magnetizing_timeout_steps`.
     #[inline(always)]
-    pub fn magnetizing<N: Num + DivSqrt + DivSqrt>(
+    pub fn magnetizing<N: Num + DivSqrt>(
         &self,
         limits: &SupervisionLimits<N>,
         magnetizing_steps: u32,
@@ -478,7 +478,7 @@ impl Supervisor {
     /// rotor speed) while the rotor runs away. A reversal at the torque limit crosses the
     /// band in a few milliseconds.
     #[inline(always)]
-    pub fn blind<N: Num + DivSqrt + DivSqrt>(
+    pub fn blind<N: Num + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         speed_pi_saturated: bool,
@@ -501,7 +501,7 @@ impl Supervisor {
     /// below 10 % of the reference, integrated with a leak (up one step while stalled,
     /// down one step otherwise) beyond `stall_steps`.
     #[inline(always)]
-    pub fn stall<N: Num + DivSqrt + DivSqrt>(
+    pub fn stall<N: Num + DivSqrt>(
         &mut self,
         limits: &SupervisionLimits<N>,
         speed_pi_saturated: bool,
@@ -593,13 +593,13 @@ pub struct ControlMonitor<N: Num = f32> {
     pub dc_current: AlphaBeta<N>,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> Default for ControlMonitor<N> {
+impl<N: Num + DivSqrt> Default for ControlMonitor<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num + DivSqrt + DivSqrt> ControlMonitor<N> {
+impl<N: Num + DivSqrt> ControlMonitor<N> {
     /// All means at zero.
     pub fn new() -> Self {
         Self {
@@ -702,13 +702,13 @@ pub struct OffsetMonitor<N: Num = f32> {
     pub idle_steps: u32,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> Default for OffsetMonitor<N> {
+impl<N: Num + DivSqrt> Default for OffsetMonitor<N> {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<N: Num + DivSqrt + DivSqrt> OffsetMonitor<N> {
+impl<N: Num + DivSqrt> OffsetMonitor<N> {
     /// Nothing measured yet.
     pub fn new() -> Self {
         Self {
@@ -754,7 +754,7 @@ impl<N: Num + DivSqrt + DivSqrt> OffsetMonitor<N> {
 impl Supervisor {
     /// Start check of the current sensors: a settled idle offset beyond `offset_limit`
     /// on a measured channel is a sensor fault.
-    pub fn check_offsets<N: Num + DivSqrt + DivSqrt>(
+    pub fn check_offsets<N: Num + DivSqrt>(
         &self,
         limits: &SupervisionLimits<N>,
         m: &OffsetMonitor<N>,
@@ -777,7 +777,7 @@ impl Supervisor {
 /// Checks on the raw samples, before anything uses them: non-finite, over-current (the
 /// third phase derived with two shunts), bus window.
 #[inline(always)]
-pub fn check_samples<N: Num + DivSqrt + DivSqrt>(
+pub fn check_samples<N: Num + DivSqrt>(
     limits: &SupervisionLimits<N>,
     currents: [N; 3],
     dc_bus: N,
@@ -803,7 +803,7 @@ pub fn check_samples<N: Num + DivSqrt + DivSqrt>(
 
 #[cold]
 #[inline(never)]
-fn classify_bad_samples<N: Num + DivSqrt + DivSqrt>(
+fn classify_bad_samples<N: Num + DivSqrt>(
     limits: &SupervisionLimits<N>,
     a: N,
     b: N,

@@ -92,7 +92,7 @@ pub struct ThermalModel<N = f32> {
     folded: bool,
 }
 
-impl<N: Num + DivSqrt + DivSqrt> ThermalModel<N> {
+impl<N: Num + DivSqrt> ThermalModel<N> {
     /// A cold machine.
     pub fn new() -> Self {
         Self {
