@@ -533,8 +533,8 @@ class Settings(unittest.TestCase):
         # another format version (CRC made to match): refused too
         import zlib
         other = bytearray(m.settings_pages())
-        other[4:6] = (3).to_bytes(2, "little")
-        other[68:72] = zlib.crc32(bytes(other[:68])).to_bytes(4, "little")
+        other[4:6] = (4).to_bytes(2, "little")
+        other[72:76] = zlib.crc32(bytes(other[:72])).to_bytes(4, "little")
         m6 = self.boot(bytes(other))
         self.assertIn("page A refused: record of another format version", m6.output())
         self.assertEqual(self.get(m6, "current_limit"), default_limit)
@@ -570,7 +570,7 @@ class Settings(unittest.TestCase):
         self.assertIn("ok current_limit applied", command(m, "set current_limit 3.5"))
         self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
         ops = m.flash_ops
-        self.assertEqual(ops, 1 + 9, "an erase and nine double words")
+        self.assertEqual(ops, 1 + 10, "an erase and ten double words")
         for op in range(1, ops + 1):
             with self.subTest(cut_during_operation=op):
                 m = self.boot(good)
@@ -927,8 +927,22 @@ class PowerStage(unittest.TestCase):
         through its divider. `speed 500`, `start`: the motor reaches 500 rpm with the
         estimate tracking it; a 1.5 N m brake (the paper's fig 7 step): 1 s later the speed
         is back within 5 rpm and the estimate within 3 rpm of the motor."""
+        self.drive_to_500_rpm_and_step("")
+
+    def test_power_stage_build_with_a_1_ms_slow_task(self):
+        """The same with `set slow_period 1`: the speed loop, field weakening, the offset
+        tracker and the slow supervision once per millisecond, inside the control
+        interrupt, on the board's CORDIC; the same bounds."""
+        self.drive_to_500_rpm_and_step("1")
+
+    def drive_to_500_rpm_and_step(self, slow_period):
         motor = fil.InductionMotorLoad()
         m = booted(load=motor)
+        if slow_period:
+            self.assertIn("ok slow_period applied",
+                          command(m, f"set slow_period {slow_period}", 5))
+            # the rebuilt drive measures its offsets again before it starts
+            m.run(600)
         self.assertIn("ok", command(m, "speed 500", 5))
         self.assertIn("ok", command(m, "start", 5))
         command(m, "stream on", 5)
@@ -937,8 +951,8 @@ class PowerStage(unittest.TestCase):
         self.assertGreater(len(frames), 10)
         f = frames[-1].split("*")[0].split(",")
         state, fault, est = int(f[2]), int(f[3]), int(f[5]) / 10
-        print(f"\npower stage closed loop: motor {motor.speed_rpm:.1f} rpm, estimate {est}",
-              file=sys.stderr)
+        print(f"\npower stage closed loop (slow period {slow_period or 0} ms): motor "
+              f"{motor.speed_rpm:.1f} rpm, estimate {est}", file=sys.stderr)
         self.assertEqual((state, fault), (2, 0), frames[-1])
         self.assertLess(abs(motor.speed_rpm - 500), 25, frames[-1])
         self.assertLess(abs(est - motor.speed_rpm), 25, frames[-1])
@@ -952,7 +966,6 @@ class PowerStage(unittest.TestCase):
         self.assertEqual((state, fault), (2, 0), frames[-1])
         self.assertLess(abs(motor.speed_rpm - 500), 5, frames[-1])
         self.assertLess(abs(est - motor.speed_rpm), 3, frames[-1])
-
 
 
 class Rearm(unittest.TestCase):

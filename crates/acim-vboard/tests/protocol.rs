@@ -3,6 +3,7 @@
 //! changes the drive (its state, its settings, the board's event log).
 
 use acim_firmware_core::protocol::{command_frame, unframe};
+use acim_firmware_core::settings::FIELD_COUNT;
 use acim_vboard::server::{self, Options, Pace, ServerHandle};
 use std::io::{BufRead, BufReader, Write};
 use std::net::{TcpListener, TcpStream};
@@ -74,7 +75,7 @@ fn bad_input_gets_an_error_and_changes_nothing() {
     let srv = start();
     let mut c = Conn::open(&srv);
     let settings = c.ask(b"get\r\n");
-    assert_eq!(settings.len(), 15, "{settings:?}");
+    assert_eq!(settings.len(), FIELD_COUNT + 1, "{settings:?}");
     assert_eq!(c.ask(b"status\r\n"), ["ok state 0 fault 00"]);
 
     let cases: &[(&[u8], &str)] = &[

@@ -795,7 +795,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
 
     /// Swaps in a new design between two steps (built outside the interrupt with
     /// [`DriveDesign::new`]). While the drive is active only a retuning is accepted: the
-    /// machine model, the period and the current sensing must stay those of the running
+    /// machine model, the period, the slow period and the current sensing must stay those of the running
     /// design (anything else needs `Idle`). A design whose coefficients do not fit this
     /// arithmetic is refused and the old one kept. A design with another inverter
     /// compensation (dead time, device drop or current band) drops the correction the
@@ -804,6 +804,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let (old, new) = (&self.cfg.design.config, &design.config);
         let retune = old.machine == new.machine
             && old.control_period == new.control_period
+            && old.slow_period == new.slow_period
             && old.current_sensing == new.current_sensing;
         let state = self.supervision.sup.state();
         if !(retune || state == DriveState::Idle) {
@@ -2356,6 +2357,32 @@ mod tests {
             &d.coeffs().inverter_tracker,
             d.refs.start.inverter.correction_duty
         ));
+    }
+
+    /// A running drive takes a retuning but not another slow period (its slow stages'
+    /// designs, counts and the means and ramp between the rates are made for one): that
+    /// needs `Idle`, where it is taken.
+    #[test]
+    fn the_slow_period_changes_only_when_idle() {
+        let mut d = drive();
+        d.set_speed_target(50.0).unwrap();
+        d.start().unwrap();
+        for _ in 0..10 {
+            d.step(&following(&d));
+        }
+        assert_ne!(d.state(), DriveState::Idle);
+        let mut cfg = *d.config();
+        cfg.slow_period = 1e-3;
+        assert!(matches!(
+            d.set_design(DriveDesign::new(cfg).unwrap()),
+            Err(CommandError::WrongState(_))
+        ));
+        assert_eq!(d.config().slow_period, 0.0);
+        let mut idle_drive = drive();
+        idle_drive
+            .set_design(DriveDesign::new(cfg).unwrap())
+            .unwrap();
+        assert_eq!(idle_drive.coeffs().cascade.slow_divider, 5);
     }
 
     /// A calibrated gain ratio is dropped with a design that does not calibrate (the

@@ -39,11 +39,13 @@ pub const SETTINGS_PAGES: u32 = 2;
 /// next one.
 pub const SETTINGS_PAGE_NUMBER: u8 = 126;
 /// Version of the record layout; a record of another version is refused.
-pub const SETTINGS_VERSION: u16 = 2;
+pub const SETTINGS_VERSION: u16 = 3;
+/// The format before the slow period: its 14 values are read, the slow task off.
+const VERSION_WITHOUT_SLOW_PERIOD: u16 = 2;
 /// First bytes of a record.
 pub const MAGIC: [u8; 4] = *b"ACIM";
 /// Number of settable values.
-pub const FIELD_COUNT: usize = 14;
+pub const FIELD_COUNT: usize = 15;
 /// Length of the record, bytes (a multiple of 8: whole flash double words).
 pub const RECORD_LEN: usize = (VALUES + 4 * FIELD_COUNT + 4).div_ceil(8) * 8;
 /// Offset of the sequence number in a record.
@@ -51,7 +53,7 @@ const SEQ: usize = 8;
 /// Offset of the first value in a record.
 const VALUES: usize = 12;
 /// Offset of the CRC in a record.
-const CRC: usize = VALUES + 4 * FIELD_COUNT;
+pub(crate) const CRC: usize = VALUES + 4 * FIELD_COUNT;
 
 /// One settable value: its name on the serial link (the field name of [`DriveConfig`] or
 /// [`MachineData`]) and its unit.
@@ -83,6 +85,7 @@ pub const FIELDS: [Field; FIELD_COUNT] = [
     f("pole_pairs", ""),
     f("inertia", "kg m^2"),
     f("viscous_friction", "N m s/rad"),
+    f("slow_period", "ms"),
 ];
 
 // indices in FIELDS
@@ -100,6 +103,7 @@ const MUTUAL_INDUCTANCE: usize = 10;
 const POLE_PAIRS: usize = 11;
 const INERTIA: usize = 12;
 const VISCOUS_FRICTION: usize = 13;
+const SLOW_PERIOD: usize = 14;
 
 /// The index in [`FIELDS`] of a name.
 pub fn field_index(name: &[u8]) -> Option<usize> {
@@ -219,6 +223,7 @@ impl Settings {
                 m.pole_pairs() as f32,
                 m.inertia(),
                 m.viscous_friction(),
+                c.slow_period * 1000.0,
             ],
         }
     }
@@ -288,6 +293,7 @@ impl Settings {
         cfg.overcurrent_trip = v[3];
         cfg.flux_current = v[4];
         cfg.max_speed = v[5] * RPM_TO_RAD_S;
+        cfg.slow_period = v[SLOW_PERIOD] / 1000.0;
         // bounds the library would report under a field `set` does not know (`machine`,
         // `regen_min_frequency`, `flying_start`), or does not have
         machine_bounds(&cfg, changed)?;
@@ -343,19 +349,24 @@ impl Settings {
         let u16_at = |o: usize| u16::from_le_bytes([r[o], r[o + 1]]);
         let u32_at = |o: usize| u32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]);
         let version = u16_at(4);
-        if version != SETTINGS_VERSION {
-            return Err(LoadError::Version(version));
-        }
-        if u16_at(6) as usize != FIELD_COUNT {
+        // a record of the format before the slow period holds its first values (a board
+        // keeps its settings across the update, the slow task off)
+        let count = match version {
+            SETTINGS_VERSION => FIELD_COUNT,
+            VERSION_WITHOUT_SLOW_PERIOD => SLOW_PERIOD,
+            _ => return Err(LoadError::Version(version)),
+        };
+        if u16_at(6) as usize != count {
             return Err(LoadError::Length);
         }
-        if crc32(&r[..CRC]) != u32_at(CRC) {
+        let crc_at = VALUES + 4 * count;
+        if crc32(&r[..crc_at]) != u32_at(crc_at) {
             return Err(LoadError::Crc);
         }
         let mut s = Settings {
             values: [0.0; FIELD_COUNT],
         };
-        for (i, v) in s.values.iter_mut().enumerate() {
+        for (i, v) in s.values.iter_mut().take(count).enumerate() {
             *v = f32::from_bits(u32_at(VALUES + 4 * i));
         }
         s.drive_config().map_err(LoadError::Invalid)?;
@@ -766,7 +777,7 @@ mod tests {
         assert_eq!(cfg, board::drive_config());
         assert!(Drive::new(cfg).is_ok());
         assert_eq!(RECORD_LEN % 8, 0);
-        assert_eq!(RECORD_LEN, 72);
+        assert_eq!(RECORD_LEN, 80);
     }
 
     #[test]
@@ -813,14 +824,47 @@ mod tests {
         }
     }
 
+    /// The slow task is a setting in milliseconds: 0 (off, the default) or 0.5-2 ms, the
+    /// library's rule, named; a record of the format before it keeps its values with the
+    /// slow task off.
+    #[test]
+    fn the_slow_period_is_a_setting_and_old_records_load_without_it() {
+        let d = Settings::defaults();
+        assert_eq!(d.get(idx("slow_period")), 0.0);
+        let s = d.set(idx("slow_period"), 1.0).unwrap();
+        assert_eq!(s.drive_config().unwrap().slow_period, 1e-3);
+        assert_eq!(Settings::decode(&s.encode(3)).unwrap(), s);
+        for bad in [0.2, 3.0, -1.0, f32::NAN] {
+            assert_eq!(
+                d.set(idx("slow_period"), bad).unwrap_err().field,
+                "slow_period",
+                "{bad}"
+            );
+        }
+        // the version-2 record: magic, version, 14 values, CRC after them
+        let old = d.set(idx("current_limit"), 4.0).unwrap();
+        let mut rec = [0u8; RECORD_LEN];
+        rec[0..4].copy_from_slice(&MAGIC);
+        rec[4..6].copy_from_slice(&2u16.to_le_bytes());
+        rec[6..8].copy_from_slice(&14u16.to_le_bytes());
+        rec[SEQ..SEQ + 4].copy_from_slice(&9u32.to_le_bytes());
+        for i in 0..14 {
+            let at = VALUES + 4 * i;
+            rec[at..at + 4].copy_from_slice(&old.get(i).to_le_bytes());
+        }
+        let crc = crc32(&rec[..VALUES + 56]);
+        rec[VALUES + 56..VALUES + 60].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(Settings::decode_record(&rec), Ok((old, 9)));
+    }
+
     #[test]
     fn blank_short_wrong_version() {
         assert_eq!(Settings::decode(&[0xFF; 80]), Err(LoadError::Blank));
         assert_eq!(Settings::decode(&[0xFF; 8]), Err(LoadError::Short));
         assert_eq!(Settings::decode(&[0u8; 80]), Err(LoadError::BadMagic));
         // another version, with a CRC that matches it: still refused (version 1, the
-        // single-page record without a sequence number, included)
-        for other in [1u16, 3] {
+        // single-page record without a sequence number, included; version 2 is read)
+        for other in [1u16, 4] {
             let mut rec = Settings::defaults().encode(7);
             rec[4..6].copy_from_slice(&other.to_le_bytes());
             let crc = crc32(&rec[..CRC]);

@@ -621,8 +621,9 @@ mod tests {
         let mut rec = Settings::defaults().encode(3);
         let i = field_index(b"flux_current").unwrap();
         rec[12 + 4 * i..16 + 4 * i].copy_from_slice(&50f32.to_le_bytes());
-        let crc = crate::settings::crc32(&rec[..68]);
-        rec[68..72].copy_from_slice(&crc.to_le_bytes());
+        let at = crate::settings::CRC;
+        let crc = crate::settings::crc32(&rec[..at]);
+        rec[at..at + 4].copy_from_slice(&crc.to_le_bytes());
         m.pages[1] = rec;
         assert_eq!(
             report(&load(&mut m)),
