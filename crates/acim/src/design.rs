@@ -738,7 +738,9 @@ impl<N: Arithmetic> DriveCoeffs<N> {
     /// The step coefficients of `design` in the arithmetic `N` (`bases`: `()` for f32
     /// SI, the per-unit bases in fixed point): each block converts its own design
     /// ([`crate::num::Units`]); in fixed point every value the drive compares against or
-    /// limits to must fit its per-unit range, and a failure names the setting.
+    /// limits to must fit its per-unit range, and a failure names the setting. Out of
+    /// line: design-time code (inlined into the firmware's constructor, its field copies
+    /// cost 7 KB of flash).
     #[inline(never)]
     pub fn new(design: &DriveDesign, bases: &N::Bases) -> Result<Self, ConfigError> {
         let d = design;

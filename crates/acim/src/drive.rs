@@ -32,8 +32,8 @@
 //!
 //! With [`DriveConfig::slow_period`] set (0.5-2 ms; 0, the default, runs every stage every
 //! control period), the step runs a slow tick once every
-//! [`crate::design::CascadeDesign::slow_divider`] control periods, as production drives schedule a
-//! medium-frequency task beside the current-loop interrupt:
+//! [`crate::design::CascadeDesign::slow_divider`] control periods, as production drives
+//! schedule a medium-frequency task beside the current-loop interrupt:
 //!
 //! - **Every period (fast)**: the gate (non-finite samples, over-current, bus window), sense,
 //!   the observer, the Rs estimator, flux and angle, the estimates finite
@@ -41,8 +41,8 @@
 //!   control monitor and the current-sensor check, modulation, the inverter tracker, and
 //!   the offset drift subtracted from the samples.
 //! - **Each slow tick**: the offset tracker's model on the slow period's mean of its
-//!   voltage signature (summed every period), field weakening, the speed loop (ramp, hold, regeneration limit,
-//!   far-side mode, PI, thermal fold-back), stall, overload and blind detection, the load
+//!   voltage signature (summed every period), field weakening, the speed loop (ramp,
+//!   hold, regeneration limit, far-side mode, PI, thermal fold-back), stall, overload and blind detection, the load
 //!   and speed ranges of [`Supervisor::plausibility`], the limit-cycle check and the
 //!   zero-speed policy. Their designs are made for the slow period
 //!   ([`DriveDesign::slow_ts`]): gains, ramp steps and counts keep their meaning in
@@ -795,8 +795,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
 
     /// Swaps in a new design between two steps (built outside the interrupt with
     /// [`DriveDesign::new`]). While the drive is active only a retuning is accepted: the
-    /// machine model, the period, the slow period and the current sensing must stay those of the running
-    /// design (anything else needs `Idle`). A design whose coefficients do not fit this
+    /// machine model, the period, the slow period and the current sensing must stay those
+    /// of the running design (anything else needs `Idle`). A design whose coefficients do not fit this
     /// arithmetic is refused and the old one kept. A design with another inverter
     /// compensation (dead time, device drop or current band) drops the correction the
     /// start test or the running tracker found beyond the old one.

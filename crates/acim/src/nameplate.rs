@@ -857,9 +857,7 @@ mod conversion {
             }
             let design = DriveDesign::new(cfg);
             proptest::prop_assume!(design.is_ok());
-            if let Ok(d) = design {
-                assert_f32_identity(&d);
-            }
+            assert_f32_identity(&design.unwrap());
         }
     }
 }
