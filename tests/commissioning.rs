@@ -186,7 +186,10 @@ fn identified_file_sets_the_controller() {
     assert!(rel(m.referred_rotor_resistance(), r.rr_ohm.identified) < 1e-4);
     assert!(rel(m.transient_inductance(), r.l_sigma_h.identified) < 1e-3);
     assert!(rel(m.magnetizing_inductance(), r.l_m_h.identified) < 1e-4);
-    assert_eq!(run.drive.dead_time_comp_s, r.dead_time_s.identified);
+    assert_eq!(
+        run.drive.inverter.dead_time_comp_s,
+        r.dead_time_s.identified
+    );
     assert!(run
         .apply_identified("[inverse_gamma]\nrs_ohm = 1.0\n")
         .is_err());

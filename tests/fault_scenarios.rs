@@ -145,11 +145,11 @@ fn stuck_channel_with_two_shunts_trips_within_30_ms() {
     check_safe("fault-sensor-stuck");
     // without it the drive's other checks alone (the true current reaches 7.8 A)
     let mut sc = software_only("fault-sensor-stuck");
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     check_scenario(&sc, "LossOfControl", 3.0, 0.03);
     // and with the comparator the true current crosses the trip level first
     let mut sc = builtins::get("fault-sensor-stuck").unwrap();
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     check_scenario(&sc, "HardwareBreak", 3.0, 0.03);
 }
 
@@ -172,11 +172,11 @@ fn dead_current_sensing_trips_within_10_ms() {
     check_safe("fault-sensors-zero");
     // without it, the control monitor alone
     let mut sc = software_only("fault-sensors-zero");
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     check_scenario(&sc, "NoCurrentResponse", 3.0, 0.01);
     // and with the hardware comparator the true current reaches the trip level first
     let mut sc = builtins::get("fault-sensors-zero").unwrap();
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     check_scenario(&sc, "HardwareBreak", 3.0, 0.01);
 }
 
@@ -185,7 +185,7 @@ fn dead_current_sensing_at_power_up_does_not_hang_in_magnetizing() {
     check("fault-sensors-zero-at-start", "CurrentSensor", 0.0, 0.0032);
     check_safe("fault-sensors-zero-at-start");
     let mut sc = builtins::get("fault-sensors-zero-at-start").unwrap();
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     check_scenario(&sc, "NoCurrentResponse", 0.0, 0.01);
 }
 
@@ -204,7 +204,7 @@ fn drifting_offset_ends_in_a_fault_not_a_runaway() {
     // frequency makes the current AC (about 1.05 s into the ramp) and within its 2 s
     // mean's rise to the limit: the check does not depend on the Rs estimate
     let mut sc = builtins::get("fault-offset-drift").unwrap();
-    sc.drive.rs_estimation = false;
+    sc.drive.estimation.rs_estimation = false;
     check_scenario(&sc, "CurrentSensor", 1.0, 1.2);
 }
 
@@ -223,10 +223,10 @@ fn an_offset_drifting_beyond_the_limit_while_running_is_found() {
     // the reference: the limit-cycle check faults it (measured 11.8 s, 4.4 s after the
     // offset crossed the limit)
     let mut sc = builtins::get("fault-offset-drift-running").unwrap();
-    sc.drive.offset_tracking = false;
+    sc.drive.trackers.offset_tracking = false;
     check_scenario(&sc, "SpeedOscillation", 7.0, 5.0);
     // with neither, nothing finds it
-    sc.drive.speed_oscillation_check = false;
+    sc.drive.limits.speed_oscillation_check = false;
     let (_, m) = acim_sim::run_with_metrics(&sc).unwrap();
     assert_eq!(m.fault, None, "{m:#?}");
 }
@@ -277,14 +277,14 @@ fn overhauling_load_that_would_blind_the_estimator_is_held_or_faults_as_overload
     assert!(recovery.is_some_and(|t| t < 1.0), "{recovery:?}");
     assert_eq!(m.speed_target_limited_s, 0.0);
     let no_far_side = sc
-        .with_overrides(&["drive.far_side_gain=0.0".to_string()])
+        .with_overrides(&["drive.estimation.far_side_gain=0.0".to_string()])
         .unwrap();
     let (_, m) = acim_sim::run_with_metrics(&no_far_side).unwrap();
     assert_eq!(m.fault, None);
     assert!(m.speed_target_limited_s > 1.0, "{m:#?}");
     assert!(m.peak_speed_rpm < 400.0, "{}", m.peak_speed_rpm);
     let off = no_far_side
-        .with_overrides(&["drive.regen_min_frequency_hz=0.0".to_string()])
+        .with_overrides(&["drive.loops.regen_min_frequency_hz=0.0".to_string()])
         .unwrap();
     let (_, m) = acim_sim::run_with_metrics(&off).unwrap();
     assert_eq!(m.fault.as_deref(), Some("Overload"), "{m:#?}");

@@ -87,7 +87,7 @@ fn braking_from_3000_rpm_stays_below_the_overvoltage_trip() {
     let (r, m) = acim_sim::run_with_metrics(&sc).unwrap();
     kept(&m);
     let peak = r.rows.iter().map(|x| x.dc_bus_v).fold(0.0f32, f32::max);
-    assert!(peak < sc.drive.dc_bus_max_v, "bus peak {peak} V");
+    assert!(peak < sc.drive.limits.dc_bus_max_v, "bus peak {peak} V");
     let top = r.rows.iter().map(|x| x.speed_rpm).fold(0.0f32, f32::max);
     assert!(top < 3030.0, "overshoot to {top} rpm");
     let stopped = &m.windows["stopped"];
@@ -98,7 +98,10 @@ fn braking_from_3000_rpm_stays_below_the_overvoltage_trip() {
 /// is what keeps the bus down.
 #[test]
 fn braking_without_overvoltage_control_trips() {
-    let m = run("fw-braking-3000", &["drive.overvoltage_control=false"]);
+    let m = run(
+        "fw-braking-3000",
+        &["drive.field_weakening.overvoltage_control=false"],
+    );
     assert_eq!(m.fault.as_deref(), Some("DcBusOverVoltage"), "{m:#?}");
 }
 
@@ -150,9 +153,9 @@ fn machine_2k2_braking_stays_below_the_overvoltage_trip() {
     kept(&m);
     let peak = r.rows.iter().map(|x| x.dc_bus_v).fold(0.0f32, f32::max);
     assert!(
-        peak < r.config.dc_bus_max,
+        peak < r.config.limits.dc_bus_max,
         "bus peak {peak} V vs {}",
-        r.config.dc_bus_max
+        r.config.limits.dc_bus_max
     );
     assert!(r.rows.last().unwrap().speed_rpm.abs() < 20.0);
 }
@@ -195,8 +198,8 @@ fn light_load(optimise: bool, light: f32, rated: f32) -> (f32, f32, f32) {
     use acim::{Drive, DriveConfig, DriveInputs, DriveState};
     use acim_plant::{LoadTorque, Plant, PwmPreload};
     let mut cfg = DriveConfig::paper_defaults();
-    cfg.flux_optimisation = optimise;
-    let ts = cfg.control_period;
+    cfg.field_weakening.flux_optimisation = optimise;
+    let ts = cfg.loops.control_period;
     let mut drive = Drive::new(cfg).unwrap();
     let mut plant = Plant::paper_default(3);
     let mut pwm = PwmPreload::new();

@@ -75,7 +75,7 @@ fn sweep(inverter_identification: bool) {
     for arithmetic in [Arithmetic::F32, Arithmetic::Fixed] {
         for rpm in [-1000.0f32, -500.0, -150.0, 150.0, 500.0, 1000.0] {
             let mut sc = builtins::get("flying-start-800").unwrap();
-            sc.drive.inverter_identification = inverter_identification;
+            sc.drive.start.inverter_identification = inverter_identification;
             sc.name = format!("fly-{rpm}-{arithmetic:?}");
             sc.duration_s = 3.0;
             sc.plant.inertia_kgm2 = 0.1;

@@ -41,7 +41,7 @@ fn run(name: &str, arithmetic: &str) -> RunResult {
     };
     let mut sets = vec![format!("drive.arithmetic={arithmetic}")];
     if ff {
-        sets.push("drive.load_torque_feedforward=true".into());
+        sets.push("drive.loops.load_torque_feedforward=true".into());
     }
     let sc = acim_sim::builtins::get(builtin)
         .unwrap()

@@ -31,7 +31,7 @@ fn reversal_against_an_active_load_keeps_control() {
 /// orientation ends in a LossOfControl trip instead of switching on regardless.
 #[test]
 fn paper_scheme_loses_orientation_in_regeneration() {
-    let m = run("regen-500", &["drive.orientation_gain=0"]);
+    let m = run("regen-500", &["drive.estimation.orientation_gain=0"]);
     assert!(!m.control_kept, "{m:#?}");
     assert_eq!(m.fault.as_deref(), Some("LossOfControl"), "{m:#?}");
     // the estimate was already far off when it tripped
@@ -52,7 +52,7 @@ fn zero_torque_orientation_stays_bounded_for_60_s() {
         assert!(w.orientation_err_max_deg < 2.0, "{name}: {w:?}");
         assert!(w.speed_est_err_max_rpm <= 4.0, "{name}: {w:?}");
     }
-    let before = run("zero-torque-60", &["drive.orientation_gain=0"]);
+    let before = run("zero-torque-60", &["drive.estimation.orientation_gain=0"]);
     assert!(before.windows["steady"].orientation_err_max_deg > 2.0);
 }
 
@@ -61,7 +61,7 @@ fn zero_torque_orientation_stays_bounded_for_60_s() {
 #[test]
 fn rs_error_without_estimator_keeps_control() {
     assert!(run("paper-fig8-rs", &[]).control_kept);
-    assert!(!run("paper-fig8-rs", &["drive.orientation_gain=0"]).control_kept);
+    assert!(!run("paper-fig8-rs", &["drive.estimation.orientation_gain=0"]).control_kept);
 }
 
 /// The measured stability map agrees with the second-order model where the model is

@@ -85,7 +85,7 @@ fn zero_speed_scenario(policy: ZeroSpeed) -> Scenario {
     s.speed_profile
         .push(acim_sim::scenario::SpeedPoint { t_s: 6.5, rpm: 0.0 });
     s.duration_s = 9.0;
-    s.drive.zero_speed_policy = policy;
+    s.drive.zero_speed.policy = policy;
     s
 }
 
@@ -161,7 +161,7 @@ fn zero_hold_scenario() {
             .fold(0.0f32, f32::max)
     };
     let mut stop = sc.clone();
-    stop.drive.zero_speed_policy = ZeroSpeed::Stop;
+    stop.drive.zero_speed.policy = ZeroSpeed::Stop;
     let r = acim_sim::sim::run(&stop).unwrap();
     assert_eq!(r.final_state, acim::DriveState::Idle);
     // switched off 0.5 s after the reference reached zero (4.0 s), never on again; the
@@ -175,7 +175,7 @@ fn zero_hold_scenario() {
     let last = r.rows.last().unwrap().speed_rpm.abs();
     assert!(last < 0.1, "{last}");
     // the file leaves the policy at the default, `stop`
-    assert_eq!(sc.drive.zero_speed_policy, ZeroSpeed::Stop);
+    assert_eq!(sc.drive.zero_speed.policy, ZeroSpeed::Stop);
     // `hold`: the creep documented in docs/robustness.md is a random walk of the noise
     // (under 5 to 16.5 rpm over noise seeds 1-6, with the inverter test at start as
     // without it): over
@@ -183,7 +183,7 @@ fn zero_hold_scenario() {
     let mut creep = Vec::new();
     for seed in 1..=3 {
         let mut hold = sc.clone();
-        hold.drive.zero_speed_policy = ZeroSpeed::Hold;
+        hold.drive.zero_speed.policy = ZeroSpeed::Hold;
         hold.seed = seed;
         let r = acim_sim::sim::run(&hold).unwrap();
         assert_eq!(r.final_state, acim::DriveState::Running);
@@ -223,7 +223,7 @@ fn inverter_test_finds_the_dead_time_within_ten_percent() {
         s.speed_profile.retain(|p| p.t_s <= 1.5);
         s.load_profile.retain(|p| p.t_s <= 1.5);
         s.windows.clear();
-        s.drive.inverter_identification = true;
+        s.drive.start.inverter_identification = true;
         s.drive.arithmetic = arithmetic;
         s.inverter.dead_time_s = dt_us * 1e-6;
         let r = acim_sim::sim::run(&s).unwrap();
@@ -239,7 +239,7 @@ fn inverter_test_finds_the_dead_time_within_ten_percent() {
         assert!(magnetized >= 0.45, "{magnetized}");
     }
     let mut s = builtin("flying-start-800");
-    s.drive.inverter_identification = true;
+    s.drive.start.inverter_identification = true;
     let r = acim_sim::sim::run(&s).unwrap();
     assert_eq!(r.inverter_test.unwrap().outcome, "Skipped");
     assert_eq!(r.fault, None);
@@ -284,7 +284,7 @@ fn inverter_error_is_tracked_while_running() {
 }
 
 /// A scenario with a nameplate derives the drive from it; the switches still come
-/// from `[drive]` (before, `--set drive.inverter_identification=false` and the other
+/// from `[drive]` (before, `--set drive.start.inverter_identification=false` and the other
 /// three were silently ignored there).
 #[test]
 fn nameplate_scenarios_take_the_robustness_switches() {
@@ -293,22 +293,26 @@ fn nameplate_scenarios_take_the_robustness_switches() {
     s.speed_profile.retain(|p| p.t_s <= 1.2);
     s.windows.clear();
     let r = acim_sim::sim::run(&s).unwrap();
-    assert!(r.config.inverter_identification && r.config.offset_tracking);
+    assert!(r.config.start.inverter_identification && r.config.trackers.offset_tracking);
     assert_eq!(r.inverter_test.unwrap().outcome, "Identified");
     let s = s
         .with_overrides(&[
-            "drive.inverter_identification=false".into(),
-            "drive.offset_tracking=false".into(),
-            "drive.inverter_tracking=false".into(),
-            "drive.current_gain_calibration=false".into(),
-            "drive.rr_adaptation=true".into(),
+            "drive.start.inverter_identification=false".into(),
+            "drive.trackers.offset_tracking=false".into(),
+            "drive.trackers.inverter_tracking=false".into(),
+            "drive.start.current_gain_calibration=false".into(),
+            "drive.trackers.rr_adaptation=true".into(),
         ])
         .unwrap();
     let r = acim_sim::sim::run(&s).unwrap();
     let c = r.config;
-    assert!(!c.inverter_identification && !c.offset_tracking && !c.current_gain_calibration);
-    assert!(!c.inverter_tracking);
-    assert!(c.rr_adaptation);
+    assert!(
+        !c.start.inverter_identification
+            && !c.trackers.offset_tracking
+            && !c.start.current_gain_calibration
+    );
+    assert!(!c.trackers.inverter_tracking);
+    assert!(c.trackers.rr_adaptation);
     assert!(r.inverter_test.is_none());
 }
 
@@ -323,7 +327,7 @@ fn inverter_test_seeds_the_standstill_rs_identification() {
     use acim_sim::scenario::Arithmetic;
     for arithmetic in [Arithmetic::F32, Arithmetic::Fixed] {
         let mut s = builtin("paper-fig9");
-        s.drive.inverter_identification = true;
+        s.drive.start.inverter_identification = true;
         s.drive.arithmetic = arithmetic;
         s.duration_s = 2.0;
         s.speed_profile.retain(|p| p.t_s <= 2.0);
@@ -374,8 +378,8 @@ fn identified_dead_time_rows_hold() {
 #[test]
 fn fig9_rs_converges_while_running_without_standstill_identification() {
     let mut s = builtin("paper-fig9");
-    s.drive.rs_estimation_mode = RsMode::Running;
-    s.drive.rs_standstill_identification = false;
+    s.drive.estimation.rs_estimation_mode = RsMode::Running;
+    s.drive.start.rs_standstill_identification = false;
     let r = acim_sim::sim::run(&s).unwrap();
     assert_eq!(r.fault, None);
     let m = acim_sim::metrics::compute(&r, 0.0);
@@ -412,7 +416,7 @@ fn offset_drift_tracked(c: &Case, bound: f32) {
     let o = acim_sim::robustness::run_scenario(c, &s).unwrap();
     assert!(o.pass(), "{o:?}");
     assert!(o.speed_est_error_rpm.abs() <= bound, "{o:?}");
-    s.drive.offset_tracking = false;
+    s.drive.trackers.offset_tracking = false;
     let off = acim_sim::robustness::run_scenario(c, &s).unwrap();
     let (on, off_err) = (o.speed_est_error_rpm.abs(), off.speed_est_error_rpm.abs());
     assert!(off_err > 1.0 && off_err > 3.0 * on, "{o:?} vs {off:?}");
@@ -454,7 +458,7 @@ fn offset_drift_is_tracked_slowly_on_the_far_side() {
     let o = acim_sim::robustness::run_scenario(&c, &s).unwrap();
     assert!(o.pass(), "{o:?}");
     assert!(o.speed_est_error_rpm.abs() <= 2.0, "{o:?}");
-    s.drive.offset_tracking = false;
+    s.drive.trackers.offset_tracking = false;
     let off = acim_sim::robustness::run_scenario(&c, &s).unwrap();
     assert!(off.speed_est_error_rpm.abs() > 3.0, "{off:?}");
 }
@@ -520,11 +524,11 @@ fn far_side_mode_holds_the_far_side_by_default() {
     };
     let c = case(Variant::DeadTime1_0NotIdentified, 60.0, true, 4.5);
     let mut blind = c.scenario_with(&defaults);
-    blind.drive.inverter_tracking = false;
+    blind.drive.trackers.inverter_tracking = false;
     held(&c, &blind);
     let c = case(Variant::Nominal, 60.0, true, 4.5);
     let mut before = c.scenario_with(&defaults);
-    before.drive.far_side_gain = 0.0;
+    before.drive.estimation.far_side_gain = 0.0;
     held(&c, &before);
     // back across the line to the near side
     let mut back = c.scenario_with(&defaults);
@@ -610,7 +614,7 @@ fn rotor_resistance_adapts_at_speed_steps() {
         // the matrix's bound, max(2 rpm, 1 % of the reference)
         assert!(after.abs() <= 2.0, "{overrides:?}: {before} -> {after}");
         let off = sc
-            .with_overrides(&["drive.rr_adaptation=false".into()])
+            .with_overrides(&["drive.trackers.rr_adaptation=false".into()])
             .unwrap();
         let (_, m_off) = acim_sim::run_with_metrics(&off).unwrap();
         let off_err = m_off.windows.get("adapted").unwrap().speed_est_err_mean_rpm;
@@ -655,8 +659,8 @@ fn current_gain_mismatch_is_calibrated_at_start() {
     }
     assert!((ks[0] / ks[1] - 1.0).abs() < 2e-4, "{ks:?}");
     let mut off = s.clone();
-    off.drive.current_gain_calibration = false;
-    off.drive.far_side_gain = 0.0;
+    off.drive.start.current_gain_calibration = false;
+    off.drive.estimation.far_side_gain = 0.0;
     let o = acim_sim::robustness::run_scenario(&c, &off).unwrap();
     assert!(o.speed_est_error_rpm.abs() > 2.0, "{o:?}");
 }

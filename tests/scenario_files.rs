@@ -39,11 +39,11 @@ fn bad_values_name_the_field_and_range() {
         .unwrap_err();
     assert_eq!(e.field, "sensors.channels");
     let e = sc
-        .with_overrides(&["drive.observer_poles_rad_s=[100.0, 6000.0, 200.0]".into()])
+        .with_overrides(&["drive.estimation.observer_poles_rad_s=[100.0, 6000.0, 200.0]".into()])
         .unwrap()
         .validate()
         .unwrap_err();
-    assert_eq!(e.field, "drive.observer_poles_rad_s[1]");
+    assert_eq!(e.field, "drive.estimation.observer_poles_rad_s[1]");
     let e = sc
         .with_overrides(&["controller.lm_h=0.6".into()])
         .unwrap()
@@ -163,10 +163,10 @@ fn the_hardware_comparator_is_configurable() {
     // dead current sensing with the drive's sensor check off (it finds the dead channels
     // first): the comparator fires at the trip level, and the run says so
     let mut dead = acim_sim::builtins::get("fault-sensors-zero").unwrap();
-    dead.drive.sensor_check = false;
+    dead.drive.limits.sensor_check = false;
     let (r, m) = acim_sim::run_with_metrics(&dead).unwrap();
     let h = m.hardware_trip.expect("the comparator fired");
-    assert_eq!(h.level_a, r.config.overcurrent_trip);
+    assert_eq!(h.level_a, r.config.limits.overcurrent_trip);
     assert!(h.off_s > 3.0 && h.off_s - h.crossing_s < 2e-6, "{h:?}");
     assert_eq!(m.fault.as_deref(), Some("HardwareBreak"));
     assert!(r.rows.last().unwrap().csv().ends_with(",1"));

@@ -77,7 +77,7 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     let mut hardware = 0;
     let mut worst = std::collections::BTreeMap::new();
     for (c, m) in &rows {
-        let ts = c.scenario.drive.control_period_s;
+        let ts = c.scenario.drive.loops.control_period_s;
         let name = &c.scenario.name;
         let line = format!(
             "{name}: {} after {:?} s (injected {:?}), peak {:.2} A, above the trip {:.1} us",
@@ -175,10 +175,10 @@ fn software_alone(sensor_check: bool) -> Vec<String> {
         }
         let mut sc = c.scenario.clone();
         sc.inverter.hardware_trip = false;
-        sc.drive.sensor_check = sensor_check;
+        sc.drive.limits.sensor_check = sensor_check;
         let (_, m) = acim_sim::run_with_metrics(&sc).unwrap();
         assert!(m.hardware_trip.is_none());
-        let ts = sc.drive.control_period_s;
+        let ts = sc.drive.loops.control_period_s;
         if m.above_trip_switching_longest_s > ts {
             beyond.push(sc.name.clone());
         }

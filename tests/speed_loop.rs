@@ -59,7 +59,7 @@ fn rated_motoring_load_is_held_down_to_zero_speed() {
             &profiles(&[(0.2, rpm)], &[(2.0, RATED_NM, 1.0)]),
         );
         sc = sc
-            .with_overrides(&["drive.zero_speed_policy=\"hold\"".to_string()])
+            .with_overrides(&["drive.zero_speed.policy=\"hold\"".to_string()])
             .unwrap();
         let (rows, m) = run(&sc);
         assert_eq!(m.fault, None, "{rpm} rpm");
@@ -101,7 +101,7 @@ fn an_overload_is_held_for_the_rating_then_faults() {
         7.0,
         &profiles(&[(0.2, 750.0)], &[(2.0, 1.45 * RATED_NM, 0.0)]),
     )
-    .with_overrides(&["drive.overload_duration_s=1.0".to_string()])
+    .with_overrides(&["drive.limits.overload_duration_s=1.0".to_string()])
     .unwrap();
     let (rows, m) = run(&over);
     assert_eq!(m.fault.as_deref(), Some("Overload"), "{m:#?}");
@@ -122,7 +122,7 @@ fn an_overload_is_held_for_the_rating_then_faults() {
         5.0,
         &profiles(&[(0.2, 750.0)], &[(2.0, 0.9 * RATED_NM, 0.0)]),
     )
-    .with_overrides(&["drive.overload_duration_s=1.0".to_string()])
+    .with_overrides(&["drive.limits.overload_duration_s=1.0".to_string()])
     .unwrap();
     let (_, m) = run(&rated);
     assert_eq!(m.fault, None);

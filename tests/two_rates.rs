@@ -1,4 +1,4 @@
-//! The two-rate schedule (`acim::DriveConfig::slow_period`): the speed loop, field
+//! The two-rate schedule (`DriveConfig.loops.slow_period`): the speed loop, field
 //! weakening and the slow supervision once per slow period, the current loop, the
 //! estimators and the fast protections every control period. The paper's scenarios keep
 //! their acceptance bounds with a 1 kHz slow task at 5 kHz, and at 10, 20 and 40 kHz all
@@ -11,7 +11,7 @@ use acim_sim::builtins;
 use acim_tests::{assert_load_step_tracked, check_windows, run};
 
 /// A 1 kHz slow task.
-const SLOW: &str = "drive.slow_period_s=0.001";
+const SLOW: &str = "drive.loops.slow_period_s=0.001";
 /// The slow period, s.
 const SLOW_PERIOD_S: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
@@ -45,7 +45,7 @@ fn paper_scenarios_keep_their_bounds_with_a_1_khz_slow_task() {
 #[test]
 fn paper_scenarios_at_10_20_and_40_khz_with_a_1_khz_slow_task() {
     for period in ["100e-6", "50e-6", "25e-6"] {
-        let rate = format!("drive.control_period_s={period}");
+        let rate = format!("drive.loops.control_period_s={period}");
         let o = [rate.as_str(), SLOW];
         for name in ["paper-fig6", "paper-fig7", "paper-fig10"] {
             check_windows(&run(name, &o), 2.0, Some(2.0));
@@ -112,7 +112,7 @@ fn the_slow_period_is_a_checked_scenario_key() {
     let sc = builtins::get("paper-fig6").unwrap();
     for bad in ["0.0002", "0.003", "-0.001"] {
         let sc = sc
-            .with_overrides(&[format!("drive.slow_period_s={bad}")])
+            .with_overrides(&[format!("drive.loops.slow_period_s={bad}")])
             .unwrap();
         let err = acim_sim::run_with_metrics(&sc).unwrap_err().to_string();
         assert!(err.contains("slow_period"), "{bad}: {err}");

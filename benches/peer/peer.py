@@ -294,7 +294,7 @@ def rated_step(rpm, t_step, duration, limit=True):
         duration=duration,
         speed=[(T_REF, float(rpm))],
         load=[(t_step, RATED_TORQUE)],
-        sets=[] if limit else ["drive.regen_min_frequency_hz=0"],
+        sets=[] if limit else ["drive.loops.regen_min_frequency_hz=0"],
         kind="step",
         event=t_step,
         target=float(rpm),
@@ -325,7 +325,7 @@ def cases_motoring_ramps():
                 speed=[(T_REF, float(rpm))],
                 load=load_ramp(2.0, 1.0, RATED_TORQUE),
                 # a held zero target keeps the flux on (the default policy switches off)
-                sets=["drive.zero_speed_policy=hold"] if rpm == 0 else [],
+                sets=["drive.zero_speed.policy=hold"] if rpm == 0 else [],
                 target=float(rpm),
                 tol=HOLD_TOL_MOTORING,
             )
@@ -351,7 +351,7 @@ def cases_regen():
                         duration=8.0,
                         speed=[(T_REF, float(rpm))],
                         load=load_ramp(2.0, 4.0, -frac * RATED_TORQUE),
-                        sets=[] if limit else ["drive.regen_min_frequency_hz=0"],
+                        sets=[] if limit else ["drive.loops.regen_min_frequency_hz=0"],
                         target=float(rpm),
                         tol=HOLD_TOL,
                     )
@@ -419,7 +419,7 @@ def cases_param_errors():
                             speed=[(T_REF, float(rpm))],
                             load=load_ramp(3.0, 1.0, sign * RATED_TORQUE),
                             errors=err,
-                            sets=[] if rs_est else ["drive.rs_estimation=false"],
+                            sets=[] if rs_est else ["drive.estimation.rs_estimation=false"],
                             target=float(rpm),
                             tol=HOLD_TOL,
                         )
@@ -697,7 +697,7 @@ def write_page(results, times, versions, ref_checks):
         "14.6 N m ramped in over 1 s (from 2.0 s); mean / peak-to-peak true speed over the last second "
         f"(4-5 s). Held: in control and the speed within +/-{HOLD_TOL_MOTORING:.0f} rpm of the target over "
         "the last second. At 0 rpm our drive holds the zero target with the flux on "
-        "(`--set drive.zero_speed_policy=hold`; its default switches off at a held zero target)."
+        "(`--set drive.zero_speed.policy=hold`; its default switches off at a held zero target)."
     )
     add("")
     add("| target (rpm) | motulator: mean / p-p (rpm) | this drive: mean / p-p (rpm) |")
@@ -715,10 +715,10 @@ def write_page(results, times, versions, ref_checks):
         "An active load driving the rotor forwards, ramped in over 4 s (from 2.0 s), at a target of "
         f"{', '.join(str(r) for r in REGEN_SPEEDS)} rpm. Held: in control and the true speed within "
         f"+/-{HOLD_TOL:.0f} rpm of the target over the last second (7-8 s). Our drive's regeneration "
-        "limit (on by default, `drive.regen_min_frequency_hz` = 1.5) keeps braking operating points 1.5 Hz "
+        "limit (on by default, `drive.loops.regen_min_frequency_hz` = 1.5) keeps braking operating points 1.5 Hz "
         "away from zero stator frequency: it holds the speed it can reach there and reports the target "
         "limited (\"target limited\" below: the drive ran above its target, inside the 30 rpm band or not); "
-        "off: `--set drive.regen_min_frequency_hz=0`. motulator has no such limit."
+        "off: `--set drive.loops.regen_min_frequency_hz=0`. motulator has no such limit."
     )
     add("")
     have = all(f"regen-{int(f * 100)}-{r}{x}" in results for f in REGEN_FRACTIONS for r in REGEN_SPEEDS for x in ("", "-nolimit"))
@@ -771,7 +771,7 @@ def write_page(results, times, versions, ref_checks):
         "of the target over the last second; the number is the mean speed error over that second "
         "(true - target, rpm). Our drive identifies Rs at standstill and adapts it while running (its "
         "default); motulator 0.5.0 has no Rs adaptation, so ours is also run with its Rs estimation off "
-        "(`--set drive.rs_estimation=false`; motulator's run is the same)."
+        "(`--set drive.estimation.rs_estimation=false`; motulator's run is the same)."
     )
     add("")
     add("| error | speed (rpm) | load | motulator | this drive | this drive, Rs estimation off |")

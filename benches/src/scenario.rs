@@ -207,18 +207,18 @@ impl StepProbe for MarkerProbe {
 /// step contains every block of the paper's scheme).
 pub fn bench_config() -> DriveConfig {
     let mut c = DriveConfig::paper_defaults();
-    c.rs_estimation = true;
+    c.estimation.rs_estimation = true;
     c
 }
 
 /// The slow task's period of the two-rate run, s (1 kHz).
 pub const TWO_RATE_SLOW_PERIOD: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
-/// [`bench_config`] with a 1 kHz slow task (`DriveConfig::slow_period`): the two-rate
+/// [`bench_config`] with a 1 kHz slow task (`DriveConfig.loops.slow_period`): the two-rate
 /// run measures its fast periods and its slow ticks apart.
 pub fn bench_config_two_rates() -> DriveConfig {
     let mut c = bench_config();
-    c.slow_period = TWO_RATE_SLOW_PERIOD;
+    c.loops.slow_period = TWO_RATE_SLOW_PERIOD;
     c
 }
 
@@ -243,23 +243,27 @@ impl Passenger {
     fn new(cfg: &DriveConfig) -> Option<Self> {
         let m = cfg.machine;
         Some(Self {
-            cfg: FullOrderConfig::new(&m, FullOrderDesign::paper_defaults(&m), cfg.control_period)
-                .ok()?,
+            cfg: FullOrderConfig::new(
+                &m,
+                FullOrderDesign::paper_defaults(&m),
+                cfg.loops.control_period,
+            )
+            .ok()?,
             full: FullOrderObserver::new(),
             flux_cfg: FluxObserverConfig::new(
                 &m,
-                FluxObserverDesign::defaults(cfg.max_speed),
-                cfg.control_period,
+                FluxObserverDesign::defaults(cfg.limits.max_speed),
+                cfg.loops.control_period,
             )
             .ok()?,
             flux: FluxObserverState::new(),
             rs: m.stator_resistance(),
             applied: (0.0, 0.0),
             pwm: SvpwmConfig::new(
-                cfg.dead_time,
-                cfg.control_period,
-                cfg.device_drop,
-                cfg.dead_time_current_band,
+                cfg.inverter.dead_time,
+                cfg.loops.control_period,
+                cfg.inverter.device_drop,
+                cfg.inverter.dead_time_current_band,
             ),
         })
     }
@@ -440,7 +444,7 @@ pub fn run() -> Summary {
     let mut err_full = 0.0f32;
     let mut err_red = 0.0f32;
     let mut err_flux = 0.0f32;
-    let ts = cfg.control_period;
+    let ts = cfg.loops.control_period;
     while s.steps < MAX_STEPS && s.measured < MEASURED_STEPS {
         let meas = plant.sample();
         let inp = DriveInputs {
@@ -473,7 +477,7 @@ pub fn run() -> Summary {
         }
         // the voltage this command applies over the next period, for the passenger
         let t = drive.telemetry();
-        let lead = t.angle + t.stator_frequency * ts * cfg.delay_periods;
+        let lead = t.angle + t.stator_frequency * ts * cfg.inverter.delay_periods;
         let v = inverse_park(t.voltage, FastSinCos::eval(lead));
         passenger.applied = (v.alpha, v.beta);
 

@@ -464,28 +464,28 @@ class Settings(unittest.TestCase):
     def test_set_save_reboot_and_a_corrupted_page(self):
         m = self.boot()
         self.assertIn("settings: defaults (nothing saved)", m.output())
-        default_limit = self.get(m, "current_limit")
-        self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
-        self.assertIn("ok stator_resistance applied",
-                      command(m, "set stator_resistance 11.25"))
-        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        default_limit = self.get(m, "limits.current_limit")
+        self.assertIn("ok limits.current_limit applied", command(m, "set limits.current_limit 4"))
+        self.assertIn("ok machine.stator_resistance applied",
+                      command(m, "set machine.stator_resistance 11.25"))
+        self.assertEqual(self.get(m, "limits.current_limit"), 4.0)
         # the new drive runs: start, then everything that changes it is refused, naming it
         command(m, "speed 300", 5)
         self.assertIn("ok", command(m, "start", 20))
-        self.assertIn("err current_limit: refused while the drive is not idle",
-                      command(m, "set current_limit 3.5"))
+        self.assertIn("err limits.current_limit: refused while the drive is not idle",
+                      command(m, "set limits.current_limit 3.5"))
         self.assertIn("err save: refused", command(m, "save"))
         self.assertIn("err defaults: refused", command(m, "defaults"))
-        self.assertEqual(self.get(m, "current_limit"), 4.0)
+        self.assertEqual(self.get(m, "limits.current_limit"), 4.0)
         command(m, "stop", 5)
         self.assertEqual(state_fault(m), (0, 0))
         # out of range: the library's rule, naming the field; nothing changes
-        self.assertIn("err (flux_current: must be below current_limit)",
-                      command(m, "set flux_current 4.5"))
-        self.assertIn("err (stator_resistance: must be finite and > 0)",
-                      command(m, "set stator_resistance 0"))
+        self.assertIn("err (loops.flux_current: must be below current_limit)",
+                      command(m, "set loops.flux_current 4.5"))
+        self.assertIn("err (machine.stator_resistance: must be finite and > 0)",
+                      command(m, "set machine.stator_resistance 0"))
         self.assertIn("err unknown setting", command(m, "set bogus 1"))
-        self.assertEqual(self.get(m, "flux_current"), 1.5)
+        self.assertEqual(self.get(m, "loops.flux_current"), 1.5)
         self.assertEqual(m.settings_pages(), b"\xff" * 4096)
         # the first save: page A, sequence number 1; page B is not touched
         self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
@@ -501,11 +501,11 @@ class Settings(unittest.TestCase):
         # reboot with that flash: the values are back, and the drive runs with them
         m2 = self.boot(m.settings_pages())
         self.assertIn("settings loaded from flash (page A, seq 1)", m2.output())
-        self.assertEqual(self.get(m2, "current_limit"), 4.0)
-        self.assertEqual(self.get(m2, "stator_resistance"), 11.25)
+        self.assertEqual(self.get(m2, "limits.current_limit"), 4.0)
+        self.assertEqual(self.get(m2, "machine.stator_resistance"), 11.25)
         self.assertEqual(state_fault(m2), (0, 0))
         # the next save goes to page B (seq 2), erasing only B; A keeps the record before
-        self.assertIn("ok current_limit applied", command(m2, "set current_limit 3.8"))
+        self.assertIn("ok limits.current_limit applied", command(m2, "set limits.current_limit 3.8"))
         self.assertIn("ok saved to flash (page B)", command(m2, "save", 20))
         self.assertEqual([e for e in m2.events if e[0] == "FLASH erase"],
                          [("FLASH erase", fil.SETTINGS_PAGE_B, 2048)])
@@ -513,7 +513,7 @@ class Settings(unittest.TestCase):
         self.assertEqual(int.from_bytes(m2.settings_page("B")[8:12], "little"), 2)
         m3 = self.boot(m2.settings_pages())
         self.assertIn("settings loaded from flash (page B, seq 2)", m3.output())
-        self.assertEqual(self.get(m3, "current_limit"), 3.8)
+        self.assertEqual(self.get(m3, "limits.current_limit"), 3.8)
         # one corrupted byte in the only record: defaults, a warning naming the page, Idle
         bad = bytearray(m.settings_pages())
         bad[20] ^= 0x01
@@ -521,7 +521,7 @@ class Settings(unittest.TestCase):
         self.assertIn("warn settings in flash refused: page A refused: CRC mismatch",
                       m4.output())
         self.assertIn("defaults in use, drive idle", m4.output())
-        self.assertEqual(self.get(m4, "current_limit"), default_limit)
+        self.assertEqual(self.get(m4, "limits.current_limit"), default_limit)
         self.assertEqual(state_fault(m4), (0, 0))
         # the newest record corrupted: the one before it, with a warning
         bad = bytearray(m2.settings_pages())
@@ -529,7 +529,7 @@ class Settings(unittest.TestCase):
         m5 = self.boot(bytes(bad))
         self.assertIn("warn settings: page B refused: CRC mismatch (corrupted record), "
                       "using page A (seq 1)", m5.output())
-        self.assertEqual(self.get(m5, "current_limit"), 4.0)
+        self.assertEqual(self.get(m5, "limits.current_limit"), 4.0)
         # another format version (CRC made to match): refused too
         import zlib
         other = bytearray(m.settings_pages())
@@ -537,7 +537,7 @@ class Settings(unittest.TestCase):
         other[72:76] = zlib.crc32(bytes(other[:72])).to_bytes(4, "little")
         m6 = self.boot(bytes(other))
         self.assertIn("page A refused: record of another format version", m6.output())
-        self.assertEqual(self.get(m6, "current_limit"), default_limit)
+        self.assertEqual(self.get(m6, "limits.current_limit"), default_limit)
 
     def test_save_is_refused_with_the_bank_swap_option(self):
         """N9: BKER selects the physical bank; with FLASH_OPTR.BFB2 set the banks may be
@@ -561,20 +561,20 @@ class Settings(unittest.TestCase):
         its double words, so the new record is never complete). Then a cut right after
         the erase (the old settings) and right after the last double word (the new ones)."""
         m = self.boot()
-        self.assertIn("ok current_limit applied", command(m, "set current_limit 4"))
+        self.assertIn("ok limits.current_limit applied", command(m, "set limits.current_limit 4"))
         self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
-        self.assertIn("ok current_limit applied", command(m, "set current_limit 3.8"))
+        self.assertIn("ok limits.current_limit applied", command(m, "set limits.current_limit 3.8"))
         self.assertIn("ok saved to flash (page B)", command(m, "save", 20))
         good = m.settings_pages()
         m.flash_ops = 0
-        self.assertIn("ok current_limit applied", command(m, "set current_limit 3.5"))
+        self.assertIn("ok limits.current_limit applied", command(m, "set limits.current_limit 3.5"))
         self.assertIn("ok saved to flash (page A)", command(m, "save", 20))
         ops = m.flash_ops
         self.assertEqual(ops, 1 + 10, "an erase and ten double words")
         for op in range(1, ops + 1):
             with self.subTest(cut_during_operation=op):
                 m = self.boot(good)
-                command(m, "set current_limit 3.5")
+                command(m, "set limits.current_limit 3.5")
                 m.flash_ops, m.cut_at_op = 0, op
                 command(m, "save", 20)
                 self.assertTrue(m.halted and m.halted.startswith("power cut"), m.halted)
@@ -587,18 +587,18 @@ class Settings(unittest.TestCase):
                 self.assertTrue([e for e in m2.events if e[0] == "FLASH ECC double error"])
                 self.assertIn("warn settings: page A torn (flash ECC error), using page B "
                               "(seq 2)", m2.output())
-                loaded = self.get(m2, "current_limit")
+                loaded = self.get(m2, "limits.current_limit")
                 print(f"\ncut during flash operation {op}: loaded current_limit {loaded} "
                       f"({'old' if loaded == 3.8 else 'new' if loaded == 3.5 else 'neither'})",
                       file=sys.stderr)
                 self.assertEqual(loaded, 3.8, "the settings saved before")
                 self.assertEqual(state_fault(m2), (0, 0))
                 # and the next save works, to the torn page again (seq 3)
-                self.assertIn("ok current_limit applied", command(m2, "set current_limit 3.6"))
+                self.assertIn("ok limits.current_limit applied", command(m2, "set limits.current_limit 3.6"))
                 self.assertIn("ok saved to flash (page A)", command(m2, "save", 20))
                 m3 = self.boot(m2.settings_pages())
                 self.assertIn("settings loaded from flash (page A, seq 3)", m3.output())
-                self.assertEqual(self.get(m3, "current_limit"), 3.6)
+                self.assertEqual(self.get(m3, "limits.current_limit"), 3.6)
         # a cut right after an operation completed: after the erase (page A blank: the old
         # settings, no warning) and after the last double word (the new record complete,
         # not yet read back: the new settings, page A seq 3)
@@ -606,14 +606,14 @@ class Settings(unittest.TestCase):
                                  (ops, 3.5, "settings loaded from flash (page A, seq 3)")):
             with self.subTest(cut_after_operation=op):
                 m = self.boot(good)
-                command(m, "set current_limit 3.5")
+                command(m, "set limits.current_limit 3.5")
                 m.flash_ops, m.cut_at_op, m.cut_completes = 0, op, True
                 command(m, "save", 20)
                 self.assertTrue(m.halted and m.halted.startswith("power cut after"), m.halted)
                 self.assertEqual(m.torn_offsets(), [])
                 m2 = self.boot(m.settings_pages())
                 self.assertIn(line, m2.output())
-                got = self.get(m2, "current_limit")
+                got = self.get(m2, "limits.current_limit")
                 print(f"\ncut after flash operation {op}: loaded current_limit {got} "
                       f"({'old' if got == 3.8 else 'new' if got == 3.5 else 'neither'})",
                       file=sys.stderr)
@@ -624,8 +624,8 @@ class Settings(unittest.TestCase):
         defaults and says the page is torn (a cut between operations, the page erased, is
         the blank case of `test_set_save_reboot_and_a_corrupted_page`)."""
         m = self.boot()
-        default_limit = self.get(m, "current_limit")
-        command(m, "set current_limit 3.5")
+        default_limit = self.get(m, "limits.current_limit")
+        command(m, "set limits.current_limit 3.5")
         m.flash_ops, m.cut_at_op = 0, 1
         command(m, "save", 20)
         self.assertTrue(m.halted and m.halted.startswith("power cut"), m.halted)
@@ -633,7 +633,7 @@ class Settings(unittest.TestCase):
         self.assertIn("warn settings in flash refused: page A torn (flash ECC error)",
                       m2.output())
         self.assertIn("warn settings: defaults in use, drive idle", m2.output())
-        self.assertEqual(self.get(m2, "current_limit"), default_limit)
+        self.assertEqual(self.get(m2, "limits.current_limit"), default_limit)
 
 
 class Profiles(unittest.TestCase):
@@ -745,7 +745,7 @@ class HardwareTrip(unittest.TestCase):
     def test_a_new_trip_moves_the_threshold(self):
         m = booted()
         self.assertEqual(m.reg(self.DAC3, 0x8), 410)
-        self.assertIn("ok", command(m, "set overcurrent_trip 6"))
+        self.assertIn("ok", command(m, "set limits.overcurrent_trip 6"))
         # 1.65 - 6 * 0.165 = 0.66 V: 819.2 counts
         self.assertEqual(m.reg(self.DAC3, 0x8), 819)
         # the drive still starts with the comparators armed (a start after `set` waits for
@@ -872,11 +872,11 @@ class SelfTest(unittest.TestCase):
         self.assertIn("err nothing to apply (already applied)", command(m, "commission apply"))
         vals = {l.split(" = ")[0]: float(l.split(" = ")[1].split()[0])
                 for l in command(m, "get").split("\r\n") if " = " in l}
-        rs, rr, lr, lm = (vals["stator_resistance"], vals["rotor_resistance"],
-                          vals["rotor_inductance"], vals["mutual_inductance"])
+        rs, rr, lr, lm = (vals["machine.stator_resistance"], vals["machine.rotor_resistance"],
+                          vals["machine.rotor_inductance"], vals["machine.mutual_inductance"])
         self.assertLess(abs(rs - 10.5) / 10.5, 0.02)
         self.assertLess(abs(rr * (lm / lr) ** 2 - 7.810714) / 7.810714, 0.05)
-        self.assertEqual(vals["pole_pairs"], 2)
+        self.assertEqual(vals["machine.pole_pairs"], 2)
         self.assertEqual(state_fault(m), (0, 0))
         m.run(5000 * 3)
         self.assertIn("ok", command(m, "speed 300"))
@@ -930,7 +930,7 @@ class PowerStage(unittest.TestCase):
         self.drive_to_500_rpm_and_step("")
 
     def test_power_stage_build_with_a_1_ms_slow_task(self):
-        """The same with `set slow_period 1`: the speed loop, field weakening, the offset
+        """The same with `set loops.slow_period 1`: the speed loop, field weakening, the offset
         tracker and the slow supervision once per millisecond, inside the control
         interrupt, on the board's CORDIC; the same bounds."""
         self.drive_to_500_rpm_and_step("1")
@@ -939,8 +939,8 @@ class PowerStage(unittest.TestCase):
         motor = fil.InductionMotorLoad()
         m = booted(load=motor)
         if slow_period:
-            self.assertIn("ok slow_period applied",
-                          command(m, f"set slow_period {slow_period}", 5))
+            self.assertIn("ok loops.slow_period applied",
+                          command(m, f"set loops.slow_period {slow_period}", 5))
             # the rebuilt drive measures its offsets again before it starts
             m.run(600)
         self.assertIn("ok", command(m, "speed 500", 5))
@@ -978,7 +978,7 @@ class Rearm(unittest.TestCase):
         motor = fil.InductionMotorLoad()
         m = booted(load=motor)
         self.assertIn("ok", command(m, "speed 300", 5))
-        self.assertIn("ok max_speed applied", command(m, "set max_speed 1900", 5))
+        self.assertIn("ok limits.max_speed applied", command(m, "set limits.max_speed 1900", 5))
         # at once: the rebuilt drive has not measured its offsets yet (start pending)
         self.assertIn("ok", command(m, "start", 5))
         self.assertFalse(m.moe(), "outputs stay off while the start waits")

@@ -25,7 +25,7 @@ tmp = tempfile.mkdtemp()
 try:
     print(board.stdout.readline().strip())
     script = os.path.join(tmp, "script.txt")
-    open(script, "w").write("0.1 speed 300\n0.2 start\n0.5 set current_limit 99\n0.6 frobnicate\n")
+    open(script, "w").write("0.1 speed 300\n0.2 start\n0.5 set limits.current_limit 99\n0.6 frobnicate\n")
     csv, screen = os.path.join(tmp, "fil.csv"), os.path.join(tmp, "screen.txt")
     t0 = time.time()
     r = subprocess.run([monitor, "--tcp", f"127.0.0.1:{port}", "--headless", "--until", "2.5",
@@ -44,7 +44,7 @@ checks = {
     "every frame decoded": " 0 bad frames" in r.stdout,
     "the firmware reached 300 rpm on its motor model": any(
         x[3] == "2" and abs(float(x[7]) - 300) < 5 and abs(float(x[6]) - 300) < 5 for x in rows),
-    "the firmware's refusal of the setting shown": "err (overcurrent_trip: must be at least current_limit)" in text,
+    "the firmware's refusal of the setting shown": "err (limits.overcurrent_trip: must be at least current_limit)" in text,
     "the firmware's unknown-command reply shown": "err unknown command (try help)" in text,
     "still running after the refused commands": bool(rows) and rows[-1][3] == "2",
 }

@@ -250,25 +250,25 @@ mod fw {
 
     fn config() -> DriveConfig {
         let mut c = DriveConfig::paper_defaults();
-        c.rs_estimation = true;
+        c.estimation.rs_estimation = true;
         // the synthetic loop has no machine behind the voltages: the running Rs law
         // (the default) reads them as a resistance and took the estimate
         // to its bound (EstimatorOutOfRange) within 1.4 s in both arithmetics, so this
         // comparison keeps the standstill mode (the running law's Q7.24 cost is not in
         // these figures; the f32 bench, closed loop against the motor model, has it)
-        c.rs_estimation_mode = acim::RsEstimationMode::Standstill;
+        c.estimation.rs_estimation_mode = acim::RsEstimationMode::Standstill;
         // nor does the current-sensor gain calibration have one: its q-axis voltage is
         // the current PI's response to the noise alone (a random walk), which it read as
         // a mismatch at its 5 % bound, and the two drives then faulted; off here (it runs
         // only while magnetizing, outside these figures; its two products per step in
         // the sense stage remain)
-        c.current_gain_calibration = false;
+        c.start.current_gain_calibration = false;
         // nor the inverter test at start (on by default): its fit would
         // read the current PI's voltage, and its 0.6 s before speed control moved the
         // measured steps into the speed ramp (drive_step 2617 -> 2623-2689 instructions
         // on the M4F, the speed PI 310 -> 323-384); off, the figures stay those of the
         // same steady running steps
-        c.inverter_identification = false;
+        c.start.inverter_identification = false;
         c
     }
 
@@ -310,7 +310,7 @@ mod fw {
         p.SYST.clear_current();
         p.SYST.enable_counter();
         let cfg = config();
-        let ts = cfg.control_period;
+        let ts = cfg.loops.control_period;
         let bases = PerUnitBases::PAPER;
         let (Ok(mut f32_drive), Ok(mut fixed_drive)) =
             (Drive::new(cfg), FixedDrive::with_bases(cfg, bases))

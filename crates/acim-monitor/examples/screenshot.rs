@@ -51,7 +51,7 @@ fn main() -> Result<(), String> {
         (0.0, "get"),
         (0.2, "start"),
         (0.5, "speed 500"),
-        (2.0, "set current_limit 99"),
+        (2.0, "set limits.current_limit 99"),
         (2.5, "load 1.5"),
         (4.0, "frobnicate"),
         (4.2, "speed 5000"),

@@ -21,12 +21,12 @@ const SCRIPT: &str = "\
 0.3 frobnicate
 0.4 speed 5000
 0.5 speed 500
-0.6 set current_limit 99
+0.6 set limits.current_limit 99
 2.5 load 1.5
 4.0 stop
 4.8 frobnicate
 4.9 speed 5000
-5.0 set current_limit 99
+5.0 set limits.current_limit 99
 ";
 
 fn out_dir() -> PathBuf {
@@ -202,9 +202,9 @@ fn start_speed_load_stop_recorded_as_the_board_ran_it() {
         "reconnects 1",
         "err unknown command (try help)",
         "err out of range",
-        "err (overcurrent_trip:",
-        "current_limit 4.67 A",
-        "> set current_limit 99",
+        "err (limits.overcurrent_trip:",
+        "limits.current_limit 4.67 A",
+        "> set limits.current_limit 99",
     ] {
         assert!(screen.contains(s), "screen lacks {s:?}:\n{screen}");
     }

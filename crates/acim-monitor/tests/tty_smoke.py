@@ -45,7 +45,7 @@ try:
     pump(1.5)
     type_("start\r", 0.5)
     type_("speed 300\r", 2.0)
-    type_("set current_limit 99\r", 0.5)
+    type_("set limits.current_limit 99\r", 0.5)
     type_("\x1b", 0.5)   # Esc sends stop
     type_("\x03", 1.0)   # Ctrl-C quits
     _, status = os.waitpid(pid, 0)

@@ -16,13 +16,13 @@ type Variant = (&'static str, fn(&mut Scenario));
 fn main() {
     let variants: [Variant; 5] = [
         ("5 kHz, default bandwidth", |_| {}),
-        ("10 kHz", |s| s.drive.control_period_s = 1.0e-4),
-        ("20 kHz", |s| s.drive.control_period_s = 5.0e-5),
+        ("10 kHz", |s| s.drive.loops.control_period_s = 1.0e-4),
+        ("20 kHz", |s| s.drive.loops.control_period_s = 5.0e-5),
         ("current bandwidth 500 rad/s", |s| {
-            s.drive.current_bandwidth_rad_s = 500.0
+            s.drive.loops.current_bandwidth_rad_s = 500.0
         }),
         ("current bandwidth 2000 rad/s", |s| {
-            s.drive.current_bandwidth_rad_s = 2000.0
+            s.drive.loops.current_bandwidth_rad_s = 2000.0
         }),
     ];
     println!(
@@ -36,7 +36,7 @@ fn main() {
     for (name, setup) in variants {
         let mut sc = base_scenario();
         setup(&mut sc);
-        sc.drive.orientation_gain = 0.0;
+        sc.drive.estimation.orientation_gain = 0.0;
         let model = linearise(&sc, 250.0, -1.5)
             .expect("valid scenario")
             .map_or(f64::NAN, |l| l.max_real());
@@ -53,7 +53,7 @@ fn main() {
     println!("|---|---|---|");
     for k in [2.0f32, 1.0] {
         let mut sc = base_scenario();
-        sc.drive.orientation_gain = k;
+        sc.drive.estimation.orientation_gain = k;
         let l = linearise(&sc, 60.0, -4.5).expect("valid scenario");
         let model = l.map_or("no equilibrium".into(), |l| {
             let (re, im) = l.eigenvalues[0];

@@ -32,7 +32,7 @@ fn main() {
     let t = std::time::Instant::now();
     let mut sc = case.scenario(mode);
     if a[4] == "off" {
-        sc.drive.rs_estimation = false;
+        sc.drive.estimation.rs_estimation = false;
     }
     for kv in a.iter().skip(5) {
         sc = sc.with_overrides(std::slice::from_ref(kv)).unwrap();

@@ -13,10 +13,10 @@ fn main() {
     let mut sc = acim_sim::stability::ideal_scenario("step");
     sc.duration_s = 10.0;
     sc.sensors.adc_bits = 16;
-    sc.drive.speed_ramp_rpm_s = 2000.0;
+    sc.drive.loops.speed_ramp_rpm_s = 2000.0;
     if a[2] == "running" {
-        sc.drive.rs_estimation = true;
-        sc.drive.rs_estimation_mode = RsMode::Running;
+        sc.drive.estimation.rs_estimation = true;
+        sc.drive.estimation.rs_estimation_mode = RsMode::Running;
     }
     if let Some(f) = a.get(3) {
         sc.controller.rs_ohm = f.parse::<f32>().unwrap() * sc.plant.rs_ohm;
@@ -30,7 +30,7 @@ fn main() {
     let v = sc.validate().unwrap();
     let mut plant = acim_sim::sim::build_plant_pub(&sc, &v);
     let mut drive = Drive::new(v.drive).unwrap();
-    let ts = sc.drive.control_period_s;
+    let ts = sc.drive.loops.control_period_s;
     let _ = drive.set_speed_target(rpm * RPM_TO_RAD_S);
     let _ = drive.start();
     let mut pwm = PwmPreload::new();

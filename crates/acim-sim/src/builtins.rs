@@ -48,11 +48,11 @@ fn base(name: &str, description: &str, duration_s: f32) -> Scenario {
 /// is switched off so that the published results are the paper's setup.
 fn paper_without_rs_estimator(name: &str, description: &str, duration_s: f32) -> Scenario {
     let mut s = base(name, description, duration_s);
-    s.drive.rs_estimation = false;
-    s.drive.offset_tracking = false;
-    s.drive.current_gain_calibration = false;
-    s.drive.inverter_identification = false;
-    s.drive.inverter_tracking = false;
+    s.drive.estimation.rs_estimation = false;
+    s.drive.trackers.offset_tracking = false;
+    s.drive.start.current_gain_calibration = false;
+    s.drive.start.inverter_identification = false;
+    s.drive.trackers.inverter_tracking = false;
     s
 }
 
@@ -69,13 +69,13 @@ fn trapezoid(name: &str, description: &str, rpm: f32) -> Scenario {
     s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm), sp(8.0, 0.0)];
     // the paper's trapezoids hold zero speed for their last 2 s with the flux on: `hold`,
     // not the drive's default `stop` (which would switch off 0.5 s after reaching zero)
-    s.drive.zero_speed_policy = ZeroSpeed::Hold;
+    s.drive.zero_speed.policy = ZeroSpeed::Hold;
     // steady windows start 1 s after the ramp ends (500 rpm/s)
-    let ramp = 2.0 * rpm.abs() / s.drive.speed_ramp_rpm_s;
+    let ramp = 2.0 * rpm.abs() / s.drive.loops.speed_ramp_rpm_s;
     s.windows = vec![
         win(
             "forward",
-            0.5 + rpm.abs() / s.drive.speed_ramp_rpm_s + 1.0,
+            0.5 + rpm.abs() / s.drive.loops.speed_ramp_rpm_s + 1.0,
             4.0,
         ),
         win("reverse", (4.0 + ramp + 1.0).min(7.9), 8.0),
@@ -111,7 +111,7 @@ fn regen(name: &str, rpm: f32) -> Scenario {
     );
     s.speed_profile = vec![sp(0.5, rpm), sp(4.0, -rpm)];
     s.load_profile = vec![load(2.0, LoadKind::Active, 1.5)];
-    let up = rpm.abs() / s.drive.speed_ramp_rpm_s;
+    let up = rpm.abs() / s.drive.loops.speed_ramp_rpm_s;
     s.windows = vec![
         win("motoring", (0.5 + up + 1.0).max(2.5), 4.0),
         win("regenerating", 4.0 + 2.0 * up + 1.0, 8.0),
@@ -166,7 +166,7 @@ pub fn all() -> Vec<Scenario> {
         "Fig. 9: Rs estimator on, initial Rs_hat 15.75 ohm (+50 %)",
     );
     s.controller.rs_ohm = 1.5 * s.plant.rs_ohm;
-    s.drive.rs_estimation = true;
+    s.drive.estimation.rs_estimation = true;
     // speed control starts about 0.6 s later (standstill Rs identification), so the
     // ramp's settling tail reaches 2.5 s: the steady window starts at 3 s
     s.windows[0].from_s = 3.0;
@@ -254,7 +254,7 @@ pub fn all() -> Vec<Scenario> {
         4.0,
     );
     s.dc_link.capacitance_f = 220e-6;
-    s.drive.speed_ramp_rpm_s = 4000.0;
+    s.drive.loops.speed_ramp_rpm_s = 4000.0;
     s.speed_profile = vec![sp(0.5, 1000.0), sp(2.5, 0.0)];
     // from 2.0 s: speed control starts at 0.77 s, the ramp settles by about 1.5 s
     s.windows = vec![win("before-fault", 2.0, 2.5)];
@@ -458,16 +458,16 @@ pub fn all() -> Vec<Scenario> {
         15.0,
     );
     s.dc_link.capacitance_f = 470e-6;
-    s.drive.overvoltage_control = true;
+    s.drive.field_weakening.overvoltage_control = true;
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
     // up and down at 2000 rpm/s where the torque allows: up, the reference is held at
     // the torque limit in field weakening; down, the over-voltage control limits the
     // braking torque to the losses and the reference is held with the speed (stopped
     // at about 13.3 s)
-    s.drive.speed_ramp_rpm_s = 2000.0;
+    s.drive.loops.speed_ramp_rpm_s = 2000.0;
     // the "stopped" window measures the drive holding zero with the flux on after the
     // braking: `hold`, not the default `stop` (which switches off 0.5 s after zero)
-    s.drive.zero_speed_policy = ZeroSpeed::Hold;
+    s.drive.zero_speed.policy = ZeroSpeed::Hold;
     s.windows = vec![win("top", 6.5, 8.0), win("stopped", 14.0, 15.0)];
     v.push(s);
 
@@ -489,10 +489,10 @@ pub fn all() -> Vec<Scenario> {
         16.0,
     );
     s.dc_link.capacitance_f = 470e-6;
-    s.drive.overvoltage_control = true;
+    s.drive.field_weakening.overvoltage_control = true;
     s.speed_profile = vec![sp(0.5, 3000.0), sp(8.0, 0.0)];
     // held at zero after the braking as published (the default `stop` would switch off)
-    s.drive.zero_speed_policy = ZeroSpeed::Hold;
+    s.drive.zero_speed.policy = ZeroSpeed::Hold;
     s.windows = vec![win("top", 7.5, 8.0)];
     v.push(s);
 
@@ -582,7 +582,7 @@ fn zero_speed_drift() -> crate::scenario::Expected {
 /// with the over-speed trip at 3600 rpm (targets up to 3240 rpm).
 fn fw_base(name: &str, description: &str, duration_s: f32) -> Scenario {
     let mut s = base(name, description, duration_s);
-    s.drive.max_speed_rpm = Some(3600.0);
+    s.drive.limits.max_speed_rpm = Some(3600.0);
     s.csv_decimation = Some(10);
     s
 }

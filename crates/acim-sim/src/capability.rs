@@ -100,7 +100,7 @@ pub fn envelope_nm(m: &MachineSpec, i_max: f32, i_d_max: f32, v_max: f32, rpm: f
 fn scenario(rpm: f32, load_nm: f32, modulation: ModulationKind) -> Scenario {
     let mut s = builtins::get("fw-ramp-3000").expect("fw-ramp-3000 is a built-in");
     s.drive.modulation = modulation;
-    let t_load = 0.5 + rpm / s.drive.speed_ramp_rpm_s + 1.0;
+    let t_load = 0.5 + rpm / s.drive.loops.speed_ramp_rpm_s + 1.0;
     s.name = format!("capability-{rpm:.0}");
     s.speed_profile = vec![SpeedPoint { t_s: 0.5, rpm }];
     // the load rises in ten steps over 2 s (a sudden passive step at low speed stops
@@ -145,20 +145,20 @@ pub fn measure_at(
     let mut points = Vec::new();
     for &rpm in speeds_rpm {
         let sc = scenario(rpm, 0.0, ModulationKind::Linear);
-        let i_max = sc.drive.current_limit_a;
+        let i_max = sc.drive.limits.current_limit_a;
         let v_max = 0.98 * sc.bus_v() / 3f32.sqrt();
-        let envelope = envelope_nm(&sc.plant, i_max, sc.drive.flux_current_a, v_max, rpm);
+        let envelope = envelope_nm(&sc.plant, i_max, sc.drive.loops.flux_current_a, v_max, rpm);
         let envelope_trim = envelope_nm(
             &sc.plant,
             i_max,
-            sc.drive.flux_current_a,
+            sc.drive.loops.flux_current_a,
             acim::design::FW_TRIM_FRACTION * v_max,
             rpm,
         );
         let envelope_six_step = envelope_nm(
             &sc.plant,
             i_max,
-            sc.drive.flux_current_a,
+            sc.drive.loops.flux_current_a,
             acim::svpwm::SIX_STEP * sc.bus_v(),
             rpm,
         );

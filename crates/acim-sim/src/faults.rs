@@ -63,12 +63,12 @@ pub fn run_all_with(
     Ok(rows)
 }
 
-/// The slow task of the fault table's last column (`drive.slow_period_s`), s.
+/// The slow task of the fault table's last column (`drive.loops.slow_period_s`), s.
 pub const TABLE_SLOW_PERIOD_S: f32 = acim::design::TYPICAL_SLOW_PERIOD;
 
 /// The `--set` override that runs a scenario with [`TABLE_SLOW_PERIOD_S`].
 pub fn slow_task_override() -> String {
-    format!("drive.slow_period_s={TABLE_SLOW_PERIOD_S}")
+    format!("drive.loops.slow_period_s={TABLE_SLOW_PERIOD_S}")
 }
 
 fn detected_after(m: &Metrics, at: Option<f32>) -> String {
@@ -190,13 +190,13 @@ pub fn sensor_cases() -> Result<Vec<SensorCase>, String> {
         for (point, rpm) in points {
             let mut sc = base.clone();
             sc.sensors.channels = 2;
-            sc.drive.max_speed_rpm = Some(2.0 * sync_rpm);
+            sc.drive.limits.max_speed_rpm = Some(2.0 * sync_rpm);
             sc.speed_profile = vec![crate::scenario::SpeedPoint { t_s: 0.5, rpm }];
             sc.load_profile = Vec::new();
             sc.windows = Vec::new();
             sc.csv_decimation = None;
             let v = sc.validate().map_err(|e| format!("{}: {e}", m.name))?;
-            let ramp = v.drive.speed_ramp * acim::math::RAD_S_TO_RPM;
+            let ramp = v.drive.loops.speed_ramp * acim::math::RAD_S_TO_RPM;
             sc.duration_s = 0.5 + START_ALLOWANCE_S + rpm / ramp + SETTLE_S;
             // when the reference arrives, without a fault
             let probe = crate::sim::run(&sc).map_err(|e| format!("{}: {e}", m.name))?;
@@ -281,7 +281,7 @@ pub fn sensor_markdown(rows: &[(SensorCase, Metrics)]) -> String {
     let control_period_s = rows
         .iter()
         .filter_map(|(c, _)| c.scenario.validate().ok())
-        .map(|v| v.drive.control_period)
+        .map(|v| v.drive.loops.control_period)
         .fold(0.0f32, f32::max);
     let mut s = format!(
         "\n## Current-sensor faults on every acceptance machine\n\n\
@@ -320,7 +320,7 @@ pub fn sensor_markdown(rows: &[(SensorCase, Metrics)]) -> String {
         let trip = c
             .scenario
             .validate()
-            .map_or(0.0, |v| v.drive.overcurrent_trip);
+            .map_or(0.0, |v| v.drive.limits.overcurrent_trip);
         let _ = writeln!(
             s,
             "| {} | {} | {} | {} | {} | {} | {:.1} | {:.2} | {:.1} |",

@@ -37,7 +37,7 @@
 //! the reachable speed, which is where the equilibrium is found. (The sampled loop does
 //! the same: there the PI sits at the bound and the torque-current reference follows the
 //! bound at the estimated speed step by step, a speed feedback of gain p lambda_ref /
-//! R_R_hat.) In the drive's far-side mode (`acim::DriveConfig::far_side_gain`
+//! R_R_hat.) In the drive's far-side mode (`DriveConfig.estimation.far_side_gain`
 //! on, the running Rs law, no inverter error left, and a load that puts the target's point
 //! at least `far_side_enter` beyond the line w_s = 0) the limit does not bind and, where
 //! w_s turns against Omega_hat, the observer's speed and load updates take
@@ -178,15 +178,15 @@ impl Model {
             allowed: format!("a valid drive configuration ({e:?})"),
         })?;
         let c = drive.coeffs();
-        let ts = f64::from(v.drive.control_period);
+        let ts = f64::from(v.drive.loops.control_period);
         let m = v.plant;
         let inv = &sc.inverter;
         let bus = f64::from(sc.bus_v());
         // the leg error: dead time over the period times the bus, plus the device drop;
         // less what the drive compensates
         let leg = |dead: f32, drop: f32| f64::from(dead) / ts * bus + f64::from(drop);
-        let inverter_error =
-            leg(inv.dead_time_s, inv.device_drop_v) - leg(v.drive.dead_time, v.drive.device_drop);
+        let inverter_error = leg(inv.dead_time_s, inv.device_drop_v)
+            - leg(v.drive.inverter.dead_time, v.drive.inverter.device_drop);
         let o = &c.observer;
         let run = &c.rs_running;
         let running = (c.rs.adapt && run.enabled).then(|| RunningLaw {
@@ -203,7 +203,7 @@ impl Model {
             b: f64::from(m.viscous_friction()),
             p: f64::from(m.pole_pairs_f32()),
             i_sd: f64::from(c.cascade.i_sd_ref),
-            rs_hat: f64::from(v.drive.rs_initial),
+            rs_hat: f64::from(v.drive.estimation.rs_initial),
             rr_hat: f64::from(c.model.referred_rotor_resistance),
             blend: f64::from(c.flux.blend) / ts,
             lm_hat: f64::from(c.flux.magnetizing_inductance),
@@ -226,7 +226,7 @@ impl Model {
             fade_start: f64::from(c.orientation.fade_start),
             inv_fade_width: f64::from(c.orientation.inv_fade_width),
             correction_limit: f64::from(c.orientation.limit),
-            current_bandwidth: f64::from(v.drive.current_bandwidth),
+            current_bandwidth: f64::from(v.drive.loops.current_bandwidth),
             running,
             regen_min_frequency: f64::from(c.speed_loop.regen_min_frequency),
             regen_current_per_frequency: f64::from(c.speed_loop.regen_current_per_frequency),
@@ -527,7 +527,7 @@ pub fn linearise(
 /// regeneration limit: every labelled point is linearised where it is labelled.
 pub fn base_scenario() -> Scenario {
     let mut sc = crate::stability::ideal_scenario("linear");
-    sc.drive.regen_min_frequency_hz = 0.0;
+    sc.drive.loops.regen_min_frequency_hz = 0.0;
     sc
 }
 
@@ -537,9 +537,9 @@ pub fn base_scenario() -> Scenario {
 pub fn default_drive_scenario() -> Scenario {
     let mut sc = crate::stability::ideal_scenario("linear-default");
     let defaults = Scenario::default();
-    sc.drive.rs_estimation = defaults.drive.rs_estimation;
-    sc.drive.rs_estimation_mode = defaults.drive.rs_estimation_mode;
-    sc.drive.regen_min_frequency_hz = defaults.drive.regen_min_frequency_hz;
+    sc.drive.estimation.rs_estimation = defaults.drive.estimation.rs_estimation;
+    sc.drive.estimation.rs_estimation_mode = defaults.drive.estimation.rs_estimation_mode;
+    sc.drive.loops.regen_min_frequency_hz = defaults.drive.loops.regen_min_frequency_hz;
     sc
 }
 
@@ -679,7 +679,7 @@ mod tests {
 
     fn point(k: f32, rpm: f32, load: f32) -> Linearisation {
         let mut s = base_scenario();
-        s.drive.orientation_gain = k;
+        s.drive.estimation.orientation_gain = k;
         linearise(&s, rpm, load).unwrap().unwrap()
     }
 
@@ -741,7 +741,9 @@ mod tests {
     /// (stable).
     #[test]
     fn agrees_with_the_measured_growth_rates() {
-        let k = acim::DriveConfig::paper_defaults().orientation_gain;
+        let k = acim::DriveConfig::paper_defaults()
+            .estimation
+            .orientation_gain;
         for (rpm, load) in [(120.0, -4.5), (250.0, -3.0), (500.0, -4.5)] {
             let lin = point(k, rpm, load).max_real();
             let measured = f64::from(crate::stability::measure(rpm, load, k).unwrap().growth_rate);
@@ -807,18 +809,18 @@ mod tests {
         assert!((l.state[2] - 2.0 * core::f64::consts::PI).abs() < 0.1);
         assert!(l.max_real() < -1.0, "{:?}", l.eigenvalues);
         let mut off = default_drive_scenario();
-        off.drive.far_side_gain = 0.0;
+        off.drive.estimation.far_side_gain = 0.0;
         assert!(linearise(&off, 60.0, -4.5).unwrap().unwrap().limited);
         // the far-side term is what holds it: without it (and without the limit) the
         // point is unstable
         let mut zero = default_drive_scenario();
-        zero.drive.far_side_gain = 0.0;
-        zero.drive.regen_min_frequency_hz = 0.0;
+        zero.drive.estimation.far_side_gain = 0.0;
+        zero.drive.loops.regen_min_frequency_hz = 0.0;
         let l = linearise(&zero, 60.0, -4.5).unwrap().unwrap();
         assert!(l.max_real() > 0.0, "{:?}", l.eigenvalues);
         // Rs held: no transit
         let mut held = default_drive_scenario();
-        held.drive.rs_estimation = false;
+        held.drive.estimation.rs_estimation = false;
         assert!(linearise(&held, 60.0, -4.5).unwrap().unwrap().limited);
     }
 

@@ -104,7 +104,7 @@ pub fn identified(base: &Scenario, report: &Report) -> Scenario {
             .map_or(base.plant.inertia_kgm2, |j| j.identified),
         friction_nms: report.friction_nms.identified,
     };
-    s.drive.dead_time_comp_s = report.dead_time_s.identified;
+    s.drive.inverter.dead_time_comp_s = report.dead_time_s.identified;
     s
 }
 

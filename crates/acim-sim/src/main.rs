@@ -170,7 +170,9 @@ impl Progress {
         if quiet || !std::io::stderr().is_terminal() {
             return Progress { bar: None };
         }
-        let steps = (sc.duration_s / sc.drive.control_period_s).round().max(1.0) as u64;
+        let steps = (sc.duration_s / sc.drive.loops.control_period_s)
+            .round()
+            .max(1.0) as u64;
         let bar = indicatif::ProgressBar::new(steps);
         // short enough for an 80-column terminal (a wrapped bar redraws badly)
         let style = indicatif::ProgressStyle::with_template(
@@ -372,7 +374,7 @@ fn outcome(m: &Metrics) -> String {
     }
     for c in &m.target_clamps {
         notes.push(format!(
-            "target {:.0} rpm at {:.2} s limited to {:.0} rpm (90 % of drive.max_speed_rpm)",
+            "target {:.0} rpm at {:.2} s limited to {:.0} rpm (90 % of drive.limits.max_speed_rpm)",
             c.target_rpm, c.t_s, c.limited_to_rpm
         ));
     }
@@ -716,7 +718,12 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 (None, Some(d)) => d.clone(),
                 (None, None) => PathBuf::from("docs/stability"),
             };
-            let gains = [0.0, acim::DriveConfig::paper_defaults().orientation_gain];
+            let gains = [
+                0.0,
+                acim::DriveConfig::paper_defaults()
+                    .estimation
+                    .orientation_gain,
+            ];
             let t0 = std::time::Instant::now();
             let pts = acim_sim::stability::map(&gains).map_err(|e| e.to_string())?;
             acim_sim::output::write_stability(&dir, &pts, &gains).map_err(|e| e.to_string())?;
@@ -755,7 +762,11 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let out = o.out();
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
             // the same scenarios with a 1 kHz slow task (unless the overrides choose one)
-            let slow = if o.sets.iter().any(|s| s.starts_with("drive.slow_period_s")) {
+            let slow = if o
+                .sets
+                .iter()
+                .any(|s| s.starts_with("drive.loops.slow_period_s"))
+            {
                 Vec::new()
             } else {
                 let mut sets = o.sets.clone();

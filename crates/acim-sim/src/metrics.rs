@@ -338,7 +338,7 @@ pub struct LoadStepMetrics {
 /// Rs estimator convergence.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct RsMetrics {
-    /// Whether the Rs estimator ran (`drive.rs_estimation`); the other fields only mean
+    /// Whether the Rs estimator ran (`drive.estimation.rs_estimation`); the other fields only mean
     /// something when it did.
     pub estimator_on: bool,
     /// True stator resistance, ohm.
@@ -475,7 +475,7 @@ fn moving_average(x: &[f32], n: usize) -> Vec<f32> {
 /// has not changed for as long.
 fn oscillation(r: &RunResult, spd_avg: &[f32], th: &Thresholds) -> Option<Oscillation> {
     let rows = &r.rows;
-    let ts = r.config.control_period;
+    let ts = r.config.loops.control_period;
     let block = ((OSCILLATION_BLOCK_S / ts).round() as usize).max(1);
     let settle = ((STEADY_AFTER_S / ts).round() as usize).max(1);
     // steps since the last reference move, load change or leaving the running state
@@ -678,7 +678,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     };
     let running_from = rows.iter().find(|r| r.state == 2).map(|r| r.t_s);
     let rs = RsMetrics {
-        estimator_on: sc.drive.rs_estimation,
+        estimator_on: sc.drive.estimation.rs_estimation,
         true_ohm: true_rs,
         initial_ohm: rows
             .first()
@@ -746,7 +746,7 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
             k += 1;
         }
         let from = rows[start].t_s;
-        let held_s = rows[k - 1].t_s - from + r.config.control_period;
+        let held_s = rows[k - 1].t_s - from + r.config.loops.control_period;
         if held_s > DRIFT_SETTLE_S {
             let a = idx(rows, from + DRIFT_SETTLE_S);
             let speed_avg = moving_average(
@@ -794,17 +794,17 @@ pub fn compute(r: &RunResult, wall_time_s: f64) -> Metrics {
     };
     let active = || rows.iter().filter(|r| r.state == 2 || r.state == 3);
     let voltage_saturated_s =
-        active().filter(|r| r.voltage_saturated).count() as f32 * r.config.control_period;
+        active().filter(|r| r.voltage_saturated).count() as f32 * r.config.loops.control_period;
     let speed_target_limited_s =
-        active().filter(|r| r.speed_target_limited).count() as f32 * r.config.control_period;
+        active().filter(|r| r.speed_target_limited).count() as f32 * r.config.loops.control_period;
     let modulation_index_max = rows
         .iter()
         .filter(|r| r.pwm_enabled)
         .fold(0.0f32, |m, r| m.max(r.modulation_index));
 
-    let max_speed_rpm = r.config.max_speed * acim::math::RAD_S_TO_RPM;
-    let trip = r.config.overcurrent_trip;
-    let ts = r.config.control_period;
+    let max_speed_rpm = r.config.limits.max_speed * acim::math::RAD_S_TO_RPM;
+    let trip = r.config.limits.overcurrent_trip;
+    let ts = r.config.loops.control_period;
     let switching = || rows.iter().filter(|r| r.pwm_enabled);
     let peak_current_a = switching().fold(0.0f32, |m, r| m.max(r.i_phase_peak_a));
     let peak_speed_rpm = rows.iter().fold(0.0f32, |m, r| m.max(r.speed_rpm.abs()));

@@ -145,7 +145,9 @@ pub fn csv_decimation(sc: &crate::scenario::Scenario) -> (u32, bool) {
     match sc.csv_decimation {
         Some(n) => (n.max(1), false),
         None => {
-            let steps = (sc.duration_s / sc.drive.control_period_s).round().max(1.0) as usize;
+            let steps = (sc.duration_s / sc.drive.loops.control_period_s)
+                .round()
+                .max(1.0) as usize;
             (steps.div_ceil(CSV_ROWS_DEFAULT_MAX).max(1) as u32, true)
         }
     }
@@ -316,7 +318,8 @@ fn draw_png(path: &Path, r: &RunResult) -> Result<(), Box<dyn std::error::Error>
     });
     let sc = &r.scenario;
     if !open_loop
-        && (sc.drive.rs_estimation || (sc.controller.rs_ohm - sc.plant.rs_ohm).abs() > 1e-6)
+        && (sc.drive.estimation.rs_estimation
+            || (sc.controller.rs_ohm - sc.plant.rs_ohm).abs() > 1e-6)
     {
         panels.push(Panel {
             title: "Stator resistance",

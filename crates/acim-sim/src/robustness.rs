@@ -28,7 +28,7 @@ pub enum Variant {
     /// The machine's Rs steps up 20 % while running.
     PlantRsStep20,
     /// The inverter's dead time is 1.0 us; the drive is configured for 1.5 us (and, as it
-    /// ships, identifies the error at start: `drive.inverter_identification`
+    /// ships, identifies the error at start: `drive.start.inverter_identification`
     /// item 2).
     DeadTime1_0,
     /// The inverter's dead time is 2.2 us; the drive is configured for 1.5 us.
@@ -41,7 +41,7 @@ pub enum Variant {
     /// 1 s from the change time while the motor turns (an amplifier's drift).
     OffsetDrift20mA,
     /// The inverter's dead time is 1.0 us, the drive is configured for 1.5 us and its start
-    /// test is switched off (`drive.inverter_identification = false`): the configured
+    /// test is switched off (`drive.start.inverter_identification = false`): the configured
     /// compensation alone, what the test buys.
     DeadTime1_0NotIdentified,
     /// The inverter's dead time is 2.2 us, configured 1.5 us, the start test off.
@@ -86,7 +86,7 @@ impl Variant {
 pub struct Setup {
     /// Rs estimation mode.
     pub mode: RsMode,
-    /// `drive.regen_min_frequency_hz` (0: off).
+    /// `drive.loops.regen_min_frequency_hz` (0: off).
     pub regen_min_frequency_hz: f32,
 }
 
@@ -154,7 +154,7 @@ impl Case {
     pub fn stator_frequency_hz(&self) -> f32 {
         let m = acim::MachineParams::paper_table1();
         let d = acim::DriveConfig::paper_defaults();
-        let lambda = m.rotor_flux_for(d.flux_current);
+        let lambda = m.rotor_flux_for(d.loops.flux_current);
         let p = m.pole_pairs_f32();
         let omega = self.rpm * acim::math::RPM_TO_RAD_S;
         let load = if self.regenerating {
@@ -187,9 +187,9 @@ impl Case {
         s.sensors.noise_a = 0.01;
         s.sensors.gain_error = [0.003, -0.003, 0.0];
         s.sensors.offset_a = [0.005, -0.005, 0.0];
-        s.drive.rs_estimation = true;
-        s.drive.rs_estimation_mode = mode;
-        s.drive.regen_min_frequency_hz = setup.regen_min_frequency_hz;
+        s.drive.estimation.rs_estimation = true;
+        s.drive.estimation.rs_estimation_mode = mode;
+        s.drive.loops.regen_min_frequency_hz = setup.regen_min_frequency_hz;
         s.speed_profile = vec![SpeedPoint {
             t_s: 0.5,
             rpm: self.rpm,
@@ -232,11 +232,11 @@ impl Case {
             Variant::DeadTime2_2 => s.inverter.dead_time_s = 2.2e-6,
             Variant::DeadTime1_0NotIdentified => {
                 s.inverter.dead_time_s = 1.0e-6;
-                s.drive.inverter_identification = false;
+                s.drive.start.inverter_identification = false;
             }
             Variant::DeadTime2_2NotIdentified => {
                 s.inverter.dead_time_s = 2.2e-6;
-                s.drive.inverter_identification = false;
+                s.drive.start.inverter_identification = false;
             }
             // present from power-up: every start waits for the switches-off measurement
             // (the simulator powers the drive 0.1 s before t = 0, `sim::POWER_UP_S`), so
@@ -325,7 +325,7 @@ pub fn run_scenario(case: &Case, sc: &Scenario) -> Result<Outcome, crate::scenar
         .first()
         .map_or(f32::NAN, |x| x.stator_resistance_est_ohm);
     // lost: a 10 ms mean of |speed - reference| above 100 rpm after the load step
-    let per = (0.01 / r.config.control_period).round().max(1.0) as usize;
+    let per = (0.01 / r.config.loops.control_period).round().max(1.0) as usize;
     let after_load: Vec<f32> = r
         .rows
         .iter()

@@ -56,7 +56,7 @@ fn apply_override(v: &mut toml::Value, s: &str) -> Result<(), ScenarioError> {
     let Some((key, val)) = s.split_once('=') else {
         return err(
             s,
-            "override must be key=value, e.g. drive.rs_estimation=true",
+            "override must be key=value, e.g. drive.estimation.rs_estimation=true",
         );
     };
     let key = key.trim();
@@ -173,10 +173,11 @@ impl MachineSpec {
 }
 
 /// Controller mode.
-#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControlMode {
-    /// Sensorless IFOC (the paper's scheme).
+    /// Sensorless IFOC (the paper's scheme; the default).
+    #[default]
     Sensorless,
     /// Open-loop V/f.
     Vf,
@@ -253,19 +254,64 @@ pub enum ZeroSpeed {
     Stop,
 }
 
-/// Drive (controller) settings.
-#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+/// Drive (controller) settings: the kind of control at the top of `[drive]`, the
+/// settings in the groups of `acim::DriveConfig` (`[drive.limits]`, `[drive.loops]`, ...).
+/// A group key written flat in `[drive]` (the earlier layout) is still read, with a
+/// deprecation note ([`regroup_drive`]).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct DriveSpec {
     /// Sensorless IFOC or open-loop V/f.
     pub mode: ControlMode,
-    /// Control period, s.
-    pub control_period_s: f32,
-    /// The slow task's period (speed loop, field weakening, slow supervision), s:
-    /// 0.5-2 ms (`acim::DriveConfig::slow_period`).
-    pub slow_period_s: f32,
-    /// Flux current reference, A peak.
-    pub flux_current_a: f32,
+    /// "f32" or "fixed".
+    pub arithmetic: Arithmetic,
+    /// "reduced" (the paper's observer), "full-order" (the baseline, f32 only) or "flux"
+    /// (the reduced-order flux observer, f32 only).
+    pub observer: ObserverKind,
+    /// "linear" (the default) or "overmodulation" (through to six-step, f32 only).
+    pub modulation: ModulationKind,
+    /// The inverter as the drive compensates it (`acim::InverterSettings`).
+    pub inverter: DriveInverterSpec,
+    /// Limits and protections (`acim::LimitSettings`).
+    pub limits: LimitSpec,
+    /// The control loops and their rates (`acim::LoopSettings`).
+    pub loops: LoopSpec,
+    /// The estimators (`acim::EstimationSettings`).
+    pub estimation: EstimationSpec,
+    /// The start sequence (`acim::StartSettings`).
+    pub start: DriveStartSpec,
+    /// What the drive tracks while running (`acim::TrackerSettings`).
+    pub trackers: TrackerSpec,
+    /// Field weakening, over-voltage control, flux optimisation (`acim::FieldWeakeningSettings`).
+    pub field_weakening: FieldWeakeningSpec,
+    /// A held zero speed target (`acim::ZeroSpeedSettings`).
+    pub zero_speed: ZeroSpeedSpec,
+}
+
+/// The inverter as the drive compensates it (`acim::InverterSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriveInverterSpec {
+    /// Dead time the drive compensates, s.
+    pub dead_time_comp_s: f32,
+    /// Device drop the drive compensates, V.
+    pub device_drop_comp_v: f32,
+}
+
+impl Default for DriveInverterSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            dead_time_comp_s: d.inverter.dead_time,
+            device_drop_comp_v: d.inverter.device_drop,
+        }
+    }
+}
+
+/// Limits and protections (`acim::LimitSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LimitSpec {
     /// Stator current limit, A peak.
     pub current_limit_a: f32,
     /// The machine's continuous current, A peak (absent: the current limit, no
@@ -282,12 +328,82 @@ pub struct DriveSpec {
     pub dc_bus_min_v: f32,
     /// Bus over-voltage trip, V.
     pub dc_bus_max_v: f32,
-    /// Speed reference ramp, rpm/s.
-    pub speed_ramp_rpm_s: f32,
+    /// Over-speed trip, rpm (the drive's default, 2000 rpm, when absent); speed targets
+    /// are limited to 90 % of it.
+    pub max_speed_rpm: Option<f32>,
+    /// Stall (locked rotor) detection time, s.
+    pub stall_time_s: f32,
+    /// Dead or stuck current-sensor detection while switching (default true;
+    /// `DriveConfig.limits.sensor_check`).
+    pub sensor_check: bool,
+    /// The limit-cycle check (default true; `DriveConfig.limits.speed_oscillation_check`).
+    pub speed_oscillation_check: bool,
+}
+
+impl Default for LimitSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            current_limit_a: d.limits.current_limit,
+            continuous_current_a: None,
+            overload_duration_s: None,
+            overload_time_s: None,
+            overcurrent_trip_a: d.limits.overcurrent_trip,
+            dc_bus_min_v: d.limits.dc_bus_min,
+            dc_bus_max_v: d.limits.dc_bus_max,
+            max_speed_rpm: None,
+            stall_time_s: d.limits.stall_time,
+            sensor_check: d.limits.sensor_check,
+            speed_oscillation_check: d.limits.speed_oscillation_check,
+        }
+    }
+}
+
+/// The control loops and their rates (`acim::LoopSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopSpec {
+    /// Control period, s.
+    pub control_period_s: f32,
+    /// The slow task's period (speed loop, field weakening, slow supervision), s:
+    /// 0.5-2 ms (`DriveConfig.loops.slow_period`).
+    pub slow_period_s: f32,
+    /// Flux current reference, A peak.
+    pub flux_current_a: f32,
     /// Current-loop bandwidth, rad/s.
     pub current_bandwidth_rad_s: f32,
     /// Speed-loop bandwidth, rad/s.
     pub speed_bandwidth_rad_s: f32,
+    /// Speed reference ramp, rpm/s.
+    pub speed_ramp_rpm_s: f32,
+    /// The two-degree-of-freedom speed loop (the observer's load estimate, the ramp and
+    /// the friction fed forward; `acim::speed_loop`); absent: off, on from a nameplate.
+    pub load_torque_feedforward: Option<bool>,
+    /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
+    /// zero while holding a regenerating point, Hz electrical (0: off; 1.5 by default).
+    pub regen_min_frequency_hz: f32,
+}
+
+impl Default for LoopSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            control_period_s: d.loops.control_period,
+            slow_period_s: d.loops.slow_period,
+            flux_current_a: d.loops.flux_current,
+            current_bandwidth_rad_s: d.loops.current_bandwidth,
+            speed_bandwidth_rad_s: d.loops.speed_bandwidth,
+            speed_ramp_rpm_s: d.loops.speed_ramp * acim::math::RAD_S_TO_RPM,
+            load_torque_feedforward: None,
+            regen_min_frequency_hz: d.loops.regen_min_frequency / acim::math::TAU,
+        }
+    }
+}
+
+/// The estimators (`acim::EstimationSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimationSpec {
     /// Observer pole rates, rad/s.
     pub observer_poles_rad_s: [f32; 3],
     /// Stator-resistance estimator on (the drive's default; the paper's figs. 6-8 and
@@ -300,132 +416,255 @@ pub struct DriveSpec {
     pub rs_initial_ohm: Option<f32>,
     /// Rs estimator convergence time constant, s.
     pub rs_convergence_time_s: f32,
-    /// The standstill Rs identification waits at most this long, s (the drive's default
-    /// when absent; 0.001 s in effect switches it off).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub rs_identification_timeout_s: Option<f32>,
-    /// Dead time the drive compensates, s.
-    pub dead_time_comp_s: f32,
-    /// Device drop the drive compensates, V.
-    pub device_drop_comp_v: f32,
-    /// Stall (locked rotor) detection time, s.
-    pub stall_time_s: f32,
     /// Orientation-correction gain at light load (0: the paper's scheme unchanged); under
     /// load the drive raises it to 1.25 |i_sq| / i_sd*.
     pub orientation_gain: f32,
     /// Far-side gain of the observer's speed update (0: off), dimensionless.
     pub far_side_gain: f32,
-    /// The two-degree-of-freedom speed loop (the observer's load estimate, the ramp and
-    /// the friction fed forward; `acim::speed_loop`); absent: off, on from a nameplate.
-    pub load_torque_feedforward: Option<bool>,
-    /// "f32" or "fixed".
-    pub arithmetic: Arithmetic,
-    /// "reduced" (the paper's observer), "full-order" (the baseline, f32 only) or "flux"
-    /// (the reduced-order flux observer, f32 only).
-    pub observer: ObserverKind,
-    /// "linear" (the default) or "overmodulation" (through to six-step, f32 only).
-    pub modulation: ModulationKind,
-    /// Over-speed trip, rpm (the drive's default, 2000 rpm, when absent); speed targets
-    /// are limited to 90 % of it.
-    pub max_speed_rpm: Option<f32>,
+}
+
+impl Default for EstimationSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            observer_poles_rad_s: [
+                d.estimation.observer_poles.p1,
+                d.estimation.observer_poles.p2,
+                d.estimation.observer_poles.p3,
+            ],
+            rs_estimation: d.estimation.rs_estimation,
+            rs_estimation_mode: match d.estimation.rs_estimation_mode {
+                acim::RsEstimationMode::Standstill => RsMode::Standstill,
+                acim::RsEstimationMode::Running => RsMode::Running,
+            },
+            rs_initial_ohm: None,
+            rs_convergence_time_s: d.estimation.rs_convergence_time,
+            orientation_gain: d.estimation.orientation_gain,
+            far_side_gain: d.estimation.far_side_gain,
+        }
+    }
+}
+
+/// The start sequence (`acim::StartSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriveStartSpec {
+    /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
+    /// `DriveConfig.start.inverter_identification`; on by default, off in the paper's
+    /// figs. 6-8 and 10-12).
+    pub inverter_identification: bool,
+    /// Calibrate the current sensors' relative gain at every start from rest (default true;
+    /// `DriveConfig.start.current_gain_calibration`; the paper's scheme sets it off).
+    pub current_gain_calibration: bool,
+    /// With the running Rs mode: identify Rs at standstill too (default true); false: Rs
+    /// converges only while turning (`DriveConfig.start.rs_standstill_identification`).
+    pub rs_standstill_identification: bool,
+    /// The standstill Rs identification waits at most this long, s (the drive's default
+    /// when absent; 0.001 s in effect switches it off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rs_identification_timeout_s: Option<f32>,
+}
+
+impl Default for DriveStartSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            inverter_identification: d.start.inverter_identification,
+            current_gain_calibration: d.start.current_gain_calibration,
+            rs_standstill_identification: d.start.rs_standstill_identification,
+            rs_identification_timeout_s: None,
+        }
+    }
+}
+
+/// What the drive tracks while running (`acim::TrackerSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackerSpec {
+    /// Track the current-sensor offsets' drift while turning (default true;
+    /// `DriveConfig.trackers.offset_tracking`; the paper's scheme sets it off).
+    pub offset_tracking: bool,
+    /// Track the inverter's voltage error while turning, from its sixth harmonic
+    /// (`DriveConfig.trackers.inverter_tracking`; the paper's scheme sets it off).
+    pub inverter_tracking: bool,
+    /// Rotor-resistance adaptation at the start of speed ramps (item 7;
+    /// `DriveConfig.trackers.rr_adaptation`, off by default: it assumes the load holds).
+    pub rr_adaptation: bool,
+}
+
+impl Default for TrackerSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            offset_tracking: d.trackers.offset_tracking,
+            inverter_tracking: d.trackers.inverter_tracking,
+            rr_adaptation: d.trackers.rr_adaptation,
+        }
+    }
+}
+
+/// Field weakening, over-voltage control, flux optimisation (`acim::FieldWeakeningSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct FieldWeakeningSpec {
     /// Field weakening above base speed.
-    pub field_weakening: bool,
+    pub enabled: bool,
     /// Over-voltage control: regenerative torque reduced near the bus trip.
     pub overvoltage_control: bool,
     /// Light-load flux optimisation: the flux lowered to the copper-loss optimum at light
     /// load (off by default).
     pub flux_optimisation: bool,
-    /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
-    /// `zero_speed_dwell_s`).
-    pub zero_speed_policy: ZeroSpeed,
-    /// The dwell at a zero reference before "stop" switches off, s.
-    pub zero_speed_dwell_s: f32,
-    /// Low-frequency regeneration limit: the stator frequency kept on the rotor's side of
-    /// zero while holding a regenerating point, Hz electrical (0: off; 1.5 by default).
-    pub regen_min_frequency_hz: f32,
-    /// Identify the inverter's voltage error at every start (0.45 s of magnetizing;
-    /// `acim::DriveConfig::inverter_identification`; on by default, off in the paper's
-    /// figs. 6-8 and 10-12).
-    pub inverter_identification: bool,
-    /// With the running Rs mode: identify Rs at standstill too (default true); false: Rs
-    /// converges only while turning (`acim::DriveConfig::rs_standstill_identification`).
-    pub rs_standstill_identification: bool,
-    /// Track the current-sensor offsets' drift while turning (default true;
-    /// `acim::DriveConfig::offset_tracking`; the paper's scheme sets it off).
-    pub offset_tracking: bool,
-    /// Track the inverter's voltage error while turning, from its sixth harmonic
-    /// (`acim::DriveConfig::inverter_tracking`; the paper's scheme sets it off).
-    pub inverter_tracking: bool,
-    /// Calibrate the current sensors' relative gain at every start from rest (default true;
-    /// `acim::DriveConfig::current_gain_calibration`; the paper's scheme sets it off).
-    pub current_gain_calibration: bool,
-    /// Rotor-resistance adaptation at the start of speed ramps (item 7;
-    /// `acim::DriveConfig::rr_adaptation`, off by default: it assumes the load holds).
-    pub rr_adaptation: bool,
-    /// Dead or stuck current-sensor detection while switching (default true;
-    /// `acim::DriveConfig::sensor_check`).
-    pub sensor_check: bool,
-    /// The limit-cycle check (default true; `acim::DriveConfig::speed_oscillation_check`).
-    pub speed_oscillation_check: bool,
 }
 
-impl Default for DriveSpec {
+impl Default for FieldWeakeningSpec {
     fn default() -> Self {
         let d = acim::DriveConfig::paper_defaults();
-        let p = d.observer_poles;
         Self {
-            mode: ControlMode::Sensorless,
-            control_period_s: d.control_period,
-            slow_period_s: d.slow_period,
-            flux_current_a: d.flux_current,
-            current_limit_a: d.current_limit,
-            continuous_current_a: None,
-            overload_duration_s: None,
-            overload_time_s: None,
-            overcurrent_trip_a: d.overcurrent_trip,
-            dc_bus_min_v: d.dc_bus_min,
-            dc_bus_max_v: d.dc_bus_max,
-            speed_ramp_rpm_s: d.speed_ramp * acim::math::RAD_S_TO_RPM,
-            current_bandwidth_rad_s: d.current_bandwidth,
-            speed_bandwidth_rad_s: d.speed_bandwidth,
-            observer_poles_rad_s: [p.p1, p.p2, p.p3],
-            rs_estimation: d.rs_estimation,
-            rs_estimation_mode: match d.rs_estimation_mode {
-                acim::RsEstimationMode::Standstill => RsMode::Standstill,
-                acim::RsEstimationMode::Running => RsMode::Running,
-            },
-            rs_initial_ohm: None,
-            rs_convergence_time_s: d.rs_convergence_time,
-            rs_identification_timeout_s: None,
-            dead_time_comp_s: d.dead_time,
-            device_drop_comp_v: d.device_drop,
-            stall_time_s: d.stall_time,
-            orientation_gain: d.orientation_gain,
-            far_side_gain: d.far_side_gain,
-            load_torque_feedforward: None,
-            arithmetic: Arithmetic::F32,
-            observer: ObserverKind::Reduced,
-            modulation: ModulationKind::Linear,
-            max_speed_rpm: None,
-            field_weakening: d.field_weakening,
-            overvoltage_control: d.overvoltage_control,
-            flux_optimisation: d.flux_optimisation,
-            zero_speed_policy: match d.zero_speed_policy {
+            enabled: d.field_weakening.enabled,
+            overvoltage_control: d.field_weakening.overvoltage_control,
+            flux_optimisation: d.field_weakening.flux_optimisation,
+        }
+    }
+}
+
+/// A held zero speed target (`acim::ZeroSpeedSettings`).
+#[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZeroSpeedSpec {
+    /// A held zero speed target: "hold" (default: flux kept) or "stop" (switch off after
+    /// `zero_speed_dwell_s`).
+    pub policy: ZeroSpeed,
+    /// The dwell at a zero reference before "stop" switches off, s.
+    pub dwell_s: f32,
+}
+
+impl Default for ZeroSpeedSpec {
+    fn default() -> Self {
+        let d = acim::DriveConfig::paper_defaults();
+        Self {
+            policy: match d.zero_speed.policy {
                 acim::ZeroSpeedPolicy::Hold => ZeroSpeed::Hold,
                 acim::ZeroSpeedPolicy::Stop => ZeroSpeed::Stop,
             },
-            zero_speed_dwell_s: d.zero_speed_dwell,
-            regen_min_frequency_hz: d.regen_min_frequency / acim::math::TAU,
-            inverter_identification: d.inverter_identification,
-            rs_standstill_identification: d.rs_standstill_identification,
-            offset_tracking: d.offset_tracking,
-            inverter_tracking: d.inverter_tracking,
-            current_gain_calibration: d.current_gain_calibration,
-            rr_adaptation: d.rr_adaptation,
-            sensor_check: d.sensor_check,
-            speed_oscillation_check: d.speed_oscillation_check,
+            dwell_s: d.zero_speed.dwell,
         }
     }
+}
+
+/// Each `[drive]` key of a group: (flat key of the earlier layout, group, key in the
+/// group).
+pub const DRIVE_GROUP_KEYS: [(&str, &str, &str); 40] = [
+    ("dead_time_comp_s", "inverter", "dead_time_comp_s"),
+    ("device_drop_comp_v", "inverter", "device_drop_comp_v"),
+    ("current_limit_a", "limits", "current_limit_a"),
+    ("continuous_current_a", "limits", "continuous_current_a"),
+    ("overload_duration_s", "limits", "overload_duration_s"),
+    ("overload_time_s", "limits", "overload_time_s"),
+    ("overcurrent_trip_a", "limits", "overcurrent_trip_a"),
+    ("dc_bus_min_v", "limits", "dc_bus_min_v"),
+    ("dc_bus_max_v", "limits", "dc_bus_max_v"),
+    ("max_speed_rpm", "limits", "max_speed_rpm"),
+    ("stall_time_s", "limits", "stall_time_s"),
+    ("sensor_check", "limits", "sensor_check"),
+    (
+        "speed_oscillation_check",
+        "limits",
+        "speed_oscillation_check",
+    ),
+    ("control_period_s", "loops", "control_period_s"),
+    ("slow_period_s", "loops", "slow_period_s"),
+    ("flux_current_a", "loops", "flux_current_a"),
+    (
+        "current_bandwidth_rad_s",
+        "loops",
+        "current_bandwidth_rad_s",
+    ),
+    ("speed_bandwidth_rad_s", "loops", "speed_bandwidth_rad_s"),
+    ("speed_ramp_rpm_s", "loops", "speed_ramp_rpm_s"),
+    (
+        "load_torque_feedforward",
+        "loops",
+        "load_torque_feedforward",
+    ),
+    ("regen_min_frequency_hz", "loops", "regen_min_frequency_hz"),
+    ("observer_poles_rad_s", "estimation", "observer_poles_rad_s"),
+    ("rs_estimation", "estimation", "rs_estimation"),
+    ("rs_estimation_mode", "estimation", "rs_estimation_mode"),
+    ("rs_initial_ohm", "estimation", "rs_initial_ohm"),
+    (
+        "rs_convergence_time_s",
+        "estimation",
+        "rs_convergence_time_s",
+    ),
+    ("orientation_gain", "estimation", "orientation_gain"),
+    ("far_side_gain", "estimation", "far_side_gain"),
+    (
+        "inverter_identification",
+        "start",
+        "inverter_identification",
+    ),
+    (
+        "current_gain_calibration",
+        "start",
+        "current_gain_calibration",
+    ),
+    (
+        "rs_standstill_identification",
+        "start",
+        "rs_standstill_identification",
+    ),
+    (
+        "rs_identification_timeout_s",
+        "start",
+        "rs_identification_timeout_s",
+    ),
+    ("offset_tracking", "trackers", "offset_tracking"),
+    ("inverter_tracking", "trackers", "inverter_tracking"),
+    ("rr_adaptation", "trackers", "rr_adaptation"),
+    ("field_weakening", "field_weakening", "enabled"),
+    (
+        "overvoltage_control",
+        "field_weakening",
+        "overvoltage_control",
+    ),
+    ("flux_optimisation", "field_weakening", "flux_optimisation"),
+    ("zero_speed_policy", "zero_speed", "policy"),
+    ("zero_speed_dwell_s", "zero_speed", "dwell_s"),
+];
+
+/// Moves each `[drive]` key of the earlier flat layout into its group
+/// ([`DRIVE_GROUP_KEYS`]: `drive.current_limit_a` becomes `drive.limits.current_limit_a`)
+/// and returns a deprecation note per key moved. A key given both ways is an error: the
+/// two could disagree.
+pub fn regroup_drive(v: &mut toml::Value) -> Result<Vec<String>, ScenarioError> {
+    let mut notes = Vec::new();
+    let Some(drive) = v.get_mut("drive").and_then(|d| d.as_table_mut()) else {
+        return Ok(notes);
+    };
+    for (flat, group, key) in DRIVE_GROUP_KEYS {
+        // `field_weakening` is both a flat key (a bool) and a group (a table)
+        let Some(value) = drive.get(flat).filter(|x| !x.is_table()).cloned() else {
+            continue;
+        };
+        drive.remove(flat);
+        let table = drive
+            .entry(group)
+            .or_insert_with(|| toml::Value::Table(Default::default()));
+        let Some(table) = table.as_table_mut() else {
+            return err(&format!("drive.{group}"), "must be a table of settings");
+        };
+        if table.contains_key(key) {
+            return err(
+                &format!("drive.{flat}"),
+                &format!("is also given as drive.{group}.{key}: keep only the grouped key"),
+            );
+        }
+        table.insert(key.to_string(), value);
+        notes.push(format!(
+            "drive.{flat} is deprecated: write it as drive.{group}.{key} ([drive.{group}] {key})"
+        ));
+    }
+    Ok(notes)
 }
 
 /// Inverter settings of the plant.
@@ -851,6 +1090,10 @@ pub struct Scenario {
     /// held zero reference, where the stator frequency is zero and unobservable).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub expected: Option<Expected>,
+    /// Deprecation notes from reading it (a `[drive]` key of the earlier flat layout,
+    /// [`regroup_drive`]): kept with the validation's warnings.
+    #[serde(skip)]
+    pub notes: Vec<String>,
 }
 
 /// An expected verdict and its reason (see [`Scenario::expected`]).
@@ -888,6 +1131,7 @@ impl Default for Scenario {
             saturation: None,
             windows: vec![],
             expected: None,
+            notes: vec![],
         }
     }
 }
@@ -933,6 +1177,14 @@ impl Scenario {
                  (crates/acim-sim/scenarios/example.toml shows every field)",
             );
         }
+        let mut v = toml::Value::Table(table);
+        let notes = regroup_drive(&mut v)?;
+        if !notes.is_empty() {
+            // an earlier layout: read the regrouped value (its errors carry no line numbers)
+            let mut s = Self::from_value(v, "(file)")?;
+            s.notes = notes;
+            return Ok(s);
+        }
         // parse the text itself: its errors quote the user's own file, with line numbers
         toml::from_str(text).or_else(|e| err("(file)", &format!("{e}")))
     }
@@ -952,8 +1204,14 @@ impl Scenario {
             return Ok(self.clone());
         }
         let mut v = toml::Value::try_from(self).or_else(|e| err("(scenario)", &format!("{e}")))?;
+        let mut notes = self.notes.clone();
         for s in sets {
             apply_override(&mut v, s)?;
+            notes.extend(
+                regroup_drive(&mut v)?
+                    .into_iter()
+                    .map(|n| format!("--set {s}: {n}")),
+            );
             // check each override on its own, so an error names the `--set` that caused it
             Self::from_value(v.clone(), "--set").map_err(|e| ScenarioError {
                 field: s
@@ -963,7 +1221,9 @@ impl Scenario {
                 allowed: format!("--set {s}: {}", e.allowed),
             })?;
         }
-        Self::from_value(v, "--set")
+        let mut out = Self::from_value(v, "--set")?;
+        out.notes = notes;
+        Ok(out)
     }
 
     /// Checks every field and builds the library configuration.
@@ -985,69 +1245,112 @@ impl Scenario {
         let plant = self.plant.params("plant")?;
         let ctl = self.controller.params("controller")?;
         let d = &self.drive;
-        check_range("drive.control_period_s", d.control_period_s, 25e-6, 2e-3)?;
-        check_range("drive.flux_current_a", d.flux_current_a, 0.05, 100.0)?;
         check_range(
-            "drive.current_limit_a",
-            d.current_limit_a,
-            d.flux_current_a * 1.01,
+            "drive.loops.control_period_s",
+            d.loops.control_period_s,
+            25e-6,
+            2e-3,
+        )?;
+        check_range(
+            "drive.loops.flux_current_a",
+            d.loops.flux_current_a,
+            0.05,
+            100.0,
+        )?;
+        check_range(
+            "drive.limits.current_limit_a",
+            d.limits.current_limit_a,
+            d.loops.flux_current_a * 1.01,
             200.0,
         )?;
         check_range(
-            "drive.overcurrent_trip_a",
-            d.overcurrent_trip_a,
-            d.current_limit_a,
+            "drive.limits.overcurrent_trip_a",
+            d.limits.overcurrent_trip_a,
+            d.limits.current_limit_a,
             400.0,
         )?;
-        check_range("drive.dc_bus_min_v", d.dc_bus_min_v, 1.0, 1000.0)?;
         check_range(
-            "drive.dc_bus_max_v",
-            d.dc_bus_max_v,
-            d.dc_bus_min_v + 1.0,
+            "drive.limits.dc_bus_min_v",
+            d.limits.dc_bus_min_v,
+            1.0,
+            1000.0,
+        )?;
+        check_range(
+            "drive.limits.dc_bus_max_v",
+            d.limits.dc_bus_max_v,
+            d.limits.dc_bus_min_v + 1.0,
             2000.0,
         )?;
-        check_range("drive.speed_ramp_rpm_s", d.speed_ramp_rpm_s, 1.0, 1e5)?;
         check_range(
-            "drive.current_bandwidth_rad_s",
-            d.current_bandwidth_rad_s,
+            "drive.loops.speed_ramp_rpm_s",
+            d.loops.speed_ramp_rpm_s,
+            1.0,
+            1e5,
+        )?;
+        check_range(
+            "drive.loops.current_bandwidth_rad_s",
+            d.loops.current_bandwidth_rad_s,
             10.0,
-            0.5 / d.control_period_s,
+            0.5 / d.loops.control_period_s,
         )?;
         check_range(
-            "drive.speed_bandwidth_rad_s",
-            d.speed_bandwidth_rad_s,
+            "drive.loops.speed_bandwidth_rad_s",
+            d.loops.speed_bandwidth_rad_s,
             0.1,
-            d.current_bandwidth_rad_s / 4.0,
+            d.loops.current_bandwidth_rad_s / 4.0,
         )?;
-        for (i, p) in d.observer_poles_rad_s.iter().enumerate() {
+        for (i, p) in d.estimation.observer_poles_rad_s.iter().enumerate() {
             check_range(
-                &format!("drive.observer_poles_rad_s[{i}]"),
+                &format!("drive.estimation.observer_poles_rad_s[{i}]"),
                 *p,
                 1.0,
-                0.99 / d.control_period_s,
+                0.99 / d.loops.control_period_s,
             )?;
         }
-        let rs0 = d.rs_initial_ohm.unwrap_or(self.controller.rs_ohm);
-        check_range("drive.rs_initial_ohm", rs0, 1e-3, 1e3)?;
+        let rs0 = d
+            .estimation
+            .rs_initial_ohm
+            .unwrap_or(self.controller.rs_ohm);
+        check_range("drive.estimation.rs_initial_ohm", rs0, 1e-3, 1e3)?;
         check_range(
-            "drive.rs_convergence_time_s",
-            d.rs_convergence_time_s,
+            "drive.estimation.rs_convergence_time_s",
+            d.estimation.rs_convergence_time_s,
             1e-3,
             100.0,
         )?;
         check_range(
-            "drive.dead_time_comp_s",
-            d.dead_time_comp_s,
+            "drive.inverter.dead_time_comp_s",
+            d.inverter.dead_time_comp_s,
             0.0,
-            0.09 * d.control_period_s,
+            0.09 * d.loops.control_period_s,
         )?;
-        check_range("drive.device_drop_comp_v", d.device_drop_comp_v, 0.0, 20.0)?;
-        check_range("drive.stall_time_s", d.stall_time_s, 0.01, 100.0)?;
-        check_range("drive.orientation_gain", d.orientation_gain, 0.0, 50.0)?;
-        check_range("drive.far_side_gain", d.far_side_gain, 0.0, 10.0)?;
         check_range(
-            "drive.zero_speed_dwell_s",
-            d.zero_speed_dwell_s,
+            "drive.inverter.device_drop_comp_v",
+            d.inverter.device_drop_comp_v,
+            0.0,
+            20.0,
+        )?;
+        check_range(
+            "drive.limits.stall_time_s",
+            d.limits.stall_time_s,
+            0.01,
+            100.0,
+        )?;
+        check_range(
+            "drive.estimation.orientation_gain",
+            d.estimation.orientation_gain,
+            0.0,
+            50.0,
+        )?;
+        check_range(
+            "drive.estimation.far_side_gain",
+            d.estimation.far_side_gain,
+            0.0,
+            10.0,
+        )?;
+        check_range(
+            "drive.zero_speed.dwell_s",
+            d.zero_speed.dwell_s,
             1e-3,
             600.0,
         )?;
@@ -1055,7 +1358,7 @@ impl Scenario {
             "inverter.dead_time_s",
             self.inverter.dead_time_s,
             0.0,
-            0.09 * d.control_period_s,
+            0.09 * d.loops.control_period_s,
         )?;
         check_range(
             "inverter.device_drop_v",
@@ -1082,7 +1385,7 @@ impl Scenario {
             "inverter.hardware_trip_delay_s",
             self.inverter.hardware_trip_delay_s,
             0.0,
-            d.control_period_s,
+            d.loops.control_period_s,
         )?;
         let s = &self.sensors;
         if !(4..=24).contains(&s.adc_bits) {
@@ -1113,7 +1416,7 @@ impl Scenario {
             _ => return err("sensors.channels", "must be 2 or 3"),
         };
         check_range("dc_link.source_v", self.bus_v(), 1.0, 2000.0)?;
-        let mut warnings = Vec::new();
+        let mut warnings = self.notes.clone();
         if let (Some(src), Some(b)) = (self.dc_link.source_v, self.board) {
             if (src - b.dc_bus_v).abs() > BUS_MISMATCH_FRACTION * b.dc_bus_v {
                 warnings.push(format!(
@@ -1284,75 +1587,75 @@ impl Scenario {
 
         let mut drive = acim::DriveConfig::paper_defaults();
         drive.machine = ctl;
-        drive.control_period = d.control_period_s;
-        drive.slow_period = d.slow_period_s;
-        drive.flux_current = d.flux_current_a;
-        drive.current_limit = d.current_limit_a;
-        if let Some(i) = d.continuous_current_a {
+        drive.loops.control_period = d.loops.control_period_s;
+        drive.loops.slow_period = d.loops.slow_period_s;
+        drive.loops.flux_current = d.loops.flux_current_a;
+        drive.limits.current_limit = d.limits.current_limit_a;
+        if let Some(i) = d.limits.continuous_current_a {
             check_range(
-                "drive.continuous_current_a",
+                "drive.limits.continuous_current_a",
                 i,
-                d.flux_current_a * 1.01,
+                d.loops.flux_current_a * 1.01,
                 200.0,
             )?;
-            drive.continuous_current = i;
+            drive.limits.continuous_current = i;
         }
-        if let Some(t) = d.overload_duration_s {
-            check_range("drive.overload_duration_s", t, 0.1, 3600.0)?;
-            drive.overload_duration = t;
+        if let Some(t) = d.limits.overload_duration_s {
+            check_range("drive.limits.overload_duration_s", t, 0.1, 3600.0)?;
+            drive.limits.overload_duration = t;
         }
-        if let Some(t) = d.overload_time_s {
-            check_range("drive.overload_time_s", t, 0.01, 60.0)?;
-            drive.overload_time = t;
+        if let Some(t) = d.limits.overload_time_s {
+            check_range("drive.limits.overload_time_s", t, 0.01, 60.0)?;
+            drive.limits.overload_time = t;
         }
-        drive.overcurrent_trip = d.overcurrent_trip_a;
-        drive.dc_bus_min = d.dc_bus_min_v;
-        drive.dc_bus_max = d.dc_bus_max_v;
-        drive.speed_ramp = d.speed_ramp_rpm_s * acim::math::RPM_TO_RAD_S;
-        drive.current_bandwidth = d.current_bandwidth_rad_s;
-        drive.speed_bandwidth = d.speed_bandwidth_rad_s;
-        drive.observer_poles = acim::observer::ObserverPoles {
-            p1: d.observer_poles_rad_s[0],
-            p2: d.observer_poles_rad_s[1],
-            p3: d.observer_poles_rad_s[2],
+        drive.limits.overcurrent_trip = d.limits.overcurrent_trip_a;
+        drive.limits.dc_bus_min = d.limits.dc_bus_min_v;
+        drive.limits.dc_bus_max = d.limits.dc_bus_max_v;
+        drive.loops.speed_ramp = d.loops.speed_ramp_rpm_s * acim::math::RPM_TO_RAD_S;
+        drive.loops.current_bandwidth = d.loops.current_bandwidth_rad_s;
+        drive.loops.speed_bandwidth = d.loops.speed_bandwidth_rad_s;
+        drive.estimation.observer_poles = acim::observer::ObserverPoles {
+            p1: d.estimation.observer_poles_rad_s[0],
+            p2: d.estimation.observer_poles_rad_s[1],
+            p3: d.estimation.observer_poles_rad_s[2],
         };
-        drive.rs_estimation = d.rs_estimation;
-        drive.rs_estimation_mode = d.rs_estimation_mode.mode();
-        drive.rs_initial = rs0;
-        drive.rs_convergence_time = d.rs_convergence_time_s;
-        if let Some(t) = d.rs_identification_timeout_s {
-            check_range("drive.rs_identification_timeout_s", t, 1e-3, 100.0)?;
-            drive.rs_identification_timeout = t;
+        drive.estimation.rs_estimation = d.estimation.rs_estimation;
+        drive.estimation.rs_estimation_mode = d.estimation.rs_estimation_mode.mode();
+        drive.estimation.rs_initial = rs0;
+        drive.estimation.rs_convergence_time = d.estimation.rs_convergence_time_s;
+        if let Some(t) = d.start.rs_identification_timeout_s {
+            check_range("drive.start.rs_identification_timeout_s", t, 1e-3, 100.0)?;
+            drive.start.rs_identification_timeout = t;
         }
-        drive.dead_time = d.dead_time_comp_s;
-        drive.device_drop = d.device_drop_comp_v;
-        drive.stall_time = d.stall_time_s;
-        drive.orientation_gain = d.orientation_gain;
-        drive.far_side_gain = d.far_side_gain;
-        if let Some(on) = d.load_torque_feedforward {
-            drive.load_torque_feedforward = on;
+        drive.inverter.dead_time = d.inverter.dead_time_comp_s;
+        drive.inverter.device_drop = d.inverter.device_drop_comp_v;
+        drive.limits.stall_time = d.limits.stall_time_s;
+        drive.estimation.orientation_gain = d.estimation.orientation_gain;
+        drive.estimation.far_side_gain = d.estimation.far_side_gain;
+        if let Some(on) = d.loops.load_torque_feedforward {
+            drive.loops.load_torque_feedforward = on;
         }
-        if let Some(rpm) = d.max_speed_rpm {
-            drive.max_speed = rpm * acim::math::RPM_TO_RAD_S;
+        if let Some(rpm) = d.limits.max_speed_rpm {
+            drive.limits.max_speed = rpm * acim::math::RPM_TO_RAD_S;
         }
-        drive.field_weakening = d.field_weakening;
-        drive.overvoltage_control = d.overvoltage_control;
-        drive.flux_optimisation = d.flux_optimisation;
-        drive.zero_speed_policy = match d.zero_speed_policy {
+        drive.field_weakening.enabled = d.field_weakening.enabled;
+        drive.field_weakening.overvoltage_control = d.field_weakening.overvoltage_control;
+        drive.field_weakening.flux_optimisation = d.field_weakening.flux_optimisation;
+        drive.zero_speed.policy = match d.zero_speed.policy {
             ZeroSpeed::Hold => acim::ZeroSpeedPolicy::Hold,
             ZeroSpeed::Stop => acim::ZeroSpeedPolicy::Stop,
         };
-        drive.zero_speed_dwell = d.zero_speed_dwell_s;
-        drive.regen_min_frequency = d.regen_min_frequency_hz * acim::math::TAU;
-        drive.inverter_identification = d.inverter_identification;
-        drive.rs_standstill_identification = d.rs_standstill_identification;
-        drive.offset_tracking = d.offset_tracking;
-        drive.inverter_tracking = d.inverter_tracking;
-        drive.current_gain_calibration = d.current_gain_calibration;
-        drive.rr_adaptation = d.rr_adaptation;
-        drive.sensor_check = d.sensor_check;
-        drive.speed_oscillation_check = d.speed_oscillation_check;
-        drive.current_sensing = match channels {
+        drive.zero_speed.dwell = d.zero_speed.dwell_s;
+        drive.loops.regen_min_frequency = d.loops.regen_min_frequency_hz * acim::math::TAU;
+        drive.start.inverter_identification = d.start.inverter_identification;
+        drive.start.rs_standstill_identification = d.start.rs_standstill_identification;
+        drive.trackers.offset_tracking = d.trackers.offset_tracking;
+        drive.trackers.inverter_tracking = d.trackers.inverter_tracking;
+        drive.start.current_gain_calibration = d.start.current_gain_calibration;
+        drive.trackers.rr_adaptation = d.trackers.rr_adaptation;
+        drive.limits.sensor_check = d.limits.sensor_check;
+        drive.limits.speed_oscillation_check = d.limits.speed_oscillation_check;
+        drive.inverter.current_sensing = match channels {
             CurrentChannels::Two => acim::CurrentSensing::TwoPhase,
             CurrentChannels::Three => acim::CurrentSensing::ThreePhase,
         };
@@ -1382,40 +1685,35 @@ impl Scenario {
                     },
                     acim::nameplate::NameplateError::Config(c) => config_error(c, true),
                 })?;
-            cfg.rs_estimation = drive.rs_estimation;
-            cfg.rs_estimation_mode = drive.rs_estimation_mode;
-            if d.rs_initial_ohm.is_some() {
-                cfg.rs_initial = drive.rs_initial;
+            cfg.estimation.rs_estimation = drive.estimation.rs_estimation;
+            cfg.estimation.rs_estimation_mode = drive.estimation.rs_estimation_mode;
+            if d.estimation.rs_initial_ohm.is_some() {
+                cfg.estimation.rs_initial = drive.estimation.rs_initial;
             }
-            cfg.orientation_gain = drive.orientation_gain;
-            cfg.far_side_gain = drive.far_side_gain;
-            if let Some(on) = d.load_torque_feedforward {
-                cfg.load_torque_feedforward = on;
+            cfg.estimation.orientation_gain = drive.estimation.orientation_gain;
+            cfg.estimation.far_side_gain = drive.estimation.far_side_gain;
+            if let Some(on) = d.loops.load_torque_feedforward {
+                cfg.loops.load_torque_feedforward = on;
             }
-            if d.overload_duration_s.is_some() {
-                cfg.overload_duration = drive.overload_duration;
+            if d.limits.overload_duration_s.is_some() {
+                cfg.limits.overload_duration = drive.limits.overload_duration;
             }
-            if d.overload_time_s.is_some() {
-                cfg.overload_time = drive.overload_time;
+            if d.limits.overload_time_s.is_some() {
+                cfg.limits.overload_time = drive.limits.overload_time;
             }
-            cfg.current_sensing = drive.current_sensing;
+            cfg.inverter.current_sensing = drive.inverter.current_sensing;
             cfg.field_weakening = drive.field_weakening;
-            cfg.overvoltage_control = drive.overvoltage_control;
-            cfg.flux_optimisation = drive.flux_optimisation;
-            cfg.zero_speed_policy = drive.zero_speed_policy;
-            cfg.zero_speed_dwell = drive.zero_speed_dwell;
-            cfg.regen_min_frequency = drive.regen_min_frequency;
+            cfg.zero_speed = drive.zero_speed;
+            cfg.loops.regen_min_frequency = drive.loops.regen_min_frequency;
             // the switches (before, a `--set` of them was silently ignored here)
-            cfg.inverter_identification = drive.inverter_identification;
-            cfg.offset_tracking = drive.offset_tracking;
-            cfg.inverter_tracking = drive.inverter_tracking;
-            cfg.current_gain_calibration = drive.current_gain_calibration;
-            cfg.rr_adaptation = drive.rr_adaptation;
-            cfg.sensor_check = drive.sensor_check;
-            cfg.speed_oscillation_check = drive.speed_oscillation_check;
-            cfg.slow_period = drive.slow_period;
-            if d.max_speed_rpm.is_some() {
-                cfg.max_speed = drive.max_speed;
+            cfg.start.inverter_identification = drive.start.inverter_identification;
+            cfg.start.current_gain_calibration = drive.start.current_gain_calibration;
+            cfg.trackers = drive.trackers;
+            cfg.limits.sensor_check = drive.limits.sensor_check;
+            cfg.limits.speed_oscillation_check = drive.limits.speed_oscillation_check;
+            cfg.loops.slow_period = drive.loops.slow_period;
+            if d.limits.max_speed_rpm.is_some() {
+                cfg.limits.max_speed = drive.limits.max_speed;
             }
             bases = acim::nameplate::per_unit_bases(&cfg, &b);
             board = Some(b);
@@ -1429,7 +1727,7 @@ impl Scenario {
                     "\"full-order\" runs in f32 only (drive.arithmetic = \"f32\")",
                 );
             }
-            acim::full_order::FullOrder::new(&drive.machine, drive.control_period).map_err(
+            acim::full_order::FullOrder::new(&drive.machine, drive.loops.control_period).map_err(
                 |e| ScenarioError {
                     field: "drive.observer".into(),
                     allowed: format!("a valid full-order design ({e:?})"),
@@ -1445,8 +1743,8 @@ impl Scenario {
             }
             acim::flux_observer::FluxObserver::new(
                 &drive.machine,
-                drive.control_period,
-                drive.max_speed,
+                drive.loops.control_period,
+                drive.limits.max_speed,
             )
             .map_err(|e| ScenarioError {
                 field: "drive.observer".into(),
@@ -1491,9 +1789,8 @@ fn config_error(e: acim::ConfigError, with_board: bool) -> ScenarioError {
     match e {
         acim::ConfigError::Invalid { field, rule } => ScenarioError {
             field: match field {
-                "control_period" if with_board => "board.pwm_frequency_hz".into(),
-                "control_period" => "drive.control_period_s".into(),
-                other => format!("drive ({other})"),
+                "loops.control_period" if with_board => "board.pwm_frequency_hz".into(),
+                other => scenario_key(other).unwrap_or_else(|| format!("drive ({other})")),
             },
             allowed: rule.into(),
         },
@@ -1502,6 +1799,23 @@ fn config_error(e: acim::ConfigError, with_board: bool) -> ScenarioError {
             allowed: format!("{other}"),
         },
     }
+}
+
+/// The scenario key of a drive configuration field (`loops.speed_bandwidth` ->
+/// `drive.loops.speed_bandwidth_rad_s`: the same name in the same group, with the unit
+/// the scenario writes), if the scenario sets it.
+fn scenario_key(field: &str) -> Option<String> {
+    let (group, name) = field.split_once('.')?;
+    DRIVE_GROUP_KEYS
+        .iter()
+        .find(|(_, g, key)| {
+            *g == group
+                && (*key == name
+                    || key
+                        .strip_prefix(name)
+                        .is_some_and(|unit| unit.starts_with('_')))
+        })
+        .map(|(_, g, key)| format!("drive.{g}.{key}"))
 }
 
 /// A machine file (`[nameplate]`, `[plant]`, `[inverse_gamma]`, `[board]`, as in the
@@ -1680,7 +1994,7 @@ impl Scenario {
             self.controller.friction_nms = b;
         }
         if let Ok(td) = get("inverter", "dead_time_s") {
-            self.drive.dead_time_comp_s = td;
+            self.drive.inverter.dead_time_comp_s = td;
         }
         Ok(())
     }

@@ -209,13 +209,13 @@ pub struct RunResult {
     /// The drive configuration as run.
     pub config: acim::DriveConfig,
     /// The inverter test at start and the running tracker's correction at the end, when
-    /// the drive runs either (`drive.inverter_identification`, `drive.inverter_tracking`).
+    /// the drive runs either (`drive.start.inverter_identification`, `drive.trackers.inverter_tracking`).
     pub inverter_test: Option<InverterTestRecord>,
     /// The rotor-resistance adaptation at the end, when the drive runs it
-    /// (`drive.rr_adaptation`).
+    /// (`drive.trackers.rr_adaptation`).
     pub rotor_resistance: Option<RotorResistanceRecord>,
     /// The current sensors' gain correction at the end, g_a / g_b as the drive calibrated
-    /// it (1: not calibrated; `drive.current_gain_calibration`).
+    /// it (1: not calibrated; `drive.start.current_gain_calibration`).
     pub current_gain_correction: f32,
     /// Speed targets the drive clamped to its limit, in time order.
     pub target_clamps: Vec<TargetClamp>,
@@ -264,7 +264,7 @@ pub struct InverterTestRecord {
     /// correction of the test and of the running tracker, the configured device drop
     /// counted as known).
     pub dead_time_us: f32,
-    /// Whether the running tracker could adapt the correction (`drive.inverter_tracking`
+    /// Whether the running tracker could adapt the correction (`drive.trackers.inverter_tracking`
     /// with the running Rs law).
     pub tracked: bool,
     /// The plant inverter's dead time, us.
@@ -294,7 +294,7 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
     let inv = Inverter::new(
         InverterConfig {
             dead_time: sc.inverter.dead_time_s,
-            pwm_period: v.drive.control_period,
+            pwm_period: v.drive.loops.control_period,
             device_drop: sc.inverter.device_drop_v,
             ..InverterConfig::default()
         },
@@ -331,7 +331,7 @@ pub(crate) fn build_plant(sc: &Scenario, v: &Validated) -> Plant {
         }));
     }
     // measure the time the true current spends above the drive's trip while switching
-    plant.set_watch_level(v.drive.overcurrent_trip);
+    plant.set_watch_level(v.drive.limits.overcurrent_trip);
     if let Some(sat) = sc.saturation {
         plant
             .machine_mut()
@@ -422,7 +422,7 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
         (Arithmetic::F32, ObserverKind::FullOrder) => {
             let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
             let observer =
-                FullOrder::new(&v.drive.machine, v.drive.control_period).map_err(|e| {
+                FullOrder::new(&v.drive.machine, v.drive.loops.control_period).map_err(|e| {
                     ScenarioError {
                         field: "drive.observer".into(),
                         allowed: format!("a valid full-order design ({e:?})"),
@@ -437,12 +437,15 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
         }
         (Arithmetic::F32, ObserverKind::Flux) => {
             let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
-            let observer =
-                FluxObserver::new(&v.drive.machine, v.drive.control_period, v.drive.max_speed)
-                    .map_err(|e| ScenarioError {
-                        field: "drive.observer".into(),
-                        allowed: format!("a valid flux-observer design ({e:?})"),
-                    })?;
+            let observer = FluxObserver::new(
+                &v.drive.machine,
+                v.drive.loops.control_period,
+                v.drive.limits.max_speed,
+            )
+            .map_err(|e| ScenarioError {
+                field: "drive.observer".into(),
+                allowed: format!("a valid flux-observer design ({e:?})"),
+            })?;
             let d: Drive<FastSinCos, f32, FluxObserver> =
                 Drive::with_parts(design, (), FastSinCos, observer, Svpwm).map_err(bad("drive"))?;
             Box::new(d)
@@ -505,7 +508,7 @@ pub fn run_with_progress(
     let v = sc.validate()?;
     let mut plant = build_plant(sc, &v);
     let mut drive = build_drive(sc, &v)?;
-    let ts = v.drive.control_period;
+    let ts = v.drive.loops.control_period;
     let n = (sc.duration_s / ts).round() as usize;
     let mut rows = Vec::with_capacity(n);
 
@@ -545,7 +548,7 @@ pub fn run_with_progress(
     let mut fault_time = None;
     let mut search = None;
     let target_limit_rpm =
-        acim::design::SPEED_TARGET_FRACTION * v.drive.max_speed * acim::math::RAD_S_TO_RPM;
+        acim::design::SPEED_TARGET_FRACTION * v.drive.limits.max_speed * acim::math::RAD_S_TO_RPM;
     let mut target_clamps = Vec::new();
     let mut user_target_rpm = 0.0f32;
     let plant_nominal = v.plant.data();
@@ -704,22 +707,24 @@ pub fn run_with_progress(
         switches_off_at_end: !pwm.preloaded().enabled,
         search,
         config: v.drive,
-        inverter_test: (v.drive.inverter_identification || v.drive.inverter_tracking).then(|| {
-            let (outcome, dead_time) = drive.inverter_test();
-            InverterTestRecord {
-                outcome: format!("{outcome:?}"),
-                dead_time_us: dead_time * 1e6,
-                true_dead_time_us: sc.inverter.dead_time_s * 1e6,
-                configured_dead_time_us: v.drive.dead_time * 1e6,
-                tracked: v.drive.inverter_tracking
-                    && v.drive.rs_estimation
-                    && v.drive.rs_estimation_mode == acim::RsEstimationMode::Running,
-            }
-        }),
+        inverter_test: (v.drive.start.inverter_identification
+            || v.drive.trackers.inverter_tracking)
+            .then(|| {
+                let (outcome, dead_time) = drive.inverter_test();
+                InverterTestRecord {
+                    outcome: format!("{outcome:?}"),
+                    dead_time_us: dead_time * 1e6,
+                    true_dead_time_us: sc.inverter.dead_time_s * 1e6,
+                    configured_dead_time_us: v.drive.inverter.dead_time * 1e6,
+                    tracked: v.drive.trackers.inverter_tracking
+                        && v.drive.estimation.rs_estimation
+                        && v.drive.estimation.rs_estimation_mode == acim::RsEstimationMode::Running,
+                }
+            }),
         current_gain_correction: drive.current_gain_correction(),
         target_clamps,
         hardware_trip,
-        rotor_resistance: v.drive.rr_adaptation.then(|| {
+        rotor_resistance: v.drive.trackers.rr_adaptation.then(|| {
             let r = drive.rotor_resistance();
             RotorResistanceRecord {
                 estimate_ohm: r.estimate,

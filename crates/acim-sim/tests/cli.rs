@@ -57,7 +57,7 @@ fn subcommands_reject_options_they_cannot_honour() {
     );
     for cmd in ["capability", "robustness", "robust-stability", "any-motor"] {
         fails_with(
-            &sim(&[cmd, "--set", "drive.orientation_gain=3"], &d),
+            &sim(&[cmd, "--set", "drive.estimation.orientation_gain=3"], &d),
             "does not take --set",
         );
     }

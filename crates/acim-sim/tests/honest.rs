@@ -330,7 +330,7 @@ fn a_sustained_oscillation_is_a_limit_cycle_not_control_kept() {
     let (_, m) = acim_sim::run_with_metrics(&on).unwrap();
     assert_eq!(m.fault.as_deref(), Some("SpeedOscillation"), "{m:#?}");
     let sc = on
-        .with_overrides(&["drive.speed_oscillation_check=false".into()])
+        .with_overrides(&["drive.limits.speed_oscillation_check=false".into()])
         .unwrap();
     let (_, m) = acim_sim::run_with_metrics(&sc).unwrap();
     assert_eq!(m.verdict, acim_sim::metrics::Verdict::LimitCycle, "{m:#?}");

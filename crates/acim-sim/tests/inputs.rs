@@ -140,12 +140,22 @@ fn pwm_frequency_and_period_errors_name_the_field() {
     let m = machine.to_str().unwrap();
     for (args, field) in [
         (
-            vec!["run", "paper-fig7", "--set", "drive.control_period_s=1"],
-            "drive.control_period_s",
+            vec![
+                "run",
+                "paper-fig7",
+                "--set",
+                "drive.loops.control_period_s=1",
+            ],
+            "drive.loops.control_period_s",
         ),
         (
-            vec!["run", "paper-fig7", "--set", "drive.control_period_s=1e-6"],
-            "drive.control_period_s",
+            vec![
+                "run",
+                "paper-fig7",
+                "--set",
+                "drive.loops.control_period_s=1e-6",
+            ],
+            "drive.loops.control_period_s",
         ),
         (
             vec!["run", m, "--set", "board.pwm_frequency_hz=1"],

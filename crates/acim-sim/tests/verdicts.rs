@@ -38,9 +38,9 @@ fn kept_lost_and_faulted() {
     let m = run(
         "regen-120",
         &[
-            "drive.orientation_gain=0",
-            "drive.regen_min_frequency_hz=0",
-            "drive.rs_estimation=false",
+            "drive.estimation.orientation_gain=0",
+            "drive.loops.regen_min_frequency_hz=0",
+            "drive.estimation.rs_estimation=false",
         ],
     );
     assert_eq!(m.verdict, Verdict::Lost, "{m:#?}");
@@ -63,7 +63,7 @@ fn csv_rows_carry_state_saturation_and_fault_reason() {
     // voltage limit before the control monitor trips (with the check on, it reports the
     // dead channels within two 1.6 ms windows, before the loops saturate)
     let mut sc = builtins::get("fault-sensors-zero").unwrap();
-    sc.drive.sensor_check = false;
+    sc.drive.limits.sensor_check = false;
     let r = acim_sim::sim::run(&sc).unwrap();
     let m = acim_sim::metrics::compute(&r, 1.0);
     assert!(r.rows.iter().any(|x| x.voltage_saturated));

@@ -520,14 +520,14 @@ mod tests {
         assert_eq!(say(&mut b, "status"), "ok state 0 fault 00\r\n");
         assert_eq!(say(&mut b, "speed 500"), "ok\r\n");
         assert_eq!(
-            say(&mut b, "get current_limit"),
-            "current_limit = 4.67 A\r\nok\r\n"
+            say(&mut b, "get limits.current_limit"),
+            "limits.current_limit = 4.67 A\r\nok\r\n"
         );
-        assert!(say(&mut b, "set current_limit -1").starts_with("err (current_limit: "));
+        assert!(say(&mut b, "set limits.current_limit -1").starts_with("err (limits.current_limit: "));
         assert_eq!(say(&mut b, "start"), "ok\r\n");
         assert_eq!(
-            say(&mut b, "set current_limit 4"),
-            "err current_limit: refused while the drive is not idle (stop or reset first)\r\n"
+            say(&mut b, "set limits.current_limit 4"),
+            "err limits.current_limit: refused while the drive is not idle (stop or reset first)\r\n"
         );
         assert!(say(&mut b, "version").starts_with("ok protocol 1 board acim-vboard"));
         let f = say(&mut b, "$C,rate 1*0000");
@@ -562,13 +562,13 @@ mod tests {
             "ok saved (virtual board: kept in memory until it exits)\r\n"
         );
         // a framed reply of several lines: one frame a line, the last an `ok`
-        let c = protocol::command_frame("get current_limit");
+        let c = protocol::command_frame("get limits.current_limit");
         let f = say(&mut b, std::str::from_utf8(&c).unwrap().trim_end());
         let lines: Vec<&str> = f.lines().collect();
         assert_eq!(lines.len(), 2, "{f}");
         assert_eq!(
             protocol::unframe(lines[0].as_bytes()).unwrap(),
-            (b'R', &b"current_limit = 4.67 A"[..])
+            (b'R', &b"limits.current_limit = 4.67 A"[..])
         );
         assert_eq!(
             protocol::unframe(lines[1].as_bytes()).unwrap(),
@@ -653,13 +653,13 @@ mod tests {
         // while running; refused by the parser or the validation: never reach the drive
         assert_eq!(say(&mut b, "reset"), "err refused in this state\r\n");
         assert_eq!(say(&mut b, "speed 1801"), "err out of range\r\n");
-        assert!(say(&mut b, "set current_limit 99").starts_with("err (overcurrent_trip: "));
+        assert!(say(&mut b, "set limits.current_limit 99").starts_with("err (limits.overcurrent_trip: "));
         assert!(b.log().is_empty(), "{:?}", b.log());
         assert_eq!(say(&mut b, "start"), "ok\r\n");
         run(&mut b, 100);
         assert_eq!(say(&mut b, "start"), "err refused in this state\r\n");
         assert!(say(&mut b, "commission 750 230 3.3 50 1500").starts_with("err "));
-        assert!(say(&mut b, "set current_limit 4").starts_with("err current_limit: refused"));
+        assert!(say(&mut b, "set limits.current_limit 4").starts_with("err limits.current_limit: refused"));
         assert_eq!(say(&mut b, "speed 300"), "ok\r\n");
         run(&mut b, 2000);
         // a refused command through the board's own interface

@@ -48,7 +48,7 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     assert!(r[0].starts_with("ok commissioning started"), "{r:?}");
     assert_eq!(say(&mut b, "status"), ["ok state 5 fault 00"]);
     assert_eq!(say(&mut b, "start"), ["err refused in this state"]);
-    assert!(say(&mut b, "set current_limit 4")[0].starts_with("err current_limit: refused"));
+    assert!(say(&mut b, "set limits.current_limit 4")[0].starts_with("err limits.current_limit: refused"));
     run(&mut b, 2.0);
     let p = say(&mut b, "commission");
     assert!(p[0].starts_with("ok commissioning: DC steps"), "{p:?}");
@@ -84,7 +84,7 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
         100.0 * (rs - 10.5).abs() / 10.5 <= rs_pct + 0.05,
         "{rs} +/-{rs_pct} %"
     );
-    for name in ["r_r", "l_sigma", "l_m", "flux_current", "dead_time"] {
+    for name in ["r_r", "l_sigma", "l_m", "loops.flux_current", "dead_time"] {
         let (v, pct) = value(name);
         assert!(v > 0.0 && pct > 0.0, "{name} {v} +/-{pct}");
     }
@@ -119,14 +119,14 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     // against the paper machine's inverse-Gamma model (the bounds)
     let truth = MachineParams::paper_table1();
     let m = MachineParams::new(acim::MachineData {
-        stator_resistance: setting(&b, "stator_resistance"),
-        rotor_resistance: setting(&b, "rotor_resistance"),
-        stator_inductance: setting(&b, "stator_inductance"),
-        rotor_inductance: setting(&b, "rotor_inductance"),
-        mutual_inductance: setting(&b, "mutual_inductance"),
-        pole_pairs: setting(&b, "pole_pairs") as u8,
-        inertia: setting(&b, "inertia"),
-        viscous_friction: setting(&b, "viscous_friction"),
+        stator_resistance: setting(&b, "machine.stator_resistance"),
+        rotor_resistance: setting(&b, "machine.rotor_resistance"),
+        stator_inductance: setting(&b, "machine.stator_inductance"),
+        rotor_inductance: setting(&b, "machine.rotor_inductance"),
+        mutual_inductance: setting(&b, "machine.mutual_inductance"),
+        pole_pairs: setting(&b, "machine.pole_pairs") as u8,
+        inertia: setting(&b, "machine.inertia"),
+        viscous_friction: setting(&b, "machine.viscous_friction"),
     })
     .unwrap();
     let err = |x: f32, t: f32| (x - t).abs() / t;
@@ -143,11 +143,11 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     let j = err(m.inertia(), truth.inertia());
     println!("errors: Rs {rs:.4}, R_R {rr:.4}, L_sigma {ls:.4}, L_M {lm:.4}, J {j:.4}");
     assert!(rs < 0.02 && rr < 0.05 && ls < 0.05 && lm < 0.05 && j < 0.10);
-    assert_eq!(setting(&b, "pole_pairs"), 2.0);
+    assert_eq!(setting(&b, "machine.pole_pairs"), 2.0);
     let mut buf = [0u8; 24];
-    let flux =
-        String::from_utf8_lossy(format_value(setting(&b, "flux_current"), &mut buf)).to_string();
-    println!("flux_current {flux} A");
+    let flux = String::from_utf8_lossy(format_value(setting(&b, "loops.flux_current"), &mut buf))
+        .to_string();
+    println!("loops.flux_current {flux} A");
 
     // the drive on the commissioned settings alone: wait for the flux to decay and the
     // rotor to coast down from the no-load test, then start, 500 rpm, the paper's load

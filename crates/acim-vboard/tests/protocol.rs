@@ -86,11 +86,14 @@ fn bad_input_gets_an_error_and_changes_nothing() {
         (b"speed 1e3\r\n", "err bad number"),
         (b"load 21\r\n", "err out of range"),
         (b"rate 1\r\n", "err out of range"),
-        (b"set current_limit 99\r\n", "err (overcurrent_trip: "),
-        (b"set current_limit -1\r\n", "err (current_limit: "),
         (
-            b"set pole_pairs 2.5\r\n",
-            "err (pole_pairs: must be a whole number in 1..=32)",
+            b"set limits.current_limit 99\r\n",
+            "err (limits.overcurrent_trip: ",
+        ),
+        (b"set limits.current_limit -1\r\n", "err (limits.current_limit: "),
+        (
+            b"set machine.pole_pairs 2.5\r\n",
+            "err (machine.pole_pairs: must be a whole number in 1..=32)",
         ),
         (b"set bogus 1\r\n", "err unknown setting (get lists them)"),
         (b"sta\xffrt\r\n", "err non-ASCII byte"),
@@ -119,8 +122,8 @@ fn bad_input_gets_an_error_and_changes_nothing() {
     // framed: the same refusals, framed
     let r = c.framed("speed 9999");
     assert!(r[0].starts_with("$E,err out of range*"), "{r:?}");
-    let r = c.framed("set current_limit 99");
-    assert!(r[0].starts_with("$E,err (overcurrent_trip: "), "{r:?}");
+    let r = c.framed("set limits.current_limit 99");
+    assert!(r[0].starts_with("$E,err (limits.overcurrent_trip: "), "{r:?}");
     // a corrupted frame of a valid command is not executed
     let mut f = command_frame("start").to_vec();
     f[4] ^= 0x20; // "start" -> "sTart"
@@ -136,10 +139,10 @@ fn bad_input_gets_an_error_and_changes_nothing() {
     let mut stop = command_frame("stop").to_vec();
     stop[3] = b'S';
     assert!(c.ask(&stop)[0].starts_with("$E,err bad frame: checksum"));
-    let r = c.ask(b"set current_limit 4\r\n");
+    let r = c.ask(b"set limits.current_limit 4\r\n");
     assert_eq!(
         r,
-        ["err current_limit: refused while the drive is not idle (stop or reset first)"]
+        ["err limits.current_limit: refused while the drive is not idle (stop or reset first)"]
     );
     std::thread::sleep(Duration::from_millis(50));
     let r = c.framed("status");
@@ -162,16 +165,16 @@ fn replies_and_version() {
     assert!(String::from_utf8_lossy(p).starts_with("ok protocol 1 board acim-vboard"));
     assert!(c.ask(b"help\r\n")[0].contains("rate <periods>"));
     assert_eq!(
-        c.ask(b"get current_limit\r\n"),
-        ["current_limit = 4.67 A", "ok"]
+        c.ask(b"get limits.current_limit\r\n"),
+        ["limits.current_limit = 4.67 A", "ok"]
     );
     assert_eq!(
-        c.ask(b"set current_limit 4\r\n"),
-        ["ok current_limit applied (save to keep it)"]
+        c.ask(b"set limits.current_limit 4\r\n"),
+        ["ok limits.current_limit applied (save to keep it)"]
     );
     assert_eq!(
-        c.ask(b"get current_limit\r\n"),
-        ["current_limit = 4 A", "ok"]
+        c.ask(b"get limits.current_limit\r\n"),
+        ["limits.current_limit = 4 A", "ok"]
     );
     srv.shutdown();
 }

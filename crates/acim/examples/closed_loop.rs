@@ -24,7 +24,7 @@ fn main() {
     drive
         .set_speed_target(500.0 * RPM_TO_RAD_S)
         .expect("finite");
-    let steps = (3.0 / config.control_period) as usize; // 3 s: ramp (1 s) and settle
+    let steps = (3.0 / config.loops.control_period) as usize; // 3 s: ramp (1 s) and settle
     let mut worst_est_err = 0.0f32;
     for k in 0..steps {
         // 1. sample at the period boundary: what the drive gets to see

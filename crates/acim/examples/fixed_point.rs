@@ -29,7 +29,7 @@ fn main() {
         .set_speed_target(120.0 * RPM_TO_RAD_S)
         .expect("finite");
     let load = LoadTorque::Passive { torque: 1.5 };
-    let steps = (3.0 / config.control_period) as usize;
+    let steps = (3.0 / config.loops.control_period) as usize;
     let mut worst_diff_rpm = 0.0f32;
     for k in 0..steps {
         let (m_fx, m_fl) = (plant_fx.sample(), plant_fl.sample());

@@ -58,7 +58,7 @@ pub enum ZeroSpeedPolicy {
 /// Open-loop V/f commissioning settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct VfConfig {
+pub struct VfSettings {
     /// Voltage per electrical frequency, V peak per rad/s (230 V rms line at 50 Hz:
     /// 187.8 V / 314.16 rad/s = 0.598).
     pub volts_per_rad_s: f32,
@@ -66,23 +66,31 @@ pub struct VfConfig {
     pub boost: f32,
 }
 
-/// Complete drive configuration (all user-facing settings; nothing here changes at run
-/// time). Units SI, speeds mechanical rad/s.
+/// The power stage as the controller sees it: dead-time and device-drop compensation, the measured phases, the sampling-to-voltage delay.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DriveConfig {
-    /// The controller's machine model (may differ from the real machine).
-    pub machine: MachineParams,
-    /// Control and PWM period, s.
-    pub control_period: f32,
-    /// The slow task's period, s: 0 (the default) runs every stage every control period;
-    /// 0.5-2 ms runs the speed loop, field weakening and the slow supervision (stall,
-    /// overload, blind, estimate plausibility, limit cycle, zero-speed policy) once per
-    /// slow period, rounded to a whole number of control periods (at least one), and the
-    /// current loop, the estimators and the fast protections every control period
-    /// (`crate::drive`, "Two rates").
-    pub slow_period: f32,
-    /// d-axis (flux) current reference i_sd*, A peak.
-    pub flux_current: f32,
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InverterSettings {
+    /// Inverter dead time, s (compensated).
+    pub dead_time: f32,
+    /// Inverter device on-state drop, V (compensated with the dead time).
+    pub device_drop: f32,
+    /// Current band of the dead-time compensation's linearised sign, A: the current
+    /// below which the inverter's dead-time error is proportional to the current (device
+    /// capacitances); a property of the power stage, to be measured at commissioning.
+    /// Default 50 mA, the inverter model's default. At 60 rpm, where the back-EMF is only
+    /// about 10 V, a mismatch shows as speed-estimate spikes at each current zero crossing.
+    pub dead_time_current_band: f32,
+    /// Measured phases.
+    pub current_sensing: CurrentSensing,
+    /// Delay between sampling and the centre of the period the voltage is applied in, in
+    /// control periods (1.5 for preloaded compare registers).
+    pub delay_periods: f32,
+}
+
+/// Limits and protections: current, bus, speed and the supervision that faults beyond them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LimitSettings {
     /// Stator current vector limit I_max, A peak.
     pub current_limit: f32,
     /// The machine's continuous (rated) current I_c, A peak: a `current_limit` above it is
@@ -104,18 +112,74 @@ pub struct DriveConfig {
     pub dc_bus_max: f32,
     /// Over-speed trip on the estimated speed, rad/s.
     pub max_speed: f32,
-    /// Speed reference slew rate (trapezoid ramps), rad/s^2.
-    pub speed_ramp: f32,
+    /// Fault when the speed PI has been at its limit with |Omega_hat| below 10 % of the
+    /// reference for this long, s (locked rotor / stall).
+    pub stall_time: f32,
+    /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
+    pub max_load_torque_estimate: f32,
+    /// Dead or stuck current-sensor detection while switching (on by default): each
+    /// channel's movement over a 1.6 ms window against the current the stator equation
+    /// predicts for the applied voltage ([`crate::sensor_check`]); a channel that does not
+    /// follow is a `CurrentSensor` fault.
+    pub sensor_check: bool,
+    /// The limit-cycle check (on by default): the speed estimate swinging around a steady
+    /// reference by more than 2 % of `max_speed` peak to peak in three 1 s blocks in a
+    /// row is a `SpeedOscillation` fault ([`crate::supervisor::SpeedOscillation`]).
+    pub speed_oscillation_check: bool,
+}
+
+/// The control loops: rates, the flux current, the current and speed loops, the speed ramp and the regeneration limit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LoopSettings {
+    /// Control and PWM period, s.
+    pub control_period: f32,
+    /// The slow task's period, s: 0 (the default) runs every stage every control period;
+    /// 0.5-2 ms runs the speed loop, field weakening and the slow supervision (stall,
+    /// overload, blind, estimate plausibility, limit cycle, zero-speed policy) once per
+    /// slow period, rounded to a whole number of control periods (at least one), and the
+    /// current loop, the estimators and the fast protections every control period
+    /// (`crate::drive`, "Two rates").
+    pub slow_period: f32,
+    /// d-axis (flux) current reference i_sd*, A peak.
+    pub flux_current: f32,
     /// Current-loop bandwidth, rad/s.
     pub current_bandwidth: f32,
     /// Speed-loop bandwidth, rad/s: both poles of the speed loop (J s^2 + k_t (kp s + ki)
     /// = J (s + alpha)^2, [`crate::speed_loop`]).
     pub speed_bandwidth: f32,
+    /// Speed reference slew rate (trapezoid ramps), rad/s^2.
+    pub speed_ramp: f32,
     /// The speed loop's two-degree-of-freedom design: the observer's load-torque estimate,
     /// the ramp's acceleration and the friction fed forward, proportional feedback
     /// ([`crate::speed_loop`]; default off: the paper's PI; the nameplate path's default
     /// on).
     pub load_torque_feedforward: bool,
+    /// Low-frequency regeneration limit, rad/s electrical; 0 = off. While
+    /// the drive holds a speed target of the rotor's sign, the regenerative torque current
+    /// is limited so that the stator frequency w_s = p Omega + R_R i_sq / lambda stays on
+    /// the rotor's side of the unobservable line w_s = 0 by at least this much:
+    /// |i_sq| <= (p |Omega_hat| - w_min) lambda_ref / R_R. An overhauling load larger than
+    /// that raises the speed until the operating point is observable again (the reachable
+    /// speed, held and reported), instead of letting the estimates drift along the line
+    /// while the rotor runs away. Transits (a zero target or one of the other sign: stops,
+    /// reversals) are not limited: they cross the line at the ramp's pace. Default 1.5 Hz,
+    /// the upper end of `orientation_fade`, where the orientation correction that holds
+    /// regeneration stable (k > tau_r |w_slip|) is at full strength. Measured without the
+    /// limit (`acim-sim overhauling`): 6-8 N m at 60 rpm oscillated between 0 and 300 rpm
+    /// with no fault; 7 N m at 120 rpm ran away to 4 500 rpm while switching. Its cost: a
+    /// target below w_min / p (45 rpm on the paper machine) cannot be braked while held.
+    /// 2 Hz was tried: the robustness matrix with the standstill Rs estimator did better
+    /// near the line (9 of 14 low-frequency cases against 4), but the 60 rpm trapezoid of
+    /// fig 12 then estimated 4.2 rpm wrong (4 is its bound) and the any-motor 3 %
+    /// trapezoid 7-14 rpm (1.2-3.4 at 1.5 Hz).
+    pub regen_min_frequency: f32,
+}
+
+/// The estimators: the observer, the stator-resistance estimator, the orientation correction and the far-side mode.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EstimationSettings {
     /// Observer poles (rates, rad/s).
     pub observer_poles: ObserverPoles,
     /// Whether the stator-resistance estimator adapts (default on; the paper's figs. 6-8
@@ -124,11 +188,6 @@ pub struct DriveConfig {
     /// When Rs adapts (with `rs_estimation`): standstill only, or also while running
     /// (the default).
     pub rs_estimation_mode: RsEstimationMode,
-    /// With `rs_estimation` in the running mode: whether Rs is also identified at standstill
-    /// while magnetizing (default true; magnetizing then waits for it). False: Rs converges
-    /// only while turning, from `rs_initial` (the fig 9 variant). The standstill
-    /// mode has no other law and needs it.
-    pub rs_standstill_identification: bool,
     /// Initial stator-resistance estimate R0, ohm (eq. 19).
     pub rs_initial: f32,
     /// Convergence time constant of the Rs estimator, s.
@@ -136,10 +195,6 @@ pub struct DriveConfig {
     /// Rs adapts only below this |w_s|, rad/s electrical: there the d-axis residual is
     /// dominated by the resistance error (its orientation part grows with w_s).
     pub rs_max_frequency: f32,
-    /// With Rs estimation on, magnetizing also waits (at standstill, where the d-axis
-    /// residual is purely the resistance error) until the Rs estimate has settled, for at
-    /// most this long, s.
-    pub rs_identification_timeout: f32,
     /// Orientation-correction gain k (dimensionless, 0 = the paper's scheme unchanged):
     /// the stator frequency gets -k sign(w_s) r_d / lambda_ref. Regeneration is stable for
     /// k > tau_r |w_slip| (see [`crate::orientation`]). This is the gain at light load;
@@ -160,73 +215,21 @@ pub struct DriveConfig {
     /// line (off within [`FAR_SIDE_LEAVE_HZ`](crate::design::FAR_SIDE_LEAVE_HZ)), with the Rs estimator in the running mode
     /// and with the inverter's voltage error known: identified by the start test at this
     /// start, or tracked while running for [`crate::inverter_tracker::INVERTER_TRACKER_TRUST`]
-    /// ([`DriveConfig::inverter_tracking`]); in it the
+    /// ([`TrackerSettings::inverter_tracking`](crate::TrackerSettings::inverter_tracking)); in it the
     /// regeneration limit is released, so the drive crosses the line to hold the target
     /// (the transit). c and the load scheduling come from the linearised loop's maps
     /// (`acim_sim::linear`; docs/robustness.md, "The far-side mode").
     pub far_side_gain: f32,
-    /// Inverter dead time, s (compensated).
-    pub dead_time: f32,
-    /// Inverter device on-state drop, V (compensated with the dead time).
-    pub device_drop: f32,
-    /// Current band of the dead-time compensation's linearised sign, A: the current
-    /// below which the inverter's dead-time error is proportional to the current (device
-    /// capacitances); a property of the power stage, to be measured at commissioning.
-    /// Default 50 mA, the inverter model's default. At 60 rpm, where the back-EMF is only
-    /// about 10 V, a mismatch shows as speed-estimate spikes at each current zero crossing.
-    pub dead_time_current_band: f32,
-    /// Measured phases.
-    pub current_sensing: CurrentSensing,
-    /// Flux within this fraction of its reference counts as settled.
-    pub flux_tolerance: f32,
-    /// Delay between sampling and the centre of the period the voltage is applied in, in
-    /// control periods (1.5 for preloaded compare registers).
-    pub delay_periods: f32,
-    /// Fault when the speed PI has been at its limit with |Omega_hat| below 10 % of the
-    /// reference for this long, s (locked rotor / stall).
-    pub stall_time: f32,
-    /// Largest plausible |T_L_hat|, N m (beyond it: estimator out of range).
-    pub max_load_torque_estimate: f32,
+}
+
+/// The start sequence: flying start, the identification steps while magnetizing and when the flux counts as settled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StartSettings {
     /// Flying start: magnetizing first measures the rotor speed from the voltage the
     /// current loops apply ([`crate::speed_search`]) and catches a turning rotor instead
     /// of braking it with DC. Needs p `max_speed` `control_period` <= pi/4.
     pub flying_start: bool,
-    /// Field weakening above base speed ([`FieldWeakeningDesign`](crate::design::FieldWeakeningDesign)): the flux
-    /// reference and the torque-current limit follow the voltage the bus supplies at the
-    /// present stator frequency. Off: the flux stays at `flux_current` and speed targets
-    /// are limited to the no-load base speed (the earlier behaviour).
-    pub field_weakening: bool,
-    /// Over-voltage control: above [`OVC_START_FRACTION`](crate::design::OVC_START_FRACTION) of `dc_bus_max` the
-    /// regenerative torque current is reduced linearly to zero at [`OVC_END_FRACTION`](crate::design::OVC_END_FRACTION),
-    /// so braking without a brake resistor cannot pump the bus to its trip. Off by
-    /// default: the fault scenarios test the trip itself.
-    pub overvoltage_control: bool,
-    /// Light-load flux optimisation (off by default): below the torque
-    /// where the copper-loss optimum needs the rated flux, the flux current follows
-    /// i_sd* = sqrt((Rs + R_R) / Rs) |i_sq*| (the minimum of 1.5 (Rs |i_s|^2 + R_R i_sq^2)
-    /// at a given torque 1.5 p L_M i_sd i_sq, steady state), floored at
-    /// [`FLUX_OPT_MIN_FRACTION`](crate::design::FLUX_OPT_MIN_FRACTION) of `flux_current`; it rises at once with the torque
-    /// current and falls with [`FLUX_OPT_FALL_TAU_R`](crate::design::FLUX_OPT_FALL_TAU_R) rotor time constants.
-    pub flux_optimisation: bool,
-    /// Low-frequency regeneration limit, rad/s electrical; 0 = off. While
-    /// the drive holds a speed target of the rotor's sign, the regenerative torque current
-    /// is limited so that the stator frequency w_s = p Omega + R_R i_sq / lambda stays on
-    /// the rotor's side of the unobservable line w_s = 0 by at least this much:
-    /// |i_sq| <= (p |Omega_hat| - w_min) lambda_ref / R_R. An overhauling load larger than
-    /// that raises the speed until the operating point is observable again (the reachable
-    /// speed, held and reported), instead of letting the estimates drift along the line
-    /// while the rotor runs away. Transits (a zero target or one of the other sign: stops,
-    /// reversals) are not limited: they cross the line at the ramp's pace. Default 1.5 Hz,
-    /// the upper end of `orientation_fade`, where the orientation correction that holds
-    /// regeneration stable (k > tau_r |w_slip|) is at full strength. Measured without the
-    /// limit (`acim-sim overhauling`): 6-8 N m at 60 rpm oscillated between 0 and 300 rpm
-    /// with no fault; 7 N m at 120 rpm ran away to 4 500 rpm while switching. Its cost: a
-    /// target below w_min / p (45 rpm on the paper machine) cannot be braked while held.
-    /// 2 Hz was tried: the robustness matrix with the standstill Rs estimator did better
-    /// near the line (9 of 14 low-frequency cases against 4), but the 60 rpm trapezoid of
-    /// fig 12 then estimated 4.2 rpm wrong (4 is its bound) and the any-motor 3 %
-    /// trapezoid 7-14 rpm (1.2-3.4 at 1.5 Hz).
-    pub regen_min_frequency: f32,
     /// Inverter voltage-error identification at every start (on by
     /// default): the first [`INVERTER_TEST_TIME`](crate::design::INVERTER_TEST_TIME) of magnetizing holds the d-axis current at
     /// three levels ([`INVERTER_TEST_LEVELS`](crate::design::INVERTER_TEST_LEVELS) of `flux_current`) with the frame held on phase
@@ -239,6 +242,28 @@ pub struct DriveConfig {
     /// design leaves the test out (the lowest level's phase currents would sit inside the
     /// band, where the fit's sign pattern does not hold) and the outcome stays `NotRun`.
     pub inverter_identification: bool,
+    /// Current-sensor gain calibration at every start from rest (on by default; two-phase
+    /// sensing only): the b channel's gain relative to a's, identified from the beta
+    /// voltage while magnetizing with the frame held, equalizes the a and b samples (their
+    /// mean gain kept) from the handover ([`crate::gain_calibration`]).
+    pub current_gain_calibration: bool,
+    /// With `rs_estimation` in the running mode: whether Rs is also identified at standstill
+    /// while magnetizing (default true; magnetizing then waits for it). False: Rs converges
+    /// only while turning, from `rs_initial` (the fig 9 variant). The standstill
+    /// mode has no other law and needs it.
+    pub rs_standstill_identification: bool,
+    /// With Rs estimation on, magnetizing also waits (at standstill, where the d-axis
+    /// residual is purely the resistance error) until the Rs estimate has settled, for at
+    /// most this long, s.
+    pub rs_identification_timeout: f32,
+    /// Flux within this fraction of its reference counts as settled.
+    pub flux_tolerance: f32,
+}
+
+/// What the drive tracks while running: the current sensors' offsets, the inverter's voltage error, the rotor resistance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TrackerSettings {
     /// Running current-sensor offset tracking (on by default): the
     /// offsets' drift after the start's switches-off measurement, estimated from the DC
     /// part of the stator voltage while |w_s| >= 1.5 Hz (in the far-side mode from 0.5 Hz,
@@ -251,11 +276,6 @@ pub struct DriveConfig {
     /// ([`crate::inverter_tracker`]); it adapts the start test's correction while
     /// 1 Hz <= |f_s| and 6 |w_s| <= `current_bandwidth`.
     pub inverter_tracking: bool,
-    /// Current-sensor gain calibration at every start from rest (on by default; two-phase
-    /// sensing only): the b channel's gain relative to a's, identified from the beta
-    /// voltage while magnetizing with the frame held, equalizes the a and b samples (their
-    /// mean gain kept) from the handover ([`crate::gain_calibration`]).
-    pub current_gain_calibration: bool,
     /// Rotor-resistance adaptation from speed transients (off by
     /// default): over each speed ramp from a steady point (its start, its run and 0.25 s
     /// beyond its end, at most 0.8 s), the speed the observer moved beyond what the
@@ -263,22 +283,67 @@ pub struct DriveConfig {
     /// torque-current change plus a torque-per-inertia error times the model's speed
     /// change ([`crate::rr_estimator`]). Assumes the load torque holds over the window.
     pub rr_adaptation: bool,
-    /// Dead or stuck current-sensor detection while switching (on by default): each
-    /// channel's movement over a 1.6 ms window against the current the stator equation
-    /// predicts for the applied voltage ([`crate::sensor_check`]); a channel that does not
-    /// follow is a `CurrentSensor` fault.
-    pub sensor_check: bool,
-    /// The limit-cycle check (on by default): the speed estimate swinging around a steady
-    /// reference by more than 2 % of `max_speed` peak to peak in three 1 s blocks in a
-    /// row is a `SpeedOscillation` fault ([`crate::supervisor::SpeedOscillation`]).
-    pub speed_oscillation_check: bool,
+}
+
+/// Above base speed and near the bus limit: field weakening, over-voltage control, light-load flux optimisation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FieldWeakeningSettings {
+    /// Field weakening above base speed ([`FieldWeakeningDesign`](crate::design::FieldWeakeningDesign)): the flux
+    /// reference and the torque-current limit follow the voltage the bus supplies at the
+    /// present stator frequency. Off: the flux stays at `flux_current` and speed targets
+    /// are limited to the no-load base speed (the earlier behaviour).
+    pub enabled: bool,
+    /// Over-voltage control: above [`OVC_START_FRACTION`](crate::design::OVC_START_FRACTION) of `dc_bus_max` the
+    /// regenerative torque current is reduced linearly to zero at [`OVC_END_FRACTION`](crate::design::OVC_END_FRACTION),
+    /// so braking without a brake resistor cannot pump the bus to its trip. Off by
+    /// default: the fault scenarios test the trip itself.
+    pub overvoltage_control: bool,
+    /// Light-load flux optimisation (off by default): below the torque
+    /// where the copper-loss optimum needs the rated flux, the flux current follows
+    /// i_sd* = sqrt((Rs + R_R) / Rs) |i_sq*| (the minimum of 1.5 (Rs |i_s|^2 + R_R i_sq^2)
+    /// at a given torque 1.5 p L_M i_sd i_sq, steady state), floored at
+    /// [`FLUX_OPT_MIN_FRACTION`](crate::design::FLUX_OPT_MIN_FRACTION) of `flux_current`; it rises at once with the torque
+    /// current and falls with [`FLUX_OPT_FALL_TAU_R`](crate::design::FLUX_OPT_FALL_TAU_R) rotor time constants.
+    pub flux_optimisation: bool,
+}
+
+/// What a held zero speed target does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ZeroSpeedSettings {
     /// Held zero speed target: switch off (`Stop`, default) or keep the flux (`Hold`).
-    pub zero_speed_policy: ZeroSpeedPolicy,
+    pub policy: ZeroSpeedPolicy,
     /// With `ZeroSpeedPolicy::Stop`: the reference stays at zero this long before the
     /// switches turn off, s.
-    pub zero_speed_dwell: f32,
+    pub dwell: f32,
+}
+
+/// Complete drive configuration (all user-facing settings; nothing here changes at run
+/// time), in ten groups. Units SI, speeds mechanical rad/s. A rejected setting names its
+/// field by its path, e.g. `loops.speed_bandwidth` ([`ConfigError`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveConfig {
+    /// The controller's machine model (may differ from the real machine).
+    pub machine: MachineParams,
+    /// The power stage as the controller sees it.
+    pub inverter: InverterSettings,
+    /// Limits and protections.
+    pub limits: LimitSettings,
+    /// The control loops and their rates.
+    pub loops: LoopSettings,
+    /// The estimators.
+    pub estimation: EstimationSettings,
+    /// The start sequence.
+    pub start: StartSettings,
+    /// What is tracked while running.
+    pub trackers: TrackerSettings,
+    /// Field weakening, over-voltage control and flux optimisation.
+    pub field_weakening: FieldWeakeningSettings,
+    /// A held zero speed target.
+    pub zero_speed: ZeroSpeedSettings,
     /// V/f mode settings.
-    pub vf: VfConfig,
+    pub vf: VfSettings,
 }
 
 impl DriveConfig {
@@ -288,59 +353,75 @@ impl DriveConfig {
         let machine = MachineParams::paper_table1();
         Self {
             machine,
-            control_period: params::DEFAULT_CONTROL_PERIOD,
-            slow_period: 0.0,
-            flux_current: params::DEFAULT_FLUX_CURRENT,
-            current_limit: params::DEFAULT_CURRENT_LIMIT,
-            continuous_current: 0.0,
-            overload_duration: DEFAULT_OVERLOAD_DURATION,
-            overload_time: 0.2,
-            overcurrent_trip: 8.0,
-            dc_bus_min: 200.0,
-            dc_bus_max: 400.0,
-            max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
-            speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
-            current_bandwidth: 1000.0,
-            speed_bandwidth: 12.5,
-            load_torque_feedforward: false,
-            observer_poles: ObserverPoles::DEFAULT,
-            rs_estimation: true,
-            rs_estimation_mode: RsEstimationMode::Running,
-            rs_standstill_identification: true,
-            rs_initial: machine.stator_resistance(),
-            rs_convergence_time: 0.2,
-            rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
-            rs_identification_timeout: 1.5,
-            orientation_gain: 2.0,
-            orientation_fade: (
-                2.0 * core::f32::consts::PI * 0.5,
-                2.0 * core::f32::consts::PI * 1.5,
-            ),
-            far_side_gain: FAR_SIDE_GAIN,
-            dead_time: 1.5e-6,
-            device_drop: 1.0,
-            dead_time_current_band: 0.05,
-            current_sensing: CurrentSensing::TwoPhase,
-            flux_tolerance: 0.02,
-            delay_periods: 1.5,
-            stall_time: 1.0,
-            max_load_torque_estimate: 15.0,
-            flying_start: true,
-            field_weakening: true,
-            overvoltage_control: false,
-            flux_optimisation: false,
-            inverter_identification: true,
-            offset_tracking: true,
-            inverter_tracking: true,
-            current_gain_calibration: true,
-            rr_adaptation: false,
-            sensor_check: true,
-            speed_oscillation_check: true,
-            zero_speed_policy: ZeroSpeedPolicy::Stop,
-            zero_speed_dwell: 0.5,
-            // the orientation correction's fade-in end (doc above)
-            regen_min_frequency: 2.0 * core::f32::consts::PI * 1.5,
-            vf: VfConfig {
+            inverter: InverterSettings {
+                dead_time: 1.5e-6,
+                device_drop: 1.0,
+                dead_time_current_band: 0.05,
+                current_sensing: CurrentSensing::TwoPhase,
+                delay_periods: 1.5,
+            },
+            limits: LimitSettings {
+                current_limit: params::DEFAULT_CURRENT_LIMIT,
+                continuous_current: 0.0,
+                overload_duration: DEFAULT_OVERLOAD_DURATION,
+                overload_time: 0.2,
+                overcurrent_trip: 8.0,
+                dc_bus_min: 200.0,
+                dc_bus_max: 400.0,
+                max_speed: 2000.0 * crate::math::RPM_TO_RAD_S,
+                stall_time: 1.0,
+                max_load_torque_estimate: 15.0,
+                sensor_check: true,
+                speed_oscillation_check: true,
+            },
+            loops: LoopSettings {
+                control_period: params::DEFAULT_CONTROL_PERIOD,
+                slow_period: 0.0,
+                flux_current: params::DEFAULT_FLUX_CURRENT,
+                current_bandwidth: 1000.0,
+                speed_bandwidth: 12.5,
+                speed_ramp: 500.0 * crate::math::RPM_TO_RAD_S,
+                load_torque_feedforward: false,
+                // the orientation correction's fade-in end (doc above)
+                regen_min_frequency: 2.0 * core::f32::consts::PI * 1.5,
+            },
+            estimation: EstimationSettings {
+                observer_poles: ObserverPoles::DEFAULT,
+                rs_estimation: true,
+                rs_estimation_mode: RsEstimationMode::Running,
+                rs_initial: machine.stator_resistance(),
+                rs_convergence_time: 0.2,
+                rs_max_frequency: 2.0 * core::f32::consts::PI * 1.5,
+                orientation_gain: 2.0,
+                orientation_fade: (
+                    2.0 * core::f32::consts::PI * 0.5,
+                    2.0 * core::f32::consts::PI * 1.5,
+                ),
+                far_side_gain: FAR_SIDE_GAIN,
+            },
+            start: StartSettings {
+                flying_start: true,
+                inverter_identification: true,
+                current_gain_calibration: true,
+                rs_standstill_identification: true,
+                rs_identification_timeout: 1.5,
+                flux_tolerance: 0.02,
+            },
+            trackers: TrackerSettings {
+                offset_tracking: true,
+                inverter_tracking: true,
+                rr_adaptation: false,
+            },
+            field_weakening: FieldWeakeningSettings {
+                enabled: true,
+                overvoltage_control: false,
+                flux_optimisation: false,
+            },
+            zero_speed: ZeroSpeedSettings {
+                policy: ZeroSpeedPolicy::Stop,
+                dwell: 0.5,
+            },
+            vf: VfSettings {
                 volts_per_rad_s: 187.8 / 314.16,
                 boost: 8.0,
             },
@@ -352,7 +433,7 @@ impl DriveConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// `field` breaks `rule` (both human-readable, e.g. `"speed_bandwidth"` and
+    /// `field` breaks `rule` (both human-readable, e.g. `"loops.speed_bandwidth"` and
     /// `"at most a quarter of current_bandwidth"`).
     Invalid {
         /// The offending field of [`DriveConfig`] (dotted for nested fields).
@@ -365,11 +446,11 @@ pub enum ConfigError {
 }
 
 impl ConfigError {
-    /// The field the error is about (`"observer_poles"` for a failed observer design).
+    /// The field the error is about (`"estimation.observer_poles"` for a failed observer design).
     pub fn field(&self) -> &'static str {
         match self {
             ConfigError::Invalid { field, .. } => field,
-            ConfigError::Observer(_) => "observer_poles",
+            ConfigError::Observer(_) => "estimation.observer_poles",
         }
     }
 }
@@ -418,7 +499,7 @@ pub const MAX_SLOW_PERIOD: f32 = 2e-3;
 pub const MAX_SPEED_BANDWIDTH_SLOW_PERIODS: f32 = 0.1;
 /// Control periods per slow period: `slow_period` / `control_period` rounded, at least
 /// one (both s, `control_period` positive; a `slow_period` of 0 gives one:
-/// [`DriveConfig::slow_period`]).
+/// [`LoopSettings::slow_period`](crate::LoopSettings::slow_period)).
 pub fn slow_divider(slow_period: f32, control_period: f32) -> u32 {
     ((slow_period / control_period + 0.5) as u32).max(1)
 }
@@ -459,6 +540,6 @@ pub const MAX_ORIENTATION_GAIN: f32 = 50.0;
 /// The default time the overload limit may be drawn, s (the common 150 % for 60 s rating
 /// of industrial drives).
 pub const DEFAULT_OVERLOAD_DURATION: f32 = 60.0;
-/// The far-side gain's default ([`DriveConfig::far_side_gain`]): the value that leaves the
+/// The far-side gain's default ([`EstimationSettings::far_side_gain`](crate::EstimationSettings::far_side_gain)): the value that leaves the
 /// fewest unstable points in the linearised loop's maps (`acim_sim::linear`, docs/robustness.md).
 pub const FAR_SIDE_GAIN: f32 = 1.5;

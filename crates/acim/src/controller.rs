@@ -87,7 +87,7 @@ impl<S: SinCos, O: SpeedObserver, M: Modulator> Controller for Drive<S, f32, O, 
         let c = Drive::config(self);
         (
             t.outcome,
-            c.dead_time + t.correction_duty * c.control_period,
+            c.inverter.dead_time + t.correction_duty * c.loops.control_period,
         )
     }
     fn rotor_resistance(&self) -> RrReport {
@@ -139,7 +139,8 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Controller for Dr
         let c = Drive::config(self);
         (
             t.outcome,
-            c.dead_time + crate::fixed::q::from_q24(t.correction_duty.0) * c.control_period,
+            c.inverter.dead_time
+                + crate::fixed::q::from_q24(t.correction_duty.0) * c.loops.control_period,
         )
     }
     fn rotor_resistance(&self) -> RrReport {

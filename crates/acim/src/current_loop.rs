@@ -37,8 +37,8 @@ impl CurrentLoopConfig {
     /// The design for `cfg`, with the PIs at the bandwidth `current_bandwidth` against
     /// the voltage `v_static` the static decoupling leaves them (V).
     pub fn new(cfg: &DriveConfig, v_static: f32) -> Self {
-        let ts = cfg.control_period;
-        let pi = PiConfig::current_loop(&cfg.machine, cfg.current_bandwidth, ts, v_static);
+        let ts = cfg.loops.control_period;
+        let pi = PiConfig::current_loop(&cfg.machine, cfg.loops.current_bandwidth, ts, v_static);
         Self {
             pi_d: pi,
             pi_q: pi,

@@ -45,7 +45,7 @@ pub use crate::svpwm::FW_TRIM_FRACTION;
 
 /// Overload: the speed loop settles in this many of its time constants (1 /
 /// speed_bandwidth); torque at the limit with a large speed error beyond that is a fault
-/// (the nameplate's [`DriveConfig::overload_time`]; the default's 0.2 s is 2.5 of the
+/// (the nameplate's [`LimitSettings::overload_time`](crate::LimitSettings::overload_time); the default's 0.2 s is 2.5 of the
 /// default 12.5 rad/s).
 pub const OVERLOAD_SPEED_LOOP_CONSTANTS: f32 = 10.0;
 /// Overload: the speed error counts beyond this fraction of the reference.
@@ -55,7 +55,7 @@ pub const OVERLOAD_FRACTION: f32 = 0.5;
 /// linearised loop is unstable on the far side at 60-120 rpm beyond 8 N m (120 rpm / 9 N m:
 /// +2.2/s; the sampled loop a limit cycle, 70-154 rpm); with it stable up to 10 N m.
 pub const FAR_SIDE_LOAD_FRACTION: f32 = 0.5;
-/// Largest accepted [`DriveConfig::far_side_gain`].
+/// Largest accepted [`EstimationSettings::far_side_gain`](crate::EstimationSettings::far_side_gain).
 pub const MAX_FAR_SIDE_GAIN: f32 = 10.0;
 /// Under load the orientation gain is at least this multiple of the stability bound
 /// tau_r |w_slip| (README, "Beyond the paper: holding orientation").
@@ -168,7 +168,7 @@ pub struct CascadeDesign<N: Num + Angles = f32> {
     pub zero_dwell_steps: u32,
     /// [`ZeroSpeedPolicy::Stop`] (false: `Hold`).
     pub zero_speed_stop: bool,
-    /// Control periods per slow period (>= 1; [`DriveConfig::slow_period`]).
+    /// Control periods per slow period (>= 1; [`LoopSettings::slow_period`](crate::LoopSettings::slow_period)).
     pub slow_divider: u32,
     /// 1 / `slow_divider`: the per-period weight of the slow task's means, and the step
     /// of its current reference's ramp.
@@ -185,11 +185,11 @@ impl CascadeDesign<f32> {
         let pu = crate::num::signal_in::<N>;
         let g = crate::num::gain_in::<N>;
         Ok(CascadeDesign {
-            i_sd_ref: pu(self.i_sd_ref, b.current, "flux_current")?,
-            settled_flux: pu(self.settled_flux, b.flux, "flux_current")?,
-            speed_target_limit: pu(self.speed_target_limit, b.speed, "max_speed")?,
-            rs_initial: pu(self.rs_initial, b.resistance(), "rs_initial")?,
-            lead: N::lead(self.lead.0, self.lead.1, b).ok_or("delay_periods")?,
+            i_sd_ref: pu(self.i_sd_ref, b.current, "loops.flux_current")?,
+            settled_flux: pu(self.settled_flux, b.flux, "loops.flux_current")?,
+            speed_target_limit: pu(self.speed_target_limit, b.speed, "limits.max_speed")?,
+            rs_initial: pu(self.rs_initial, b.resistance(), "estimation.rs_initial")?,
+            lead: N::lead(self.lead.0, self.lead.1, b).ok_or("inverter.delay_periods")?,
             vf: VfDesign {
                 volts_per_rad_s: g(
                     self.vf.volts_per_rad_s * b.frequency / b.voltage,
@@ -200,7 +200,7 @@ impl CascadeDesign<f32> {
             zero_dwell_steps: self.zero_dwell_steps,
             zero_speed_stop: self.zero_speed_stop,
             slow_divider: self.slow_divider,
-            inv_slow_divider: g(self.inv_slow_divider, "slow_period")?,
+            inv_slow_divider: g(self.inv_slow_divider, "loops.slow_period")?,
         })
     }
 }
@@ -240,17 +240,17 @@ pub struct DriveCoeffs<N: Arithmetic = f32> {
     // the additions last, so that the default path's field offsets stay as they were
     /// The running Rs law ([`crate::rs_estimator`], "While running").
     pub rs_running: RsRunningConfig<N>,
-    /// The inverter test at start ([`DriveConfig::inverter_identification`]).
+    /// The inverter test at start ([`StartSettings::inverter_identification`](crate::StartSettings::inverter_identification)).
     pub inverter_test: InverterTestDesign<N>,
-    /// The running offset tracker ([`DriveConfig::offset_tracking`]).
+    /// The running offset tracker ([`TrackerSettings::offset_tracking`](crate::TrackerSettings::offset_tracking)).
     pub offset_tracker: OffsetTrackerConfig<N>,
-    /// The running inverter-error tracker ([`DriveConfig::inverter_tracking`]).
+    /// The running inverter-error tracker ([`TrackerSettings::inverter_tracking`](crate::TrackerSettings::inverter_tracking)).
     pub inverter_tracker: InverterTrackerConfig<N>,
-    /// The current-sensor gain calibration ([`DriveConfig::current_gain_calibration`]).
+    /// The current-sensor gain calibration ([`StartSettings::current_gain_calibration`](crate::StartSettings::current_gain_calibration)).
     pub gain_calibration: GainCalibrationConfig<N>,
-    /// The rotor-resistance adaptation ([`DriveConfig::rr_adaptation`]).
+    /// The rotor-resistance adaptation ([`TrackerSettings::rr_adaptation`](crate::TrackerSettings::rr_adaptation)).
     pub rr: RrEstimatorConfig<N>,
-    /// Dead or stuck current sensors ([`DriveConfig::sensor_check`]).
+    /// Dead or stuck current sensors ([`LimitSettings::sensor_check`](crate::LimitSettings::sensor_check)).
     pub sensor_check: SensorCheckConfig<N>,
 }
 
@@ -318,15 +318,15 @@ pub struct DriveDesign {
 impl DriveDesign {
     /// Validates `cfg` and derives every constant. Errors name the field and the rule.
     pub fn new(cfg: DriveConfig) -> Result<Self, ConfigError> {
-        let ts = positive(cfg.control_period, "control_period")?;
+        let ts = positive(cfg.loops.control_period, "loops.control_period")?;
         check(
             ts <= MAX_CONTROL_PERIOD,
-            "control_period",
+            "loops.control_period",
             "at most 10 ms (MAX_CONTROL_PERIOD)",
         )?;
         check(
             ts >= MIN_CONTROL_PERIOD,
-            "control_period",
+            "loops.control_period",
             "at least 20 us (MIN_CONTROL_PERIOD)",
         )?;
         check(
@@ -340,133 +340,159 @@ impl DriveDesign {
             "machine",
             "rotor time constant Lr/Rr must be at most 10 s (MAX_ROTOR_TIME_CONSTANT)",
         )?;
-        let i_max = positive(cfg.current_limit, "current_limit")?;
-        let i_d = positive(cfg.flux_current, "flux_current")?;
-        check(i_d < i_max, "flux_current", "must be below current_limit")?;
-        positive(cfg.overcurrent_trip, "overcurrent_trip")?;
+        let i_max = positive(cfg.limits.current_limit, "limits.current_limit")?;
+        let i_d = positive(cfg.loops.flux_current, "loops.flux_current")?;
         check(
-            cfg.overcurrent_trip >= i_max,
-            "overcurrent_trip",
+            i_d < i_max,
+            "loops.flux_current",
+            "must be below current_limit",
+        )?;
+        positive(cfg.limits.overcurrent_trip, "limits.overcurrent_trip")?;
+        check(
+            cfg.limits.overcurrent_trip >= i_max,
+            "limits.overcurrent_trip",
             "must be at least current_limit",
         )?;
         check(
-            cfg.overcurrent_trip <= MAX_TRIP_OVER_LIMIT * i_max,
-            "overcurrent_trip",
+            cfg.limits.overcurrent_trip <= MAX_TRIP_OVER_LIMIT * i_max,
+            "limits.overcurrent_trip",
             "must be at most 3 x current_limit (MAX_TRIP_OVER_LIMIT)",
         )?;
-        positive(cfg.dc_bus_min, "dc_bus_min")?;
-        positive(cfg.dc_bus_max, "dc_bus_max")?;
+        positive(cfg.limits.dc_bus_min, "limits.dc_bus_min")?;
+        positive(cfg.limits.dc_bus_max, "limits.dc_bus_max")?;
         check(
-            cfg.dc_bus_max > cfg.dc_bus_min,
-            "dc_bus_max",
+            cfg.limits.dc_bus_max > cfg.limits.dc_bus_min,
+            "limits.dc_bus_max",
             "must be above dc_bus_min",
         )?;
-        positive(cfg.max_speed, "max_speed")?;
-        positive(cfg.speed_ramp, "speed_ramp")?;
-        positive(cfg.current_bandwidth, "current_bandwidth")?;
-        positive(cfg.speed_bandwidth, "speed_bandwidth")?;
+        positive(cfg.limits.max_speed, "limits.max_speed")?;
+        positive(cfg.loops.speed_ramp, "loops.speed_ramp")?;
+        positive(cfg.loops.current_bandwidth, "loops.current_bandwidth")?;
+        positive(cfg.loops.speed_bandwidth, "loops.speed_bandwidth")?;
         check(
-            cfg.continuous_current == 0.0
-                || (is_finite(cfg.continuous_current) && cfg.continuous_current > cfg.flux_current),
-            "continuous_current",
+            cfg.limits.continuous_current == 0.0
+                || (is_finite(cfg.limits.continuous_current)
+                    && cfg.limits.continuous_current > cfg.loops.flux_current),
+            "limits.continuous_current",
             "0 (no fold-back) or finite and above flux_current",
         )?;
-        positive(cfg.overload_duration, "overload_duration")?;
+        positive(cfg.limits.overload_duration, "limits.overload_duration")?;
         check(
-            is_finite(cfg.overload_time) && cfg.overload_time >= ts,
-            "overload_time",
+            is_finite(cfg.limits.overload_time) && cfg.limits.overload_time >= ts,
+            "limits.overload_time",
             "finite and at least one control period",
         )?;
         check(
-            cfg.current_bandwidth * ts <= MAX_CURRENT_BANDWIDTH_PERIODS,
-            "current_bandwidth",
+            cfg.loops.current_bandwidth * ts <= MAX_CURRENT_BANDWIDTH_PERIODS,
+            "loops.current_bandwidth",
             "times control_period at most 0.5 (MAX_CURRENT_BANDWIDTH_PERIODS)",
         )?;
         check(
-            cfg.speed_bandwidth * MIN_LOOP_SEPARATION <= cfg.current_bandwidth,
-            "speed_bandwidth",
+            cfg.loops.speed_bandwidth * MIN_LOOP_SEPARATION <= cfg.loops.current_bandwidth,
+            "loops.speed_bandwidth",
             "at most a quarter of current_bandwidth (MIN_LOOP_SEPARATION)",
         )?;
         check(
-            cfg.slow_period == 0.0
-                || (is_finite(cfg.slow_period)
-                    && cfg.slow_period >= MIN_SLOW_PERIOD
-                    && cfg.slow_period <= MAX_SLOW_PERIOD),
-            "slow_period",
+            cfg.loops.slow_period == 0.0
+                || (is_finite(cfg.loops.slow_period)
+                    && cfg.loops.slow_period >= MIN_SLOW_PERIOD
+                    && cfg.loops.slow_period <= MAX_SLOW_PERIOD),
+            "loops.slow_period",
             "0 (every stage every control period) or 0.5 to 2 ms (MIN_SLOW_PERIOD, \
              MAX_SLOW_PERIOD)",
         )?;
         // a whole number of control periods, at least one (a control period above the
         // slow period runs everything at the control rate)
-        let slow_divider = slow_divider(cfg.slow_period, ts);
+        let slow_divider = slow_divider(cfg.loops.slow_period, ts);
         let slow_ts = slow_divider as f32 * ts;
         check(
-            slow_divider == 1 || cfg.speed_bandwidth * slow_ts <= MAX_SPEED_BANDWIDTH_SLOW_PERIODS,
-            "speed_bandwidth",
+            slow_divider == 1
+                || cfg.loops.speed_bandwidth * slow_ts <= MAX_SPEED_BANDWIDTH_SLOW_PERIODS,
+            "loops.speed_bandwidth",
             "times the slow period at most 0.1 (MAX_SPEED_BANDWIDTH_SLOW_PERIODS): lower \
              it or shorten slow_period",
         )?;
-        positive(cfg.rs_initial, "rs_initial")?;
-        positive(cfg.rs_convergence_time, "rs_convergence_time")?;
+        positive(cfg.estimation.rs_initial, "estimation.rs_initial")?;
+        positive(
+            cfg.estimation.rs_convergence_time,
+            "estimation.rs_convergence_time",
+        )?;
         check(
-            is_finite(cfg.far_side_gain) && (0.0..=MAX_FAR_SIDE_GAIN).contains(&cfg.far_side_gain),
-            "far_side_gain",
+            is_finite(cfg.estimation.far_side_gain)
+                && (0.0..=MAX_FAR_SIDE_GAIN).contains(&cfg.estimation.far_side_gain),
+            "estimation.far_side_gain",
             "must be in 0 ..= 10 (MAX_FAR_SIDE_GAIN)",
         )?;
         check(
-            is_finite(cfg.dead_time)
-                && cfg.dead_time >= 0.0
-                && cfg.dead_time < MAX_DEAD_TIME_FRACTION * ts,
-            "dead_time",
+            is_finite(cfg.inverter.dead_time)
+                && cfg.inverter.dead_time >= 0.0
+                && cfg.inverter.dead_time < MAX_DEAD_TIME_FRACTION * ts,
+            "inverter.dead_time",
             "must be >= 0 and below 10 % of control_period (MAX_DEAD_TIME_FRACTION)",
         )?;
         check(
-            is_finite(cfg.device_drop) && (0.0..=MAX_DEVICE_DROP).contains(&cfg.device_drop),
-            "device_drop",
+            is_finite(cfg.inverter.device_drop)
+                && (0.0..=MAX_DEVICE_DROP).contains(&cfg.inverter.device_drop),
+            "inverter.device_drop",
             "must be in 0 ..= 20 V (MAX_DEVICE_DROP)",
         )?;
-        positive(cfg.dead_time_current_band, "dead_time_current_band")?;
-        let tol = positive(cfg.flux_tolerance, "flux_tolerance")?;
+        positive(
+            cfg.inverter.dead_time_current_band,
+            "inverter.dead_time_current_band",
+        )?;
+        let tol = positive(cfg.start.flux_tolerance, "start.flux_tolerance")?;
         check(
             tol < MAX_FLUX_TOLERANCE,
-            "flux_tolerance",
+            "start.flux_tolerance",
             "must be below 0.5 (MAX_FLUX_TOLERANCE)",
         )?;
         check(
-            is_finite(cfg.delay_periods) && (0.0..=MAX_DELAY_PERIODS).contains(&cfg.delay_periods),
-            "delay_periods",
+            is_finite(cfg.inverter.delay_periods)
+                && (0.0..=MAX_DELAY_PERIODS).contains(&cfg.inverter.delay_periods),
+            "inverter.delay_periods",
             "must be in 0 ..= 3 periods (MAX_DELAY_PERIODS)",
         )?;
-        positive(cfg.rs_max_frequency, "rs_max_frequency")?;
-        positive(cfg.rs_identification_timeout, "rs_identification_timeout")?;
+        positive(
+            cfg.estimation.rs_max_frequency,
+            "estimation.rs_max_frequency",
+        )?;
+        positive(
+            cfg.start.rs_identification_timeout,
+            "start.rs_identification_timeout",
+        )?;
         check(
-            cfg.rs_standstill_identification || cfg.rs_estimation_mode == RsEstimationMode::Running,
-            "rs_standstill_identification",
+            cfg.start.rs_standstill_identification
+                || cfg.estimation.rs_estimation_mode == RsEstimationMode::Running,
+            "start.rs_standstill_identification",
             "may be off only with rs_estimation_mode Running (the standstill mode has no \
              other law)",
         )?;
         check(
-            is_finite(cfg.orientation_gain)
-                && (0.0..=MAX_ORIENTATION_GAIN).contains(&cfg.orientation_gain),
-            "orientation_gain",
+            is_finite(cfg.estimation.orientation_gain)
+                && (0.0..=MAX_ORIENTATION_GAIN).contains(&cfg.estimation.orientation_gain),
+            "estimation.orientation_gain",
             "must be in 0 ..= 50 (MAX_ORIENTATION_GAIN)",
         )?;
-        let (fa, fb) = cfg.orientation_fade;
+        let (fa, fb) = cfg.estimation.orientation_fade;
         check(
             is_finite(fa) && is_finite(fb) && fa >= 0.0 && fb > fa,
-            "orientation_fade",
+            "estimation.orientation_fade",
             "must be finite with 0 <= lower < upper",
         )?;
-        positive(cfg.stall_time, "stall_time")?;
-        positive(cfg.zero_speed_dwell, "zero_speed_dwell")?;
+        positive(cfg.limits.stall_time, "limits.stall_time")?;
+        positive(cfg.zero_speed.dwell, "zero_speed.dwell")?;
         check(
-            is_finite(cfg.regen_min_frequency)
-                && cfg.regen_min_frequency >= 0.0
-                && cfg.regen_min_frequency <= 0.5 * cfg.max_speed * cfg.machine.pole_pairs_f32(),
-            "regen_min_frequency",
+            is_finite(cfg.loops.regen_min_frequency)
+                && cfg.loops.regen_min_frequency >= 0.0
+                && cfg.loops.regen_min_frequency
+                    <= 0.5 * cfg.limits.max_speed * cfg.machine.pole_pairs_f32(),
+            "loops.regen_min_frequency",
             "must be in 0 ..= p max_speed / 2 rad/s (0: off)",
         )?;
-        positive(cfg.max_load_torque_estimate, "max_load_torque_estimate")?;
+        positive(
+            cfg.limits.max_load_torque_estimate,
+            "limits.max_load_torque_estimate",
+        )?;
         positive(cfg.vf.volts_per_rad_s, "vf.volts_per_rad_s")?;
         check(
             is_finite(cfg.vf.boost) && cfg.vf.boost >= 0.0,
@@ -476,26 +502,31 @@ impl DriveDesign {
 
         let m = cfg.machine;
         let flux_reference = m.rotor_flux_for(i_d);
-        let base_speed = linear_limit(cfg.dc_bus_max) / (m.pole_pairs_f32() * flux_reference);
+        let base_speed =
+            linear_limit(cfg.limits.dc_bus_max) / (m.pole_pairs_f32() * flux_reference);
         check(
-            cfg.max_speed <= MAX_SPEED_OVER_BASE * base_speed,
-            "max_speed",
+            cfg.limits.max_speed <= MAX_SPEED_OVER_BASE * base_speed,
+            "limits.max_speed",
             "must be at most 3 x the base speed the bus drives, linear limit at dc_bus_max \
              / (p lambda_ref) (MAX_SPEED_OVER_BASE)",
         )?;
         let i_sq_limit = sqrt(i_max * i_max - i_d * i_d);
-        let observer =
-            ObserverConfig::new(&m, cfg.observer_poles, ts).map_err(ConfigError::Observer)?;
+        let observer = ObserverConfig::new(&m, cfg.estimation.observer_poles, ts)
+            .map_err(ConfigError::Observer)?;
         // the voltage limit of the current PIs follows the bus at run time; these static
         // limits only bound the integrators before the first step
-        let v_static = linear_limit(cfg.dc_bus_max);
-        let mut rs = RsEstimatorConfig::new(&m, ts, cfg.rs_convergence_time, i_d);
-        rs.adapt = cfg.rs_estimation;
-        rs.max_stator_frequency = cfg.rs_max_frequency;
-        let mut rs_running =
-            RsRunningConfig::new(ts, cfg.rs_convergence_time, i_d, m.rotor_time_constant());
-        rs_running.enabled = cfg.rs_estimation_mode == RsEstimationMode::Running;
-        rs_running.standstill = cfg.rs_standstill_identification;
+        let v_static = linear_limit(cfg.limits.dc_bus_max);
+        let mut rs = RsEstimatorConfig::new(&m, ts, cfg.estimation.rs_convergence_time, i_d);
+        rs.adapt = cfg.estimation.rs_estimation;
+        rs.max_stator_frequency = cfg.estimation.rs_max_frequency;
+        let mut rs_running = RsRunningConfig::new(
+            ts,
+            cfg.estimation.rs_convergence_time,
+            i_d,
+            m.rotor_time_constant(),
+        );
+        rs_running.enabled = cfg.estimation.rs_estimation_mode == RsEstimationMode::Running;
+        rs_running.standstill = cfg.start.rs_standstill_identification;
         rs_running.max_frequency = crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
             * m.stator_resistance()
             / m.magnetizing_inductance();
@@ -503,27 +534,28 @@ impl DriveDesign {
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
         // sequence (frame held, Rs identification) applies
         let search = SpeedSearchDesign::new(&SpeedSearchSpec {
-            enabled: cfg.flying_start,
+            enabled: cfg.start.flying_start,
             control_period: ts,
             rotor_time_constant: m.rotor_time_constant(),
             referred_rotor_resistance: m.referred_rotor_resistance(),
             i_sd_ref: i_d,
-            current_bandwidth: cfg.current_bandwidth,
+            current_bandwidth: cfg.loops.current_bandwidth,
             pole_pairs: pp,
-            max_speed: cfg.max_speed,
-            standstill_frequency: cfg.rs_max_frequency,
+            max_speed: cfg.limits.max_speed,
+            standstill_frequency: cfg.estimation.rs_max_frequency,
         });
         let Some(search) = search else {
             return Err(ConfigError::Invalid {
-                field: "flying_start",
+                field: "start.flying_start",
                 rule: "needs p max_speed control_period <= pi/4 (the speed search resolves \
                        at most a quarter turn per period); switch it off or shorten the period",
             });
         };
         // the inverter test at start, where the flux current's levels allow it
-        let inverter_test_on = cfg.inverter_identification
-            && cfg.flux_current >= INVERTER_TEST_MIN_BANDS * cfg.dead_time_current_band;
-        let search_steps = if cfg.flying_start {
+        let inverter_test_on = cfg.start.inverter_identification
+            && cfg.loops.flux_current
+                >= INVERTER_TEST_MIN_BANDS * cfg.inverter.dead_time_current_band;
+        let search_steps = if cfg.start.flying_start {
             search.decision_step() as f32
         } else {
             0.0
@@ -534,15 +566,15 @@ impl DriveDesign {
             cascade: CascadeDesign {
                 i_sd_ref: i_d,
                 settled_flux: flux_reference * (1.0 - tol),
-                speed_target_limit: SPEED_TARGET_FRACTION * cfg.max_speed,
-                rs_initial: cfg.rs_initial,
-                lead: (ts, cfg.delay_periods),
+                speed_target_limit: SPEED_TARGET_FRACTION * cfg.limits.max_speed,
+                rs_initial: cfg.estimation.rs_initial,
+                lead: (ts, cfg.inverter.delay_periods),
                 vf: VfDesign {
                     volts_per_rad_s: cfg.vf.volts_per_rad_s,
                     boost: cfg.vf.boost,
                 },
-                zero_dwell_steps: ((cfg.zero_speed_dwell / slow_ts) as u32).max(1),
-                zero_speed_stop: cfg.zero_speed_policy == ZeroSpeedPolicy::Stop,
+                zero_dwell_steps: ((cfg.zero_speed.dwell / slow_ts) as u32).max(1),
+                zero_speed_stop: cfg.zero_speed.policy == ZeroSpeedPolicy::Stop,
                 slow_divider,
                 inv_slow_divider: 1.0 / slow_divider as f32,
             },
@@ -551,16 +583,16 @@ impl DriveDesign {
             speed_loop: SpeedLoopConfig::new(
                 &m,
                 flux_reference,
-                cfg.speed_bandwidth,
+                cfg.loops.speed_bandwidth,
                 slow_ts,
                 i_sq_limit,
-                cfg.load_torque_feedforward,
+                cfg.loops.load_torque_feedforward,
             )
             .with_reference_limits(&cfg, flux_reference, slow_ts),
             thermal: ThermalConfig::new(
-                cfg.current_limit,
-                cfg.continuous_current,
-                cfg.overload_duration,
+                cfg.limits.current_limit,
+                cfg.limits.continuous_current,
+                cfg.limits.overload_duration,
                 i_d,
                 slow_ts,
             ),
@@ -569,10 +601,10 @@ impl DriveDesign {
             rs,
             rs_running,
             pwm: SvpwmConfig::new(
-                cfg.dead_time,
+                cfg.inverter.dead_time,
                 ts,
-                cfg.device_drop,
-                cfg.dead_time_current_band,
+                cfg.inverter.device_drop,
+                cfg.inverter.dead_time_current_band,
             ),
             i_sq_limit,
             flux_reference,
@@ -588,10 +620,10 @@ impl DriveDesign {
             offset_tracker: OffsetTrackerConfig {
                 exact_turn: slow_divider > 1,
                 ..OffsetTrackerConfig::new(
-                    cfg.offset_tracking,
+                    cfg.trackers.offset_tracking,
                     slow_ts,
                     m.stator_resistance(),
-                    OFFSET_FRACTION * cfg.overcurrent_trip,
+                    OFFSET_FRACTION * cfg.limits.overcurrent_trip,
                     i_d,
                     m.rotor_time_constant(),
                 )
@@ -600,57 +632,58 @@ impl DriveDesign {
             // resistance) into the correction: only with the running Rs law, which takes
             // it back out of the estimate (crate::inverter_tracker, "Gates")
             inverter_tracker: InverterTrackerConfig::new(
-                cfg.inverter_tracking
-                    && cfg.rs_estimation
-                    && cfg.rs_estimation_mode == RsEstimationMode::Running,
+                cfg.trackers.inverter_tracking
+                    && cfg.estimation.rs_estimation
+                    && cfg.estimation.rs_estimation_mode == RsEstimationMode::Running,
                 ts,
                 i_d,
-                cfg.current_bandwidth,
+                cfg.loops.current_bandwidth,
             ),
             gain_calibration: GainCalibrationConfig::new(
-                cfg.current_gain_calibration && cfg.current_sensing == CurrentSensing::TwoPhase,
+                cfg.start.current_gain_calibration
+                    && cfg.inverter.current_sensing == CurrentSensing::TwoPhase,
                 ts,
                 m.stator_resistance(),
                 i_d,
             ),
             rr_estimator: RrEstimatorConfig::new(
-                cfg.rr_adaptation,
+                cfg.trackers.rr_adaptation,
                 ts,
                 m.pole_pairs_f32(),
                 m.referred_rotor_resistance(),
                 i_d,
             ),
             sensor_check: SensorCheckConfig {
-                enabled: cfg.sensor_check,
+                enabled: cfg.limits.sensor_check,
                 ..SensorCheckConfig::new(&m, ts, i_max).map_err(|e| ConfigError::Invalid {
                     field: match e {
-                        SensorCheckError::ControlPeriod => "control_period",
-                        SensorCheckError::CurrentLimit => "current_limit",
+                        SensorCheckError::ControlPeriod => "loops.control_period",
+                        SensorCheckError::CurrentLimit => "limits.current_limit",
                         SensorCheckError::Inductance => "machine",
                     },
                     rule: "the current-sensor check needs it positive and finite",
                 })?
             },
             orientation: OrientationDesign {
-                gain_per_flux: cfg.orientation_gain / flux_reference,
+                gain_per_flux: cfg.estimation.orientation_gain / flux_reference,
                 // k(i_sq) = max(k, margin |i_sq| / i_sd*) = k max(1, c |i_sq|); the
                 // paper's scheme (k = 0) stays uncorrected at any load
-                load_factor_per_current: if cfg.orientation_gain > 0.0 {
-                    ORIENTATION_GAIN_MARGIN / (cfg.orientation_gain * i_d)
+                load_factor_per_current: if cfg.estimation.orientation_gain > 0.0 {
+                    ORIENTATION_GAIN_MARGIN / (cfg.estimation.orientation_gain * i_d)
                 } else {
                     0.0
                 },
                 fade_start: fa,
                 inv_fade_width: 1.0 / (fb - fa),
-                limit: ORIENTATION_LIMIT_FRACTION * cfg.max_speed * pp,
-                far_side_gain: cfg.far_side_gain,
+                limit: ORIENTATION_LIMIT_FRACTION * cfg.limits.max_speed * pp,
+                far_side_gain: cfg.estimation.far_side_gain,
                 far_side_load_factor: FAR_SIDE_LOAD_FRACTION / i_d,
             },
             magnetizing: MagnetizingDesign {
-                identify_rs: cfg.rs_estimation && cfg.rs_standstill_identification,
+                identify_rs: cfg.estimation.rs_estimation && cfg.start.rs_standstill_identification,
                 // counted from the start; with the inverter test the identification
                 // begins after the search and the test, and keeps its own time after them
-                rs_timeout_steps: (cfg.rs_identification_timeout / ts
+                rs_timeout_steps: (cfg.start.rs_identification_timeout / ts
                     + if inverter_test_on {
                         INVERTER_TEST_TIME / ts + search_steps
                     } else {
@@ -663,25 +696,25 @@ impl DriveDesign {
             },
             field_weakening: FieldWeakeningDesign::new(&cfg, base_speed, slow_ts),
             limits: SupervisionLimits {
-                current_sensing: cfg.current_sensing,
-                overcurrent_trip: cfg.overcurrent_trip,
-                dc_bus_min: cfg.dc_bus_min,
-                dc_bus_max: cfg.dc_bus_max,
-                max_speed: cfg.max_speed,
-                max_load_torque: cfg.max_load_torque_estimate,
+                current_sensing: cfg.inverter.current_sensing,
+                overcurrent_trip: cfg.limits.overcurrent_trip,
+                dc_bus_min: cfg.limits.dc_bus_min,
+                dc_bus_max: cfg.limits.dc_bus_max,
+                max_speed: cfg.limits.max_speed,
+                max_load_torque: cfg.limits.max_load_torque_estimate,
                 implausible_steps: (IMPLAUSIBLE_TIME / slow_ts) as u32,
-                stall_steps: (cfg.stall_time / slow_ts) as u32,
-                overload_steps: (cfg.overload_time / slow_ts) as u32,
+                stall_steps: (cfg.limits.stall_time / slow_ts) as u32,
+                overload_steps: (cfg.limits.overload_time / slow_ts) as u32,
                 overload_fraction: OVERLOAD_FRACTION,
                 overload_speed_floor: OVERLOAD_FRACTION * 100.0 * crate::math::RPM_TO_RAD_S,
                 blind_frequency: fa,
                 blind_steps: (m.rotor_time_constant() / slow_ts) as u32,
                 stall_fraction: STALL_SPEED_FRACTION,
-                rs_bound_faults: cfg.rs_estimation,
-                monitor_filter: (ts * cfg.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
+                rs_bound_faults: cfg.estimation.rs_estimation,
+                monitor_filter: (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
                     .min(1.0),
                 current_error_limit: CURRENT_ERROR_FRACTION * i_d,
-                current_sum_limit: CURRENT_SUM_FRACTION * cfg.overcurrent_trip,
+                current_sum_limit: CURRENT_SUM_FRACTION * cfg.limits.overcurrent_trip,
                 model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
                     + RESIDUAL_VOLTAGE_FRACTION * v_static,
                 demagnetize_steps: (DEMAGNETIZE_TAU_R * m.rotor_time_constant() / ts) as u32,
@@ -691,20 +724,20 @@ impl DriveDesign {
                 offset_skip_steps: ((OFFSET_SWITCH_OFF_SKIP_TIME / ts + 0.5) as u32).max(1),
                 oscillation_steps: ((OSCILLATION_BLOCK_TIME / slow_ts + 0.5) as u32).max(1),
                 oscillation_filter: (slow_ts / OSCILLATION_FILTER_TIME).min(1.0),
-                oscillation_check: cfg.speed_oscillation_check,
-                oscillation_swing: OSCILLATION_FRACTION * cfg.max_speed,
-                offset_limit: OFFSET_FRACTION * cfg.overcurrent_trip,
+                oscillation_check: cfg.limits.speed_oscillation_check,
+                oscillation_swing: OSCILLATION_FRACTION * cfg.limits.max_speed,
+                offset_limit: OFFSET_FRACTION * cfg.limits.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
                 running_offset_min_frequency: 4.0 * i_max
-                    / (OFFSET_FRACTION * cfg.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
+                    / (OFFSET_FRACTION * cfg.limits.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
                 impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance()
                     + m.referred_rotor_resistance(),
                 impedance_inductance: m.stator_inductance(),
                 impedance_voltage_floor: m.stator_resistance() * i_max,
                 // the inverter test runs after the search, and the Rs identification
                 // after both with its own timeout
-                magnetizing_timeout_steps: ((if cfg.rs_estimation {
-                    cfg.rs_identification_timeout
+                magnetizing_timeout_steps: ((if cfg.estimation.rs_estimation {
+                    cfg.start.rs_identification_timeout
                 } else {
                     0.0
                 } + if inverter_test_on {
@@ -729,7 +762,7 @@ impl DriveDesign {
     /// interrupt). Rejects non-finite values and values outside 0 ..= 50.
     pub fn with_orientation_gain(&self, gain: f32) -> Result<Self, ConfigError> {
         let mut cfg = self.config;
-        cfg.orientation_gain = gain;
+        cfg.estimation.orientation_gain = gain;
         Self::new(cfg)
     }
 }
@@ -755,21 +788,29 @@ impl<N: Arithmetic> DriveCoeffs<N> {
         let pu =
             |x: f32, base: f32, field| crate::num::signal_in::<N>(x, base, field).map_err(named);
         // range checks: everything the drive compares against or limits to must fit
-        pu(cfg.overcurrent_trip, b.current, "overcurrent_trip")?;
-        pu(cfg.current_limit, b.current, "current_limit")?;
-        pu(cfg.dc_bus_max, b.voltage, "dc_bus_max")?;
-        pu(cfg.max_speed, b.speed, "max_speed")?;
-        pu(cfg.max_speed * pp * 1.25, b.frequency, "max_speed")?;
-        pu(1.2 * d.flux_reference, b.flux, "flux_current")?;
         pu(
-            cfg.max_load_torque_estimate,
+            cfg.limits.overcurrent_trip,
+            b.current,
+            "limits.overcurrent_trip",
+        )?;
+        pu(cfg.limits.current_limit, b.current, "limits.current_limit")?;
+        pu(cfg.limits.dc_bus_max, b.voltage, "limits.dc_bus_max")?;
+        pu(cfg.limits.max_speed, b.speed, "limits.max_speed")?;
+        pu(
+            cfg.limits.max_speed * pp * 1.25,
+            b.frequency,
+            "limits.max_speed",
+        )?;
+        pu(1.2 * d.flux_reference, b.flux, "loops.flux_current")?;
+        pu(
+            cfg.limits.max_load_torque_estimate,
             b.torque,
-            "max_load_torque_estimate",
+            "limits.max_load_torque_estimate",
         )?;
         pu(
-            m.torque_constant(d.flux_reference) * cfg.current_limit,
+            m.torque_constant(d.flux_reference) * cfg.limits.current_limit,
             b.torque,
-            "current_limit",
+            "limits.current_limit",
         )?;
         pu(
             2.5 * m.stator_resistance() + m.referred_rotor_resistance(),
@@ -777,18 +818,18 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             "machine",
         )?;
         // the reciprocals' domain
-        if cfg.dc_bus_min / b.voltage < N::RECIP_FLOOR {
-            return Err(named("dc_bus_min"));
+        if cfg.limits.dc_bus_min / b.voltage < N::RECIP_FLOOR {
+            return Err(named("limits.dc_bus_min"));
         }
         if d.flux.min_flux / b.flux < N::RECIP_FLOOR {
-            return Err(named("flux_current"));
+            return Err(named("loops.flux_current"));
         }
         Ok(DriveCoeffs {
             cascade: d.cascade.convert(b).map_err(named)?,
             current_loop: d
                 .current_loop
                 .convert(b)
-                .ok_or_else(|| named("current_bandwidth"))?,
+                .ok_or_else(|| named("loops.current_bandwidth"))?,
             speed_loop: d
                 .speed_loop
                 .convert(b, pp, d.flux_reference)
@@ -798,19 +839,19 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             observer: d
                 .observer
                 .convert(b)
-                .ok_or_else(|| named("observer_poles"))?,
+                .ok_or_else(|| named("estimation.observer_poles"))?,
             rs: d
                 .rs
                 .convert(b)
-                .ok_or_else(|| named("rs_convergence_time"))?,
+                .ok_or_else(|| named("estimation.rs_convergence_time"))?,
             pwm: d
                 .pwm
                 .convert(b)
-                .ok_or_else(|| named("dead_time_current_band"))?,
+                .ok_or_else(|| named("inverter.dead_time_current_band"))?,
             model: d.model.convert(b).ok_or_else(|| named("machine"))?,
             orientation: d
                 .orientation
-                .convert(b, cfg.orientation_fade)
+                .convert(b, cfg.estimation.orientation_fade)
                 .map_err(named)?,
             magnetizing: d.magnetizing.convert(b).map_err(named)?,
             limits: d.limits.convert(b).map_err(named)?,
@@ -818,15 +859,15 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             rs_running: d
                 .rs_running
                 .convert(b)
-                .ok_or_else(|| named("rs_convergence_time"))?,
+                .ok_or_else(|| named("estimation.rs_convergence_time"))?,
             offset_tracker: d
                 .offset_tracker
                 .convert(b)
-                .ok_or_else(|| named("overcurrent_trip"))?,
+                .ok_or_else(|| named("limits.overcurrent_trip"))?,
             inverter_tracker: d
                 .inverter_tracker
                 .convert(b)
-                .ok_or_else(|| named("flux_current"))?,
+                .ok_or_else(|| named("loops.flux_current"))?,
             gain_calibration: d.gain_calibration.convert(b).map_err(named)?,
             rr: d
                 .rr_estimator
@@ -853,21 +894,25 @@ mod tests {
     #[test]
     fn robust_settings_are_accepted_in_every_build() {
         let c = DriveConfig::paper_defaults();
-        assert!(c.rs_estimation && c.rs_estimation_mode == RsEstimationMode::Running);
+        assert!(
+            c.estimation.rs_estimation
+                && c.estimation.rs_estimation_mode == RsEstimationMode::Running
+        );
         let mut z = DriveConfig::paper_defaults();
-        z.zero_speed_policy = ZeroSpeedPolicy::Stop;
+        z.zero_speed.policy = ZeroSpeedPolicy::Stop;
         let mut i = DriveConfig::paper_defaults();
-        i.inverter_identification = false;
+        i.start.inverter_identification = false;
         assert_eq!(field(c), None);
         assert_eq!(field(z), None);
         assert_eq!(field(i), None);
         // the inverter test is on by default; a flux current too small for its levels
         // leaves it out of the design instead of rejecting the configuration
-        assert!(c.inverter_identification);
+        assert!(c.start.inverter_identification);
         assert!(DriveDesign::new(c).unwrap().inverter_test.level_steps > 0);
         assert_eq!(DriveDesign::new(i).unwrap().inverter_test.level_steps, 0);
         let mut small = DriveConfig::paper_defaults();
-        small.flux_current = 0.9 * INVERTER_TEST_MIN_BANDS * small.dead_time_current_band;
+        small.loops.flux_current =
+            0.9 * INVERTER_TEST_MIN_BANDS * small.inverter.dead_time_current_band;
         assert_eq!(field(small), None);
         assert_eq!(
             DriveDesign::new(small).unwrap().inverter_test.level_steps,
@@ -875,16 +920,16 @@ mod tests {
         );
         // the standstill mode has no other Rs law: it cannot be switched off there
         let mut s = DriveConfig::paper_defaults();
-        s.rs_estimation_mode = RsEstimationMode::Standstill;
-        s.rs_standstill_identification = false;
-        assert_eq!(field(s), Some("rs_standstill_identification"));
+        s.estimation.rs_estimation_mode = RsEstimationMode::Standstill;
+        s.start.rs_standstill_identification = false;
+        assert_eq!(field(s), Some("start.rs_standstill_identification"));
         // the regeneration limit is in every build (a protection)
         let mut r = DriveConfig::paper_defaults();
         assert_eq!(field(r), None);
-        r.regen_min_frequency = 0.0;
+        r.loops.regen_min_frequency = 0.0;
         assert_eq!(field(r), None);
-        r.regen_min_frequency = -1.0;
-        assert_eq!(field(r), Some("regen_min_frequency"));
+        r.loops.regen_min_frequency = -1.0;
+        assert_eq!(field(r), Some("loops.regen_min_frequency"));
     }
 
     /// Protections cannot be switched off by configuration, and errors name the field
@@ -894,14 +939,14 @@ mod tests {
     fn physics_bounds_name_the_field() {
         assert_eq!(field(DriveConfig::paper_defaults()), None);
         let mut c = DriveConfig::paper_defaults();
-        c.overcurrent_trip = 1e30;
-        assert_eq!(field(c), Some("overcurrent_trip"));
+        c.limits.overcurrent_trip = 1e30;
+        assert_eq!(field(c), Some("limits.overcurrent_trip"));
         let mut c = DriveConfig::paper_defaults();
-        c.max_speed = 1e30;
-        assert_eq!(field(c), Some("max_speed"));
+        c.limits.max_speed = 1e30;
+        assert_eq!(field(c), Some("limits.max_speed"));
         let mut c = DriveConfig::paper_defaults();
         let mut data = c.machine.data();
-        data.rotor_resistance = data.rotor_inductance / (2.0 * c.control_period);
+        data.rotor_resistance = data.rotor_inductance / (2.0 * c.loops.control_period);
         c.machine = MachineParams::new(data).unwrap();
         assert_eq!(field(c), Some("machine"));
         // a rotor time constant of days: magnetizing would never time out
@@ -915,11 +960,11 @@ mod tests {
         assert_eq!(field(c), None);
         let d = DriveDesign::new(c).unwrap();
         assert!(
-            (d.limits.magnetizing_timeout_steps as f32) * c.control_period
+            (d.limits.magnetizing_timeout_steps as f32) * c.loops.control_period
                 <= 2.0 * MAGNETIZING_TIMEOUT_TAU_R * MAX_ROTOR_TIME_CONSTANT
         );
         let mut c = DriveConfig::paper_defaults();
-        c.control_period = 5e-6;
-        assert_eq!(field(c), Some("control_period"), "not dead_time");
+        c.loops.control_period = 5e-6;
+        assert_eq!(field(c), Some("loops.control_period"), "not dead_time");
     }
 }

@@ -30,7 +30,7 @@
 //!
 //! ## Two rates
 //!
-//! With [`DriveConfig::slow_period`] set (0.5-2 ms; 0, the default, runs every stage every
+//! With [`LoopSettings::slow_period`](crate::LoopSettings::slow_period) set (0.5-2 ms; 0, the default, runs every stage every
 //! control period), the step runs a slow tick once every
 //! [`crate::design::CascadeDesign::slow_divider`] control periods, as production drives
 //! schedule a medium-frequency task beside the current-loop interrupt:
@@ -71,7 +71,7 @@
 
 use crate::current_loop::{CurrentLoop, CurrentLoopInputs};
 use crate::design::DriveCoeffs;
-pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
+pub use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfSettings};
 use crate::field_weakening::{FieldWeakening, FieldWeakeningInputs, FieldWeakeningOutput};
 use crate::flux::FluxModel;
 use crate::frames::{
@@ -109,7 +109,7 @@ struct StepReferences<N: Arithmetic> {
     inv_dc_bus: N,
     magnetizing: bool,
     zero_held: bool,
-    /// This period is a slow tick ([`crate::DriveConfig::slow_period`]).
+    /// This period is a slow tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)).
     slow: bool,
 }
 
@@ -657,7 +657,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
 
     /// The rotor-resistance adaptation's state ([`crate::rr_estimator`]; its estimate
-    /// stays at the configured R_R with [`crate::DriveConfig::rr_adaptation`] off).
+    /// stays at the configured R_R with [`TrackerSettings::rr_adaptation`](crate::TrackerSettings::rr_adaptation) off).
     pub fn rotor_resistance_estimator(&self) -> &RrEstimator<N> {
         &self.est.rr
     }
@@ -675,7 +675,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
     /// The speed observer.
     /// The inverter test at start and the correction it identified
-    /// ([`DriveConfig::inverter_identification`]).
+    /// ([`StartSettings::inverter_identification`](crate::StartSettings::inverter_identification)).
     pub fn inverter_test(&self) -> &InverterTest<N> {
         &self.refs.start.inverter
     }
@@ -716,7 +716,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.request_start(DriveState::OpenLoop)
     }
 
-    /// Whether the next running period is a slow tick ([`DriveConfig::slow_period`];
+    /// Whether the next running period is a slow tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period);
     /// always, with no slow task): for measuring the two paths apart.
     pub fn slow_tick_due(&self) -> bool {
         self.refs.slow_count == 0
@@ -803,9 +803,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     pub fn set_design(&mut self, design: DriveDesign) -> Result<(), CommandError> {
         let (old, new) = (&self.cfg.design.config, &design.config);
         let retune = old.machine == new.machine
-            && old.control_period == new.control_period
-            && old.slow_period == new.slow_period
-            && old.current_sensing == new.current_sensing;
+            && old.loops.control_period == new.loops.control_period
+            && old.loops.slow_period == new.loops.slow_period
+            && old.inverter.current_sensing == new.inverter.current_sensing;
         let state = self.supervision.sup.state();
         if !(retune || state == DriveState::Idle) {
             return Err(CommandError::WrongState(state));
@@ -817,9 +817,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // time) it is meaningless, and a trusted tracker's or an identified test's would
         // let the far-side mode release the regeneration limit on it. Both start again (a
         // test measuring now ends; the next start's test, if on, measures anew)
-        let inverter_changed = old.dead_time != new.dead_time
-            || old.device_drop != new.device_drop
-            || old.dead_time_current_band != new.dead_time_current_band;
+        let inverter_changed = old.inverter.dead_time != new.inverter.dead_time
+            || old.inverter.device_drop != new.inverter.device_drop
+            || old.inverter.dead_time_current_band != new.inverter.dead_time_current_band;
         if inverter_changed {
             self.refs.start.inverter = InverterTest::default();
             self.loops.inverter_tracker = InverterTracker::default();
@@ -1116,7 +1116,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             .plausibility(limits, &health, saturated)
     }
 
-    /// The slow task's tick ([`crate::DriveConfig::slow_period`]): true once every
+    /// The slow task's tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)): true once every
     /// `slow_divider` control periods (every period with a divider of 1).
     #[inline(always)]
     fn slow_tick(&mut self) -> bool {
@@ -1379,7 +1379,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let i = m.i_dq;
         // the far-side term: in the far-side mode (the reference
         // stage's, from the last step) and while w_s is against Omega_hat, the speed and
-        // load updates see e - c(i_sq) w e_d (`DriveConfig::far_side_gain`)
+        // load updates see e - c(i_sq) w e_d (`DriveConfig.estimation.far_side_gain`)
         let far_side_error = {
             let ws = est.flux.stator_frequency;
             let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
@@ -1952,7 +1952,7 @@ mod tests {
     /// `tests/robustness.rs`).
     fn synthetic_defaults() -> DriveConfig {
         let mut c = DriveConfig::paper_defaults();
-        c.inverter_identification = false;
+        c.start.inverter_identification = false;
         c
     }
 
@@ -1990,12 +1990,12 @@ mod tests {
     #[test]
     fn config_validation_names_the_field_and_the_rule() {
         let mut c = DriveConfig::paper_defaults();
-        c.speed_bandwidth = 900.0;
+        c.loops.speed_bandwidth = 900.0;
         let e = Drive::new(c).err().unwrap();
         assert_eq!(
             e,
             ConfigError::Invalid {
-                field: "speed_bandwidth",
+                field: "loops.speed_bandwidth",
                 rule: "at most a quarter of current_bandwidth (MIN_LOOP_SEPARATION)"
             }
         );
@@ -2007,28 +2007,34 @@ mod tests {
              (MIN_LOOP_SEPARATION)"
         );
         let mut c = DriveConfig::paper_defaults();
-        c.control_period = 0.0;
+        c.loops.control_period = 0.0;
         assert_eq!(
             Drive::new(c).err().map(|e| e.field()),
-            Some("control_period")
+            Some("loops.control_period")
         );
         let mut c = DriveConfig::paper_defaults();
-        c.flux_current = 5.0;
-        assert_eq!(Drive::new(c).err().map(|e| e.field()), Some("flux_current"));
+        c.loops.flux_current = 5.0;
+        assert_eq!(
+            Drive::new(c).err().map(|e| e.field()),
+            Some("loops.flux_current")
+        );
         let mut c = DriveConfig::paper_defaults();
-        c.dc_bus_max = 100.0;
-        assert_eq!(Drive::new(c).err().map(|e| e.field()), Some("dc_bus_max"));
+        c.limits.dc_bus_max = 100.0;
+        assert_eq!(
+            Drive::new(c).err().map(|e| e.field()),
+            Some("limits.dc_bus_max")
+        );
         let mut c = DriveConfig::paper_defaults();
-        c.observer_poles.p1 = f32::NAN;
+        c.estimation.observer_poles.p1 = f32::NAN;
         assert_eq!(
             Drive::new(c).err(),
             Some(ConfigError::Observer(ObserverDesignError::PoleNotPositive))
         );
         let mut c = DriveConfig::paper_defaults();
-        c.speed_bandwidth = 900.0;
+        c.loops.speed_bandwidth = 900.0;
         assert_eq!(
             Drive::new(c).err().map(|e| e.field()),
-            Some("speed_bandwidth")
+            Some("loops.speed_bandwidth")
         );
     }
 
@@ -2075,14 +2081,14 @@ mod tests {
             steps as f32 * 200e-6
         };
         let mut flux_only = synthetic_defaults();
-        flux_only.rs_estimation = false;
+        flux_only.estimation.rs_estimation = false;
         // about ln(1/0.02) = 3.9 rotor time constants of 66.7 ms
         let t = magnetize(flux_only);
         assert!((0.2..0.35).contains(&t), "magnetizing took {t} s");
         let d = synthetic_defaults();
         let t_rs = magnetize(d);
         assert!(
-            t_rs > t && t_rs < t + d.rs_identification_timeout,
+            t_rs > t && t_rs < t + d.start.rs_identification_timeout,
             "magnetizing with the Rs identification took {t_rs} s"
         );
     }
@@ -2101,13 +2107,13 @@ mod tests {
             .flat_map(|p| schedules.map(|s| (p, s)))
         {
             let mut cfg = synthetic_defaults();
-            cfg.zero_speed_policy = policy;
-            cfg.slow_period = slow;
+            cfg.zero_speed.policy = policy;
+            cfg.loops.slow_period = slow;
             // no machine: the currents follow their references exactly (`following`),
             // which the observer and the sensor check, reading the voltage, do not
             // believe; the policy is what is tested here
-            cfg.load_torque_feedforward = false;
-            cfg.sensor_check = false;
+            cfg.loops.load_torque_feedforward = false;
+            cfg.limits.sensor_check = false;
             let mut d = powered(Drive::new(cfg).unwrap());
             d.start().unwrap();
             let inp = DriveInputs {
@@ -2231,10 +2237,10 @@ mod tests {
             Err(CommandError::NotFinite)
         );
         assert_eq!(d.set_orientation_gain(0.0), Ok(()));
-        assert_eq!(d.config().orientation_gain, 0.0);
+        assert_eq!(d.config().estimation.orientation_gain, 0.0);
         assert_eq!(d.set_speed_target(f32::NAN), Err(CommandError::NotFinite));
         d.set_speed_target(1e6).unwrap();
-        assert!(d.refs.speed.speed_target <= 0.9 * d.config().max_speed);
+        assert!(d.refs.speed.speed_target <= 0.9 * d.config().limits.max_speed);
     }
 
     /// Without field weakening, a target above the speed the bus voltage can reach
@@ -2251,11 +2257,11 @@ mod tests {
     /// [`unreachable_speed_targets_are_limited_and_reported`] with the slow period `slow`, s.
     fn unreachable_targets_with(slow: f32) {
         let mut cfg = synthetic_defaults();
-        cfg.field_weakening = false;
-        cfg.slow_period = slow;
+        cfg.field_weakening.enabled = false;
+        cfg.loops.slow_period = slow;
         // no machine: running, the currents follow their references exactly
         // (`following`), which the sensor check, reading the voltage, does not believe
-        cfg.sensor_check = false;
+        cfg.limits.sensor_check = false;
         let mut d = powered(Drive::new(cfg).unwrap());
         let i = 1.5;
         let magnetizing = DriveInputs {
@@ -2307,7 +2313,7 @@ mod tests {
         // the samples read 0 A while switching: every channel dead, which the sensor
         // check reports within two windows (its own tests); the wait is tested here
         let mut cfg = DriveConfig::paper_defaults();
-        cfg.sensor_check = false;
+        cfg.limits.sensor_check = false;
         let mut d = powered(Drive::new(cfg).unwrap());
         assert_eq!(d.start(), Ok(()));
         idle(&mut d, 10);
@@ -2315,7 +2321,7 @@ mod tests {
         d.stop();
         let wait = d.coeffs().limits.demagnetize_steps;
         let tau_r = d.design().config.machine.rotor_time_constant();
-        let ts = d.design().config.control_period;
+        let ts = d.design().config.loops.control_period;
         assert_eq!(wait, (5.0 * tau_r / ts) as u32);
         idle(&mut d, wait - 1);
         assert_eq!(d.start(), Err(CommandError::Demagnetizing));
@@ -2342,14 +2348,14 @@ mod tests {
         d.refs.start.inverter.correction_duty = 0.002;
         d.refs.start.inverter.outcome = InverterTestOutcome::Identified;
         let mut cfg = *d.config();
-        cfg.orientation_gain *= 0.5;
+        cfg.estimation.orientation_gain *= 0.5;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
         assert_eq!(d.refs.start.inverter.correction_duty, 0.002);
         assert_eq!(
             d.refs.start.inverter.outcome,
             InverterTestOutcome::Identified
         );
-        cfg.dead_time = 2.0e-6;
+        cfg.inverter.dead_time = 2.0e-6;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
         assert_eq!(d.refs.start.inverter.correction_duty, 0.0);
         assert_eq!(d.refs.start.inverter.outcome, InverterTestOutcome::NotRun);
@@ -2372,12 +2378,12 @@ mod tests {
         }
         assert_ne!(d.state(), DriveState::Idle);
         let mut cfg = *d.config();
-        cfg.slow_period = 1e-3;
+        cfg.loops.slow_period = 1e-3;
         assert!(matches!(
             d.set_design(DriveDesign::new(cfg).unwrap()),
             Err(CommandError::WrongState(_))
         ));
-        assert_eq!(d.config().slow_period, 0.0);
+        assert_eq!(d.config().loops.slow_period, 0.0);
         let mut idle_drive = drive();
         idle_drive
             .set_design(DriveDesign::new(cfg).unwrap())
@@ -2393,7 +2399,7 @@ mod tests {
         d.refs.start.gain_cal.ratio = 1.01;
         d.refs.start.gain_cal.factors = [0.995, 1.005];
         let mut cfg = *d.config();
-        cfg.current_gain_calibration = false;
+        cfg.start.current_gain_calibration = false;
         d.set_design(DriveDesign::new(cfg).unwrap()).unwrap();
         assert_eq!(d.refs.start.gain_cal.factors, [1.0; 2]);
         assert_eq!(d.current_gain_correction(), 1.0);
@@ -2548,10 +2554,10 @@ mod tests {
             samples in proptest::collection::vec((-6.0f32..6.0, -6.0f32..6.0), 1..300),
         ) {
             let mut c = synthetic_defaults();
-            c.flux_current = flux_current;
-            c.current_limit = flux_current + extra;
-            c.overcurrent_trip = crate::design::MAX_TRIP_OVER_LIMIT * c.current_limit;
-            c.speed_ramp = 1e6; // a step: a large target saturates the speed PI at once
+            c.loops.flux_current = flux_current;
+            c.limits.current_limit = flux_current + extra;
+            c.limits.overcurrent_trip = crate::design::MAX_TRIP_OVER_LIMIT * c.limits.current_limit;
+            c.loops.speed_ramp = 1e6; // a step: a large target saturates the speed PI at once
             let mut d = powered(Drive::new(c).unwrap());
             d.set_speed_target(target).unwrap();
             d.start().unwrap();
@@ -2563,18 +2569,18 @@ mod tests {
                 n += 1;
             }
             prop_assert_eq!(d.state(), DriveState::Running);
-            let lim = c.current_limit * (1.0 + 1e-5);
+            let lim = c.limits.current_limit * (1.0 + 1e-5);
             let mut at_limit = false;
             // samples scaled to +/-1.4 I_max (the third phase within 2.8 I_max, below the
             // trip at 3 I_max)
-            let k = 1.4 * c.current_limit / 6.0;
+            let k = 1.4 * c.limits.current_limit / 6.0;
             for (a, b) in samples {
                 let (a, b) = (k * a, k * b);
                 d.step(&DriveInputs { phase_currents: [a, b, -a - b], dc_bus: 325.0 });
                 let r = d.telemetry().current_reference;
                 let mag = (r.d * r.d + r.q * r.q).sqrt();
                 prop_assert!(mag <= lim, "{r:?} vs {lim}");
-                at_limit |= mag > 0.999 * c.current_limit;
+                at_limit |= mag > 0.999 * c.limits.current_limit;
             }
             // the property is exercised: large targets drive the reference to the circle
             // (the drive limits a target to the speed the bus voltage can reach)

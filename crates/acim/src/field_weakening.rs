@@ -92,7 +92,7 @@ pub const OVC_END_FRACTION: f32 = 0.975;
 /// below base speed is unchanged). i_sq in the model is the previous step's reference.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FieldWeakeningDesign<N: Num = f32> {
-    /// Field weakening on ([`DriveConfig::field_weakening`](crate::design::DriveConfig::field_weakening)).
+    /// Field weakening on ([`FieldWeakeningSettings::enabled`](crate::FieldWeakeningSettings::enabled)).
     pub enabled: bool,
     /// [`FW_VOLTAGE_FRACTION`] (dimensionless): V = this x v_max.
     pub voltage_fraction: N::Gain,
@@ -122,9 +122,9 @@ pub struct FieldWeakeningDesign<N: Num = f32> {
     /// lambda_ref, Wb: the orientation correction's gain k/lambda_ref is rescaled by
     /// lambda_ref/lambda_r while the flux is weakened.
     pub flux_reference: N,
-    /// Over-voltage control on ([`DriveConfig::overvoltage_control`](crate::design::DriveConfig::overvoltage_control)).
+    /// Over-voltage control on ([`FieldWeakeningSettings::overvoltage_control`](crate::FieldWeakeningSettings::overvoltage_control)).
     pub overvoltage_control: bool,
-    /// Light-load flux optimisation on ([`DriveConfig::flux_optimisation`](crate::design::DriveConfig::flux_optimisation)).
+    /// Light-load flux optimisation on ([`FieldWeakeningSettings::flux_optimisation`](crate::FieldWeakeningSettings::flux_optimisation)).
     pub flux_optimisation: bool,
     /// sqrt((Rs + R_R) / Rs): the copper-loss optimum's i_sd / |i_sq|.
     pub optimum_ratio: N::Gain,
@@ -144,29 +144,29 @@ impl FieldWeakeningDesign {
     /// updated every `ts` (s, the slow period).
     pub fn new(cfg: &DriveConfig, base_speed: f32, ts: f32) -> Self {
         let m = cfg.machine;
-        let band = (OVC_END_FRACTION - OVC_START_FRACTION) * cfg.dc_bus_max;
+        let band = (OVC_END_FRACTION - OVC_START_FRACTION) * cfg.limits.dc_bus_max;
         Self {
-            enabled: cfg.field_weakening,
+            enabled: cfg.field_weakening.enabled,
             voltage_fraction: FW_VOLTAGE_FRACTION,
             min_frequency: FW_MIN_FREQUENCY_FRACTION * m.pole_pairs_f32() * base_speed,
-            min_flux_current: FW_MIN_FLUX_FRACTION * cfg.flux_current,
-            current_limit: cfg.current_limit,
+            min_flux_current: FW_MIN_FLUX_FRACTION * cfg.loops.flux_current,
+            current_limit: cfg.limits.current_limit,
             inv_stator_inductance: 1.0 / m.stator_inductance(),
             stator_inductance: m.stator_inductance(),
             flux_voltage: 1.0,
             trim_gain: FW_TRIM_BANDWIDTH * ts / (2.0 * FW_VOLTAGE_FRACTION * m.stator_inductance()),
             trim_gate: FW_TRIM_GATE,
             trim_fraction: FW_TRIM_FRACTION,
-            rated_linkage: m.stator_inductance() * cfg.flux_current,
-            flux_reference: m.rotor_flux_for(cfg.flux_current),
-            overvoltage_control: cfg.overvoltage_control,
-            flux_optimisation: cfg.flux_optimisation,
+            rated_linkage: m.stator_inductance() * cfg.loops.flux_current,
+            flux_reference: m.rotor_flux_for(cfg.loops.flux_current),
+            overvoltage_control: cfg.field_weakening.overvoltage_control,
+            flux_optimisation: cfg.field_weakening.flux_optimisation,
             optimum_ratio: sqrt(
                 (m.stator_resistance() + m.referred_rotor_resistance()) / m.stator_resistance(),
             ),
-            optimum_min_current: FLUX_OPT_MIN_FRACTION * cfg.flux_current,
+            optimum_min_current: FLUX_OPT_MIN_FRACTION * cfg.loops.flux_current,
             optimum_fall: (ts / (FLUX_OPT_FALL_TAU_R * m.rotor_time_constant())).min(1.0),
-            regen_start: OVC_START_FRACTION * cfg.dc_bus_max,
+            regen_start: OVC_START_FRACTION * cfg.limits.dc_bus_max,
             inv_regen_band: 1.0 / band,
         }
     }
@@ -273,7 +273,7 @@ impl<N: Num + DivSqrt> FieldWeakening<N> {
         out
     }
 
-    /// Light-load flux optimisation ([`crate::DriveConfig::flux_optimisation`]): the
+    /// Light-load flux optimisation ([`FieldWeakeningSettings::flux_optimisation`](crate::FieldWeakeningSettings::flux_optimisation)): the
     /// copper-loss optimum i_sd* = sqrt((Rs + R_R)/Rs) |i_sq*| of the last step's torque
     /// current `i_sq_ref` (A), between the floor and `i_sd_max` (the rated or weakened
     /// flux current). It rises at once (a load step takes the flux back up, with tau_r)
@@ -422,7 +422,7 @@ impl FieldWeakeningDesign<f32> {
         b: &PerUnitBases,
     ) -> Result<FieldWeakeningDesign<N>, &'static str> {
         if self.min_frequency / b.frequency < N::RECIP_FLOOR {
-            return Err("max_speed");
+            return Err("limits.max_speed");
         }
         let g = crate::num::gain_in::<N>;
         let pu =
@@ -430,9 +430,9 @@ impl FieldWeakeningDesign<f32> {
         Ok(FieldWeakeningDesign {
             enabled: self.enabled,
             voltage_fraction: g(self.voltage_fraction, "field_weakening")?,
-            min_frequency: pu(self.min_frequency, b.frequency, "max_speed")?,
-            min_flux_current: pu(self.min_flux_current, b.current, "flux_current")?,
-            current_limit: pu(self.current_limit, b.current, "current_limit")?,
+            min_frequency: pu(self.min_frequency, b.frequency, "limits.max_speed")?,
+            min_flux_current: pu(self.min_flux_current, b.current, "loops.flux_current")?,
+            current_limit: pu(self.current_limit, b.current, "limits.current_limit")?,
             inv_stator_inductance: g(
                 self.inv_stator_inductance * b.voltage / (b.frequency * b.current),
                 "machine",
@@ -451,15 +451,15 @@ impl FieldWeakeningDesign<f32> {
             )?,
             trim_gate: g(self.trim_gate, "field_weakening")?,
             trim_fraction: g(self.trim_fraction, "field_weakening")?,
-            rated_linkage: pu(self.rated_linkage, b.flux, "flux_current")?,
-            flux_reference: pu(self.flux_reference, b.flux, "flux_current")?,
+            rated_linkage: pu(self.rated_linkage, b.flux, "loops.flux_current")?,
+            flux_reference: pu(self.flux_reference, b.flux, "loops.flux_current")?,
             overvoltage_control: self.overvoltage_control,
             flux_optimisation: self.flux_optimisation,
             optimum_ratio: g(self.optimum_ratio, "machine")?,
-            optimum_min_current: pu(self.optimum_min_current, b.current, "flux_current")?,
+            optimum_min_current: pu(self.optimum_min_current, b.current, "loops.flux_current")?,
             optimum_fall: g(self.optimum_fall, "machine")?,
-            regen_start: pu(self.regen_start, b.voltage, "dc_bus_max")?,
-            inv_regen_band: g(self.inv_regen_band * b.voltage, "dc_bus_max")?,
+            regen_start: pu(self.regen_start, b.voltage, "limits.dc_bus_max")?,
+            inv_regen_band: g(self.inv_regen_band * b.voltage, "limits.dc_bus_max")?,
         })
     }
 }
@@ -472,7 +472,7 @@ mod tests {
 
     fn design(overvoltage: bool) -> DriveDesign {
         let mut cfg = DriveConfig::paper_defaults();
-        cfg.overvoltage_control = overvoltage;
+        cfg.field_weakening.overvoltage_control = overvoltage;
         DriveDesign::new(cfg).unwrap()
     }
 
@@ -508,7 +508,7 @@ mod tests {
         let mut fw = FieldWeakening::new(d.cascade.i_sd_ref);
         let out = fw.update(
             &d.field_weakening,
-            &inputs(&d, 50.0, d.config.dc_bus_max, true),
+            &inputs(&d, 50.0, d.config.limits.dc_bus_max, true),
         );
         assert_eq!(out.i_sd_ref, d.cascade.i_sd_ref);
         assert_eq!(
@@ -522,10 +522,10 @@ mod tests {
     fn beyond_base_speed_the_flux_falls_inside_the_current_circle_and_latches() {
         let d = design(false);
         let mut fw = FieldWeakening::new(d.cascade.i_sd_ref);
-        let base = linear_limit(d.config.dc_bus_max) / d.flux_reference;
+        let base = linear_limit(d.config.limits.dc_bus_max) / d.flux_reference;
         let out = fw.update(
             &d.field_weakening,
-            &inputs(&d, 2.0 * base, d.config.dc_bus_max, true),
+            &inputs(&d, 2.0 * base, d.config.limits.dc_bus_max, true),
         );
         assert!(
             out.i_sd_ref < d.cascade.i_sd_ref && out.i_sd_ref >= d.field_weakening.min_flux_current
@@ -534,7 +534,7 @@ mod tests {
         assert!(out.i_sd_ref.powi(2) + out.i_sq_max.powi(2) <= i_max * i_max * 1.0001);
         assert!(fw.active());
         // back below base speed: latched until the flux has settled at its rated value
-        let low = inputs(&d, 50.0, d.config.dc_bus_max, false);
+        let low = inputs(&d, 50.0, d.config.limits.dc_bus_max, false);
         fw.update(&d.field_weakening, &low);
         assert!(fw.active());
         fw.update(

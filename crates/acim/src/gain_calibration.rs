@@ -86,7 +86,7 @@ pub const GAIN_CALIBRATION_MIN_FRACTION: f32 = 0.5;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GainCalibrationConfig<N: Num + FineIntegrator = f32> {
-    /// Calibrate at all: [`crate::design::DriveConfig::current_gain_calibration`] with
+    /// Calibrate at all: [`StartSettings::current_gain_calibration`](crate::StartSettings::current_gain_calibration) with
     /// two-phase sensing.
     pub enabled: bool,
     /// The low-pass gain, `Ts / GAIN_CALIBRATION_FILTER_TIME` (fixed point: into the finer
@@ -219,18 +219,19 @@ impl GainCalibrationConfig<f32> {
         let g = crate::num::gain_in::<N>;
         Ok(GainCalibrationConfig {
             enabled: self.enabled,
-            filter: g(self.filter * N::FINE_SCALE, "control_period")?,
+            filter: g(self.filter * N::FINE_SCALE, "loops.control_period")?,
             fine_bounds: N::FINE_RANGE,
-            min_voltage: N::checked_from_f32(self.min_voltage / b.voltage).ok_or("flux_current")?,
+            min_voltage: N::checked_from_f32(self.min_voltage / b.voltage)
+                .ok_or("loops.flux_current")?,
             ratio_scale: g(
                 if N::RECIP_FLOOR > 0.0 {
                     0.5 * b.voltage / self.min_voltage
                 } else {
                     self.ratio_scale
                 },
-                "current_gain_calibration",
+                "start.current_gain_calibration",
             )?,
-            sqrt3: g(self.sqrt3, "current_gain_calibration")?,
+            sqrt3: g(self.sqrt3, "start.current_gain_calibration")?,
             // dimensionless
             bounds: (N::from_f32(self.bounds.0), N::from_f32(self.bounds.1)),
         })

@@ -2,7 +2,7 @@
 //! currents (the current-sense amplifier outputs, not the ADC samples) opens all six
 //! switches by itself, without the control step.
 //!
-//! The software trip ([`crate::DriveConfig::overcurrent_trip`], checked on the samples
+//! The software trip ([`LimitSettings::overcurrent_trip`](crate::LimitSettings::overcurrent_trip), checked on the samples
 //! every period) cannot see a current its sensors do not report: a dead or stuck current
 //! channel lets the true current run away between samples the drive believes. A
 //! comparator on each current-sense amplifier output, wired into the timer's break input,
@@ -41,9 +41,9 @@ pub const HARDWARE_TRIP_DELAY: f32 = 1.5e-6;
 
 /// The hardware trip level of a drive configuration, A (phase peak):
 /// [`HARDWARE_TRIP_RATIO`] times its software trip
-/// ([`DriveConfig::overcurrent_trip`]).
+/// ([`LimitSettings::overcurrent_trip`](crate::LimitSettings::overcurrent_trip)).
 pub fn hardware_trip_level(cfg: &DriveConfig) -> f32 {
-    HARDWARE_TRIP_RATIO * cfg.overcurrent_trip
+    HARDWARE_TRIP_RATIO * cfg.limits.overcurrent_trip
 }
 
 #[cfg(test)]
@@ -56,7 +56,7 @@ mod tests {
     fn the_hardware_level_is_the_software_trip() {
         let cfg = DriveConfig::paper_defaults();
         let hw = hardware_trip_level(&cfg);
-        assert!(hw <= cfg.overcurrent_trip);
+        assert!(hw <= cfg.limits.overcurrent_trip);
         assert!((hw - 8.0).abs() < 1e-4, "{hw}");
     }
 }

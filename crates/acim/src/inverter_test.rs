@@ -9,7 +9,7 @@
 //! stator resistance from the inverter error at a steady operating point (both give a
 //! voltage along the current, Rs |i| + (4/pi) V_e, see docs/robustness.md); the error's
 //! sixth harmonic across the current can, and [`crate::inverter_tracker`] adapts the
-//! correction from it (`DriveConfig::inverter_tracking`), with the running Rs estimator
+//! correction from it (`DriveConfig.trackers.inverter_tracking`), with the running Rs estimator
 //! carrying the rest as an apparent resistance.
 
 use crate::num::Num;
@@ -44,7 +44,7 @@ pub const INVERTER_TEST_MIN_BANDS: f32 = 20.0;
 /// it is not believed (no correction, telemetry shows none).
 pub const INVERTER_TEST_MAX_DUTY: f32 = 0.05;
 
-/// The inverter test at start ([`DriveConfig::inverter_identification`](crate::design::DriveConfig::inverter_identification)).
+/// The inverter test at start ([`StartSettings::inverter_identification`](crate::StartSettings::inverter_identification)).
 ///
 /// At rest with the frame held on phase a (angle 0), a d-axis current i puts +i in phase a
 /// and -i/2 in b and c. Each leg's dead-time and device-drop error V_e opposes its current,
@@ -262,7 +262,7 @@ impl InverterTestDesign<f32> {
         let g = crate::num::gain_in::<N>;
         let pu =
             |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
-        let current = |x: f32| pu(x, b.current, "flux_current");
+        let current = |x: f32| pu(x, b.current, "loops.flux_current");
         let r = b.resistance();
         Ok(InverterTestDesign {
             level_steps: self.level_steps,
@@ -277,22 +277,22 @@ impl InverterTestDesign<f32> {
                 current(self.tolerances[1])?,
                 current(self.tolerances[2])?,
             ],
-            filter: g(self.filter, "control_period")?,
+            filter: g(self.filter, "loops.control_period")?,
             // dimensionless: voltage in, voltage out
             error_weights: [
-                g(self.error_weights[0], "inverter_identification")?,
-                g(self.error_weights[1], "inverter_identification")?,
-                g(self.error_weights[2], "inverter_identification")?,
+                g(self.error_weights[0], "start.inverter_identification")?,
+                g(self.error_weights[1], "start.inverter_identification")?,
+                g(self.error_weights[2], "start.inverter_identification")?,
             ],
             // 1/A: V_base y w / R_base = y (w I_base) in resistance per unit
             slope_weights: [
-                g(self.slope_weights[0] * b.current, "flux_current")?,
-                g(self.slope_weights[1] * b.current, "flux_current")?,
-                g(self.slope_weights[2] * b.current, "flux_current")?,
+                g(self.slope_weights[0] * b.current, "loops.flux_current")?,
+                g(self.slope_weights[1] * b.current, "loops.flux_current")?,
+                g(self.slope_weights[2] * b.current, "loops.flux_current")?,
             ],
             resistance_window: (
-                pu(self.resistance_window.0, r, "inverter_identification")?,
-                pu(self.resistance_window.1, r, "inverter_identification")?,
+                pu(self.resistance_window.0, r, "start.inverter_identification")?,
+                pu(self.resistance_window.1, r, "start.inverter_identification")?,
             ),
             max_duty: N::from_f32(self.max_duty),
         })

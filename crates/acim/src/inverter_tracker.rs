@@ -71,7 +71,7 @@ pub const INVERTER_TRACKER_TRUST: f32 = 3.0;
 /// Mean square of the sign vector's component across the current (see the module).
 pub const CROSS_MEAN_SQUARE: f32 = 0.154;
 
-/// The tracker's design ([`crate::DriveConfig::inverter_tracking`]).
+/// The tracker's design ([`TrackerSettings::inverter_tracking`](crate::TrackerSettings::inverter_tracking)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct InverterTrackerConfig<N: Num = f32> {
@@ -165,7 +165,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
     /// Whether it has adapted for [`INVERTER_TRACKER_TRUST`] and its `correction` (duty)
     /// is inside the bound: the drive then takes the correction as known, as after a
     /// start test that identified the error (the far-side mode's condition,
-    /// [`crate::DriveConfig::far_side_gain`]). A correction at the bound is an error the
+    /// [`EstimationSettings::far_side_gain`](crate::EstimationSettings::far_side_gain)). A correction at the bound is an error the
     /// bound cut short (an inverter beyond the range, or a tracker misled), not a known one.
     #[inline(always)]
     pub fn trusted(&self, cfg: &InverterTrackerConfig<N>, correction: N) -> bool {

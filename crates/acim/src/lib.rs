@@ -85,8 +85,9 @@ pub mod full_order;
 
 pub use controller::Controller;
 pub use design::{
-    ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, RsEstimationMode, VfConfig,
-    ZeroSpeedPolicy,
+    ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, EstimationSettings,
+    FieldWeakeningSettings, InverterSettings, LimitSettings, LoopSettings, RsEstimationMode,
+    StartSettings, TrackerSettings, VfSettings, ZeroSpeedPolicy, ZeroSpeedSettings,
 };
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,

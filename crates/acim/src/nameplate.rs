@@ -40,7 +40,7 @@
 //!
 //! Inconsistent data get a [`NameplateError`] naming the field and the rule.
 
-use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfConfig};
+use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfSettings};
 use crate::fixed::PerUnitBases;
 use crate::math::{is_finite, sqrt, RAD_S_TO_RPM, RPM_TO_RAD_S};
 use crate::observer::ObserverPoles;
@@ -398,30 +398,30 @@ pub fn drive_config(
     let sync_rpm = rated.synchronous_speed * RAD_S_TO_RPM;
     let mut cfg = DriveConfig::paper_defaults();
     cfg.machine = machine;
-    cfg.control_period = ts;
-    cfg.flux_current = i_d;
-    cfg.current_limit = OVERLOAD_CURRENT * i_max;
-    cfg.continuous_current = i_max;
-    cfg.load_torque_feedforward = true;
-    cfg.overload_time = crate::design::OVERLOAD_SPEED_LOOP_CONSTANTS / w_speed;
-    cfg.overcurrent_trip = trip;
-    cfg.dc_bus_min = BUS_MIN_FRACTION * bus;
-    cfg.dc_bus_max = bus_max;
-    cfg.max_speed = SPEED_LIMIT_OVER_RATED * sync_rpm * RPM_TO_RAD_S;
-    cfg.speed_ramp = rated.speed / RAMP_TIME;
-    cfg.current_bandwidth = w_c;
-    cfg.speed_bandwidth = w_speed;
-    cfg.observer_poles = ObserverPoles {
+    cfg.loops.control_period = ts;
+    cfg.loops.flux_current = i_d;
+    cfg.limits.current_limit = OVERLOAD_CURRENT * i_max;
+    cfg.limits.continuous_current = i_max;
+    cfg.loops.load_torque_feedforward = true;
+    cfg.limits.overload_time = crate::design::OVERLOAD_SPEED_LOOP_CONSTANTS / w_speed;
+    cfg.limits.overcurrent_trip = trip;
+    cfg.limits.dc_bus_min = BUS_MIN_FRACTION * bus;
+    cfg.limits.dc_bus_max = bus_max;
+    cfg.limits.max_speed = SPEED_LIMIT_OVER_RATED * sync_rpm * RPM_TO_RAD_S;
+    cfg.loops.speed_ramp = rated.speed / RAMP_TIME;
+    cfg.loops.current_bandwidth = w_c;
+    cfg.loops.speed_bandwidth = w_speed;
+    cfg.estimation.observer_poles = ObserverPoles {
         p1: 0.6 * p3,
         p2: 0.8 * p3,
         p3,
     };
-    cfg.rs_initial = rs;
-    cfg.dead_time = board.dead_time_s;
-    cfg.device_drop = board.device_drop_v;
-    cfg.current_sensing = CurrentSensing::TwoPhase;
-    cfg.max_load_torque_estimate = LOAD_ESTIMATE_OVER_RATED * rated.torque;
-    cfg.vf = VfConfig {
+    cfg.estimation.rs_initial = rs;
+    cfg.inverter.dead_time = board.dead_time_s;
+    cfg.inverter.device_drop = board.device_drop_v;
+    cfg.inverter.current_sensing = CurrentSensing::TwoPhase;
+    cfg.limits.max_load_torque_estimate = LOAD_ESTIMATE_OVER_RATED * rated.torque;
+    cfg.vf = VfSettings {
         volts_per_rad_s: rated.phase_voltage / rated.frequency,
         boost: rs * i_d,
     };
@@ -437,14 +437,17 @@ pub fn drive_config(
 /// plausible load estimate, 3 x rated, stays within 1.5 pu).
 pub fn per_unit_bases(cfg: &DriveConfig, board: &Board) -> PerUnitBases {
     let m = &cfg.machine;
-    let flux = m.rotor_flux_for(cfg.flux_current);
-    let i_sq = sqrt(cfg.current_limit * cfg.current_limit - cfg.flux_current * cfg.flux_current);
+    let flux = m.rotor_flux_for(cfg.loops.flux_current);
+    let i_sq = sqrt(
+        cfg.limits.current_limit * cfg.limits.current_limit
+            - cfg.loops.flux_current * cfg.loops.flux_current,
+    );
     let torque = m.torque_constant(flux) * i_sq;
     PerUnitBases {
         current: board.current_full_scale_a,
-        voltage: cfg.dc_bus_max,
-        speed: cfg.max_speed,
-        frequency: 1.5 * m.pole_pairs_f32() * cfg.max_speed,
+        voltage: cfg.limits.dc_bus_max,
+        speed: cfg.limits.max_speed,
+        frequency: 1.5 * m.pole_pairs_f32() * cfg.limits.max_speed,
         flux: 1.28 * flux,
         torque: 2.0 * torque,
     }
@@ -565,8 +568,8 @@ mod tests {
         for (name, m, n, b) in machines() {
             let cfg = drive_config(m, &n, &b).unwrap_or_else(|e| panic!("{name}: {e}"));
             // nothing of the paper's machine left: the initial Rs is this machine's
-            assert_eq!(cfg.rs_initial, m.stator_resistance(), "{name}");
-            assert!(cfg.flux_current < cfg.current_limit, "{name}");
+            assert_eq!(cfg.estimation.rs_initial, m.stator_resistance(), "{name}");
+            assert!(cfg.loops.flux_current < cfg.limits.current_limit, "{name}");
             let bases = per_unit_bases(&cfg, &b);
             crate::fixed::FixedDrive::with_bases(cfg, bases)
                 .unwrap_or_else(|e| panic!("{name} fixed point: {e}"));
@@ -580,19 +583,21 @@ mod tests {
         let d = DriveConfig::paper_defaults();
         // the paper's limit is the rated current: the nameplate's continuous current,
         // with the short-time rating above it
-        assert!((cfg.continuous_current - d.current_limit).abs() < 0.01);
-        assert!((cfg.current_limit - OVERLOAD_CURRENT * d.current_limit).abs() < 0.01);
-        assert!((cfg.control_period - d.control_period).abs() < 1e-9);
-        assert!((cfg.current_bandwidth - d.current_bandwidth).abs() < 1e-3);
+        assert!((cfg.limits.continuous_current - d.limits.current_limit).abs() < 0.01);
+        assert!(
+            (cfg.limits.current_limit - OVERLOAD_CURRENT * d.limits.current_limit).abs() < 0.01
+        );
+        assert!((cfg.loops.control_period - d.loops.control_period).abs() < 1e-9);
+        assert!((cfg.loops.current_bandwidth - d.loops.current_bandwidth).abs() < 1e-3);
         // the speed loop: the two-degree-of-freedom design at SPEED_BANDWIDTH_MIN (the
         // paper defaults keep the paper's PI)
-        assert!(cfg.load_torque_feedforward && !d.load_torque_feedforward);
-        assert!((cfg.speed_bandwidth - SPEED_BANDWIDTH_MIN).abs() < 1e-3);
+        assert!(cfg.loops.load_torque_feedforward && !d.loops.load_torque_feedforward);
+        assert!((cfg.loops.speed_bandwidth - SPEED_BANDWIDTH_MIN).abs() < 1e-3);
         // the no-load current at 230 V, 50 Hz (the paper's drive uses 1.5 A)
         assert!(
-            (cfg.flux_current - 1.065).abs() < 0.01,
+            (cfg.loops.flux_current - 1.065).abs() < 0.01,
             "{}",
-            cfg.flux_current
+            cfg.loops.flux_current
         );
         // the bases follow the same rules as the hand-picked ones
         let bases = per_unit_bases(&cfg, &b);
@@ -615,12 +620,13 @@ mod tests {
             for (k, f) in [4e3, 5e3, 8e3, 10e3, 20e3].into_iter().enumerate() {
                 b.pwm_frequency_hz = f;
                 let cfg = drive_config(m, &n, &b).unwrap_or_else(|e| panic!("{name}: {e}"));
-                let w = cfg.speed_bandwidth;
+                let w = cfg.loops.speed_bandwidth;
                 bandwidths[k] = w;
                 // the feedback's dip T / (2 alpha J) as a fraction of the rated speed
                 let dip = 1.0 / (2.0 * start_time * w);
-                let cap = (cfg.current_bandwidth / SPEED_LOOP_MIN_SEPARATION)
-                    .min(OBSERVER_POLE_PERIODS / (OBSERVER_OVER_SPEED_LOOP * cfg.control_period));
+                let cap = (cfg.loops.current_bandwidth / SPEED_LOOP_MIN_SEPARATION).min(
+                    OBSERVER_POLE_PERIODS / (OBSERVER_OVER_SPEED_LOOP * cfg.loops.control_period),
+                );
                 assert!(
                     w >= SPEED_BANDWIDTH_MIN - 1e-3 || w >= cap - 1e-3,
                     "{name}: {w}"
@@ -629,10 +635,10 @@ mod tests {
                     dip <= RATED_STEP_DIP + 1e-4 || w >= cap - 1e-3,
                     "{name} {f}: {dip}"
                 );
-                let p3 = cfg.observer_poles.p3;
+                let p3 = cfg.estimation.observer_poles.p3;
                 assert!(
                     p3 >= OBSERVER_OVER_SPEED_LOOP * w - 1e-3
-                        || p3 >= OBSERVER_POLE_PERIODS / cfg.control_period - 1e-2
+                        || p3 >= OBSERVER_POLE_PERIODS / cfg.loops.control_period - 1e-2
                 );
             }
             if name == "ti-aci-benchmark" {
@@ -804,18 +810,18 @@ mod conversion {
             let base = drive_config(m, &n, &b).unwrap();
             let bases = per_unit_bases(&base, &b);
             let mut variants = [base; 9];
-            variants[6].flying_start = true;
-            variants[7].offset_tracking = false;
+            variants[6].start.flying_start = true;
+            variants[7].trackers.offset_tracking = false;
             variants[8] = crate::config::DriveConfig::paper_defaults();
-            variants[8].flying_start = true;
+            variants[8].start.flying_start = true;
             let mut data = variants[8].machine.data();
             data.inertia = 0.1;
             variants[8].machine = MachineParams::new(data).unwrap();
-            variants[1].slow_period = 1e-3;
-            variants[2].current_sensing = CurrentSensing::ThreePhase;
-            variants[3].current_gain_calibration = true;
-            variants[4].rr_adaptation = true;
-            variants[5].field_weakening = !base.field_weakening;
+            variants[1].loops.slow_period = 1e-3;
+            variants[2].inverter.current_sensing = CurrentSensing::ThreePhase;
+            variants[3].start.current_gain_calibration = true;
+            variants[4].trackers.rr_adaptation = true;
+            variants[5].field_weakening.enabled = !base.field_weakening.enabled;
             for (k, v) in variants.iter().enumerate() {
                 let d = DriveDesign::new(*v).unwrap();
                 assert_f32_identity(&d);
@@ -847,13 +853,13 @@ mod conversion {
             data.inertia = j;
             data.viscous_friction = f;
             cfg.machine = MachineParams::new(data).unwrap();
-            cfg.flying_start = flags & 1 != 0;
-            cfg.field_weakening = flags & 2 != 0;
-            cfg.current_gain_calibration = flags & 4 != 0;
-            cfg.rr_adaptation = flags & 8 != 0;
-            cfg.offset_tracking = flags & 16 != 0;
+            cfg.start.flying_start = flags & 1 != 0;
+            cfg.field_weakening.enabled = flags & 2 != 0;
+            cfg.start.current_gain_calibration = flags & 4 != 0;
+            cfg.trackers.rr_adaptation = flags & 8 != 0;
+            cfg.trackers.offset_tracking = flags & 16 != 0;
             if flags & 32 != 0 {
-                cfg.slow_period = 1e-3;
+                cfg.loops.slow_period = 1e-3;
             }
             let design = DriveDesign::new(cfg);
             proptest::prop_assume!(design.is_ok());

@@ -388,7 +388,7 @@ pub trait SpeedObserver<N: Num = f32> {
     /// on the frame, and the correction would be a second, competing speed path.
     const ORIENTATION_CORRECTION: bool = true;
     /// Whether the drive applies its low-frequency regeneration limit
-    /// ([`crate::DriveConfig::regen_min_frequency`]) with this observer: off for an
+    /// ([`LoopSettings::regen_min_frequency`](crate::LoopSettings::regen_min_frequency)) with this observer: off for an
     /// observer whose gain is designed stable while regenerating near zero stator
     /// frequency.
     const REGENERATION_LIMIT: bool = true;

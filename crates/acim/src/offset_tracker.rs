@@ -112,7 +112,7 @@
 //! estimate no longer converges to the offset. Measured with no offset drift at all (the
 //! robustness matrix's sensors, no regeneration limit, running Rs law; `cargo run
 //! --release -p acim-sim --example robust_case -- 0 <rpm> <motor|regen> <load> running
-//! drive.regen_min_frequency_hz=0`), the largest estimate after the load step was, with
+//! drive.loops.regen_min_frequency_hz=0`), the largest estimate after the load step was, with
 //! the gate at 1 Hz:
 //!
 //! | point | f_s | largest estimate | the case |
@@ -163,7 +163,7 @@
 //! within 2 rpm from 15 s (2 s means: -4.2 rpm at 7-9 s, -2.3 at 13-15 s, -1.8 at 15-17 s,
 //! -0.95 at 17-19 s, within 0.5 rpm from 23 s; untracked -5.4 and -4.1 at 7-9 and
 //! 17-19 s). `cargo run --release -p acim-sim --example robust_case -- 10 60 regen 4.5
-//! running drive.regen_min_frequency_hz=1.5 duration_s=40` with `CSV=`; test
+//! running drive.loops.regen_min_frequency_hz=1.5 duration_s=40` with `CSV=`; test
 //! `offset_drift_is_tracked_slowly_on_the_far_side`. A sensor's thermal drift takes
 //! minutes; the matrix's 1 s ramp is still not followed within its window (2-4 s after).
 //!
@@ -175,7 +175,7 @@
 //!
 //! ## With a slow task
 //!
-//! With the drive's slow task ([`crate::design::DriveConfig::slow_period`]) the model and
+//! With the drive's slow task ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)) the model and
 //! the estimate update once per slow period `T`, on the mean of `u` over it (the fast
 //! path only sums `u`, two products and two sums a period). The mean keeps the DC part
 //! exactly and the fundamental as a phasor turning by `w T` per slow period (shrunk by
@@ -220,7 +220,7 @@ pub const OFFSET_TRACKER_FREQUENCY_FILTER: f32 = 0.1;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct OffsetTrackerConfig<N: Num + FineIntegrator = f32> {
-    /// Track at all ([`crate::design::DriveConfig::offset_tracking`]).
+    /// Track at all ([`TrackerSettings::offset_tracking`](crate::TrackerSettings::offset_tracking)).
     pub enabled: bool,
     /// `mu_f Ts`, per step.
     pub fundamental_gain: N::Gain,

@@ -40,7 +40,7 @@ pub struct OrientationDesign<N: Num = f32> {
 /// The fade in |w_s|: 0 below `orientation_fade`'s start (no orientation information at
 /// w_s = 0), 1 above its end, linear between, from the stator frequency
 /// `stator_frequency` (rad/s electrical). Shared by the correction and the far-side term
-/// of the observer (`DriveConfig::far_side_gain`), so both fade in together.
+/// of the observer (`DriveConfig.estimation.far_side_gain`), so both fade in together.
 #[inline(always)]
 pub fn fade<N: Num>(d: &OrientationDesign<N>, stator_frequency: N) -> N {
     N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE)
@@ -91,17 +91,23 @@ impl OrientationDesign<f32> {
         Ok(OrientationDesign {
             gain_per_flux: g(
                 self.gain_per_flux * b.voltage / b.frequency,
-                "orientation_gain",
+                "estimation.orientation_gain",
             )?,
             load_factor_per_current: g(
                 self.load_factor_per_current * b.current,
-                "orientation_gain",
+                "estimation.orientation_gain",
             )?,
-            fade_start: pu(self.fade_start, b.frequency, "orientation_fade")?,
-            inv_fade_width: g(b.frequency / (fade.1 - fade.0), "orientation_fade")?,
-            limit: pu(self.limit, b.frequency, "max_speed")?,
-            far_side_gain: g(self.far_side_gain, "far_side_gain")?,
-            far_side_load_factor: g(self.far_side_load_factor * b.current, "far_side_gain")?,
+            fade_start: pu(self.fade_start, b.frequency, "estimation.orientation_fade")?,
+            inv_fade_width: g(
+                b.frequency / (fade.1 - fade.0),
+                "estimation.orientation_fade",
+            )?,
+            limit: pu(self.limit, b.frequency, "limits.max_speed")?,
+            far_side_gain: g(self.far_side_gain, "estimation.far_side_gain")?,
+            far_side_load_factor: g(
+                self.far_side_load_factor * b.current,
+                "estimation.far_side_gain",
+            )?,
         })
     }
 }

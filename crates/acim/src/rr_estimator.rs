@@ -63,7 +63,7 @@
 //! - The load torque holds over the window. A load change inside it (a load step, or a
 //!   fan's torque changing with the speed) adds a speed excess the fit shares between
 //!   `gamma` and `dR`. This is why the adaptation is off by default
-//!   ([`crate::design::DriveConfig::rr_adaptation`]).
+//!   ([`TrackerSettings::rr_adaptation`](crate::TrackerSettings::rr_adaptation)).
 //! - A stator-resistance error enters the q-axis equation as an R_R error does: the fit
 //!   finds `dR + dRs` (the running Rs law keeps `dRs` small where it adapts).
 //! - The flux model's `tau_r` keeps the configured R_R (it matters in flux transients only).
@@ -123,7 +123,7 @@ pub const RR_STEADY_FILTER_TIME: f32 = 0.1;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RrEstimatorConfig<N: Num = f32> {
-    /// Adapt at all ([`crate::design::DriveConfig::rr_adaptation`]).
+    /// Adapt at all ([`TrackerSettings::rr_adaptation`](crate::TrackerSettings::rr_adaptation)).
     pub enabled: bool,
     /// [`RR_QUIET_TIME`] in steps.
     pub quiet_steps: u32,

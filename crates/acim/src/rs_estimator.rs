@@ -165,7 +165,7 @@ pub struct RsRunningConfig<N: Num = f32> {
     pub enabled: bool,
     /// With `enabled`: whether the eq. (19) law identifies Rs at standstill (the frame
     /// held, before the ramp) too. False: Rs converges only while turning (the
-    /// fig 9 variant, `DriveConfig::rs_standstill_identification`).
+    /// fig 9 variant, `DriveConfig.start.rs_standstill_identification`).
     pub standstill: bool,
     /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
     pub alpha_ts: N::Gain,

@@ -40,7 +40,7 @@ use crate::num::Units;
 use crate::params::MachineParams;
 use crate::pi::{PiConfig, PiController};
 
-/// The far-side transit: with [`DriveConfig::far_side_gain`] on, the
+/// The far-side transit: with [`EstimationSettings::far_side_gain`](crate::EstimationSettings::far_side_gain) on, the
 /// regeneration limit is released while the load torque estimate puts the speed target's
 /// operating point at least this far beyond the line w_s = 0, Hz (the observable
 /// bound, |f_s| >= 1 Hz).
@@ -86,7 +86,7 @@ pub struct SpeedLoopConfig<N: Num = f32> {
     /// lambda_ref / R_R, A per rad/s electrical (torque current per slip frequency).
     pub regen_current_per_frequency: N::Gain,
     /// 1.5 p lambda_ref^2 / R_R, N m per rad/s electrical: the torque whose slip is one
-    /// rad/s (the far-side transit; 0 when [`DriveConfig::far_side_gain`] is 0).
+    /// rad/s (the far-side transit; 0 when [`EstimationSettings::far_side_gain`](crate::EstimationSettings::far_side_gain) is 0).
     pub far_side_torque_per_frequency: N::Gain,
     /// The far-side transit enters beyond this stator frequency, rad/s electrical (0: no
     /// transit; [`FAR_SIDE_ENTER_HZ`]).
@@ -138,11 +138,11 @@ impl SpeedLoopConfig<f32> {
     ) -> Self {
         let m = cfg.machine;
         let pp = m.pole_pairs_f32();
-        self.ramp_step = cfg.speed_ramp * ts;
+        self.ramp_step = cfg.loops.speed_ramp * ts;
         self.speed_per_volt = 1.0 / (pp * flux_reference);
-        self.regen_min_frequency = cfg.regen_min_frequency;
+        self.regen_min_frequency = cfg.loops.regen_min_frequency;
         self.regen_current_per_frequency = flux_reference / m.referred_rotor_resistance();
-        self.far_side_torque_per_frequency = if cfg.far_side_gain > 0.0 {
+        self.far_side_torque_per_frequency = if cfg.estimation.far_side_gain > 0.0 {
             1.5 * pp * flux_reference * flux_reference / m.referred_rotor_resistance()
         } else {
             0.0
@@ -150,17 +150,18 @@ impl SpeedLoopConfig<f32> {
         // the transit needs the Rs estimate kept while running: with Rs held 20 % high
         // the far side at 15-30 rpm is unstable with the far-side term
         // (docs/robustness.md, "The far-side mode")
-        self.far_side_enter = if cfg.far_side_gain > 0.0
-            && cfg.rs_estimation
-            && cfg.rs_estimation_mode == RsEstimationMode::Running
+        self.far_side_enter = if cfg.estimation.far_side_gain > 0.0
+            && cfg.estimation.rs_estimation
+            && cfg.estimation.rs_estimation_mode == RsEstimationMode::Running
         {
             2.0 * core::f32::consts::PI * FAR_SIDE_ENTER_HZ
         } else {
             0.0
         };
         self.far_side_leave = 2.0 * core::f32::consts::PI * FAR_SIDE_LEAVE_HZ;
-        self.hold_band = FW_HOLD_BAND_FRACTION * cfg.max_speed;
-        self.report_steps = (FW_REPORT_SPEED_LOOP_CONSTANTS / (cfg.speed_bandwidth * ts)) as u32;
+        self.hold_band = FW_HOLD_BAND_FRACTION * cfg.limits.max_speed;
+        self.report_steps =
+            (FW_REPORT_SPEED_LOOP_CONSTANTS / (cfg.loops.speed_bandwidth * ts)) as u32;
         self
     }
 
@@ -424,7 +425,7 @@ impl<N: Num> SpeedLoop<N> {
 }
 
 /// The torque-current limits with the low-frequency regeneration limit
-/// ([`DriveConfig::regen_min_frequency`], off at 0): while the speed target has the
+/// ([`LoopSettings::regen_min_frequency`](crate::LoopSettings::regen_min_frequency), off at 0): while the speed target has the
 /// sign of the speed estimate (holding a speed; a zero or opposite target is a transit,
 /// through zero to a stop or a reversal, which must cross the line), the braking side is
 /// limited to
@@ -463,7 +464,7 @@ impl SpeedLoopConfig<f32> {
         flux_reference: f32,
     ) -> Result<SpeedLoopConfig<N>, &'static str> {
         let g = crate::num::gain_in::<N>;
-        let bandwidth = "speed_bandwidth";
+        let bandwidth = "loops.speed_bandwidth";
         Ok(SpeedLoopConfig {
             pi: self.pi.convert(b.speed, b.current).ok_or(bandwidth)?,
             acceleration_feedforward: g(
@@ -477,20 +478,20 @@ impl SpeedLoopConfig<f32> {
             // 1/(p lambda_ref) in the order the design has always converted it
             speed_per_volt: g(
                 b.voltage / (pole_pairs * flux_reference * b.speed),
-                "flux_current",
+                "loops.flux_current",
             )?,
             regen_min_frequency: N::from_f32(self.regen_min_frequency / b.frequency),
             regen_current_per_frequency: g(
                 self.regen_current_per_frequency * b.frequency / b.current,
-                "regen_min_frequency",
+                "loops.regen_min_frequency",
             )?,
             far_side_torque_per_frequency: g(
                 self.far_side_torque_per_frequency * b.frequency / b.torque,
-                "far_side_gain",
+                "estimation.far_side_gain",
             )?,
             far_side_enter: N::from_f32(self.far_side_enter / b.frequency),
             far_side_leave: N::from_f32(self.far_side_leave / b.frequency),
-            hold_band: N::checked_from_f32(self.hold_band / b.speed).ok_or("max_speed")?,
+            hold_band: N::checked_from_f32(self.hold_band / b.speed).ok_or("limits.max_speed")?,
             report_steps: self.report_steps,
         })
     }
@@ -579,7 +580,7 @@ mod tests {
     #[test]
     fn the_regeneration_limit_bounds_braking_near_zero_frequency() {
         let mut cfg = crate::DriveConfig::paper_defaults();
-        cfg.regen_min_frequency = 2.0 * core::f32::consts::PI * 1.5;
+        cfg.loops.regen_min_frequency = 2.0 * core::f32::consts::PI * 1.5;
         let d = crate::design::DriveDesign::new(cfg).unwrap();
         let c = &d.speed_loop;
         let w_min = c.regen_min_frequency / d.pole_pairs; // rad/s mechanical

@@ -57,7 +57,7 @@ use crate::num::Units;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SpeedSearchDesign<N: Num = f32> {
-    /// Whether the search runs ([`crate::DriveConfig::flying_start`]).
+    /// Whether the search runs ([`StartSettings::flying_start`](crate::StartSettings::flying_start)).
     pub enabled: bool,
     /// Magnetizing steps before the first sample: five current-loop time constants.
     pub begin_step: u32,
@@ -101,7 +101,7 @@ pub const SIGNAL_FLOOR: f32 = 1e-3;
 /// What the search is designed from: the drive's period, machine and limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpeedSearchSpec {
-    /// Whether the search runs ([`crate::DriveConfig::flying_start`]).
+    /// Whether the search runs ([`StartSettings::flying_start`](crate::StartSettings::flying_start)).
     pub enabled: bool,
     /// The control period Ts, s.
     pub control_period: f32,
@@ -336,13 +336,13 @@ impl SpeedSearchDesign<f32> {
             begin_step: self.begin_step,
             block_len: self.block_len,
             pairs: self.pairs,
-            sample_gain: g(self.sample_gain * b.voltage, "flux_current")?,
+            sample_gain: g(self.sample_gain * b.voltage, "loops.flux_current")?,
             pair_weight: g(self.pair_weight, "machine")?,
             signal_floor: N::from_f32(self.signal_floor),
-            speed_per_rad: g(self.speed_per_rad / b.speed, "control_period")?,
+            speed_per_rad: g(self.speed_per_rad / b.speed, "loops.control_period")?,
             standstill_speed: N::checked_from_f32(self.standstill_speed / b.speed)
-                .ok_or("rs_max_frequency")?,
-            max_speed: N::checked_from_f32(self.max_speed / b.speed).ok_or("max_speed")?,
+                .ok_or("estimation.rs_max_frequency")?,
+            max_speed: N::checked_from_f32(self.max_speed / b.speed).ok_or("limits.max_speed")?,
             atan: self.atan.map(N::from_f32),
         })
     }
@@ -472,27 +472,23 @@ mod tests {
             standstill_frequency: 9.4,
         });
         assert!(d.is_none());
-        let cfg = crate::DriveConfig {
-            control_period: 2e-3,
-            current_bandwidth: 100.0,
-            speed_bandwidth: 5.0,
-            ..crate::DriveConfig::paper_defaults()
-        };
+        let mut cfg = crate::DriveConfig::paper_defaults();
+        cfg.loops.control_period = 2e-3;
+        cfg.loops.current_bandwidth = 100.0;
+        cfg.loops.speed_bandwidth = 5.0;
         let e = crate::DriveDesign::new(cfg).unwrap_err();
         assert!(
             matches!(
                 e,
                 crate::ConfigError::Invalid {
-                    field: "flying_start",
+                    field: "start.flying_start",
                     ..
                 }
             ),
             "{e:?}"
         );
-        let off = crate::DriveConfig {
-            flying_start: false,
-            ..cfg
-        };
+        let mut off = cfg;
+        off.start.flying_start = false;
         assert!(
             crate::DriveDesign::new(off).is_ok(),
             "{:?}",

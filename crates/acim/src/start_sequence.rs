@@ -300,8 +300,9 @@ impl MagnetizingDesign<f32> {
             rs_timeout_steps: self.rs_timeout_steps,
             rs_settle_steps: self.rs_settle_steps,
             rs_settled_error: N::checked_from_f32(self.rs_settled_error / b.current)
-                .ok_or("flux_current")?,
-            residual_filter: N::gain_from_f32(self.residual_filter).ok_or("control_period")?,
+                .ok_or("loops.flux_current")?,
+            residual_filter: N::gain_from_f32(self.residual_filter)
+                .ok_or("loops.control_period")?,
             search: self.search.convert(b)?,
         })
     }
@@ -314,9 +315,9 @@ mod tests {
 
     fn coeffs(flying: bool, inverter: bool, identify_rs: bool) -> DriveCoeffs {
         let mut cfg = DriveConfig::paper_defaults();
-        cfg.flying_start = flying;
-        cfg.inverter_identification = inverter;
-        cfg.rs_standstill_identification = identify_rs;
+        cfg.start.flying_start = flying;
+        cfg.start.inverter_identification = inverter;
+        cfg.start.rs_standstill_identification = identify_rs;
         DriveCoeffs::new(&DriveDesign::new(cfg).unwrap(), &()).unwrap()
     }
 

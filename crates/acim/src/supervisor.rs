@@ -35,7 +35,7 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub implausible_steps: u32,
     /// Steps the stall condition may persist.
     pub stall_steps: u32,
-    /// Steps the overload condition may persist (leaky): [`DriveConfig::overload_time`](crate::design::DriveConfig::overload_time).
+    /// Steps the overload condition may persist (leaky): [`LimitSettings::overload_time`](crate::LimitSettings::overload_time).
     pub overload_steps: u32,
     /// Overload: speed error beyond this fraction of |reference| ([`OVERLOAD_FRACTION`](crate::design::OVERLOAD_FRACTION)).
     pub overload_fraction: N,
@@ -76,7 +76,7 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// Idle periods after a switch-off whose samples are not taken
     /// ([`OFFSET_SWITCH_OFF_SKIP_TIME`](crate::design::OFFSET_SWITCH_OFF_SKIP_TIME), >= 1).
     pub offset_skip_steps: u32,
-    /// Whether the speed-oscillation check runs ([`DriveConfig::speed_oscillation_check`](crate::design::DriveConfig::speed_oscillation_check)).
+    /// Whether the speed-oscillation check runs ([`LimitSettings::speed_oscillation_check`](crate::LimitSettings::speed_oscillation_check)).
     pub oscillation_check: bool,
     /// The speed-oscillation check's block, steps ([`OSCILLATION_BLOCK_TIME`](crate::design::OSCILLATION_BLOCK_TIME)).
     pub oscillation_steps: u32,
@@ -839,46 +839,58 @@ impl SupervisionLimits<f32> {
         let r = b.resistance();
         Ok(SupervisionLimits {
             current_sensing: self.current_sensing,
-            overcurrent_trip: pu(self.overcurrent_trip, b.current, "overcurrent_trip")?,
-            dc_bus_min: pu(self.dc_bus_min, b.voltage, "dc_bus_min")?,
-            dc_bus_max: pu(self.dc_bus_max, b.voltage, "dc_bus_max")?,
-            max_speed: pu(self.max_speed, b.speed, "max_speed")?,
-            max_load_torque: pu(self.max_load_torque, b.torque, "max_load_torque_estimate")?,
+            overcurrent_trip: pu(self.overcurrent_trip, b.current, "limits.overcurrent_trip")?,
+            dc_bus_min: pu(self.dc_bus_min, b.voltage, "limits.dc_bus_min")?,
+            dc_bus_max: pu(self.dc_bus_max, b.voltage, "limits.dc_bus_max")?,
+            max_speed: pu(self.max_speed, b.speed, "limits.max_speed")?,
+            max_load_torque: pu(
+                self.max_load_torque,
+                b.torque,
+                "limits.max_load_torque_estimate",
+            )?,
             implausible_steps: self.implausible_steps,
             stall_steps: self.stall_steps,
             overload_steps: self.overload_steps,
             overload_fraction: N::from_f32(self.overload_fraction),
-            overload_speed_floor: pu(self.overload_speed_floor, b.speed, "speed_bandwidth")?,
-            blind_frequency: pu(self.blind_frequency, b.frequency, "orientation_fade")?,
+            overload_speed_floor: pu(self.overload_speed_floor, b.speed, "loops.speed_bandwidth")?,
+            blind_frequency: pu(
+                self.blind_frequency,
+                b.frequency,
+                "estimation.orientation_fade",
+            )?,
             blind_steps: self.blind_steps,
             stall_fraction: N::from_f32(self.stall_fraction),
             rs_bound_faults: self.rs_bound_faults,
-            monitor_filter: g(self.monitor_filter, "current_bandwidth")?,
-            current_error_limit: pu(self.current_error_limit, b.current, "flux_current")?,
-            current_sum_limit: pu(self.current_sum_limit, b.current, "overcurrent_trip")?,
-            model_residual_limit: pu(self.model_residual_limit, b.voltage, "dc_bus_max")?,
+            monitor_filter: g(self.monitor_filter, "loops.current_bandwidth")?,
+            current_error_limit: pu(self.current_error_limit, b.current, "loops.flux_current")?,
+            current_sum_limit: pu(self.current_sum_limit, b.current, "limits.overcurrent_trip")?,
+            model_residual_limit: pu(self.model_residual_limit, b.voltage, "limits.dc_bus_max")?,
             magnetizing_timeout_steps: self.magnetizing_timeout_steps,
             demagnetize_steps: self.demagnetize_steps,
-            offset_filter: g(self.offset_filter, "control_period")?,
+            offset_filter: g(self.offset_filter, "loops.control_period")?,
             offset_settle_steps: self.offset_settle_steps,
             offset_skip_steps: self.offset_skip_steps,
             oscillation_steps: self.oscillation_steps,
-            oscillation_filter: g(self.oscillation_filter, "control_period")?,
+            oscillation_filter: g(self.oscillation_filter, "loops.control_period")?,
             oscillation_check: self.oscillation_check,
-            oscillation_swing: pu(self.oscillation_swing, b.speed, "max_speed")?,
-            offset_limit: pu(self.offset_limit, b.current, "overcurrent_trip")?,
-            running_offset_filter: g(self.running_offset_filter, "control_period")?,
+            oscillation_swing: pu(self.oscillation_swing, b.speed, "limits.max_speed")?,
+            offset_limit: pu(self.offset_limit, b.current, "limits.overcurrent_trip")?,
+            running_offset_filter: g(self.running_offset_filter, "loops.control_period")?,
             running_offset_min_frequency: pu(
                 self.running_offset_min_frequency,
                 b.frequency,
-                "overcurrent_trip",
+                "limits.overcurrent_trip",
             )?,
             impedance_resistance: pu(self.impedance_resistance, r, "machine.stator_resistance")?,
             impedance_inductance: g(
                 self.impedance_inductance * b.frequency * b.current / b.voltage,
                 "machine.stator_inductance",
             )?,
-            impedance_voltage_floor: pu(self.impedance_voltage_floor, b.voltage, "current_limit")?,
+            impedance_voltage_floor: pu(
+                self.impedance_voltage_floor,
+                b.voltage,
+                "limits.current_limit",
+            )?,
         })
     }
 }

@@ -140,14 +140,14 @@ impl ThermalConfig<f32> {
             |x: f32, base: f32, field: &'static str| N::checked_from_f32(x / base).ok_or(field);
         Ok(ThermalConfig {
             heat_gain: N::gain_from_f32(self.heat_gain * current * current)
-                .ok_or("overload_duration")?,
+                .ok_or("limits.overload_duration")?,
             continuous_squared: pu(
                 self.continuous_squared,
                 current * current,
-                "continuous_current",
+                "limits.continuous_current",
             )?,
-            continuous_ratio: pu(self.continuous_ratio, 1.0, "continuous_current")?,
-            release: pu(self.release, 1.0, "overload_duration")?,
+            continuous_ratio: pu(self.continuous_ratio, 1.0, "limits.continuous_current")?,
+            release: pu(self.release, 1.0, "limits.overload_duration")?,
             enabled: self.enabled,
         })
     }

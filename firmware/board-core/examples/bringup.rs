@@ -19,8 +19,8 @@ fn row(p: &BusProfile) -> String {
         p.name,
         p.dc_bus_min,
         p.dc_bus_max,
-        cfg.current_limit,
-        cfg.overcurrent_trip,
+        cfg.limits.current_limit,
+        cfg.limits.overcurrent_trip,
         p.max_speed_rpm,
         if p.name == LOW_VOLTAGE.name {
             "`--features low-voltage`"
@@ -200,15 +200,19 @@ fn profile_section(b: &BoardProfile) {
     );
     println!(
         "| bus profile | {}: {:.0}-{:.0} V, limit {:.2} A, trip {:.2} A |",
-        b.bus.name, b.bus.dc_bus_min, b.bus.dc_bus_max, cfg.current_limit, cfg.overcurrent_trip
+        b.bus.name,
+        b.bus.dc_bus_min,
+        b.bus.dc_bus_max,
+        cfg.limits.current_limit,
+        cfg.limits.overcurrent_trip
     );
     println!(
         "| first power-up | {}: {:.0}-{:.0} V, limit {:.2} A, trip {:.2} A, {:.0} rpm |",
         lv.name,
         lv.dc_bus_min,
         lv.dc_bus_max,
-        cfg_lv.current_limit,
-        cfg_lv.overcurrent_trip,
+        cfg_lv.limits.current_limit,
+        cfg_lv.limits.overcurrent_trip,
         lv.max_speed_rpm
     );
     println!(
@@ -237,9 +241,9 @@ fn profile_section(b: &BoardProfile) {
         board::OFFSET_TOLERANCE_COUNTS, s.bias_counts(), s.amplifier_bias_v,
         currents[0], currents[1], currents[2], s.amplifier_bias_v);
     println!("3. **Bus reading and open-loop V/f at low voltage**: a current-limited supply at about {:.0} V (inside {:.0}-{:.0} V, limit near {:.1} A); `stream on`: the bus field reads the supply within 2 %. Off by a constant factor: the divider values are wrong; full scale: a wrong pin. Then `speed 60`, `vf`: the motor turns slowly, a current probe shows sinusoidal phase currents below {:.1} A. An immediate over-current trip means the current sign or gain is wrong; vibration without turning, a phase swapped.",
-        test_v, lv.dc_bus_min, lv.dc_bus_max, cfg_lv.overcurrent_trip, cfg_lv.current_limit);
+        test_v, lv.dc_bus_min, lv.dc_bus_max, cfg_lv.limits.overcurrent_trip, cfg_lv.limits.current_limit);
     println!("4. **Current loop on a locked rotor**: lock the shaft, `start`: while magnetizing the drive holds the flux current ({:.2} A) as DC; a clamp meter on one phase and the telemetry's `i_d` agree within 5 %, `i_q` near 0. A ratio between them is the gain error (shunt or amplifier gain of the profile); a current growing until the trip, the sign (`current_sign`). `stop`.",
-        cfg_lv.flux_current);
+        cfg_lv.loops.flux_current);
     println!("5. **Sensorless start**: free shaft, `speed 60`, `start`: state 1 then 2, `speed_est` follows 60 rpm. Fault 11 (loss of control) or 7 (stall) with good steps 2-4 means the machine parameters: commission first (step 6).");
     println!("6. **Commissioning**: load uncoupled, `commission <P W> <V> <A> <Hz> <rpm>` from the nameplate (the rotor turns in its last test); each identified value comes with its error bound; `commission apply`. A refused result names the check that failed.");
     println!("7. **Save and power-cycle**: `save`, power-cycle, the boot loads the saved set (the section below).");
@@ -272,13 +276,13 @@ fn save_and_power_cycle() {
     println!("1. Before the first `save`, read FLASH_OPTR (STM32CubeProgrammer): DBANK = 1, BFB2 = 0. \
               `err save failed: flash in single-bank mode` or `... bank swap option set` means one of \
               them is not; the firmware then never erases anything.");
-    println!("2. `set current_limit <a value of yours>`, `save`: `ok saved to flash (page A)` on a fresh \
+    println!("2. `set limits.current_limit <a value of yours>`, `save`: `ok saved to flash (page A)` on a fresh \
               board, then the pages alternate (the next `save` says page B). `err save failed: \
               read-back differs` means the page did not program: the board keeps the settings it \
               had; do not trust that flash.");
     println!(
         "3. Power-cycle the NUCLEO (unplug USB): the boot prints `settings loaded from flash \
-              (page A, seq 1)` and `get current_limit` shows your value. `settings: defaults \
+              (page A, seq 1)` and `get limits.current_limit` shows your value. `settings: defaults \
               (nothing saved)` means nothing reached the flash."
     );
     println!("4. The power cut (optional, no power stage connected): send `save` and unplug USB at once \

@@ -265,22 +265,22 @@ pub fn drive_config_for(p: &BusProfile) -> DriveConfig {
 /// The drive configuration for board `b` with the bus profile `p`.
 pub fn drive_config_with(b: &BoardProfile, p: &BusProfile) -> DriveConfig {
     let mut cfg = DriveConfig::paper_defaults();
-    cfg.dc_bus_min = p.dc_bus_min;
-    cfg.dc_bus_max = p.dc_bus_max;
-    cfg.current_limit = p.current_limit;
-    cfg.overcurrent_trip = p.overcurrent_trip;
-    cfg.max_speed = p.max_speed_rpm * acim::math::RPM_TO_RAD_S;
-    cfg.control_period = CONTROL_PERIOD_S;
-    cfg.dead_time = DEAD_TIME_NS as f32 * 1e-9;
-    cfg.current_sensing = if b.stage.shunts >= 3 {
+    cfg.limits.dc_bus_min = p.dc_bus_min;
+    cfg.limits.dc_bus_max = p.dc_bus_max;
+    cfg.limits.current_limit = p.current_limit;
+    cfg.limits.overcurrent_trip = p.overcurrent_trip;
+    cfg.limits.max_speed = p.max_speed_rpm * acim::math::RPM_TO_RAD_S;
+    cfg.loops.control_period = CONTROL_PERIOD_S;
+    cfg.inverter.dead_time = DEAD_TIME_NS as f32 * 1e-9;
+    cfg.inverter.current_sensing = if b.stage.shunts >= 3 {
         CurrentSensing::ThreePhase
     } else {
         CurrentSensing::TwoPhase
     };
     // the trip level must stay inside the measurable range (saturation also trips)
     let fs = b.stage.current_full_scale();
-    if cfg.overcurrent_trip > 0.9 * fs {
-        cfg.overcurrent_trip = 0.9 * fs;
+    if cfg.limits.overcurrent_trip > 0.9 * fs {
+        cfg.limits.overcurrent_trip = 0.9 * fs;
     }
     cfg
 }
@@ -389,7 +389,7 @@ mod tests {
             assert!(Drive::new(cfg).is_ok(), "{}", p.name);
             assert!(p.dc_bus_max < POWER_STAGE.bus_full_scale(), "{}", p.name);
             assert!(
-                cfg.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6,
+                cfg.limits.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6,
                 "{}",
                 p.name
             );
@@ -402,7 +402,7 @@ mod tests {
     #[test]
     fn drive_config_is_accepted() {
         let cfg = drive_config();
-        assert!(cfg.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6);
+        assert!(cfg.limits.overcurrent_trip <= 0.9 * POWER_STAGE.current_full_scale() + 1e-6);
         assert!(Drive::new(cfg).is_ok());
     }
 }

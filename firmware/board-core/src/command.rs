@@ -10,7 +10,7 @@
 //! status           print the state, fault and timing
 //! stream on|off    text telemetry frames on the UART as well as RTT
 //! load <N m>       self-test only: the motor model's load torque (a brake), |N m| <= 20
-//! set <name> <v>   change a setting (crate::settings::FIELDS), Idle only, e.g. "set current_limit 2.5"
+//! set <name> <v>   change a setting (crate::settings::FIELDS), Idle only, e.g. "set limits.current_limit 2.5"
 //! get [<name>]     print one setting, or all of them
 //! save             write the settings to the reserved flash page (Idle only)
 //! defaults [low-voltage]  this build's default settings (or the 24-60 V bring-up profile), Idle only, not saved
@@ -361,26 +361,32 @@ mod tests {
         use crate::settings::FIELDS;
         let lim = FIELDS
             .iter()
-            .position(|f| f.name == "current_limit")
+            .position(|f| f.name == "limits.current_limit")
             .unwrap();
-        assert_eq!(parse(b"set current_limit 2.5"), Ok(Command::Set(lim, 2.5)));
         assert_eq!(
-            parse(b"set stator_inductance 0.4476"),
+            parse(b"set limits.current_limit 2.5"),
+            Ok(Command::Set(lim, 2.5))
+        );
+        assert_eq!(
+            parse(b"set machine.stator_inductance 0.4476"),
             Ok(Command::Set(8, 0.4476))
         );
         assert_eq!(parse(b"get"), Ok(Command::Get(None)));
-        assert_eq!(parse(b"get current_limit"), Ok(Command::Get(Some(lim))));
+        assert_eq!(
+            parse(b"get limits.current_limit"),
+            Ok(Command::Get(Some(lim)))
+        );
         assert_eq!(parse(b"save"), Ok(Command::Save));
         assert_eq!(parse(b"defaults"), Ok(Command::Defaults(false)));
         assert_eq!(parse(b"defaults low-voltage"), Ok(Command::Defaults(true)));
         use ParseError::*;
         let cases: &[(&[u8], ParseError)] = &[
             (b"set", MissingArgument),
-            (b"set current_limit", MissingArgument),
+            (b"set limits.current_limit", MissingArgument),
             (b"set currentlimit 2", UnknownSetting),
-            (b"set current_limit x", BadNumber),
-            (b"set current_limit 1e3", BadNumber),
-            (b"set current_limit 2 3", UnexpectedArgument),
+            (b"set limits.current_limit x", BadNumber),
+            (b"set limits.current_limit 1e3", BadNumber),
+            (b"set limits.current_limit 2 3", UnexpectedArgument),
             (b"get bogus", UnknownSetting),
             (b"save now", UnexpectedArgument),
             (b"defaults mains", BadProfile),

@@ -527,7 +527,7 @@ pub(crate) mod tests {
     fn settings_are_refused_while_running() {
         use crate::settings::{field_index, Settings};
         let conv = Converter::new(&POWER_STAGE);
-        let i = field_index(b"current_limit").unwrap();
+        let i = field_index(b"limits.current_limit").unwrap();
         let s = Settings::defaults().set(i, 4.0).unwrap();
         let rebuilt = || Drive::new(s.drive_config().unwrap()).unwrap();
         let mut l = looped();
@@ -535,14 +535,14 @@ pub(crate) mod tests {
         l.step(&raw_at_bus(&conv, 325.0));
         assert_eq!(l.replace_drive(rebuilt()), Err(DriveState::Magnetizing));
         assert_eq!(
-            l.drive().config().current_limit,
+            l.drive().config().limits.current_limit,
             Settings::defaults().get(i)
         );
         l.trip(FirmwareFault::HardwareBreak);
         assert_eq!(l.replace_drive(rebuilt()), Err(DriveState::Fault));
         assert!(l.apply(ControlCommand::ResetFault).result.is_ok());
         assert_eq!(l.replace_drive(rebuilt()), Ok(()));
-        assert_eq!(l.drive().config().current_limit, 4.0);
+        assert_eq!(l.drive().config().limits.current_limit, 4.0);
         assert_eq!(l.state(), DriveState::Idle);
     }
 
@@ -560,7 +560,7 @@ pub(crate) mod tests {
         assert!(refusal_text(CommandError::Demagnetizing).starts_with(b"err the rotor flux"));
         assert_eq!(l.state(), DriveState::Idle);
         let m = l.drive().config().machine;
-        let wait = (5.0 * m.rotor_time_constant() / l.drive().config().control_period) as u32;
+        let wait = (5.0 * m.rotor_time_constant() / l.drive().config().loops.control_period) as u32;
         for _ in 0..wait {
             l.step(&raw_at_bus(&conv, 325.0));
         }

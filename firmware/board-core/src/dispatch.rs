@@ -516,18 +516,18 @@ fn proposal<R: Reply>(out: &mut R, pr: &Proposal) {
     );
     identified(
         out,
-        b"flux_current",
+        b"loops.flux_current",
         id.rated_flux_current,
         b"A",
         c.rated_flux_current,
     );
     match id.inertia {
-        Some(j) => identified(out, b"inertia", j, b"kg m^2", c.inertia),
-        None => out.line(b"identified inertia: not resolved (the setting is kept)"),
+        Some(j) => identified(out, b"machine.inertia", j, b"kg m^2", c.inertia),
+        None => out.line(b"identified machine.inertia: not resolved (the setting is kept)"),
     }
     identified(
         out,
-        b"viscous_friction",
+        b"machine.viscous_friction",
         id.viscous_friction,
         b"N m s/rad",
         c.viscous_friction,
@@ -745,7 +745,7 @@ mod tests {
 
     /// An accepted result, pending, with settings unlike the defaults.
     fn pending(d: &mut Dispatch) -> Settings {
-        let lim = crate::settings::field_index(b"current_limit").unwrap();
+        let lim = crate::settings::field_index(b"limits.current_limit").unwrap();
         let settings = d.settings().set(lim, 3.0).unwrap();
         d.com.outcome = Some(Outcome::Identified(Proposal {
             identified: Identified {
@@ -808,16 +808,17 @@ mod tests {
             core::str::from_utf8(RATE_ABOVE_UART).unwrap()
         );
         assert_eq!(
-            say(&mut d, &mut p, "get current_limit").as_slice(),
-            ["current_limit = 4.67 A", "ok"]
+            say(&mut d, &mut p, "get limits.current_limit").as_slice(),
+            ["limits.current_limit = 4.67 A", "ok"]
         );
         assert_eq!(say(&mut d, &mut p, "get").len(), FIELDS.len() + 1);
         assert_eq!(
-            one(&mut d, &mut p, "set current_limit 4"),
-            "ok current_limit applied (save to keep it)"
+            one(&mut d, &mut p, "set limits.current_limit 4"),
+            "ok limits.current_limit applied (save to keep it)"
         );
         assert_eq!(d.settings().get(2), 4.0);
-        assert!(one(&mut d, &mut p, "set current_limit 99").starts_with("err (overcurrent_trip: "));
+        assert!(one(&mut d, &mut p, "set limits.current_limit 99")
+            .starts_with("err (limits.overcurrent_trip: "));
         assert_eq!(
             one(&mut d, &mut p, "defaults"),
             "ok defaults applied (save to keep it)"
@@ -835,8 +836,8 @@ mod tests {
         assert_eq!(one(&mut d, &mut p, "start"), "ok");
         assert_eq!(one(&mut d, &mut p, "start"), "err refused in this state");
         assert_eq!(
-            one(&mut d, &mut p, "set current_limit 4"),
-            "err current_limit: refused while the drive is not idle (stop or reset first)"
+            one(&mut d, &mut p, "set limits.current_limit 4"),
+            "err limits.current_limit: refused while the drive is not idle (stop or reset first)"
         );
         assert_eq!(
             one(&mut d, &mut p, "save"),
@@ -944,9 +945,9 @@ mod tests {
                 "identified r_r 7.213 ohm +/-2.1 %",
                 "identified l_sigma 41.27 mH +/-1.5 %",
                 "identified l_m 421.9 mH +/-1.2 %",
-                "identified flux_current 1.203 A +/-1.1 %",
-                "identified inertia 0.02345 kg m^2 +/-4.2 %",
-                "identified viscous_friction 0.0021 N m s/rad (no bound)",
+                "identified loops.flux_current 1.203 A +/-1.1 %",
+                "identified machine.inertia 0.02345 kg m^2 +/-4.2 %",
+                "identified machine.viscous_friction 0.0021 N m s/rad (no bound)",
                 "identified dead_time 1.492 us +/-3.3 %",
                 "ok commissioned: send 'commission apply' to use these settings \
                  (or 'commission <P W> <V> <A> <Hz> <rpm>' to repeat)",
@@ -986,7 +987,7 @@ mod tests {
     /// What discards a pending result (it took effect), and what keeps it.
     #[test]
     fn start_vf_set_and_defaults_discard_a_pending_result() {
-        let discarding = ["start", "vf", "set current_limit 4", "defaults"];
+        let discarding = ["start", "vf", "set limits.current_limit 4", "defaults"];
         for cmd in discarding {
             let mut d = Dispatch::new(Settings::defaults());
             let mut p = Fake::new(false);

@@ -571,7 +571,7 @@ mod tests {
             Some(Ok(Request::Command(Command::Stop)))
         );
         // every setting line fits framed
-        let long = command_frame("set stator_inductance -123456.123");
+        let long = command_frame("set machine.stator_inductance -123456.123");
         assert!(long.len() - 2 <= MAX_FRAMED_LINE);
     }
 

@@ -55,8 +55,8 @@ const VALUES: usize = 12;
 /// Offset of the CRC in a record.
 pub(crate) const CRC: usize = VALUES + 4 * FIELD_COUNT;
 
-/// One settable value: its name on the serial link (the field name of [`DriveConfig`] or
-/// [`MachineData`]) and its unit.
+/// One settable value: its name on the serial link (its path in [`DriveConfig`]'s groups,
+/// the machine's fields under `machine.`) and its unit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Field {
     /// Name in commands and errors.
@@ -71,21 +71,21 @@ const fn f(name: &'static str, unit: &'static str) -> Field {
 
 /// The settable values, in record order.
 pub const FIELDS: [Field; FIELD_COUNT] = [
-    f("dc_bus_min", "V"),
-    f("dc_bus_max", "V"),
-    f("current_limit", "A"),
-    f("overcurrent_trip", "A"),
-    f("flux_current", "A"),
-    f("max_speed", "rpm"),
-    f("stator_resistance", "ohm"),
-    f("rotor_resistance", "ohm"),
-    f("stator_inductance", "H"),
-    f("rotor_inductance", "H"),
-    f("mutual_inductance", "H"),
-    f("pole_pairs", ""),
-    f("inertia", "kg m^2"),
-    f("viscous_friction", "N m s/rad"),
-    f("slow_period", "ms"),
+    f("limits.dc_bus_min", "V"),
+    f("limits.dc_bus_max", "V"),
+    f("limits.current_limit", "A"),
+    f("limits.overcurrent_trip", "A"),
+    f("loops.flux_current", "A"),
+    f("limits.max_speed", "rpm"),
+    f("machine.stator_resistance", "ohm"),
+    f("machine.rotor_resistance", "ohm"),
+    f("machine.stator_inductance", "H"),
+    f("machine.rotor_inductance", "H"),
+    f("machine.mutual_inductance", "H"),
+    f("machine.pole_pairs", ""),
+    f("machine.inertia", "kg m^2"),
+    f("machine.viscous_friction", "N m s/rad"),
+    f("loops.slow_period", "ms"),
 ];
 
 // indices in FIELDS
@@ -105,9 +105,24 @@ const INERTIA: usize = 12;
 const VISCOUS_FRICTION: usize = 13;
 const SLOW_PERIOD: usize = 14;
 
-/// The index in [`FIELDS`] of a name.
+/// The index in [`FIELDS`] of a name: its path in [`DriveConfig`]'s groups
+/// (`limits.current_limit`), or the name without its group (`current_limit`, the earlier
+/// flat name, still accepted; the replies name the field by its path).
 pub fn field_index(name: &[u8]) -> Option<usize> {
-    FIELDS.iter().position(|f| f.name.as_bytes() == name)
+    FIELDS.iter().position(|f| {
+        let path = f.name.as_bytes();
+        path == name || path.rsplit(|&b| b == b'.').next() == Some(name)
+    })
+}
+
+/// The [`FIELDS`] name of a library field: its path as given (`limits.current_limit`), or
+/// the path of a machine field the library names alone (`stator_resistance` ->
+/// `machine.stator_resistance`).
+fn field_path(field: &'static str) -> &'static str {
+    FIELDS
+        .iter()
+        .find(|f| f.name.strip_prefix("machine.") == Some(field))
+        .map_or(field, |f| f.name)
 }
 
 /// Why a value or a set of values was refused: the field and the rule it broke.
@@ -126,7 +141,7 @@ impl From<ConfigError> for SettingError {
         match e {
             ConfigError::Invalid { field, rule } => SettingError { field, rule },
             ConfigError::Observer(_) => SettingError {
-                field: "observer_poles",
+                field: "estimation.observer_poles",
                 rule: "no stable observer for this machine (check the machine parameters)",
             },
         }
@@ -137,19 +152,19 @@ impl From<ParamError> for SettingError {
     fn from(e: ParamError) -> Self {
         match e {
             ParamError::NotPositive(field) => SettingError {
-                field,
+                field: field_path(field),
                 rule: "must be finite and > 0",
             },
             ParamError::Negative(field) => SettingError {
-                field,
+                field: field_path(field),
                 rule: "must be finite and >= 0",
             },
             ParamError::NoLeakage => SettingError {
-                field: "mutual_inductance",
+                field: "machine.mutual_inductance",
                 rule: "too large: need mutual_inductance^2 < stator_inductance * rotor_inductance",
             },
             ParamError::PolePairs => SettingError {
-                field: "pole_pairs",
+                field: "machine.pole_pairs",
                 rule: "must be a whole number in 1..=32",
             },
         }
@@ -209,12 +224,12 @@ impl Settings {
         let m = &c.machine;
         Self {
             values: [
-                c.dc_bus_min,
-                c.dc_bus_max,
-                c.current_limit,
-                c.overcurrent_trip,
-                c.flux_current,
-                c.max_speed * RAD_S_TO_RPM,
+                c.limits.dc_bus_min,
+                c.limits.dc_bus_max,
+                c.limits.current_limit,
+                c.limits.overcurrent_trip,
+                c.loops.flux_current,
+                c.limits.max_speed * RAD_S_TO_RPM,
                 m.stator_resistance(),
                 m.rotor_resistance(),
                 m.stator_inductance(),
@@ -223,7 +238,7 @@ impl Settings {
                 m.pole_pairs() as f32,
                 m.inertia(),
                 m.viscous_friction(),
-                c.slow_period * 1000.0,
+                c.loops.slow_period * 1000.0,
             ],
         }
     }
@@ -261,7 +276,7 @@ impl Settings {
     /// The drive configuration: this board's defaults with these values, checked by
     /// [`MachineParams::new`], [`DriveDesign::new`], the board's measurement limits and
     /// the physical bounds of every field ([`MIN_TIME_CONSTANT_S`] and the constants after
-    /// it). The initial stator-resistance estimate follows `stator_resistance`.
+    /// it). The initial stator-resistance estimate follows `machine.stator_resistance`.
     pub fn drive_config(&self) -> Result<DriveConfig, SettingError> {
         self.checked_config(None)
     }
@@ -286,29 +301,30 @@ impl Settings {
         })?;
         let mut cfg = board::drive_config();
         cfg.machine = machine;
-        cfg.rs_initial = machine.stator_resistance();
-        cfg.dc_bus_min = v[0];
-        cfg.dc_bus_max = v[1];
-        cfg.current_limit = v[2];
-        cfg.overcurrent_trip = v[3];
-        cfg.flux_current = v[4];
-        cfg.max_speed = v[5] * RPM_TO_RAD_S;
-        cfg.slow_period = v[SLOW_PERIOD] / 1000.0;
+        cfg.estimation.rs_initial = machine.stator_resistance();
+        cfg.limits.dc_bus_min = v[0];
+        cfg.limits.dc_bus_max = v[1];
+        cfg.limits.current_limit = v[2];
+        cfg.limits.overcurrent_trip = v[3];
+        cfg.loops.flux_current = v[4];
+        cfg.limits.max_speed = v[5] * RPM_TO_RAD_S;
+        cfg.loops.slow_period = v[SLOW_PERIOD] / 1000.0;
         // bounds the library would report under a field `set` does not know (`machine`,
         // `regen_min_frequency`, `flying_start`), or does not have
         machine_bounds(&cfg, changed)?;
         speed_bounds(&cfg, changed)?;
         DriveDesign::new(cfg)?;
         // all finite and positive from here: DriveDesign::new has refused anything else
-        if cfg.overcurrent_trip > TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale() {
+        if cfg.limits.overcurrent_trip > TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale()
+        {
             return Err(SettingError {
-                field: "overcurrent_trip",
+                field: "limits.overcurrent_trip",
                 rule: "at most 90 % of the current-sense full scale (board::POWER_STAGE)",
             });
         }
-        if cfg.dc_bus_max > BUS_FULL_SCALE_FRACTION * POWER_STAGE.bus_full_scale() {
+        if cfg.limits.dc_bus_max > BUS_FULL_SCALE_FRACTION * POWER_STAGE.bus_full_scale() {
             return Err(SettingError {
-                field: "dc_bus_max",
+                field: "limits.dc_bus_max",
                 rule: "at most 95 % of the bus-sense full scale (board::POWER_STAGE)",
             });
         }
@@ -433,11 +449,11 @@ pub const MIN_DC_BUS_V: f32 = 0.5 * board::LOW_VOLTAGE.dc_bus_min;
 /// wider than 4:1 cannot tell a collapsed bus from the supply it brackets (mains: at
 /// least 100 V under a 400 V maximum; the bring-up profile: 16.5 V under 66 V).
 pub const MIN_BUS_WINDOW: f32 = 0.25;
-/// The over-current trip is at least this multiple of `current_limit`: the regulated
+/// The over-current trip is at least this multiple of `limits.current_limit`: the regulated
 /// current's PWM ripple and the current loops' overshoot must not reach it (both
 /// profiles: 1.6-1.7).
 pub const MIN_TRIP_OVER_LIMIT: f32 = 1.2;
-/// `flux_current` is at least this fraction of the trip: five times the current-sensor
+/// `loops.flux_current` is at least this fraction of the trip: five times the current-sensor
 /// offset the drive tolerates (`acim::design::OFFSET_FRACTION`, 2 % of the trip), so an
 /// accepted offset cannot be a sizeable part of the magnetizing current.
 pub const MIN_FLUX_OVER_TRIP: f32 = 5.0 * acim::design::OFFSET_FRACTION;
@@ -493,7 +509,8 @@ fn machine_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Setti
          magnetizing path dominates the leakage)",
     )?;
     relation(
-        m.transient_time_constant() >= MIN_TRANSIENT_TIME_CONSTANT_PERIODS * cfg.control_period,
+        m.transient_time_constant()
+            >= MIN_TRANSIENT_TIME_CONSTANT_PERIODS * cfg.loops.control_period,
         &[
             STATOR_INDUCTANCE,
             MUTUAL_INDUCTANCE,
@@ -510,13 +527,13 @@ fn machine_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Setti
 /// The over-speed trip's range, where it is finite and positive (the library names it
 /// otherwise).
 fn speed_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
-    let w = cfg.max_speed;
+    let w = cfg.limits.max_speed;
     if !(acim::math::is_finite(w) && w > 0.0) {
         return Ok(());
     }
     let p = cfg.machine.pole_pairs_f32();
     relation(
-        p * w >= 2.0 * cfg.regen_min_frequency,
+        p * w >= 2.0 * cfg.loops.regen_min_frequency,
         &[MAX_SPEED, POLE_PAIRS],
         changed,
         "must be at least 180 rpm / pole_pairs: twice the speed of the regeneration \
@@ -530,7 +547,7 @@ fn speed_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Setting
          commanded speed lets a runaway go unchecked)",
     )?;
     relation(
-        p * w * cfg.control_period <= 0.25 * core::f32::consts::PI,
+        p * w * cfg.loops.control_period <= 0.25 * core::f32::consts::PI,
         &[MAX_SPEED, POLE_PAIRS],
         changed,
         "pole_pairs x max_speed must be at most 37 500 rpm: a quarter electrical turn per \
@@ -542,36 +559,36 @@ fn speed_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Setting
 /// and positive: `DriveDesign::new` accepted them).
 fn protection_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
     relation(
-        cfg.dc_bus_min >= MIN_DC_BUS_V,
+        cfg.limits.dc_bus_min >= MIN_DC_BUS_V,
         &[DC_BUS_MIN],
         changed,
         "must be at least 10 V: half the low-voltage bring-up profile's (below it the \
          under-voltage trip no longer stops switching on a collapsed supply)",
     )?;
     relation(
-        cfg.dc_bus_min >= MIN_BUS_WINDOW * cfg.dc_bus_max,
+        cfg.limits.dc_bus_min >= MIN_BUS_WINDOW * cfg.limits.dc_bus_max,
         &[DC_BUS_MIN, DC_BUS_MAX],
         changed,
         "dc_bus_min must be at least a quarter of dc_bus_max (a wider window cannot tell \
          a collapsed bus from the supply)",
     )?;
     relation(
-        cfg.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.current_limit,
+        cfg.limits.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.limits.current_limit,
         &[OVERCURRENT_TRIP, CURRENT_LIMIT],
         changed,
         "overcurrent_trip must be at least 1.2 x current_limit (the regulated current's \
          ripple and overshoot must not reach it)",
     )?;
     relation(
-        cfg.flux_current >= MIN_FLUX_OVER_TRIP * cfg.overcurrent_trip,
+        cfg.loops.flux_current >= MIN_FLUX_OVER_TRIP * cfg.limits.overcurrent_trip,
         &[FLUX_CURRENT, OVERCURRENT_TRIP],
         changed,
         "flux_current must be at least 10 % of overcurrent_trip (five times the \
          current-sensor offset the drive tolerates)",
     )?;
     relation(
-        cfg.machine.stator_resistance() * cfg.current_limit
-            <= acim::svpwm::linear_limit(cfg.dc_bus_max),
+        cfg.machine.stator_resistance() * cfg.limits.current_limit
+            <= acim::svpwm::linear_limit(cfg.limits.dc_bus_max),
         &[STATOR_RESISTANCE, CURRENT_LIMIT, DC_BUS_MAX],
         changed,
         "stator_resistance x current_limit must be within the linear voltage at \
@@ -583,16 +600,20 @@ fn protection_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Se
 /// The inertia and friction against the speed loop and the observer.
 fn mechanical_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), SettingError> {
     let m = &cfg.machine;
-    let i_q = sqrt(cfg.current_limit * cfg.current_limit - cfg.flux_current * cfg.flux_current);
-    let torque = m.torque_constant(m.rotor_flux_for(cfg.flux_current)) * i_q;
+    let i_q = sqrt(
+        cfg.limits.current_limit * cfg.limits.current_limit
+            - cfg.loops.flux_current * cfg.loops.flux_current,
+    );
+    let torque = m.torque_constant(m.rotor_flux_for(cfg.loops.flux_current)) * i_q;
     let j = m.inertia();
     let slowest_pole = cfg
+        .estimation
         .observer_poles
         .p1
-        .min(cfg.observer_poles.p2)
-        .min(cfg.observer_poles.p3);
+        .min(cfg.estimation.observer_poles.p2)
+        .min(cfg.estimation.observer_poles.p3);
     relation(
-        j * cfg.max_speed * slowest_pole >= torque,
+        j * cfg.limits.max_speed * slowest_pole >= torque,
         &[INERTIA, MAX_SPEED, CURRENT_LIMIT, FLUX_CURRENT],
         changed,
         "inertia too small: the run-up to max_speed at the current limit's torque must \
@@ -600,7 +621,7 @@ fn mechanical_bounds(cfg: &DriveConfig, changed: Option<usize>) -> Result<(), Se
          is past the over-speed trip before the speed estimate follows",
     )?;
     relation(
-        j * cfg.speed_ramp <= torque,
+        j * cfg.loops.speed_ramp <= torque,
         &[INERTIA, CURRENT_LIMIT, FLUX_CURRENT],
         changed,
         "inertia too large: the speed ramp (500 rpm/s) must need less than the torque at \
@@ -771,6 +792,28 @@ mod tests {
     }
 
     #[test]
+    fn names_are_the_configs_paths_and_the_flat_names_still_resolve() {
+        for (i, f) in FIELDS.iter().enumerate() {
+            let (group, name) = f.name.split_once('.').unwrap();
+            assert!(
+                ["machine", "limits", "loops"].contains(&group),
+                "{}",
+                f.name
+            );
+            assert_eq!(field_index(f.name.as_bytes()), Some(i));
+            assert_eq!(field_index(name.as_bytes()), Some(i), "{name}");
+        }
+        assert_eq!(field_index(b"loops.current_limit"), None);
+        assert_eq!(field_index(b"limits."), None);
+        assert_eq!(field_index(b""), None);
+        // the library's machine errors name the setting's path
+        let e = Settings::defaults()
+            .set(idx("machine.stator_resistance"), -1.0)
+            .unwrap_err();
+        assert_eq!(e.field, "machine.stator_resistance");
+    }
+
+    #[test]
     fn defaults_are_this_builds_drive() {
         let s = Settings::defaults();
         let cfg = s.drive_config().unwrap();
@@ -783,18 +826,18 @@ mod tests {
     #[test]
     fn round_trip_through_the_record() {
         let s = Settings::defaults()
-            .set(idx("current_limit"), 4.0)
+            .set(idx("limits.current_limit"), 4.0)
             .unwrap()
-            .set(idx("stator_resistance"), 11.25)
+            .set(idx("machine.stator_resistance"), 11.25)
             .unwrap();
         let rec = s.encode(0xFFFF_FFFE);
         assert_eq!(&rec[..4], b"ACIM");
         assert_eq!(Settings::decode_record(&rec), Ok((s, 0xFFFF_FFFE)));
         let back = Settings::decode(&rec).unwrap();
         assert_eq!(back, s);
-        assert_eq!(back.get(idx("current_limit")), 4.0);
+        assert_eq!(back.get(idx("limits.current_limit")), 4.0);
         let cfg = back.drive_config().unwrap();
-        assert_eq!(cfg.rs_initial, 11.25);
+        assert_eq!(cfg.estimation.rs_initial, 11.25);
         // a whole page (record then erased flash) reads the same
         let mut page = [0xFFu8; SETTINGS_PAGE_BYTES as usize];
         page[..RECORD_LEN].copy_from_slice(&rec);
@@ -830,19 +873,19 @@ mod tests {
     #[test]
     fn the_slow_period_is_a_setting_and_old_records_load_without_it() {
         let d = Settings::defaults();
-        assert_eq!(d.get(idx("slow_period")), 0.0);
-        let s = d.set(idx("slow_period"), 1.0).unwrap();
-        assert_eq!(s.drive_config().unwrap().slow_period, 1e-3);
+        assert_eq!(d.get(idx("loops.slow_period")), 0.0);
+        let s = d.set(idx("loops.slow_period"), 1.0).unwrap();
+        assert_eq!(s.drive_config().unwrap().loops.slow_period, 1e-3);
         assert_eq!(Settings::decode(&s.encode(3)).unwrap(), s);
         for bad in [0.2, 3.0, -1.0, f32::NAN] {
             assert_eq!(
-                d.set(idx("slow_period"), bad).unwrap_err().field,
-                "slow_period",
+                d.set(idx("loops.slow_period"), bad).unwrap_err().field,
+                "loops.slow_period",
                 "{bad}"
             );
         }
         // the version-2 record: magic, version, 14 values, CRC after them
-        let old = d.set(idx("current_limit"), 4.0).unwrap();
+        let old = d.set(idx("limits.current_limit"), 4.0).unwrap();
         let mut rec = [0u8; RECORD_LEN];
         rec[0..4].copy_from_slice(&MAGIC);
         rec[4..6].copy_from_slice(&2u16.to_le_bytes());
@@ -877,12 +920,12 @@ mod tests {
     fn an_intact_record_with_a_refused_value_is_refused() {
         // a record written by a build with other limits: CRC good, value out of range
         let mut s = Settings::defaults();
-        s.values[idx("flux_current")] = 50.0;
+        s.values[idx("loops.flux_current")] = 50.0;
         let e = Settings::decode(&s.encode(1)).unwrap_err();
         assert_eq!(
             e,
             LoadError::Invalid(SettingError {
-                field: "flux_current",
+                field: "loops.flux_current",
                 rule: "must be below current_limit"
             })
         );
@@ -892,21 +935,29 @@ mod tests {
     fn out_of_range_values_name_the_field() {
         let s = Settings::defaults();
         let cases: &[(&str, f32, &str)] = &[
-            ("current_limit", -1.0, "current_limit"),
-            ("current_limit", f32::NAN, "current_limit"),
-            ("flux_current", 6.0, "flux_current"),
-            ("dc_bus_min", 500.0, "dc_bus_max"),
-            ("dc_bus_max", 470.0, "dc_bus_max"),
-            ("overcurrent_trip", 9.5, "overcurrent_trip"),
-            ("overcurrent_trip", 3.0, "overcurrent_trip"),
-            ("max_speed", 0.0, "max_speed"),
-            ("stator_resistance", 0.0, "stator_resistance"),
-            ("mutual_inductance", 10.0, "mutual_inductance"),
-            ("pole_pairs", 2.5, "pole_pairs"),
-            ("pole_pairs", 0.0, "pole_pairs"),
-            ("pole_pairs", 33.0, "pole_pairs"),
-            ("viscous_friction", -0.1, "viscous_friction"),
-            ("inertia", f32::INFINITY, "inertia"),
+            ("limits.current_limit", -1.0, "limits.current_limit"),
+            ("limits.current_limit", f32::NAN, "limits.current_limit"),
+            ("loops.flux_current", 6.0, "loops.flux_current"),
+            ("limits.dc_bus_min", 500.0, "limits.dc_bus_max"),
+            ("limits.dc_bus_max", 470.0, "limits.dc_bus_max"),
+            ("limits.overcurrent_trip", 9.5, "limits.overcurrent_trip"),
+            ("limits.overcurrent_trip", 3.0, "limits.overcurrent_trip"),
+            ("limits.max_speed", 0.0, "limits.max_speed"),
+            (
+                "machine.stator_resistance",
+                0.0,
+                "machine.stator_resistance",
+            ),
+            (
+                "machine.mutual_inductance",
+                10.0,
+                "machine.mutual_inductance",
+            ),
+            ("machine.pole_pairs", 2.5, "machine.pole_pairs"),
+            ("machine.pole_pairs", 0.0, "machine.pole_pairs"),
+            ("machine.pole_pairs", 33.0, "machine.pole_pairs"),
+            ("machine.viscous_friction", -0.1, "machine.viscous_friction"),
+            ("machine.inertia", f32::INFINITY, "machine.inertia"),
         ];
         for &(name, v, field) in cases {
             let e = s.set(idx(name), v).unwrap_err();
@@ -919,23 +970,23 @@ mod tests {
         // each value is checked against the others: lowering the limit and the trip
         // needs an order that stays valid (trip <= 3 x limit, trip >= limit)
         assert_eq!(
-            s.set(idx("current_limit"), 2.5).unwrap_err().field,
-            "overcurrent_trip"
+            s.set(idx("limits.current_limit"), 2.5).unwrap_err().field,
+            "limits.overcurrent_trip"
         );
         let low = s
-            .set(idx("overcurrent_trip"), 7.0)
-            .and_then(|s| s.set(idx("current_limit"), 2.5))
-            .and_then(|s| s.set(idx("overcurrent_trip"), 4.0))
+            .set(idx("limits.overcurrent_trip"), 7.0)
+            .and_then(|s| s.set(idx("limits.current_limit"), 2.5))
+            .and_then(|s| s.set(idx("limits.overcurrent_trip"), 4.0))
             .unwrap();
         // the bus window moves in steps that keep it within 4:1 (or `defaults
         // low-voltage`), the speed limit first (it must stay within 3 x base speed)
         let low = low
-            .set(idx("max_speed"), 300.0)
-            .and_then(|s| s.set(idx("dc_bus_min"), 100.0))
-            .and_then(|s| s.set(idx("dc_bus_max"), 120.0))
-            .and_then(|s| s.set(idx("dc_bus_min"), 30.0))
-            .and_then(|s| s.set(idx("dc_bus_max"), 66.0))
-            .and_then(|s| s.set(idx("dc_bus_min"), 20.0))
+            .set(idx("limits.max_speed"), 300.0)
+            .and_then(|s| s.set(idx("limits.dc_bus_min"), 100.0))
+            .and_then(|s| s.set(idx("limits.dc_bus_max"), 120.0))
+            .and_then(|s| s.set(idx("limits.dc_bus_min"), 30.0))
+            .and_then(|s| s.set(idx("limits.dc_bus_max"), 66.0))
+            .and_then(|s| s.set(idx("limits.dc_bus_min"), 20.0))
             .unwrap();
         let lv = Settings::from_config(&board::drive_config_for(&board::LOW_VOLTAGE));
         assert!(lv.drive_config().is_ok());
@@ -956,39 +1007,56 @@ mod tests {
     fn values_that_disable_a_protection_are_refused() {
         let s = Settings::defaults();
         let tiny = parse_value(b"0.0000001").unwrap();
-        for name in ["rotor_resistance", "dc_bus_min", "inertia"] {
+        for name in [
+            "machine.rotor_resistance",
+            "limits.dc_bus_min",
+            "machine.inertia",
+        ] {
             let e = s.set(idx(name), tiny).unwrap_err();
             assert_eq!(e.field, name, "{e:?}");
         }
         // rotor time constant: 0.56 H / 10 s and 0.56 H / 1 ms
-        assert!(s.set(idx("rotor_resistance"), 0.057).is_ok());
+        assert!(s.set(idx("machine.rotor_resistance"), 0.057).is_ok());
         assert_eq!(
-            s.set(idx("rotor_resistance"), 0.05).unwrap_err().field,
-            "rotor_resistance"
+            s.set(idx("machine.rotor_resistance"), 0.05)
+                .unwrap_err()
+                .field,
+            "machine.rotor_resistance"
         );
-        assert!(s.set(idx("rotor_resistance"), 560.0).is_err());
+        assert!(s.set(idx("machine.rotor_resistance"), 560.0).is_err());
         // a relation names the field that was set
         assert_eq!(
-            s.set(idx("rotor_inductance"), 100.0).unwrap_err().field,
-            "rotor_inductance"
+            s.set(idx("machine.rotor_inductance"), 100.0)
+                .unwrap_err()
+                .field,
+            "machine.rotor_inductance"
         );
         // the under-voltage trip: at least a quarter of dc_bus_max (400 V here)
-        assert!(s.set(idx("dc_bus_min"), 100.0).is_ok());
+        assert!(s.set(idx("limits.dc_bus_min"), 100.0).is_ok());
         assert_eq!(
-            s.set(idx("dc_bus_min"), 99.0).unwrap_err().field,
-            "dc_bus_min"
+            s.set(idx("limits.dc_bus_min"), 99.0).unwrap_err().field,
+            "limits.dc_bus_min"
         );
-        let narrow = s.set(idx("dc_bus_min"), 100.0).unwrap();
+        let narrow = s.set(idx("limits.dc_bus_min"), 100.0).unwrap();
         assert_eq!(
-            narrow.set(idx("dc_bus_max"), 401.0).unwrap_err().field,
-            "dc_bus_max"
+            narrow
+                .set(idx("limits.dc_bus_max"), 401.0)
+                .unwrap_err()
+                .field,
+            "limits.dc_bus_max"
         );
         // the inertia: the paper machine at 2000 rpm and 4.67 A runs up in
         // J x 209 rad/s / 10.4 N m; at least 1/120 s, and the 500 rpm/s ramp within it
-        assert!(s.set(idx("inertia"), 0.001).is_ok());
-        assert_eq!(s.set(idx("inertia"), 0.0003).unwrap_err().field, "inertia");
-        assert!(s.set(idx("inertia"), 0.15).is_ok());
-        assert_eq!(s.set(idx("inertia"), 0.25).unwrap_err().field, "inertia");
+        assert!(s.set(idx("machine.inertia"), 0.001).is_ok());
+        assert_eq!(
+            s.set(idx("machine.inertia"), 0.0003).unwrap_err().field,
+            "machine.inertia"
+        );
+        assert!(s.set(idx("machine.inertia"), 0.15).is_ok());
+        assert_eq!(
+            s.set(idx("machine.inertia"), 0.25).unwrap_err().field,
+            "machine.inertia"
+        );
     }
 
     /// Every field has bounds beyond finite and positive; a refusal names the field set.
@@ -996,24 +1064,24 @@ mod tests {
     fn every_field_is_bounded() {
         let s = Settings::defaults();
         let cases: &[(&str, f32)] = &[
-            ("dc_bus_min", 5.0),
-            ("dc_bus_max", 460.0),
-            ("current_limit", 6.8),
-            ("overcurrent_trip", 5.0),
-            ("flux_current", 0.7),
-            ("max_speed", 80.0),
-            ("max_speed", 3700.0),
-            ("stator_resistance", 0.05),
-            ("stator_resistance", 60.0),
-            ("rotor_resistance", 0.01),
-            ("stator_inductance", 200.0),
-            ("stator_inductance", 1.5),
-            ("rotor_inductance", 1.2),
-            ("mutual_inductance", 0.2),
-            ("mutual_inductance", 0.5599),
-            ("pole_pairs", 20.0),
-            ("inertia", 0.0001),
-            ("viscous_friction", 2.0),
+            ("limits.dc_bus_min", 5.0),
+            ("limits.dc_bus_max", 460.0),
+            ("limits.current_limit", 6.8),
+            ("limits.overcurrent_trip", 5.0),
+            ("loops.flux_current", 0.7),
+            ("limits.max_speed", 80.0),
+            ("limits.max_speed", 3700.0),
+            ("machine.stator_resistance", 0.05),
+            ("machine.stator_resistance", 60.0),
+            ("machine.rotor_resistance", 0.01),
+            ("machine.stator_inductance", 200.0),
+            ("machine.stator_inductance", 1.5),
+            ("machine.rotor_inductance", 1.2),
+            ("machine.mutual_inductance", 0.2),
+            ("machine.mutual_inductance", 0.5599),
+            ("machine.pole_pairs", 20.0),
+            ("machine.inertia", 0.0001),
+            ("machine.viscous_friction", 2.0),
         ];
         for &(name, v) in cases {
             let e = s.set(idx(name), v).unwrap_err();
@@ -1021,19 +1089,19 @@ mod tests {
         }
         // and values inside them are taken
         for (name, v) in [
-            ("dc_bus_min", 150.0),
-            ("dc_bus_max", 450.0),
-            ("current_limit", 6.0),
-            ("overcurrent_trip", 6.0),
-            ("flux_current", 0.9),
-            ("max_speed", 100.0),
-            ("max_speed", 3000.0),
-            ("stator_resistance", 20.0),
-            ("rotor_resistance", 2.0),
-            ("mutual_inductance", 0.5),
-            ("pole_pairs", 4.0),
-            ("inertia", 0.05),
-            ("viscous_friction", 0.1),
+            ("limits.dc_bus_min", 150.0),
+            ("limits.dc_bus_max", 450.0),
+            ("limits.current_limit", 6.0),
+            ("limits.overcurrent_trip", 6.0),
+            ("loops.flux_current", 0.9),
+            ("limits.max_speed", 100.0),
+            ("limits.max_speed", 3000.0),
+            ("machine.stator_resistance", 20.0),
+            ("machine.rotor_resistance", 2.0),
+            ("machine.mutual_inductance", 0.5),
+            ("machine.pole_pairs", 4.0),
+            ("machine.inertia", 0.05),
+            ("machine.viscous_friction", 0.1),
         ] {
             assert!(s.set(idx(name), v).is_ok(), "{name} = {v}");
         }
@@ -1071,7 +1139,7 @@ mod tests {
         fn assert_protected(cfg: &DriveConfig) {
             let d = DriveDesign::new(*cfg).expect("accepted settings build a drive");
             let l = &d.limits;
-            let ts = cfg.control_period;
+            let ts = cfg.loops.control_period;
             let magnetizing_s = l.magnetizing_timeout_steps as f32 * ts;
             // Rs identification 1.5 s + inverter test 0.45 s + 10 tau_r + the search's
             // 2 tau_r, tau_r <= 10 s
@@ -1086,8 +1154,8 @@ mod tests {
             // over-current trip: measurable, above the regulated current
             let fs = POWER_STAGE.current_full_scale();
             assert!(l.overcurrent_trip <= TRIP_FULL_SCALE_FRACTION * fs);
-            assert!(l.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.current_limit);
-            assert!(l.offset_limit <= 0.2 * cfg.flux_current * 1.0001);
+            assert!(l.overcurrent_trip >= MIN_TRIP_OVER_LIMIT * cfg.limits.current_limit);
+            assert!(l.offset_limit <= 0.2 * cfg.loops.flux_current * 1.0001);
             // over-speed trip: above the speed targets, below a runaway, and not reached
             // from rest at full torque within the observer's slowest time constant
             let rpm = l.max_speed * RAD_S_TO_RPM;

@@ -323,7 +323,7 @@ mod tests {
         );
         assert!(!r.moe);
         let cfg = ctl.drive().config();
-        let wait = (5.0 * cfg.machine.rotor_time_constant() / cfg.control_period) as u32;
+        let wait = (5.0 * cfg.machine.rotor_time_constant() / cfg.loops.control_period) as u32;
         for _ in 0..wait {
             conversion(&mut r);
             control_period(&mut ctl, &mut r, &mut o);

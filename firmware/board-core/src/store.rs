@@ -468,7 +468,7 @@ mod tests {
 
     /// A valid, distinct settings set for save number `n`.
     fn nth(n: u32) -> Settings {
-        let i = field_index(b"current_limit").unwrap();
+        let i = field_index(b"limits.current_limit").unwrap();
         Settings::defaults()
             .set(i, 3.0 + (n % 150) as f32 * 0.01)
             .unwrap()
@@ -619,7 +619,7 @@ mod tests {
         // an intact record that today's validation refuses: named, with the rule
         let mut m = Model::new();
         let mut rec = Settings::defaults().encode(3);
-        let i = field_index(b"flux_current").unwrap();
+        let i = field_index(b"loops.flux_current").unwrap();
         rec[12 + 4 * i..16 + 4 * i].copy_from_slice(&50f32.to_le_bytes());
         let at = crate::settings::CRC;
         let crc = crate::settings::crc32(&rec[..at]);

@@ -126,7 +126,7 @@ impl<S: SinCos<Q24>, O: SpeedObserver<Q24>, M: Modulator<Q24>> Drive<S, Q24, O, 
         let [a, b, c] = inp.phase_currents;
         // with two shunts the third sample is not a measurement: ignored, as the f32
         // drive ignores it (it derives c = -a - b)
-        let c = match self.config().current_sensing {
+        let c = match self.config().inverter.current_sensing {
             CurrentSensing::TwoPhase => 0.0,
             CurrentSensing::ThreePhase => c,
         };
@@ -222,18 +222,18 @@ mod tests {
     #[test]
     fn rejects_what_the_design_rejects() {
         let mut c = DriveConfig::paper_defaults();
-        c.speed_bandwidth = 900.0;
+        c.loops.speed_bandwidth = 900.0;
         assert_eq!(
             FixedDrive::with_bases(c, PerUnitBases::PAPER).err(),
             Some(DriveDesign::new(c).unwrap_err())
         );
         let mut c = DriveConfig::paper_defaults();
-        c.dc_bus_max = 900.0;
+        c.limits.dc_bus_max = 900.0;
         assert_eq!(
             FixedDrive::with_bases(c, PerUnitBases::PAPER)
                 .err()
                 .map(|e| e.field()),
-            Some("dc_bus_max")
+            Some("limits.dc_bus_max")
         );
     }
 
@@ -293,7 +293,7 @@ mod tests {
     fn non_finite_samples_are_judged_alike_in_both_arithmetics() {
         for sensing in [CurrentSensing::TwoPhase, CurrentSensing::ThreePhase] {
             let mut cfg = DriveConfig::paper_defaults();
-            cfg.current_sensing = sensing;
+            cfg.inverter.current_sensing = sensing;
             let mut f = crate::Drive::new(cfg).unwrap();
             let mut q = FixedDrive::with_bases(cfg, PerUnitBases::PAPER).unwrap();
             f.start().unwrap();
@@ -344,7 +344,7 @@ mod tests {
             let mut d = drive();
             d.set_speed_target(Q24(target)).unwrap();
             if vf { d.start_open_loop().unwrap(); } else { d.start().unwrap(); }
-            let trip = to_q24(DriveConfig::paper_defaults().overcurrent_trip / PerUnitBases::PAPER.current);
+            let trip = to_q24(DriveConfig::paper_defaults().limits.overcurrent_trip / PerUnitBases::PAPER.current);
             for (a, b, c, bus) in samples {
                 let was = d.state();
                 let out = d.step(&FixedInputs { phase_currents: [Q24(a), Q24(b), Q24(c)], dc_bus: Q24(bus) });
