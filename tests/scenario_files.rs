@@ -189,3 +189,60 @@ fn the_hardware_comparator_is_configurable() {
     assert_eq!(m.fault.as_deref(), Some("NoCurrentResponse"));
     assert!(r.rows.iter().all(|x| !x.hardware_trip));
 }
+
+#[test]
+fn drive_keys_live_in_the_configs_groups_and_flat_keys_are_read_with_a_note() {
+    // the grouped layout: no note
+    let grouped = Scenario::from_toml(
+        "[drive.estimation]\nrs_estimation = false\n[drive.field_weakening]\nenabled = false\n\
+         [drive.zero_speed]\npolicy = \"hold\"\n",
+    )
+    .unwrap();
+    assert!(grouped.notes.is_empty(), "{:?}", grouped.notes);
+    let v = grouped.validate().unwrap();
+    assert!(!v.drive.estimation.rs_estimation);
+    assert!(!v.drive.field_weakening.enabled);
+    assert_eq!(v.drive.zero_speed.policy, acim::ZeroSpeedPolicy::Hold);
+    // the earlier flat layout: the same scenario, one deprecation note per key, shown
+    // with the validation's warnings
+    let flat = Scenario::from_toml(
+        "[drive]\nrs_estimation = false\nfield_weakening = false\nzero_speed_policy = \"hold\"\n",
+    )
+    .unwrap();
+    assert_eq!(flat.drive, grouped.drive);
+    assert_eq!(flat.notes.len(), 3, "{:?}", flat.notes);
+    assert!(
+        flat.notes[0].contains("drive.estimation.rs_estimation"),
+        "{:?}",
+        flat.notes
+    );
+    assert_eq!(flat.validate().unwrap().warnings.len(), 3);
+    // a flat --set is moved the same way and says so
+    let sc = Scenario::from_toml(EXAMPLE).unwrap();
+    let set = sc
+        .with_overrides(&["drive.current_limit_a=4.0".into()])
+        .unwrap();
+    assert_eq!(set.drive.limits.current_limit_a, 4.0);
+    assert!(
+        set.notes[0].starts_with("--set drive.current_limit_a=4.0: "),
+        "{:?}",
+        set.notes
+    );
+    // both ways at once could disagree: refused
+    let e = Scenario::from_toml(
+        "[drive]\nrs_estimation = false\n[drive.estimation]\nrs_estimation = true\n",
+    )
+    .unwrap_err();
+    assert_eq!(e.field, "drive.rs_estimation");
+    // an unknown key in a group names itself
+    let e = Scenario::from_toml("[drive.loops]\ncurrent_limit_a = 4.0\n").unwrap_err();
+    assert!(e.allowed.contains("current_limit_a"), "{e}");
+    // the drive's own rules name the scenario key (limits.overcurrent_trip, at most three
+    // times the current limit -> drive.limits.overcurrent_trip_a)
+    let e = sc
+        .with_overrides(&["drive.limits.overcurrent_trip_a=20.0".into()])
+        .unwrap()
+        .validate()
+        .unwrap_err();
+    assert_eq!(e.field, "drive.limits.overcurrent_trip_a", "{e}");
+}

@@ -637,6 +637,12 @@ pub const DRIVE_GROUP_KEYS: [(&str, &str, &str); 40] = [
 /// and returns a deprecation note per key moved. A key given both ways is an error: the
 /// two could disagree.
 pub fn regroup_drive(v: &mut toml::Value) -> Result<Vec<String>, ScenarioError> {
+    regroup(v, false)
+}
+
+/// [`regroup_drive`]; with `overwrite` (a `--set` on a whole scenario, where every
+/// grouped key is present) the flat key's value replaces the grouped one.
+fn regroup(v: &mut toml::Value, overwrite: bool) -> Result<Vec<String>, ScenarioError> {
     let mut notes = Vec::new();
     let Some(drive) = v.get_mut("drive").and_then(|d| d.as_table_mut()) else {
         return Ok(notes);
@@ -653,7 +659,7 @@ pub fn regroup_drive(v: &mut toml::Value) -> Result<Vec<String>, ScenarioError> 
         let Some(table) = table.as_table_mut() else {
             return err(&format!("drive.{group}"), "must be a table of settings");
         };
-        if table.contains_key(key) {
+        if table.contains_key(key) && !overwrite {
             return err(
                 &format!("drive.{flat}"),
                 &format!("is also given as drive.{group}.{key}: keep only the grouped key"),
@@ -665,6 +671,36 @@ pub fn regroup_drive(v: &mut toml::Value) -> Result<Vec<String>, ScenarioError> 
         ));
     }
     Ok(notes)
+}
+
+/// The text of a scenario file with each flat `[drive]` key written as the dotted key of
+/// its group on the same line (`flux_current_a = 1.5` -> `loops.flux_current_a = 1.5`):
+/// the parser's errors then keep the user's line numbers and text.
+fn regroup_drive_text(text: &str) -> String {
+    let mut in_drive = false;
+    let mut out = String::with_capacity(text.len() + 64);
+    for line in text.lines() {
+        if let Some(h) = header_name(line) {
+            in_drive = h == "drive" && !line.trim_start().starts_with("[[");
+        }
+        let t = line.trim_start();
+        let moved = in_drive
+            .then(|| {
+                DRIVE_GROUP_KEYS.iter().find_map(|(flat, group, key)| {
+                    let rest = t.strip_prefix(flat)?;
+                    rest.trim_start()
+                        .starts_with('=')
+                        .then(|| format!("{group}.{key}{rest}"))
+                })
+            })
+            .flatten();
+        match moved {
+            Some(m) => out += &m,
+            None => out += line,
+        }
+        out.push('\n');
+    }
+    out
 }
 
 /// Inverter settings of the plant.
@@ -1180,8 +1216,15 @@ impl Scenario {
         let mut v = toml::Value::Table(table);
         let notes = regroup_drive(&mut v)?;
         if !notes.is_empty() {
-            // an earlier layout: read the regrouped value (its errors carry no line numbers)
-            let mut s = Self::from_value(v, "(file)")?;
+            // the earlier flat layout: read it with each key moved to its group on its own
+            // line (errors quote the user's line); a layout that cannot be moved line by
+            // line (a group's table given as well) is read from the regrouped value
+            let mut s = match toml::from_str::<Self>(&regroup_drive_text(text)) {
+                Ok(s) => s,
+                Err(e) => {
+                    Self::from_value(v, "(file)").or_else(|_| err("(file)", &format!("{e}")))?
+                }
+            };
             s.notes = notes;
             return Ok(s);
         }
@@ -1208,7 +1251,7 @@ impl Scenario {
         for s in sets {
             apply_override(&mut v, s)?;
             notes.extend(
-                regroup_drive(&mut v)?
+                regroup(&mut v, true)?
                     .into_iter()
                     .map(|n| format!("--set {s}: {n}")),
             );

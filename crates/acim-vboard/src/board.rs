@@ -523,7 +523,9 @@ mod tests {
             say(&mut b, "get limits.current_limit"),
             "limits.current_limit = 4.67 A\r\nok\r\n"
         );
-        assert!(say(&mut b, "set limits.current_limit -1").starts_with("err (limits.current_limit: "));
+        assert!(
+            say(&mut b, "set limits.current_limit -1").starts_with("err (limits.current_limit: ")
+        );
         assert_eq!(say(&mut b, "start"), "ok\r\n");
         assert_eq!(
             say(&mut b, "set limits.current_limit 4"),
@@ -653,13 +655,15 @@ mod tests {
         // while running; refused by the parser or the validation: never reach the drive
         assert_eq!(say(&mut b, "reset"), "err refused in this state\r\n");
         assert_eq!(say(&mut b, "speed 1801"), "err out of range\r\n");
-        assert!(say(&mut b, "set limits.current_limit 99").starts_with("err (limits.overcurrent_trip: "));
+        assert!(say(&mut b, "set limits.current_limit 99")
+            .starts_with("err (limits.overcurrent_trip: "));
         assert!(b.log().is_empty(), "{:?}", b.log());
         assert_eq!(say(&mut b, "start"), "ok\r\n");
         run(&mut b, 100);
         assert_eq!(say(&mut b, "start"), "err refused in this state\r\n");
         assert!(say(&mut b, "commission 750 230 3.3 50 1500").starts_with("err "));
-        assert!(say(&mut b, "set limits.current_limit 4").starts_with("err limits.current_limit: refused"));
+        assert!(say(&mut b, "set limits.current_limit 4")
+            .starts_with("err limits.current_limit: refused"));
         assert_eq!(say(&mut b, "speed 300"), "ok\r\n");
         run(&mut b, 2000);
         // a refused command through the board's own interface

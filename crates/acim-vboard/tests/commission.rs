@@ -48,7 +48,8 @@ fn commissioning_identifies_the_motor_and_the_drive_runs_on_the_result() {
     assert!(r[0].starts_with("ok commissioning started"), "{r:?}");
     assert_eq!(say(&mut b, "status"), ["ok state 5 fault 00"]);
     assert_eq!(say(&mut b, "start"), ["err refused in this state"]);
-    assert!(say(&mut b, "set limits.current_limit 4")[0].starts_with("err limits.current_limit: refused"));
+    assert!(say(&mut b, "set limits.current_limit 4")[0]
+        .starts_with("err limits.current_limit: refused"));
     run(&mut b, 2.0);
     let p = say(&mut b, "commission");
     assert!(p[0].starts_with("ok commissioning: DC steps"), "{p:?}");

@@ -90,7 +90,10 @@ fn bad_input_gets_an_error_and_changes_nothing() {
             b"set limits.current_limit 99\r\n",
             "err (limits.overcurrent_trip: ",
         ),
-        (b"set limits.current_limit -1\r\n", "err (limits.current_limit: "),
+        (
+            b"set limits.current_limit -1\r\n",
+            "err (limits.current_limit: ",
+        ),
         (
             b"set machine.pole_pairs 2.5\r\n",
             "err (machine.pole_pairs: must be a whole number in 1..=32)",
@@ -123,7 +126,10 @@ fn bad_input_gets_an_error_and_changes_nothing() {
     let r = c.framed("speed 9999");
     assert!(r[0].starts_with("$E,err out of range*"), "{r:?}");
     let r = c.framed("set limits.current_limit 99");
-    assert!(r[0].starts_with("$E,err (limits.overcurrent_trip: "), "{r:?}");
+    assert!(
+        r[0].starts_with("$E,err (limits.overcurrent_trip: "),
+        "{r:?}"
+    );
     // a corrupted frame of a valid command is not executed
     let mut f = command_frame("start").to_vec();
     f[4] ^= 0x20; // "start" -> "sTart"

@@ -2003,7 +2003,7 @@ mod tests {
         use std::string::ToString;
         assert_eq!(
             e.to_string(),
-            "drive config: speed_bandwidth: at most a quarter of current_bandwidth \
+            "drive config: loops.speed_bandwidth: at most a quarter of current_bandwidth \
              (MIN_LOOP_SEPARATION)"
         );
         let mut c = DriveConfig::paper_defaults();

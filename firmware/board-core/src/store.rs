@@ -628,7 +628,7 @@ mod tests {
         assert_eq!(
             report(&load(&mut m)),
             "warn settings in flash refused: page B refused: stored value refused \
-             (flux_current: must be below current_limit)\n\
+             (loops.flux_current: must be below current_limit)\n\
              warn settings: defaults in use, drive idle\n"
         );
     }
