@@ -1069,7 +1069,7 @@ class Uart(unittest.TestCase):
         self.assertTrue(out.endswith("\r\n"), out[-80:])
         lines = out.split("\r\n")[:-1]
         self.assertGreater(len(lines), 20)
-        good = re.compile(r"^(ok|[a-z_]+ = -?[0-9]+(\.[0-9]+)?( [A-Za-z0-9^/ ]+)?)$")
+        good = re.compile(r"^(ok|[a-z_]+\.[a-z_]+ = -?[0-9]+(\.[0-9]+)?( [A-Za-z0-9^/ ]+)?)$")
         bad = [l for l in lines if not good.match(l)]
         self.assertFalse(bad, bad[:5])
 
