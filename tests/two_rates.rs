@@ -3,8 +3,10 @@
 //! estimators and the fast protections every control period. The paper's scenarios keep
 //! their acceptance bounds with a 1 kHz slow task at 5 kHz, and at 10, 20 and 40 kHz all
 //! but Fig. 12's 60 rpm bound, which the dead time breaks there whatever the schedule; every fault
-//! scenario keeps its reason, found no later than one slow period after the single-rate
-//! drive finds it.
+//! scenario keeps its reason (a switch short: one of the estimate-independent detectors
+//! that find it, as at one rate), found no later than one slow period after the
+//! single-rate drive finds it. The slow task runs after each tick's output
+//! (`Drive::step_fast`, then `Drive::run_slow`), as in the firmware's slow interrupt.
 
 use acim_sim::builtins;
 
@@ -92,9 +94,24 @@ fn fault_scenarios_keep_their_reason_and_time_with_a_1_khz_slow_task() {
     .unwrap();
     assert_eq!(single.len(), two.len());
     assert!(single.len() >= 15, "{} fault scenarios", single.len());
+    // a switch that fails short is found by whichever estimate-independent detector
+    // crosses first, which depends on the instant (`phase_short_trips_at_any_instant_of_
+    // the_period` in tests/fault_scenarios.rs): the slow task's one-period shift of the
+    // references can move the first crossing from one to another
+    const SHORT: [&str; 4] = [
+        "OverCurrent",
+        "HardwareBreak",
+        "LossOfControl",
+        "CurrentRegulation",
+    ];
     for ((sc, _, a), (_, _, b)) in single.iter().zip(&two) {
         let name = &sc.name;
-        assert_eq!(a.fault, b.fault, "{name}");
+        if name == "fault-short" {
+            let found = b.fault.as_deref().unwrap_or_default();
+            assert!(SHORT.contains(&found), "{name}: {found}");
+        } else {
+            assert_eq!(a.fault, b.fault, "{name}");
+        }
         assert_eq!(a.switches_off_at_end, b.switches_off_at_end, "{name}");
         if let (Some(ta), Some(tb)) = (a.fault_time_s, b.fault_time_s) {
             assert!(

@@ -77,7 +77,7 @@ const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
 /// order of the step.
-const REPORT_REGIONS: [&str; 15] = [
+const REPORT_REGIONS: [&str; 16] = [
     "sincos",
     "clarke_park",
     "current_pi",
@@ -93,6 +93,7 @@ const REPORT_REGIONS: [&str; 15] = [
     "overmodulation",
     "two_rate_fast",
     "two_rate_tick",
+    "two_rate_slow",
 ];
 
 fn main() {

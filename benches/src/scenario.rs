@@ -33,7 +33,7 @@ use acim::svpwm::SvpwmConfig;
 use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
-pub const REGIONS: [&str; 16] = [
+pub const REGIONS: [&str; 17] = [
     "empty",
     "fault_checks",
     "sincos",
@@ -50,6 +50,7 @@ pub const REGIONS: [&str; 16] = [
     "observer_flux",
     "two_rate_fast",
     "two_rate_tick",
+    "two_rate_slow",
 ];
 
 /// Steps from `start()` on (magnetising, with the speed search, the inverter test at
@@ -169,6 +170,7 @@ markers! {
     13 => bench_begin_observer_flux, bench_end_observer_flux;
     14 => bench_begin_two_rate_fast, bench_end_two_rate_fast;
     15 => bench_begin_two_rate_tick, bench_end_two_rate_tick;
+    16 => bench_begin_two_rate_slow, bench_end_two_rate_slow;
 }
 
 /// Calls the marker pair of each region of `Drive::step_probed`.
@@ -350,8 +352,10 @@ pub fn bench_region_drive_step(drive: &mut Drive, inp: &DriveInputs, on: bool) -
     out
 }
 
-/// One step of the two-rate drive, as the firmware calls it, measured as a fast period
-/// (`two_rate_fast`) or a slow tick (`two_rate_tick`).
+/// One step of the two-rate drive, as the firmware calls it: the fast part
+/// (`Drive::step_fast`), measured as a fast period (`two_rate_fast`) or a slow tick
+/// (`two_rate_tick`), then a tick's slow task (`Drive::run_slow`, `two_rate_slow`), which
+/// the firmware may run in a lower-priority interrupt.
 #[inline(never)]
 #[no_mangle]
 pub fn bench_region_two_rates(drive: &mut Drive, inp: &DriveInputs, on: bool) -> PwmOutput {
@@ -363,13 +367,22 @@ pub fn bench_region_two_rates(drive: &mut Drive, inp: &DriveInputs, on: bool) ->
             bench_begin_two_rate_fast();
         }
     }
-    let out = drive.step(black_box(inp));
+    let out = drive.step_fast(black_box(inp));
     let out = black_box(out);
     if on {
         if tick {
             bench_end_two_rate_tick();
         } else {
             bench_end_two_rate_fast();
+        }
+    }
+    if drive.slow_pending() {
+        if on {
+            bench_begin_two_rate_slow();
+        }
+        drive.run_slow();
+        if on {
+            bench_end_two_rate_slow();
         }
     }
     out

@@ -18,7 +18,8 @@ level:
   TIM1's break 2 (their analog behaviour is not modelled: a comparator never fires);
 - CORDIC (sine and cosine of the q1.31 argument), IWDG (start/feed counted), USART2 (bytes
   in and out), SysTick (COUNTFLAG reads set: delays take no emulated time), DWT (CYCCNT =
-  instructions executed), NVIC (enables), TIM6 (the self-test's period interrupt).
+  instructions executed), NVIC (enables; software pends, whose interrupt runs after the
+  control interrupt returns), TIM6 (the self-test's period interrupt).
 
 Time: the main program runs in chunks of instructions; one PWM period is
 `INSTRUCTIONS_PER_PERIOD` instructions of it (8 000; the real period is 34 000 cycles at
@@ -67,6 +68,7 @@ def _keep_exception(uc, e):
 INSTRUCTIONS_PER_PERIOD = 8_000
 STOP = 0x0FFF_0000          # handlers "return" here (mapped, never executed)
 ADC1_2_IRQ = 18
+SLOW_TASK_IRQ = 101   # FMAC's vector: the firmware's slow task, pended by software
 TIM6_IRQ = 54
 NMI_VECTOR = 2
 HARDFAULT_VECTOR = 3
@@ -172,7 +174,7 @@ def _plain_write(base, off4):
                                     (0x4000_4400, 0x18), (0x4000_3000, 0x0),
                                     (0xE000_ED00, 0x94))
                 or (base == 0x4002_2000 and off4 in (0x8, 0x10, 0x14, 0x18))
-                or (base == 0xE000_E100 and off4 < 0x20))
+                or (base in (0xE000_E100, 0xE000_E200) and off4 < 0x20))
 
 
 _SPLIT = {}         # address -> (base, offset)
@@ -380,6 +382,9 @@ class Machine:
         self.iwdg_feeds = 0
         self.iwdg_started = False
         self.nvic_enabled = set()
+        self.nvic_pending = set()     # set by software through NVIC_ISPR
+        self.slow_isr_runs = 0           # slow-task interrupts taken
+        self.slow_isr_instructions = []  # their instructions, while counting
         self.break_active = False
         self.cordic_results = []
         self.load = load or RlLoad()
@@ -644,6 +649,10 @@ class Machine:
             for b in range(32):
                 if value & (1 << b):
                     self.nvic_enabled.add(off4 * 8 + b)
+        if base == 0xE000_E200 and off4 < 0x20:       # NVIC_ISPRn: pend by software
+            for b in range(32):
+                if value & (1 << b):
+                    self.nvic_pending.add(off4 * 8 + b)
         self.regs[(base, off4)] = value
 
     def _adc_write(self, base, off, value):
@@ -863,6 +872,10 @@ class Machine:
         if TIM6_IRQ in self.nvic_enabled and self.reg(0x4000_1000, 0xC) & 1 \
                 and self.reg(0x4000_1000, 0x10) & 1:
             return TIM6_IRQ
+        # a software-pended interrupt (lower priority than the control interrupt's: it
+        # runs after it, tail-chained)
+        for irq in sorted(self.nvic_pending & self.nvic_enabled):
+            return irq
         return None
 
     # --- execution ---------------------------------------------------------------------
@@ -1018,12 +1031,21 @@ class Machine:
                 next_period += INSTRUCTIONS_PER_PERIOD
                 self._period_hardware()
                 irq = self._irq_pending()
-                if irq is not None and not (self.uc.reg_read(UC_ARM_REG_PRIMASK) & 1):
+                while irq is not None and not (self.uc.reg_read(UC_ARM_REG_PRIMASK) & 1):
+                    self.nvic_pending.discard(irq)
                     self.uc.reg_write(UC_ARM_REG_PC, self.pc | 1)
                     c = self.run_exception(16 + irq)
                     self.pc = self.uc.reg_read(UC_ARM_REG_PC)
-                    if c is not None:
+                    if irq == SLOW_TASK_IRQ:
+                        self.slow_isr_runs += 1
+                        if c is not None:
+                            self.slow_isr_instructions.append(c)
+                    elif c is not None:
                         self.isr_instructions.append(c)
+                    if self.halted is not None:
+                        break
+                    # a lower-priority interrupt the handler pended runs next
+                    irq = self._irq_pending()
                 if on_period is not None:
                     on_period(self)
         return self

@@ -6,11 +6,19 @@
 //! motor model in place of ADC and PWM (TIM1 is never configured, outputs stay off).
 //!
 //! Per period: acknowledge, apply at most one queued command, read the samples, break /
-//! sequence checks, `ControlLoop::step`, write the PWM (switches off in this same period
-//! on any fault), deadline check, cycle statistics and decimated telemetry.
+//! sequence checks, `ControlLoop::step_fast`, write the PWM (switches off in this same
+//! period on any fault), deadline check, cycle statistics and decimated telemetry.
 //!
-//! Data shared with `main` only through lock-free SPSC queues and atomics: the interrupt
-//! owns the drive.
+//! With a slow task (the `loops.slow_period` setting), a slow tick's work (speed loop,
+//! field weakening, slow supervision) runs in a second interrupt of lower priority
+//! (`FMAC`'s vector, `hw::SLOW_TASK_IRQ`), pended by the period and run from flash once
+//! the control interrupt returns; the two share the drive through
+//! `acim_firmware_core::stage::SlowTaskGate` (the slow task must end within the period;
+//! if not, the next control period switches the outputs off, the one after trips
+//! `DeadlineMissed`). The self-test runs the slow work inline (`ControlLoop::step`).
+//!
+//! Data shared with `main` only through lock-free SPSC queues and atomics: the
+//! interrupts own the drive.
 
 use crate::board_cfg::Sc;
 #[cfg(feature = "selftest")]
@@ -29,7 +37,15 @@ use crate::hw;
 #[cfg(not(feature = "selftest"))]
 use acim_firmware_core::board::{MAX_DUTY, PWM_ARR};
 #[cfg(not(feature = "selftest"))]
-use acim_firmware_core::stage::{apply_command, control_period};
+use acim_firmware_core::control::FirmwareFault;
+#[cfg(not(feature = "selftest"))]
+use acim_firmware_core::stage::{
+    apply_command, control_period, slow_period, ControlEntry, PowerStageIo, SlowTaskGate,
+};
+
+/// The drive's hand-over between the control interrupt and the slow task's.
+#[cfg(not(feature = "selftest"))]
+static SLOW_GATE: SlowTaskGate = SlowTaskGate::new();
 
 /// Telemetry queue length (holds N-1 samples: 1.5 s at 10 Hz).
 pub const TEL_Q: usize = 16;
@@ -136,8 +152,10 @@ fn state() -> Option<&'static mut IsrState> {
     }
     // SAFETY: STATE was initialised by `install` (READY is set after the write). After
     // `install` only the control interrupt takes this reference (it does not preempt
-    // itself), and `replace_drive_if_idle` and the three commissioning accessors with all
-    // interrupts masked: the &mut is unique
+    // itself), the slow task's interrupt between `SLOW_GATE.enter` and `exit` (the control
+    // interrupt, which preempts it, takes none then: `SlowTaskGate::control_entry`; the
+    // slow interrupt never preempts the control one), and `replace_drive_if_idle` and the
+    // three commissioning accessors with all interrupts masked: the &mut is unique
     // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
 }
@@ -228,11 +246,22 @@ fn ADC1_2() {
         arr: PWM_ARR,
         max_duty: MAX_DUTY,
     };
+    let entry = SLOW_GATE.control_entry();
+    if entry == ControlEntry::SlowTaskBusy {
+        // the slow task overran into this period and holds the drive: outputs off now,
+        // the drive untouched; the next period trips it
+        io.switch_off();
+        io_ack(&mut io);
+        return;
+    }
     let Some(st) = state() else {
         // not installed yet: only acknowledge
         io_ack(&mut io);
         return;
     };
+    if entry == ControlEntry::SlowTaskOverran {
+        st.ctl.trip(FirmwareFault::DeadlineMissed);
+    }
     // at most one command per period; a start arms the outputs, an accepted reset
     // clears breaks
     if let Some(cmd) = st.cmd.dequeue() {
@@ -245,6 +274,18 @@ fn ADC1_2() {
     control_period(&mut st.ctl, &mut io, &mut st.outputs);
     let t1 = DWT::cycle_count();
     publish(st, elapsed(t0, t1), 0.0);
+}
+
+/// The slow task's interrupt: a slow tick's work, pended by the control interrupt, at a
+/// lower priority; its code runs from flash (ccmram.x).
+#[cfg(not(feature = "selftest"))]
+#[interrupt]
+fn FMAC() {
+    SLOW_GATE.enter();
+    if let Some(st) = state() {
+        slow_period(&mut st.ctl);
+    }
+    SLOW_GATE.exit();
 }
 
 #[cfg(not(feature = "selftest"))]

@@ -28,7 +28,7 @@ impl CordicSinCos {
 }
 
 impl SinCos for CordicSinCos {
-    #[inline]
+    #[inline(always)]
     fn sin_cos(&mut self, theta: f32) -> SinCosValue {
         // the library passes angles in [-pi, pi); anything else is wrapped first
         let t = if theta.abs() <= PI {

@@ -332,6 +332,31 @@ impl PowerStageIo for Tim1Adc {
         t.ccr2().write(|w| unsafe { w.ccr().bits(half) });
         t.ccr3().write(|w| unsafe { w.ccr().bits(half) });
     }
+
+    /// Pends the slow task's interrupt ([`SLOW_TASK_IRQ`]): NVIC_ISPR, a write the NVIC
+    /// takes atomically.
+    #[inline(always)]
+    fn pend_slow_task(&mut self) {
+        cortex_m::peripheral::NVIC::pend(SLOW_TASK_IRQ);
+    }
+}
+
+/// The slow task's interrupt: FMAC's vector, pended by software only (the filter
+/// accelerator is not used and its interrupt is never enabled in the peripheral).
+pub const SLOW_TASK_IRQ: pac::Interrupt = pac::Interrupt::FMAC;
+
+/// The slow task's NVIC priority: below the control interrupt's (0), above the main loop.
+pub const SLOW_TASK_PRIORITY: u8 = 0x80;
+
+/// Sets the slow task's interrupt priority below the control interrupt's and unmasks it.
+pub fn nvic_enable_slow_task(nvic: &mut cortex_m::peripheral::NVIC) {
+    // SAFETY: as for `nvic_enable_top`: no priority-based critical section exists; the
+    // slow interrupt shares the drive with the control interrupt through
+    // `stage::SlowTaskGate`, which does not depend on priorities beyond the control
+    // interrupt's preempting this one.
+    unsafe { nvic.set_priority(SLOW_TASK_IRQ, SLOW_TASK_PRIORITY) };
+    // SAFETY: everything its handler uses is initialised before (see main).
+    unsafe { cortex_m::peripheral::NVIC::unmask(SLOW_TASK_IRQ) };
 }
 
 /// The clock registers read back after the HAL's set-up (checked by

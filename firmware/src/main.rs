@@ -364,6 +364,9 @@ fn main() -> ! {
         outputs: acim_firmware_core::stage::Outputs::default(),
     });
     hw::nvic_enable_top(irq, &mut cp.NVIC);
+    // the slow task's interrupt (a slow tick's work, pended by the control interrupt)
+    #[cfg(not(feature = "selftest"))]
+    hw::nvic_enable_slow_task(&mut cp.NVIC);
 
     let mut watchdog = IndependentWatchdog::new(dp.IWDG);
     watchdog.start(board::WATCHDOG_TIMEOUT_MS.millis());

@@ -55,7 +55,11 @@ fn subcommands_reject_options_they_cannot_honour() {
         &sim(&["stability", "--set", "sensors.adc_bits=8"], &d),
         "`stability` does not take --set",
     );
-    for cmd in ["capability", "robustness", "robust-stability", "any-motor"] {
+    fails_with(
+        &sim(&["robustness", "--gzip"], &d),
+        "`robustness` does not take --gzip",
+    );
+    for cmd in ["capability", "robust-stability", "any-motor"] {
         fails_with(
             &sim(&[cmd, "--set", "drive.estimation.orientation_gain=3"], &d),
             "does not take --set",

@@ -31,26 +31,30 @@
 //! ## Two rates
 //!
 //! With [`LoopSettings::slow_period`](crate::LoopSettings::slow_period) set (0.5-2 ms; 0, the default, runs every stage every
-//! control period), the step runs a slow tick once every
-//! [`crate::design::CascadeDesign::slow_divider`] control periods, as production drives
-//! schedule a medium-frequency task beside the current-loop interrupt:
+//! control period), every [`crate::design::CascadeDesign::slow_divider`]-th control
+//! period is a slow tick, as production drives schedule a medium-frequency task beside
+//! the current-loop interrupt. The fast part ([`Drive::step_fast`]) runs every period;
+//! a tick hands the slow task ([`Drive::run_slow`]) its samples and estimates, and the
+//! slow task runs after the period's output is computed: in [`Drive::step`] right after
+//! it, on a board in an interrupt of lower priority (firmware/README.md). Its outputs
+//! take effect from the next period.
 //!
 //! - **Every period (fast)**: the gate (non-finite samples, over-current, bus window), sense,
 //!   the observer, the Rs estimator, flux and angle, the estimates finite
 //!   ([`Supervisor::estimates_valid`]), the magnetizing sequence, current control, the
 //!   control monitor and the current-sensor check, modulation, the inverter tracker, and
 //!   the offset drift subtracted from the samples.
-//! - **Each slow tick**: the offset tracker's model on the slow period's mean of its
+//! - **Each slow tick** (the slow task): the offset tracker's model on the slow period's mean of its
 //!   voltage signature (summed every period), field weakening, the speed loop (ramp,
 //!   hold, regeneration limit, far-side mode, PI, thermal fold-back), stall, overload and blind detection, the load
 //!   and speed ranges of [`Supervisor::plausibility`], the limit-cycle check and the
 //!   zero-speed policy. Their designs are made for the slow period
 //!   ([`DriveDesign::slow_ts`]): gains, ramp steps and counts keep their meaning in
 //!   seconds, so every slow protection keeps its time and is found at most one slow
-//!   period later.
+//!   period later (its fault switches off from the period after the tick).
 //! - **Between them**: the fast path sums the speed and load-torque estimates over the slow
 //!   period and the slow tick reads their means (not samples, which would alias the
-//!   estimate's period-to-period ripple); the slow tick's current reference is reached in
+//!   estimate's period-to-period ripple); the slow task's current reference is reached in
 //!   equal steps over the next slow period (the current loop sees no staircase).
 //!
 //! The first running period after magnetizing is a slow tick. Both arithmetics run the
@@ -109,8 +113,10 @@ struct StepReferences<N: Arithmetic> {
     inv_dc_bus: N,
     magnetizing: bool,
     zero_held: bool,
-    /// This period is a slow tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)).
+    /// The slow task's work runs inline in this period (every period with no slow task).
     slow: bool,
+    /// This period is a slow tick of a slow task: its work is left for [`Drive::run_slow`].
+    defer: bool,
 }
 
 /// Samples of one control step (A and V; pu in fixed point).
@@ -394,6 +400,18 @@ struct References<N: Arithmetic> {
     current: ReferenceRamp<N>,
     /// The estimates' means over the slow period, for the slow task.
     means: SlowMeans<N>,
+    /// The last slow tick's samples and estimates, until [`Drive::run_slow`] takes them.
+    job: Option<SlowJob<N>>,
+}
+
+/// What a slow tick hands the slow task ([`Drive::run_slow`]): that period's samples,
+/// estimates and voltage limit, and whether it was magnetizing.
+#[derive(Clone, Copy, Debug)]
+struct SlowJob<N: Arithmetic> {
+    m: Measured<N>,
+    e: Estimate<N>,
+    limit: VoltageLimit<N>,
+    magnetizing: bool,
 }
 
 /// What the fast path gathers for the slow task over a slow period: the speed and
@@ -576,6 +594,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 slow_count: 0,
                 current: ReferenceRamp::default(),
                 means: SlowMeans::default(),
+                job: None,
             },
             loops: Loops {
                 cur: CurrentLoop::new(),
@@ -876,6 +895,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.refs.slow_count = 0;
         self.refs.current = ReferenceRamp::default();
         self.refs.means = SlowMeans::default();
+        self.refs.job = None;
         self.prev = self.latch(Applied::default());
     }
 
@@ -899,6 +919,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// Trips the supervisor and switches off. The speed target is cleared: a restart
     /// after a fault needs a new speed command.
     fn enter_fault(&mut self, reason: FaultReason) -> PwmOutput<N> {
+        self.refs.job = None;
         self.refs.start.cancel_wait();
         self.supervision.sup.trip(reason);
         self.prev.voltage = Applied::default();
@@ -908,13 +929,27 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
 
     /// One control step: samples in, PWM command out. Never panics and never returns a
     /// non-finite or out-of-range duty: bad input faults the drive (switches off) instead.
+    /// With a slow task, a slow tick's work runs after the period's output is computed
+    /// ([`Drive::step_fast`], then [`Drive::run_slow`]), as in a firmware that runs it in a
+    /// lower-priority interrupt after the control interrupt.
     #[inline]
     pub fn step(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
+        let out = self.step_probed(inp, &mut NoProbe);
+        self.run_slow();
+        out
+    }
+
+    /// The fast part of [`Drive::step`]: with no slow task, the whole step; with one, a
+    /// slow tick leaves its work (the speed loop, field weakening, the offset tracker's
+    /// update, the slow supervision, the zero-speed policy) for [`Drive::run_slow`],
+    /// which must run before the next call ([`Drive::slow_pending`]).
+    #[inline]
+    pub fn step_fast(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
         self.step_probed(inp, &mut NoProbe)
     }
 
-    /// [`Drive::step`] with `probe` called around each [`StepRegion`] of a running step
-    /// (the regions do not cover the state machine's bookkeeping, the estimator
+    /// [`Drive::step_fast`] with `probe` called around each [`StepRegion`] of a running
+    /// step (the regions do not cover the state machine's bookkeeping, the estimator
     /// plausibility checks and the telemetry record, which the whole step includes).
     #[inline(always)]
     pub fn step_probed<P: StepProbe>(
@@ -929,11 +964,14 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             Err(out) => return out,
         };
         // the slow task's work (speed loop, field weakening, slow supervision) runs in
-        // this period if it is a slow tick; otherwise its last outputs hold
-        let slow = self.slow_tick();
+        // this period with no slow task; with one, after it on a slow tick (`run_slow`);
+        // between ticks its last outputs hold
+        let tick = self.slow_tick();
+        let defer = tick && self.cfg.coeffs.cascade.slow_divider > 1;
+        let slow = tick && !defer;
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
-        let m = self.sense(inp, !magnetizing, slow);
+        let m = self.sense(inp, !magnetizing);
         probe.end(StepRegion::ClarkePark);
         // 3. estimate; the frame is held while magnetizing at rest and turns with the
         // rotor on a flying start
@@ -949,7 +987,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let limit = self.voltage_limit(&m, inv_dc_bus);
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
-        let i_ref = match self.references(&m, &e, magnetizing, limit, slow) {
+        let i_ref = match self.references(&m, &e, magnetizing, limit) {
             Ok(i_ref) => i_ref,
             Err(reason) => return self.enter_fault(reason),
         };
@@ -968,8 +1006,72 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
+            defer,
         };
         self.control_and_modulate(&m, &e, &step, probe)
+    }
+
+    /// Whether a slow tick's work waits for [`Drive::run_slow`].
+    pub fn slow_pending(&self) -> bool {
+        self.refs.job.is_some()
+    }
+
+    /// The slow task ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)):
+    /// the work of the last slow tick, on that period's samples and the estimates'
+    /// means over the slow period; nothing if none is pending (no slow task, or the drive
+    /// stopped or faulted since). In order: the offset tracker's update, the load and
+    /// speed plausibility, field weakening and the speed loop (the new current reference,
+    /// reached in equal steps over the next slow period), stall and blind operation, the
+    /// zero-speed policy and the limit-cycle check. A fault it finds switches the drive
+    /// off from the next period.
+    #[inline(never)]
+    pub fn run_slow(&mut self) {
+        let Some(job) = self.refs.job.take() else {
+            return;
+        };
+        if let Err(reason) = self.slow_task(&job) {
+            self.enter_fault(reason);
+        }
+    }
+
+    /// [`Drive::run_slow`]'s work; a fault's reason, or `Ok` (also after the zero-speed
+    /// policy switched off).
+    #[inline(always)]
+    fn slow_task(&mut self, job: &SlowJob<N>) -> Result<(), FaultReason> {
+        let SlowJob {
+            m,
+            e,
+            limit,
+            magnetizing,
+        } = *job;
+        if !magnetizing {
+            let u_ab = self.sensing.tracker.take_mean();
+            self.update_offset_tracker(u_ab, true);
+        }
+        if let Some(reason) = self.plausibility(&e, true) {
+            return Err(reason);
+        }
+        if !magnetizing {
+            let periods = self.cfg.coeffs.cascade.slow_divider;
+            let e = self.refs.means.take(&e, periods);
+            let target = self.slow_references(&m, &e, limit)?;
+            let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
+            self.refs.current.aim(target, periods, inv_periods);
+        }
+        let zero_held = self.zero_speed_held(magnetizing, true);
+        // the telemetry of the tick's period shows the slow task's outcome
+        let t = &mut self.telemetry;
+        t.zero_speed_held = zero_held;
+        t.speed_reference = self.refs.speed.speed_reference;
+        t.speed_target_limited = self.refs.speed.target_limited;
+        if zero_held && self.cfg.coeffs.cascade.zero_speed_stop && self.refs.commanded {
+            self.stop_at_zero_speed();
+            return Ok(());
+        }
+        match self.speed_oscillation(&e, magnetizing) {
+            Some(reason) => Err(reason),
+            None => Ok(()),
+        }
     }
 
     /// The gate ([`Supervisor::gate`]): the closed-loop mode this step runs in, or the
@@ -1021,6 +1123,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
+            defer,
         } = *step;
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
@@ -1045,6 +1148,14 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             inv_dc_bus,
         });
         self.record(m, e, i_ref, v, modulation.saturated, zero_held);
+        if defer {
+            self.refs.job = Some(SlowJob {
+                m: *m,
+                e: *e,
+                limit,
+                magnetizing,
+            });
+        }
         PwmOutput {
             duties: modulation.duties,
             enabled: true,
@@ -1174,13 +1285,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             return Some(reason);
         }
         // a limit cycle: the estimate swinging around a steady reference (slow)
-        let speed = &self.refs.speed;
         if slow {
-            if let Some(reason) = self.supervision.oscillation.update(
-                &self.cfg.coeffs.limits,
-                e.observer.speed - speed.speed_reference,
-                !magnetizing && !speed.ramping,
-            ) {
+            if let Some(reason) = self.speed_oscillation(e, magnetizing) {
                 return Some(reason);
             }
         }
@@ -1188,6 +1294,18 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             &self.cfg.coeffs.limits,
             m.i_ab,
             e.stator_frequency,
+        )
+    }
+
+    /// The limit-cycle check ([`crate::supervisor::SpeedOscillation`]), once per slow
+    /// period: the estimate swinging around a steady reference.
+    #[inline(always)]
+    fn speed_oscillation(&mut self, e: &Estimate<N>, magnetizing: bool) -> Option<FaultReason> {
+        let speed = &self.refs.speed;
+        self.supervision.oscillation.update(
+            &self.cfg.coeffs.limits,
+            e.observer.speed - speed.speed_reference,
+            !magnetizing && !speed.ramping,
         )
     }
 
@@ -1227,7 +1345,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// Sense stage: Clarke (two or three phases), the tracked offset drift subtracted
     /// while `running` ([`crate::offset_tracker`]), and Park at the frame angle.
     #[inline(always)]
-    fn sense(&mut self, inp: &DriveInputs<N>, running: bool, slow: bool) -> Measured<N> {
+    fn sense(&mut self, inp: &DriveInputs<N>, running: bool) -> Measured<N> {
         // the last step's duties were made for the bus measured then; they act over the
         // period this sample opens, at the bus measured now: a rippling or sagging bus
         // scales the voltage they apply (duty x bus), and the estimators use that voltage
@@ -1255,7 +1373,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         };
         let angle = self.est.flux.angle;
         let sc = self.loops.sincos.sin_cos(angle);
-        let i_ab = self.track_offsets(i_ab, applied.v_ab, running, slow);
+        let i_ab = self.track_offsets(i_ab, applied.v_ab, running);
         // the fundamental's sample: the staircase ripple at the period boundary,
         // Delta i = -j w_s Ts^2 v / (12 sigma Ls), removed (ModelGains::sample_ripple)
         let i = park(i_ab, sc);
@@ -1289,7 +1407,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         i_ab: AlphaBeta<N>,
         v_ab: AlphaBeta<N>,
         running: bool,
-        slow: bool,
     ) -> AlphaBeta<N> {
         let prev = &self.prev;
         let tracker = &mut self.sensing.tracker;
@@ -1299,23 +1416,30 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             beta: i_ab.beta - o.beta,
         };
         let rs = prev.stator_resistance;
-        let mut u_ab = AlphaBeta {
+        let u_ab = AlphaBeta {
             alpha: v_ab.alpha - rs * i_ab.alpha,
             beta: v_ab.beta - rs * i_ab.beta,
         };
-        let cascade = &self.cfg.coeffs.cascade;
-        if cascade.slow_divider > 1 {
-            if !running {
-                tracker.take_mean();
+        if self.cfg.coeffs.cascade.slow_divider > 1 {
+            // with a slow task: summed here, the model updated on the mean by `run_slow`
+            if running {
+                let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
+                tracker.accumulate(u_ab, inv_periods);
             } else {
-                tracker.accumulate(u_ab, cascade.inv_slow_divider);
-                if !slow {
-                    return i_ab;
-                }
-                u_ab = tracker.take_mean();
+                tracker.take_mean();
             }
+            return i_ab;
         }
-        tracker.update(
+        self.update_offset_tracker(u_ab, running);
+        i_ab
+    }
+
+    /// The offset tracker's model update on `u_ab` (V: this period's, or the slow
+    /// period's mean with a slow task), with the last period's signals.
+    #[inline(always)]
+    fn update_offset_tracker(&mut self, u_ab: AlphaBeta<N>, running: bool) {
+        let prev = &self.prev;
+        self.sensing.tracker.update(
             &self.cfg.coeffs.offset_tracker,
             &OffsetTrackerInputs {
                 u_ab,
@@ -1327,7 +1451,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             },
             &mut self.loops.sincos,
         );
-        i_ab
     }
 
     /// Estimation stage: speed observer, Rs estimator (eq. 19-20) and residual filter,
@@ -1590,7 +1713,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         e: &Estimate<N>,
         magnetizing: bool,
         limit: VoltageLimit<N>,
-        slow: bool,
     ) -> Result<Dq<N>, FaultReason> {
         let periods = self.cfg.coeffs.cascade.slow_divider;
         if magnetizing {
@@ -1601,27 +1723,14 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             }
             return Ok(i_ref);
         }
-        // running: the slow task's references, reached over its period, from the
-        // estimates' means over it (with no slow task every period is a tick, on this
-        // period's estimates; one call site, so that the slow stages are inlined once)
-        let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
-        let means;
-        let e = if periods > 1 {
+        // running: with a slow task its last reference, reached over its period (the
+        // estimates summed for its means); with none, this period's
+        if periods > 1 {
+            let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
             self.refs.means.add(&e.observer, inv_periods);
-            if !slow {
-                return Ok(self.refs.current.advance());
-            }
-            means = self.refs.means.take(e, periods);
-            &means
-        } else {
-            e
-        };
-        let target = self.slow_references(m, e, limit)?;
-        if periods == 1 {
-            return Ok(target);
+            return Ok(self.refs.current.advance());
         }
-        self.refs.current.aim(target, periods, inv_periods);
-        Ok(self.refs.current.advance())
+        self.slow_references(m, e, limit)
     }
 
     /// The slow task's references: field weakening, the speed loop and the stall and
@@ -2477,7 +2586,6 @@ mod tests {
                 phase_currents: [0.05, 0.0, 0.0],
                 dc_bus: 325.0,
             },
-            false,
             false,
         );
         assert!(

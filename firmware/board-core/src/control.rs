@@ -167,10 +167,21 @@ impl<S: SinCos> ControlLoop<S> {
         }
     }
 
-    /// One control step on this period's raw sample. A saturated current channel trips
-    /// the drive; every fault returns [`PwmOutput::OFF`] in this same step.
+    /// One control step on this period's raw sample, the slow task's work included
+    /// ([`acim::Drive::step`]): [`ControlLoop::step_fast`], then
+    /// [`ControlLoop::run_slow`].
     #[inline]
     pub fn step(&mut self, raw: &RawSample) -> PwmOutput {
+        let out = self.step_fast(raw);
+        self.run_slow();
+        out
+    }
+
+    /// The fast part of one control step ([`acim::Drive::step_fast`]): with a slow task,
+    /// a slow tick leaves its work for [`ControlLoop::run_slow`]. A saturated current
+    /// channel trips the drive; every fault returns [`PwmOutput::OFF`] in this same step.
+    #[inline]
+    pub fn step_fast(&mut self, raw: &RawSample) -> PwmOutput {
         let c = self.conv.convert(raw);
         self.inputs = c.inputs;
         if c.saturated {
@@ -181,7 +192,20 @@ impl<S: SinCos> ControlLoop<S> {
         if let Some(com) = self.commissioning.as_mut() {
             return com.step(&c.inputs);
         }
-        self.drive.step(&c.inputs)
+        self.drive.step_fast(&c.inputs)
+    }
+
+    /// Whether a slow tick's work waits for [`ControlLoop::run_slow`].
+    #[inline]
+    pub fn slow_pending(&self) -> bool {
+        self.drive.slow_pending()
+    }
+
+    /// The slow task's work of the last slow tick ([`acim::Drive::run_slow`]); nothing if
+    /// none waits. A fault it finds switches the outputs off at the next period.
+    #[inline(never)]
+    pub fn run_slow(&mut self) {
+        self.drive.run_slow();
     }
 
     /// Forces a fault; the first cause is kept. A running commissioning is abandoned.

@@ -16,11 +16,21 @@
 //! - if MOE is found clear after a period that switched on, the hardware break fired
 //!   during or after the last check: the drive trips (fault 16) instead of re-arming;
 //! - break flags are cleared only by an accepted fault reset.
+//!
+//! With a slow task ([`acim::LoopSettings::slow_period`]) the period runs the drive's
+//! fast part only ([`ControlLoop::step_fast`]); a slow tick's work waits, and the period
+//! requests the slow task's interrupt ([`PowerStageIo::pend_slow_task`]), of lower
+//! priority, which runs it ([`slow_period`]) once the control interrupt has written the
+//! PWM and returned. The two share the drive through a [`SlowTaskGate`]: the slow task
+//! must finish before the next control period; if it has not, that period switches the
+//! outputs off without touching the drive, and the one after trips it
+//! ([`FirmwareFault::DeadlineMissed`]).
 
 use crate::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
 use crate::convert::RawSample;
 use acim::frames::SinCos;
 use acim::PwmOutput;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 /// What the period sequence needs from the power stage's registers.
 pub trait PowerStageIo {
@@ -45,6 +55,77 @@ pub trait PowerStageIo {
     fn write_duties(&mut self, duties: [f32; 3]);
     /// Clears MOE at once and returns the compare values to 50 %.
     fn switch_off(&mut self);
+    /// Requests the slow task's interrupt (lower priority than the control interrupt):
+    /// it runs [`slow_period`] once the control interrupt returns.
+    fn pend_slow_task(&mut self);
+}
+
+/// The hand-over of the drive between the control interrupt and the slow task's
+/// lower-priority interrupt (lock-free: the control interrupt preempts the slow one,
+/// never the reverse). The slow interrupt holds the drive between [`SlowTaskGate::enter`]
+/// and [`SlowTaskGate::exit`]; the control interrupt asks [`SlowTaskGate::control_entry`]
+/// before it touches the drive.
+#[derive(Debug, Default)]
+pub struct SlowTaskGate {
+    running: AtomicBool,
+    overran: AtomicBool,
+}
+
+/// What the control interrupt may do this period ([`SlowTaskGate::control_entry`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ControlEntry {
+    /// The drive is free: run the period.
+    Run,
+    /// The slow task overran into this period and still holds the drive: switch the
+    /// outputs off and return without touching it.
+    SlowTaskBusy,
+    /// The slow task overran into the last period (it has finished since): trip the
+    /// drive ([`FirmwareFault::DeadlineMissed`]), then run the period (it switches off).
+    SlowTaskOverran,
+}
+
+impl SlowTaskGate {
+    /// A free gate.
+    pub const fn new() -> Self {
+        Self {
+            running: AtomicBool::new(false),
+            overran: AtomicBool::new(false),
+        }
+    }
+
+    /// The slow interrupt takes the drive.
+    #[inline(always)]
+    pub fn enter(&self) {
+        self.running.store(true, Ordering::SeqCst);
+    }
+
+    /// The slow interrupt gives the drive back.
+    #[inline(always)]
+    pub fn exit(&self) {
+        self.running.store(false, Ordering::SeqCst);
+    }
+
+    /// The control interrupt's question at its entry (it preempted the slow interrupt
+    /// if that one holds the drive).
+    #[inline(always)]
+    pub fn control_entry(&self) -> ControlEntry {
+        if self.running.load(Ordering::SeqCst) {
+            self.overran.store(true, Ordering::SeqCst);
+            ControlEntry::SlowTaskBusy
+        } else if self.overran.swap(false, Ordering::SeqCst) {
+            ControlEntry::SlowTaskOverran
+        } else {
+            ControlEntry::Run
+        }
+    }
+}
+
+/// The slow task's interrupt: the work of the last slow tick
+/// ([`ControlLoop::run_slow`]). Call it between [`SlowTaskGate::enter`] and
+/// [`SlowTaskGate::exit`].
+#[inline(never)]
+pub fn slow_period<S: SinCos>(ctl: &mut ControlLoop<S>) {
+    ctl.run_slow();
 }
 
 /// The interrupt's memory of the outputs between periods.
@@ -116,13 +197,17 @@ pub fn control_period<S: SinCos, P: PowerStageIo>(
     } else if !(adc1_done && adc2_done) {
         ctl.trip(FirmwareFault::AdcSequence)
     } else {
-        ctl.step(&raw)
+        ctl.step_fast(&raw)
     };
     let mut out = write(ctl, io, outputs, out);
     if io.sequence_pending() {
         out = ctl.trip(FirmwareFault::DeadlineMissed);
         io.switch_off();
         outputs.on = false;
+    }
+    // a slow tick's work: in the slow task's interrupt, after this one
+    if ctl.slow_pending() {
+        io.pend_slow_task();
     }
     // disarmed once nothing switches and no start waits (stop, fault, commissioning done)
     outputs.armed &= ctl.switching() || ctl.drive().start_pending();
@@ -182,6 +267,8 @@ mod tests {
         pending: bool,
         /// a break fires during the next `write_duties`
         break_during_write: bool,
+        /// slow-task requests since the last look
+        slow_requests: u32,
     }
 
     impl PowerStageIo for Regs {
@@ -222,6 +309,9 @@ mod tests {
         }
         fn switch_off(&mut self) {
             self.moe = false;
+        }
+        fn pend_slow_task(&mut self) {
+            self.slow_requests += 1;
         }
     }
 
@@ -381,6 +471,7 @@ mod tests {
         o: Outputs,
         sim: crate::sim::SimulatedStage,
         duties: [f32; 3],
+        slow_runs: u32,
     }
 
     impl Bench {
@@ -393,6 +484,7 @@ mod tests {
                 o,
                 sim,
                 duties: [0.5; 3],
+                slow_runs: 0,
             }
         }
         fn command(&mut self, cmd: ControlCommand) -> bool {
@@ -407,6 +499,12 @@ mod tests {
                 let out = control_period(&mut self.ctl, &mut self.r, &mut self.o);
                 if out.enabled {
                     self.duties = out.duties;
+                }
+                // the slow task's interrupt, after the control interrupt returned
+                if self.r.slow_requests > 0 {
+                    self.r.slow_requests = 0;
+                    self.slow_runs += 1;
+                    slow_period(&mut self.ctl);
                 }
                 self.sim.run_period(PwmOutput {
                     duties: self.duties,
@@ -493,5 +591,61 @@ mod tests {
         b.ctl.trip(FirmwareFault::AdcSequence);
         assert!(!b.command(ControlCommand::Start));
         assert!(!b.o.armed());
+    }
+
+    /// With a 1 ms slow task at 5 kHz, every fifth running period requests the slow
+    /// task's interrupt, which runs the speed loop: the drive starts and follows a speed
+    /// target as with one rate. Without a slow task nothing is requested.
+    #[test]
+    fn a_slow_tick_requests_the_slow_task_which_runs_the_speed_loop() {
+        for slow_period in [0.0, 1e-3] {
+            let mut cfg = crate::board::drive_config();
+            cfg.loops.slow_period = slow_period;
+            let mut d = acim::Drive::new(cfg).unwrap();
+            // the offsets measured, as `powered` does
+            for _ in 0..3000 {
+                d.step(&acim::DriveInputs {
+                    phase_currents: [0.0; 3],
+                    dc_bus: 325.0,
+                });
+            }
+            let mut b = Bench::new(d);
+            assert!(b.command(ControlCommand::SpeedRpm(300.0)));
+            assert!(b.command(ControlCommand::Start));
+            b.periods(25_000);
+            assert_eq!(b.ctl.fault_code(), 0, "slow period {slow_period}");
+            assert_eq!(b.ctl.drive().state(), acim::DriveState::Running);
+            let speed = b.ctl.drive().telemetry().speed_estimate * acim::math::RAD_S_TO_RPM;
+            assert!((speed - 300.0).abs() < 15.0, "{slow_period}: {speed} rpm");
+            if slow_period == 0.0 {
+                assert_eq!(b.slow_runs, 0);
+            } else {
+                // one request per slow tick while switching (magnetizing and running):
+                // a fifth of the periods, less the start's wait with the switches off
+                let ticks = 25_000 / 5;
+                assert!(
+                    b.slow_runs > ticks * 9 / 10 && b.slow_runs <= ticks + 1,
+                    "{}",
+                    b.slow_runs
+                );
+            }
+        }
+    }
+
+    /// The gate: while the slow interrupt holds the drive the control interrupt may not
+    /// touch it; the period after, it trips the drive; then it runs again.
+    #[test]
+    fn a_slow_task_that_overruns_its_period_is_a_missed_deadline() {
+        let g = SlowTaskGate::new();
+        assert_eq!(g.control_entry(), ControlEntry::Run);
+        g.enter();
+        g.exit();
+        assert_eq!(g.control_entry(), ControlEntry::Run);
+        g.enter();
+        assert_eq!(g.control_entry(), ControlEntry::SlowTaskBusy);
+        assert_eq!(g.control_entry(), ControlEntry::SlowTaskBusy);
+        g.exit();
+        assert_eq!(g.control_entry(), ControlEntry::SlowTaskOverran);
+        assert_eq!(g.control_entry(), ControlEntry::Run);
     }
 }
