@@ -115,8 +115,6 @@ struct StepReferences<N: Arithmetic> {
     zero_held: bool,
     /// The slow task's work runs inline in this period (every period with no slow task).
     slow: bool,
-    /// This period is a slow tick of a slow task: its work is left for [`Drive::run_slow`].
-    defer: bool,
 }
 
 /// Samples of one control step (A and V; pu in fixed point).
@@ -935,7 +933,10 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     #[inline]
     pub fn step(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
         let out = self.step_probed(inp, &mut NoProbe);
-        self.run_slow();
+        // the test inline: the call's register saves cost more than the check
+        if self.refs.job.is_some() {
+            self.run_slow();
+        }
         out
     }
 
@@ -985,6 +986,16 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // dc_bus_min > 0 by the gate: one reciprocal per step, shared with the modulator)
         let inv_dc_bus = m.dc_bus.recip();
         let limit = self.voltage_limit(&m, inv_dc_bus);
+        if defer {
+            // the slow task's inputs, taken while they are at hand (a fault or a stop
+            // later in the period drops them)
+            self.refs.job = Some(SlowJob {
+                m,
+                e,
+                limit,
+                magnetizing,
+            });
+        }
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
         let i_ref = match self.references(&m, &e, magnetizing, limit) {
@@ -1006,7 +1017,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
-            defer,
         };
         self.control_and_modulate(&m, &e, &step, probe)
     }
@@ -1029,6 +1039,13 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let Some(job) = self.refs.job.take() else {
             return;
         };
+        // stopped (the zero-speed policy in the fast part) or faulted since the tick
+        if !matches!(
+            self.supervision.sup.state(),
+            DriveState::Running | DriveState::Magnetizing
+        ) {
+            return;
+        }
         if let Err(reason) = self.slow_task(&job) {
             self.enter_fault(reason);
         }
@@ -1123,7 +1140,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
-            defer,
         } = *step;
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
@@ -1148,14 +1164,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             inv_dc_bus,
         });
         self.record(m, e, i_ref, v, modulation.saturated, zero_held);
-        if defer {
-            self.refs.job = Some(SlowJob {
-                m: *m,
-                e: *e,
-                limit,
-                magnetizing,
-            });
-        }
         PwmOutput {
             duties: modulation.duties,
             enabled: true,
