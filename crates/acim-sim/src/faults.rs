@@ -123,10 +123,13 @@ pub fn markdown(
          such episode (the plant's hardware comparator at the trip level opens the switches within \
          its 1.5 us delay). Trip 8 A, speed limit 2000 rpm. The last column runs the same \
          scenario with the speed loop, field weakening and the slow supervision in a 1 kHz slow \
-         task (`slow_period_s = 0.001`; the drive's default runs every stage every period): the \
-         fast path's protections (over-current, non-finite samples, the bus window, the control \
+         task (`drive.loops.slow_period_s = 0.001`; the drive's default runs every stage every \
+         period), run after each tick's output as a board's slow interrupt runs it: the fast \
+         path's protections (over-current, non-finite samples, the bus window, the control \
          monitor, the sensor check) judge every period as before, the slow ones once per slow \
-         period with their times unchanged.\n",
+         period with their times unchanged, switching off from the period after the tick. The \
+         phase short is found by the model residual (`LossOfControl`) there, one of the \
+         detectors that find it at one rate too, depending on the instant.\n",
     );
     s
 }
