@@ -30,7 +30,7 @@ use crate::control::{CommandReply, ControlCommand, ControlLoop, FirmwareFault};
 use crate::convert::RawSample;
 use acim::frames::SinCos;
 use acim::PwmOutput;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
 
 /// What the period sequence needs from the power stage's registers.
 pub trait PowerStageIo {
@@ -93,30 +93,40 @@ impl SlowTaskGate {
         }
     }
 
+    // One core, two interrupt levels: the flags need atomicity against preemption and
+    // the compiler's ordering around the drive's accesses (the fences), not the
+    // hardware's barriers.
+
     /// The slow interrupt takes the drive.
     #[inline(always)]
     pub fn enter(&self) {
-        self.running.store(true, Ordering::SeqCst);
+        self.running.store(true, Ordering::Relaxed);
+        compiler_fence(Ordering::SeqCst);
     }
 
     /// The slow interrupt gives the drive back.
     #[inline(always)]
     pub fn exit(&self) {
-        self.running.store(false, Ordering::SeqCst);
+        compiler_fence(Ordering::SeqCst);
+        self.running.store(false, Ordering::Relaxed);
     }
 
     /// The control interrupt's question at its entry (it preempted the slow interrupt
-    /// if that one holds the drive).
+    /// if that one holds the drive; nothing preempts it, so its read and write of the
+    /// overrun flag cannot be split).
     #[inline(always)]
     pub fn control_entry(&self) -> ControlEntry {
-        if self.running.load(Ordering::SeqCst) {
-            self.overran.store(true, Ordering::SeqCst);
+        let entry = if self.running.load(Ordering::Relaxed) {
+            self.overran.store(true, Ordering::Relaxed);
             ControlEntry::SlowTaskBusy
-        } else if self.overran.swap(false, Ordering::SeqCst) {
+        } else if self.overran.load(Ordering::Relaxed) {
+            self.overran.store(false, Ordering::Relaxed);
             ControlEntry::SlowTaskOverran
         } else {
             ControlEntry::Run
-        }
+        };
+        compiler_fence(Ordering::SeqCst);
+        entry
     }
 }
 
