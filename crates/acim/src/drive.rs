@@ -412,6 +412,18 @@ struct SlowJob<N: Arithmetic> {
     magnetizing: bool,
 }
 
+impl<N: Arithmetic> SlowJob<N> {
+    #[inline(always)]
+    fn new(m: Measured<N>, e: Estimate<N>, limit: VoltageLimit<N>, magnetizing: bool) -> Self {
+        Self {
+            m,
+            e,
+            limit,
+            magnetizing,
+        }
+    }
+}
+
 /// What the fast path gathers for the slow task over a slow period: the speed and
 /// load-torque estimates' means (each period's sample times 1/`slow_divider`, summed), so
 /// that the slow task reads the estimates averaged, not sampled (their period-to-period
@@ -967,9 +979,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // the slow task's work (speed loop, field weakening, slow supervision) runs in
         // this period with no slow task; with one, after it on a slow tick (`run_slow`);
         // between ticks its last outputs hold
-        let tick = self.slow_tick();
-        let defer = tick && self.cfg.coeffs.cascade.slow_divider > 1;
-        let slow = tick && !defer;
+        let (slow, defer) = self.slow_tick();
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
         let m = self.sense(inp, !magnetizing);
@@ -989,12 +999,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if defer {
             // the slow task's inputs, taken while they are at hand (a fault or a stop
             // later in the period drops them)
-            self.refs.job = Some(SlowJob {
-                m,
-                e,
-                limit,
-                magnetizing,
-            });
+            self.refs.job = Some(SlowJob::new(m, e, limit, magnetizing));
         }
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
@@ -1235,18 +1240,23 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             .plausibility(limits, &health, saturated)
     }
 
-    /// The slow task's tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)): true once every
-    /// `slow_divider` control periods (every period with a divider of 1).
+    /// The slow task's tick ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)): once every
+    /// `slow_divider` control periods (every period with a divider of 1). Returns whether
+    /// its work runs inline in this period (no slow task: every period) and whether it is
+    /// handed to [`Drive::run_slow`] (a tick of a slow task).
     #[inline(always)]
-    fn slow_tick(&mut self) -> bool {
+    fn slow_tick(&mut self) -> (bool, bool) {
+        let divider = self.cfg.coeffs.cascade.slow_divider;
         let r = &mut self.refs;
-        if r.slow_count == 0 {
-            r.slow_count = self.cfg.coeffs.cascade.slow_divider.saturating_sub(1);
+        let tick = if r.slow_count == 0 {
+            r.slow_count = divider.saturating_sub(1);
             true
         } else {
             r.slow_count -= 1;
             false
-        }
+        };
+        let defer = tick && divider > 1;
+        (tick && !defer, defer)
     }
 
     /// The supervisor's control monitor ([`ControlMonitor`]): measured currents against
@@ -2008,8 +2018,10 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             CurrentSensing::TwoPhase => (clarke_two(a, b), [a, b, -a - b]),
             CurrentSensing::ThreePhase => (clarke_three(a, b, cc), [a, b, cc]),
         };
-        // the ramp is the slow task's (its step is per slow period)
-        let slow = self.slow_tick();
+        // the ramp is the slow task's (its step is per slow period; a few operations,
+        // run in the tick itself)
+        let (inline, deferred) = self.slow_tick();
+        let slow = inline || deferred;
         let c = &self.cfg.coeffs;
         let r = &mut self.refs;
         if slow {
