@@ -90,7 +90,7 @@ rows = [l.split(",") for l in open(csv).read().splitlines()[1:]]
 checks = {
     "exit status 0": os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0,
     "the charts were drawn": "Speed [rpm]" in text and "Currents d/q [A]" in text,
-    "the refused setting was shown": "err (overcurrent_trip" in text,
+    "the refused setting was shown": "err (limits.overcurrent_trip" in text,
     "the recording was closed": "recorded" in text,
     "the drive ran at 300 rpm": any(r[3] == "2" and abs(float(r[6]) - 300) < 5 for r in rows),
     "Esc stopped it": rows and rows[-1][3] == "0",
