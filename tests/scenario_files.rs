@@ -228,6 +228,17 @@ fn drive_keys_live_in_the_configs_groups_and_flat_keys_are_read_with_a_note() {
         "{:?}",
         set.notes
     );
+    // `field_weakening` is a flat switch and a group: the flat --set sets the switch and
+    // keeps the group's other keys
+    let on = sc
+        .with_overrides(&["drive.field_weakening.overvoltage_control=true".into()])
+        .unwrap();
+    let off = on
+        .with_overrides(&["drive.field_weakening=false".into()])
+        .unwrap();
+    assert!(!off.drive.field_weakening.enabled);
+    assert!(off.drive.field_weakening.overvoltage_control);
+    assert_eq!(off.notes.len(), 1, "{:?}", off.notes);
     // both ways at once could disagree: refused
     let e = Scenario::from_toml(
         "[drive]\nrs_estimation = false\n[drive.estimation]\nrs_estimation = true\n",

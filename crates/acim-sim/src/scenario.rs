@@ -637,12 +637,6 @@ pub const DRIVE_GROUP_KEYS: [(&str, &str, &str); 40] = [
 /// and returns a deprecation note per key moved. A key given both ways is an error: the
 /// two could disagree.
 pub fn regroup_drive(v: &mut toml::Value) -> Result<Vec<String>, ScenarioError> {
-    regroup(v, false)
-}
-
-/// [`regroup_drive`]; with `overwrite` (a `--set` on a whole scenario, where every
-/// grouped key is present) the flat key's value replaces the grouped one.
-fn regroup(v: &mut toml::Value, overwrite: bool) -> Result<Vec<String>, ScenarioError> {
     let mut notes = Vec::new();
     let Some(drive) = v.get_mut("drive").and_then(|d| d.as_table_mut()) else {
         return Ok(notes);
@@ -659,7 +653,7 @@ fn regroup(v: &mut toml::Value, overwrite: bool) -> Result<Vec<String>, Scenario
         let Some(table) = table.as_table_mut() else {
             return err(&format!("drive.{group}"), "must be a table of settings");
         };
-        if table.contains_key(key) && !overwrite {
+        if table.contains_key(key) {
             return err(
                 &format!("drive.{flat}"),
                 &format!("is also given as drive.{group}.{key}: keep only the grouped key"),
@@ -1249,12 +1243,17 @@ impl Scenario {
         let mut v = toml::Value::try_from(self).or_else(|e| err("(scenario)", &format!("{e}")))?;
         let mut notes = self.notes.clone();
         for s in sets {
-            apply_override(&mut v, s)?;
-            notes.extend(
-                regroup(&mut v, true)?
-                    .into_iter()
-                    .map(|n| format!("--set {s}: {n}")),
-            );
+            // a flat `[drive]` key of the earlier layout names its grouped key (set in
+            // place: the group's other keys keep their values)
+            let grouped = s.split_once('=').and_then(|(k, val)| {
+                let flat = k.trim().strip_prefix("drive.")?;
+                let (_, group, key) = DRIVE_GROUP_KEYS.iter().find(|(f, ..)| *f == flat)?;
+                notes.push(format!(
+                    "--set {s}: drive.{flat} is deprecated: write it as drive.{group}.{key}"
+                ));
+                Some(format!("drive.{group}.{key}={val}"))
+            });
+            apply_override(&mut v, grouped.as_deref().unwrap_or(s))?;
             // check each override on its own, so an error names the `--set` that caused it
             Self::from_value(v.clone(), "--set").map_err(|e| ScenarioError {
                 field: s

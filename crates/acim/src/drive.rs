@@ -1417,8 +1417,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// The running offset tracker ([`crate::offset_tracker`]): the tracked drift (last
     /// step's estimate) out of the current `i_ab` (A); the tracker reads the voltage `v_ab`
     /// applied over the past period (V) less Rs_hat times that current (its DC part: the
-    /// drift's). With a slow task it sums that every period and adapts on the slow
-    /// period's mean at the tick (`slow`). Returns the corrected current.
+    /// drift's). With a slow task it sums that every period, and the slow task adapts on
+    /// the slow period's mean ([`Drive::run_slow`]). Returns the corrected current.
     #[inline(always)]
     fn track_offsets(
         &mut self,
@@ -2492,6 +2492,48 @@ mod tests {
             &d.coeffs().inverter_tracker,
             d.refs.start.inverter.correction_duty
         ));
+    }
+
+    /// With a slow task, a slow tick's fast part hands the slow task its inputs and
+    /// `run_slow` takes them once; a fault or a stop between the two drops them (the
+    /// slow task then changes nothing); without a slow task nothing is handed over.
+    #[test]
+    fn a_slow_tick_hands_over_once_and_a_stop_or_fault_drops_it() {
+        for case in ["run", "stop", "fault"] {
+            let mut cfg = synthetic_defaults();
+            cfg.loops.slow_period = crate::design::TYPICAL_SLOW_PERIOD;
+            cfg.limits.sensor_check = false;
+            let mut d = powered(Drive::new(cfg).unwrap());
+            d.set_speed_target(100.0).unwrap();
+            d.start().unwrap();
+            let mut steps = 0;
+            while (d.state() != DriveState::Running || !d.slow_tick_due()) && steps < 20_000 {
+                d.step(&following(&d));
+                steps += 1;
+            }
+            assert_eq!(d.state(), DriveState::Running);
+            d.step_fast(&following(&d));
+            assert!(d.slow_pending());
+            let target = d.refs.current.target;
+            match case {
+                "stop" => d.stop(),
+                "fault" => {
+                    d.trip(FaultReason::DeadlineMissed);
+                }
+                _ => {}
+            }
+            d.run_slow();
+            assert!(!d.slow_pending());
+            // the speed loop, ramping towards 100 rad/s, asks for torque current
+            let aimed = d.refs.current.target.q != target.q;
+            assert_eq!(aimed, case == "run", "{case}");
+        }
+        let mut d = powered(Drive::new(synthetic_defaults()).unwrap());
+        d.start().unwrap();
+        for _ in 0..10 {
+            d.step_fast(&following(&d));
+            assert!(!d.slow_pending());
+        }
     }
 
     /// A running drive takes a retuning but not another slow period (its slow stages'
