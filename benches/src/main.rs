@@ -77,7 +77,7 @@ const CLOCK_MHZ: f64 = 170.0;
 
 /// The regions of the JSON report (marker regions, without the calibration one), in the
 /// order of the step.
-const REPORT_REGIONS: [&str; 16] = [
+const REPORT_REGIONS: [&str; 20] = [
     "sincos",
     "clarke_park",
     "current_pi",
@@ -94,6 +94,10 @@ const REPORT_REGIONS: [&str; 16] = [
     "two_rate_fast",
     "two_rate_tick",
     "two_rate_slow",
+    "drive_step_loaded",
+    "two_rate_fast_loaded",
+    "two_rate_tick_loaded",
+    "two_rate_slow_loaded",
 ];
 
 fn main() {
@@ -185,7 +189,16 @@ fn run(
     let calib_root = dis
         .function_named(|n| n == "bench_calibrate")
         .ok_or("cannot find bench_calibrate")?;
+    // the same steps at the steady loaded point
+    let loaded_roots = ["bench_region_drive_step_loaded", "bench_region_two_rates_loaded"]
+        .iter()
+        .map(|r| {
+            dis.function_named(|n| n == *r)
+                .ok_or(format!("cannot find {r}"))
+        })
+        .collect::<Res<Vec<_>>>()?;
     let mut roots = vec![shadow_root, drive_root, two_rate_root, calib_root];
+    roots.extend(loaded_roots);
     roots.extend(markers.values().map(|m| m.func));
     let measured_graph = dis.reachable(&roots);
 
@@ -268,6 +281,12 @@ fn run(
             .map(|r| r.6)
             .unwrap_or(f64::NAN)
     };
+    let max_c = |n: &str| {
+        rows.iter()
+            .find(|r| r.0 == n)
+            .map(|r| r.7 as f64)
+            .unwrap_or(f64::NAN)
+    };
     let ratio = mean_c("observer_full_order") / mean_c("observer_reduced");
 
     // ---- the fixed-point path on the Cortex-M4F and the Cortex-M3
@@ -341,6 +360,27 @@ fn run(
         (
             "drive_step mean <= 750 est. cycles",
             mean_c("drive_step") <= 750.0,
+        ),
+        (
+            "observer_reduced max <= 75 est. cycles",
+            max_c("observer_reduced") <= 75.0,
+        ),
+        // the two-rate targets, on the ramp and at the steady loaded point
+        (
+            "two_rate_fast max <= 800 est. cycles",
+            max_c("two_rate_fast") <= 800.0,
+        ),
+        (
+            "two_rate_fast_loaded max <= 800 est. cycles",
+            max_c("two_rate_fast_loaded") <= 800.0,
+        ),
+        (
+            "two_rate_slow max <= 1500 est. cycles",
+            max_c("two_rate_slow") <= 1500.0,
+        ),
+        (
+            "two_rate_slow_loaded max <= 1500 est. cycles",
+            max_c("two_rate_slow_loaded") <= 1500.0,
         ),
     ];
     for (t, ok) in targets {
@@ -685,7 +725,9 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
         "control interrupt ({}), Cortex-M4 model, zero wait states (CCM SRAM):",
         elf.display()
     );
-    for phase in ["magnetizing", "running"] {
+    // the R-L load's phases (magnetizing, running) and the motor model's steady loaded
+    // point, one rate and with a 1 ms slow task (the control interrupt alone)
+    for phase in ["magnetizing", "running", "loaded", "loaded_two_rate"] {
         let path = dir.join(format!("fil-isr-trace-{phase}.txt"));
         let text =
             std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -2334,6 +2376,10 @@ mod tests {
         assert!(!s.drive_faulted, "{s:?}");
         assert_eq!(s.two_rate_measured, scenario::MEASURED_STEPS, "{s:?}");
         assert!(!s.two_rate_faulted, "{s:?}");
+        // the steady loaded point: reached and held (500 rpm under 1.5 N m)
+        assert_eq!(s.loaded_measured, scenario::LOADED_STEPS, "{s:?}");
+        assert_eq!(s.two_rate_loaded_measured, scenario::LOADED_STEPS, "{s:?}");
+        assert!((s.loaded_true_rpm - scenario::SPEED_TARGET_RPM).abs() < 5.0, "{s:?}");
         assert!(s.full_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.reduced_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.flux_mean_abs_err_rpm < 10.0, "{s:?}");

@@ -33,7 +33,7 @@ use acim::svpwm::SvpwmConfig;
 use acim_plant::{LoadTorque, Plant, PwmPreload};
 
 /// Region names in marker-id order (id = index). `empty` calibrates the marker overhead.
-pub const REGIONS: [&str; 17] = [
+pub const REGIONS: [&str; 21] = [
     "empty",
     "fault_checks",
     "sincos",
@@ -51,14 +51,25 @@ pub const REGIONS: [&str; 17] = [
     "two_rate_fast",
     "two_rate_tick",
     "two_rate_slow",
+    "drive_step_loaded",
+    "two_rate_fast_loaded",
+    "two_rate_tick_loaded",
+    "two_rate_slow_loaded",
 ];
 
 /// Steps from `start()` on (magnetising, with the speed search, the inverter test at
 /// start and the standstill Rs identification, is about 4400 steps), then this many
 /// measured `Running` steps.
 pub const MEASURED_STEPS: u32 = 2000;
+/// Running steps from which the steady loaded point is measured: the ramp reaches
+/// [`SPEED_TARGET_RPM`] after 1 s of running (5000 steps at 500 rpm/s) and the load has
+/// been on since [`LOAD_FROM_STEP`]; 0.4 s later the speed and the estimators have
+/// settled.
+pub const LOADED_FROM_STEP: u32 = 7000;
+/// Running steps measured at the steady loaded point (the `*_loaded` regions).
+pub const LOADED_STEPS: u32 = 1000;
 /// Upper bound on the whole run, steps.
-pub const MAX_STEPS: u32 = 10000;
+pub const MAX_STEPS: u32 = 16000;
 /// Speed target, rpm.
 pub const SPEED_TARGET_RPM: f32 = 500.0;
 /// Passive load (paper Fig. 7: 1.5 N m) applied from this measured step on.
@@ -171,6 +182,10 @@ markers! {
     14 => bench_begin_two_rate_fast, bench_end_two_rate_fast;
     15 => bench_begin_two_rate_tick, bench_end_two_rate_tick;
     16 => bench_begin_two_rate_slow, bench_end_two_rate_slow;
+    17 => bench_begin_drive_step_loaded, bench_end_drive_step_loaded;
+    18 => bench_begin_two_rate_fast_loaded, bench_end_two_rate_fast_loaded;
+    19 => bench_begin_two_rate_tick_loaded, bench_end_two_rate_tick_loaded;
+    20 => bench_begin_two_rate_slow_loaded, bench_end_two_rate_slow_loaded;
 }
 
 /// Calls the marker pair of each region of `Drive::step_probed`.
@@ -388,6 +403,64 @@ pub fn bench_region_two_rates(drive: &mut Drive, inp: &DriveInputs, on: bool) ->
     out
 }
 
+/// [`bench_region_drive_step`] at the steady loaded point (`drive_step_loaded`): every
+/// estimator path live (the Rs law, the trackers at speed under load).
+#[inline(never)]
+#[no_mangle]
+pub fn bench_region_drive_step_loaded(
+    drive: &mut Drive,
+    inp: &DriveInputs,
+    on: bool,
+) -> PwmOutput {
+    if on {
+        bench_begin_drive_step_loaded();
+    }
+    let out = drive.step(black_box(inp));
+    let out = black_box(out);
+    if on {
+        bench_end_drive_step_loaded();
+    }
+    out
+}
+
+/// [`bench_region_two_rates`] at the steady loaded point (`two_rate_fast_loaded`,
+/// `two_rate_tick_loaded`, `two_rate_slow_loaded`).
+#[inline(never)]
+#[no_mangle]
+pub fn bench_region_two_rates_loaded(
+    drive: &mut Drive,
+    inp: &DriveInputs,
+    on: bool,
+) -> PwmOutput {
+    let tick = drive.slow_tick_due();
+    if on {
+        if tick {
+            bench_begin_two_rate_tick_loaded();
+        } else {
+            bench_begin_two_rate_fast_loaded();
+        }
+    }
+    let out = drive.step_fast(black_box(inp));
+    let out = black_box(out);
+    if on {
+        if tick {
+            bench_end_two_rate_tick_loaded();
+        } else {
+            bench_end_two_rate_fast_loaded();
+        }
+    }
+    if drive.slow_pending() {
+        if on {
+            bench_begin_two_rate_slow_loaded();
+        }
+        drive.run_slow();
+        if on {
+            bench_end_two_rate_slow_loaded();
+        }
+    }
+    out
+}
+
 /// The calibration region: begin immediately followed by end, eight times.
 #[inline(never)]
 #[no_mangle]
@@ -427,6 +500,12 @@ pub struct Summary {
     pub two_rate_measured: u32,
     /// Whether the two-rate drive faulted.
     pub two_rate_faulted: bool,
+    /// Steps measured at the steady loaded point.
+    pub loaded_measured: u32,
+    /// True speed at the end of the steady loaded point, rpm.
+    pub loaded_true_rpm: f32,
+    /// Steps of the two-rate run measured at the steady loaded point.
+    pub two_rate_loaded_measured: u32,
 }
 
 /// Runs the scenario: start, magnetise, ramp to [`SPEED_TARGET_RPM`], load step; the
@@ -523,21 +602,51 @@ pub fn run() -> Summary {
     s.true_rpm = plant.speed() / RPM_TO_RAD_S;
     s.reduced_rpm = drive.telemetry().speed_estimate / RPM_TO_RAD_S;
     s.full_rpm = passenger.speed() / RPM_TO_RAD_S;
+    // on to the steady loaded point (unmeasured), then the step measured there
+    let mut running = s.measured;
+    while !s.drive_faulted && s.steps < MAX_STEPS && running < LOADED_FROM_STEP + LOADED_STEPS {
+        let meas = plant.sample();
+        let inp = DriveInputs {
+            phase_currents: meas.phase_currents,
+            dc_bus: meas.dc_bus,
+        };
+        let on = drive.state() == DriveState::Running && running >= LOADED_FROM_STEP;
+        let out = bench_region_drive_step_loaded(drive, &inp, on);
+        plant.run_pwm_period(
+            pwm.advance(out),
+            LoadTorque::Passive {
+                torque: LOAD_TORQUE,
+            },
+        );
+        s.steps += 1;
+        if drive.state() == DriveState::Running {
+            running += 1;
+        }
+        if on {
+            s.loaded_measured += 1;
+        }
+        if drive.state() == DriveState::Fault {
+            s.drive_faulted = true;
+        }
+    }
+    s.loaded_true_rpm = plant.speed() / RPM_TO_RAD_S;
     s.full_mean_abs_err_rpm = err_full / n / RPM_TO_RAD_S;
     s.reduced_mean_abs_err_rpm = err_red / n / RPM_TO_RAD_S;
     s.flux_mean_abs_err_rpm = err_flux / n / RPM_TO_RAD_S;
-    let (measured, faulted) = run_two_rates();
+    let (measured, loaded, faulted) = run_two_rates();
     s.two_rate_measured = measured;
+    s.two_rate_loaded_measured = loaded;
     s.two_rate_faulted = faulted;
     s
 }
 
 /// The same scenario closed by the two-rate drive ([`bench_config_two_rates`]), with its
-/// own plant: (running steps measured, whether it faulted).
-fn run_two_rates() -> (u32, bool) {
+/// own plant, on to the steady loaded point: (running steps measured on the ramp, at the
+/// loaded point, whether it faulted).
+fn run_two_rates() -> (u32, u32, bool) {
     let cfg = black_box(bench_config_two_rates());
     let Ok(mut drive) = Drive::new(cfg) else {
-        return (0, true);
+        return (0, 0, true);
     };
     let mut plant = Plant::paper_default(1);
     plant.set_substeps(PLANT_SUBSTEPS);
@@ -545,15 +654,25 @@ fn run_two_rates() -> (u32, bool) {
     let _ = drive.set_speed_target(SPEED_TARGET_RPM * RPM_TO_RAD_S);
     let _ = drive.start();
     let drive = black_box(&mut drive);
-    let (mut steps, mut measured) = (0, 0);
-    while steps < MAX_STEPS && measured < MEASURED_STEPS {
+    let (mut steps, mut measured, mut loaded) = (0, 0, 0);
+    while steps < MAX_STEPS && measured < LOADED_FROM_STEP + LOADED_STEPS {
         let meas = plant.sample();
         let inp = DriveInputs {
             phase_currents: meas.phase_currents,
             dc_bus: meas.dc_bus,
         };
-        let on = drive.state() == DriveState::Running;
-        let out = bench_region_two_rates(drive, &inp, on);
+        let running = drive.state() == DriveState::Running;
+        // the ramp's first measured steps, then the steady loaded point
+        let out = if measured < MEASURED_STEPS {
+            bench_region_two_rates(drive, &inp, running)
+        } else {
+            let on = running && measured >= LOADED_FROM_STEP;
+            if on {
+                loaded += 1;
+            }
+            bench_region_two_rates_loaded(drive, &inp, on)
+        };
+        let on = running;
         let load = if measured >= LOAD_FROM_STEP {
             LoadTorque::Passive {
                 torque: LOAD_TORQUE,
@@ -567,8 +686,8 @@ fn run_two_rates() -> (u32, bool) {
             measured += 1;
         }
         if drive.state() == DriveState::Fault {
-            return (measured, true);
+            return (measured.min(MEASURED_STEPS), loaded, true);
         }
     }
-    (measured, false)
+    (measured.min(MEASURED_STEPS), loaded, false)
 }

@@ -1040,6 +1040,10 @@ class Machine:
                         self.slow_isr_runs += 1
                         if c is not None:
                             self.slow_isr_instructions.append(c)
+                        if self.trace_isr:
+                            # the control interrupt's traces only (the slow task runs
+                            # from flash: not weighed as CCM code)
+                            self.isr_traces.pop()
                     elif c is not None:
                         self.isr_instructions.append(c)
                     if self.halted is not None:

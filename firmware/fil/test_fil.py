@@ -919,6 +919,28 @@ class SelfTest(unittest.TestCase):
         self.assertLess(abs(load - 1.5), 0.1, frames[-1])
 
 
+def trace_loaded_interrupts(m, phase):
+    """At the steady loaded point (500 rpm, 1.5 N m): 200 control interrupts traced to
+    target/fil-isr-trace-<phase>.txt, which the cycle bench weighs with its Cortex-M4
+    model (`acim-bench --weigh-isr`), beside the R-L load's phases."""
+    m.count_isr = True
+    m.trace_isr = True
+    m.isr_instructions = []
+    m.isr_traces = []
+    m.run(200)
+    m.count_isr = False
+    m.trace_isr = False
+    n = m.isr_instructions
+    assert len(m.isr_traces) == len(n) == 200, (len(m.isr_traces), len(n))
+    print(f"control interrupt (power-stage build, {phase}): min {min(n)} mean "
+          f"{sum(n) / len(n):.1f} max {max(n)}", file=sys.stderr)
+    target = os.path.join(HERE, "..", "..", "target")
+    os.makedirs(target, exist_ok=True)
+    with open(os.path.join(target, f"fil-isr-trace-{phase}.txt"), "w") as f:
+        for t in m.isr_traces:
+            f.write(" ".join(f"{a:x}" for a in t) + "\n")
+
+
 class PowerStage(unittest.TestCase):
     def test_power_stage_build_drives_the_motor_model_to_500_rpm(self):
         """The unmodified power-stage ELF closed loop: TIM1's compare registers drive the
@@ -930,6 +952,7 @@ class PowerStage(unittest.TestCase):
         task nothing pends the slow task's interrupt."""
         m = self.drive_to_500_rpm_and_step("")
         self.assertEqual(m.slow_isr_runs, 0)
+        trace_loaded_interrupts(m, "loaded")
 
     def test_power_stage_build_with_a_1_ms_slow_task(self):
         """The same with `set loops.slow_period 1`: the speed loop, field weakening, the
@@ -946,6 +969,7 @@ class PowerStage(unittest.TestCase):
         m.run(200)
         self.assertEqual(len(m.slow_isr_instructions), 40)
         fast = m.isr_instructions[-200:]
+        trace_loaded_interrupts(m, "loaded_two_rate")
         print(f"slow task: {m.slow_isr_runs} interrupts; the last 200 periods: control "
               f"interrupt {min(fast)}..{max(fast)} instructions, slow task "
               f"{min(m.slow_isr_instructions)}..{max(m.slow_isr_instructions)}",

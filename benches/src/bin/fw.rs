@@ -37,7 +37,7 @@ mod fw {
         }
         let s = scenario::run();
         hprintln!(
-            "ACIM-BENCH summary steps={} measured={} mismatches={} replica_faults={} drive_faulted={} true_rpm={} reduced_rpm={} full_rpm={} reduced_err_rpm={} full_err_rpm={} two_rate_measured={} two_rate_faulted={}",
+            "ACIM-BENCH summary steps={} measured={} mismatches={} replica_faults={} drive_faulted={} true_rpm={} reduced_rpm={} full_rpm={} reduced_err_rpm={} full_err_rpm={} two_rate_measured={} two_rate_faulted={} loaded_measured={} loaded_true_rpm={} two_rate_loaded_measured={}",
             s.steps,
             s.measured,
             s.mismatches,
@@ -49,7 +49,10 @@ mod fw {
             s.reduced_mean_abs_err_rpm,
             s.full_mean_abs_err_rpm,
             s.two_rate_measured,
-            s.two_rate_faulted as u8
+            s.two_rate_faulted as u8,
+            s.loaded_measured,
+            s.loaded_true_rpm,
+            s.two_rate_loaded_measured
         );
         #[cfg(feature = "dwt")]
         report_dwt();
