@@ -190,13 +190,16 @@ fn run(
         .function_named(|n| n == "bench_calibrate")
         .ok_or("cannot find bench_calibrate")?;
     // the same steps at the steady loaded point
-    let loaded_roots = ["bench_region_drive_step_loaded", "bench_region_two_rates_loaded"]
-        .iter()
-        .map(|r| {
-            dis.function_named(|n| n == *r)
-                .ok_or(format!("cannot find {r}"))
-        })
-        .collect::<Res<Vec<_>>>()?;
+    let loaded_roots = [
+        "bench_region_drive_step_loaded",
+        "bench_region_two_rates_loaded",
+    ]
+    .iter()
+    .map(|r| {
+        dis.function_named(|n| n == *r)
+            .ok_or(format!("cannot find {r}"))
+    })
+    .collect::<Res<Vec<_>>>()?;
     let mut roots = vec![shadow_root, drive_root, two_rate_root, calib_root];
     roots.extend(loaded_roots);
     roots.extend(markers.values().map(|m| m.func));
@@ -2379,7 +2382,10 @@ mod tests {
         // the steady loaded point: reached and held (500 rpm under 1.5 N m)
         assert_eq!(s.loaded_measured, scenario::LOADED_STEPS, "{s:?}");
         assert_eq!(s.two_rate_loaded_measured, scenario::LOADED_STEPS, "{s:?}");
-        assert!((s.loaded_true_rpm - scenario::SPEED_TARGET_RPM).abs() < 5.0, "{s:?}");
+        assert!(
+            (s.loaded_true_rpm - scenario::SPEED_TARGET_RPM).abs() < 5.0,
+            "{s:?}"
+        );
         assert!(s.full_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.reduced_mean_abs_err_rpm < 10.0, "{s:?}");
         assert!(s.flux_mean_abs_err_rpm < 10.0, "{s:?}");

@@ -269,7 +269,10 @@ impl Passenger {
             full: FullOrderObserver::new(),
             flux_cfg: FluxObserverConfig::new(
                 &m,
-                FluxObserverDesign::defaults(cfg.limits.max_speed),
+                FluxObserverDesign::defaults(
+                    cfg.limits.max_speed,
+                    m.magnetizing_inductance() * cfg.loops.flux_current,
+                ),
                 cfg.loops.control_period,
             )
             .ok()?,
@@ -407,11 +410,7 @@ pub fn bench_region_two_rates(drive: &mut Drive, inp: &DriveInputs, on: bool) ->
 /// estimator path live (the Rs law, the trackers at speed under load).
 #[inline(never)]
 #[no_mangle]
-pub fn bench_region_drive_step_loaded(
-    drive: &mut Drive,
-    inp: &DriveInputs,
-    on: bool,
-) -> PwmOutput {
+pub fn bench_region_drive_step_loaded(drive: &mut Drive, inp: &DriveInputs, on: bool) -> PwmOutput {
     if on {
         bench_begin_drive_step_loaded();
     }
@@ -427,11 +426,7 @@ pub fn bench_region_drive_step_loaded(
 /// `two_rate_tick_loaded`, `two_rate_slow_loaded`).
 #[inline(never)]
 #[no_mangle]
-pub fn bench_region_two_rates_loaded(
-    drive: &mut Drive,
-    inp: &DriveInputs,
-    on: bool,
-) -> PwmOutput {
+pub fn bench_region_two_rates_loaded(drive: &mut Drive, inp: &DriveInputs, on: bool) -> PwmOutput {
     let tick = drive.slow_tick_due();
     if on {
         if tick {

@@ -1787,6 +1787,7 @@ impl Scenario {
                 &drive.machine,
                 drive.loops.control_period,
                 drive.limits.max_speed,
+                drive.loops.flux_current,
             )
             .map_err(|e| ScenarioError {
                 field: "drive.observer".into(),

@@ -441,6 +441,7 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
                 &v.drive.machine,
                 v.drive.loops.control_period,
                 v.drive.limits.max_speed,
+                v.drive.loops.flux_current,
             )
             .map_err(|e| ScenarioError {
                 field: "drive.observer".into(),

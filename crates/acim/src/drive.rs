@@ -1484,6 +1484,13 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // observer, with the voltage applied over the past period and the flux state of
         // the last step
         probe.begin(StepRegion::ObserverReduced);
+        // an observer with its own flux angle: the pull of the model's frame onto it,
+        // from the two frames at this sample (before the observer's update)
+        let frame_pull = if O::FRAME_LOCK && !frame_held {
+            self.est.observer.frame_pull(&m.sc)
+        } else {
+            N::ZERO
+        };
         let observer = self.observe(m, magnetizing, frame_held);
         probe.end(StepRegion::ObserverReduced);
         // stator resistance (eq. 19-20): the current model of eq. (20) runs every step
@@ -1494,7 +1501,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let rs = self.estimate_rs(m, frame_held, flux_settled, ws_prev);
         probe.end(StepRegion::RsEstimator);
         probe.begin(StepRegion::FluxSlip);
-        self.flux_and_angle(m, &observer, magnetizing, frame_held, rs);
+        self.flux_and_angle(m, &observer, magnetizing, frame_held, rs, frame_pull);
         probe.end(StepRegion::FluxSlip);
         Estimate {
             observer,
@@ -1611,7 +1618,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
 
     /// Orientation correction, rotor-resistance adaptation, flux model, slip law and frame
     /// angle (eq. 13, 8) with p Omega_hat: sensorless.
-    /// `rs` is this step's Rs_hat (ohm); the flux state is still the last step's.
+    /// `rs` is this step's Rs_hat (ohm), `frame_pull` the frame lock's frequency (rad/s
+    /// electrical, 0 without one); the flux state is still the last step's.
     #[inline(always)]
     fn flux_and_angle(
         &mut self,
@@ -1620,6 +1628,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         magnetizing: bool,
         frame_held: bool,
         rs: N,
+        frame_pull: N,
     ) {
         let c = &self.cfg.coeffs;
         let est = &mut self.est;
@@ -1629,7 +1638,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let weakened = self.prev.fw_active;
         // (also while a flying start magnetizes in the turning frame: the residual of a
         // speed error locks the frame onto the rotor as the flux builds)
-        let correction = if !O::ORIENTATION_CORRECTION {
+        let correction = if O::FRAME_LOCK {
+            frame_pull
+        } else if !O::ORIENTATION_CORRECTION {
             N::ZERO
         } else if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)

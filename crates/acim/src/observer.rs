@@ -397,6 +397,19 @@ pub trait SpeedObserver<N: Num = f32> {
     /// [`crate::rs_estimator::RsRunningConfig::max_frequency`], where the resistive drop
     /// is observable against inductance errors (Rs/L_M).
     const RS_RUNNING_AT_SPEED: bool = true;
+    /// Whether the observer estimates the rotor-flux angle itself and the drive's frame
+    /// follows it ([`SpeedObserver::frame_pull`]): the rotor-flux model's angle is then
+    /// locked to the observer's, so that the model's own orientation errors (a speed
+    /// estimate's lag through 1/tau_r, an R_R error) do not reach the field orientation.
+    const FRAME_LOCK: bool = false;
+    /// With [`SpeedObserver::FRAME_LOCK`]: the frequency (rad/s electrical) to add to the
+    /// rotor-flux model's frame frequency so that it follows the observer's angle, given
+    /// the model's frame at this sample (`model`), before this step's update.
+    #[inline(always)]
+    fn frame_pull(&self, model: &crate::frames::SinCosValue<N>) -> N {
+        let _ = model;
+        N::ZERO
+    }
     /// One step. `coeffs` are the reduced-order observer's design (eq. 12, 14) built with
     /// the drive's; another observer holds its own design and may ignore them.
     fn update(
