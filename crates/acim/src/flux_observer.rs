@@ -562,7 +562,7 @@ impl crate::observer::SpeedObserver for FluxObserver {
         if self.state.flux <= self.cfg.flux_floor || ws <= w1 {
             return 0.0;
         }
-        // faded in from w1 to 2 w1 (w1 > 0 here: ws > w1 >= 0)
+        // faded in from w1 to 2 w1 (w1 = 3 Rs/L_M > 0: MachineParams takes Rs, L_M > 0)
         let weight = ((ws - w1) / w1).min(1.0);
         let (c, s) = (self.state.cos, self.state.sin);
         weight * self.cfg.frame_bandwidth * (s * model.cos - c * model.sin)
