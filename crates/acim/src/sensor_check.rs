@@ -49,7 +49,10 @@
 //! astray when   |moved| >= still_threshold
 //!           and |residual| > astray_ratio |change| + allowance
 //! fault when a judged channel is still and no channel is astray, in this window or
-//!       (twice running) in the ASTRAY_HOLD windows before
+//!       (twice running) in the ASTRAY_HOLD windows before, and, within ASTRAY_HOLD
+//!       windows of one with a channel astray, a witness: a judged channel on the
+//!       model (|residual| <= astray_ratio |change| + allowance) or every channel
+//!       reading about zero (|i_meas,x| < still_threshold)
 //! ```
 //!
 //! A failed sensor stands still (a dead channel reads its zero code, a stuck one its last
@@ -61,6 +64,17 @@
 //! the other channel misses the model while moving. Both conditions keep these faults
 //! for the detectors that name them (`Stall`, `OverCurrent`, `CurrentRegulation`,
 //! `LossOfControl`), however far the model is off.
+//!
+//! The witness closes the one gap those two conditions leave: a window in which only one
+//! channel is judged. After a locked rotor the model's back-EMF is the running machine's
+//! until the speed estimate falls, so every channel misses the prediction; a moving
+//! channel shows it (astray), but when the current loops hold the current near its
+//! reference a channel can stand still in the next window while it alone is judged: at
+//! 20 and 40 kHz (`fault-locked-rotor`, 500 rpm) the check named the locked rotor
+//! `CurrentSensor` 3.2 ms after it, the window after the one astray, before the stall
+//! detector's 27 ms.
+//! A failed sensor leaves a witness: a healthy channel on the model, or (every channel
+//! dead) all of them at zero; a stuck channel away from such a break needs none.
 //!
 //! where `allowance = RESISTANCE_UNCERTAINTY R_sigma Ts/(sigma Ls) |sum (i - i_filtered)|`
 //! over the window covers a resistance error on the part of the current the bias has not
@@ -348,6 +362,10 @@ pub struct SensorCheck<N: Num = f32> {
     astray_hold: u32,
     /// The last window had a moving channel missing the model.
     astray_last: bool,
+    /// Windows left, after one in which a moving channel missed the model, during which
+    /// a standing channel is judged a failed sensor only with a channel on the model (or
+    /// every channel at zero) beside it.
+    astray_recent: u32,
 }
 
 impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
@@ -361,6 +379,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         self.primed = false;
         self.astray_hold = 0;
         self.astray_last = false;
+        self.astray_recent = 0;
         self.window.count = 0;
         self.window.voltage_sum = Dq::default();
         self.window.current_sum = Dq::default();
@@ -462,22 +481,29 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         // channel away from the model, module docs)
         let mut still = false;
         let mut astray = false;
+        // the evidence that the model holds where the sensors do: a judged channel on the
+        // model, or every channel at its zero (dead sensing, which leaves none to follow)
+        let mut followed = false;
+        let mut all_zero = true;
         for ((&p, &start), &meas) in phases
             .iter()
             .zip(self.window.start_phases.iter())
             .zip(measured.iter())
             .take(judged)
         {
+            all_zero &= meas.abs() < cfg.still_threshold;
             let change = (p - start).abs();
             let moved = (meas - start).abs();
             let residual = (meas - p).abs();
             if change <= cfg.change_threshold {
                 continue;
             }
+            let on_model = residual <= N::gain(cfg.astray_ratio, change) + allowance;
+            followed |= on_model;
             if moved < cfg.still_threshold {
                 still |= residual > N::gain(cfg.response_ratio, change) + allowance;
             } else {
-                astray |= residual > N::gain(cfg.astray_ratio, change) + allowance;
+                astray |= !on_model;
             }
         }
         // a machine fault's current runs away for some windows: a channel missing while
@@ -489,9 +515,14 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
             self.astray_hold = self.astray_hold.saturating_sub(1);
         }
         self.astray_last = astray;
-
-        let fault =
-            (still && !astray && self.astray_hold == 0).then_some(FaultReason::CurrentSensor);
+        let corroborated = followed || all_zero || self.astray_recent == 0;
+        self.astray_recent = if astray {
+            ASTRAY_HOLD
+        } else {
+            self.astray_recent.saturating_sub(1)
+        };
+        let fault = (still && !astray && self.astray_hold == 0 && corroborated)
+            .then_some(FaultReason::CurrentSensor);
         self.bias.d = self.bias.d + N::gain(cfg.bias_gain, eps.d - self.bias.d);
         self.bias.q = self.bias.q + N::gain(cfg.bias_gain, eps.q - self.bias.q);
         self.filtered.d = self.filtered.d + N::gain(cfg.bias_gain, inp.current.d - self.filtered.d);
