@@ -729,8 +729,15 @@ fn weigh_isr_traces(elf: &Path, dir: &Path, check: bool, update: bool) -> Res<bo
         elf.display()
     );
     // the R-L load's phases (magnetizing, running) and the motor model's steady loaded
-    // point, one rate and with a 1 ms slow task (the control interrupt alone)
-    for phase in ["magnetizing", "running", "loaded", "loaded_two_rate"] {
+    // point, one rate, with a 1 ms slow task (the control interrupt alone) and with the
+    // flux observer (`estimation.observer 1`)
+    for phase in [
+        "magnetizing",
+        "running",
+        "loaded",
+        "loaded_two_rate",
+        "loaded_flux",
+    ] {
         let path = dir.join(format!("fil-isr-trace-{phase}.txt"));
         let text =
             std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;

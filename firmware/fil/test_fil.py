@@ -533,8 +533,8 @@ class Settings(unittest.TestCase):
         # another format version (CRC made to match): refused too
         import zlib
         other = bytearray(m.settings_pages())
-        other[4:6] = (4).to_bytes(2, "little")
-        other[72:76] = zlib.crc32(bytes(other[:72])).to_bytes(4, "little")
+        other[4:6] = (5).to_bytes(2, "little")
+        other[76:80] = zlib.crc32(bytes(other[:76])).to_bytes(4, "little")
         m6 = self.boot(bytes(other))
         self.assertIn("page A refused: record of another format version", m6.output())
         self.assertEqual(self.get(m6, "limits.current_limit"), default_limit)
@@ -975,9 +975,21 @@ class PowerStage(unittest.TestCase):
               f"{min(m.slow_isr_instructions)}..{max(m.slow_isr_instructions)}",
               file=sys.stderr)
 
-    def drive_to_500_rpm_and_step(self, slow_period):
+    def test_power_stage_build_with_the_flux_observer(self):
+        """The same with `set estimation.observer 1`: the flux observer with speed
+        adaptation (`acim::flux_observer`) in place of the paper's, chosen by the setting
+        on the same ELF; the same bounds, and the control interrupt traced at the loaded
+        point (`loaded_flux`)."""
+        m = self.drive_to_500_rpm_and_step("", observer="1")
+        trace_loaded_interrupts(m, "loaded_flux")
+
+    def drive_to_500_rpm_and_step(self, slow_period, observer=""):
         motor = fil.InductionMotorLoad()
         m = booted(load=motor)
+        if observer:
+            self.assertIn("ok estimation.observer applied",
+                          command(m, f"set estimation.observer {observer}", 5))
+            m.run(600)
         if slow_period:
             self.assertIn("ok loops.slow_period applied",
                           command(m, f"set loops.slow_period {slow_period}", 5))
@@ -991,7 +1003,8 @@ class PowerStage(unittest.TestCase):
         self.assertGreater(len(frames), 10)
         f = frames[-1].split("*")[0].split(",")
         state, fault, est = int(f[2]), int(f[3]), int(f[5]) / 10
-        print(f"\npower stage closed loop (slow period {slow_period or 0} ms): motor "
+        print(f"\npower stage closed loop (slow period {slow_period or 0} ms, observer "
+              f"{observer or 0}): motor "
               f"{motor.speed_rpm:.1f} rpm, estimate {est}", file=sys.stderr)
         self.assertEqual((state, fault), (2, 0), frames[-1])
         self.assertLess(abs(motor.speed_rpm - 500), 25, frames[-1])

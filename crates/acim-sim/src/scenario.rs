@@ -1761,6 +1761,16 @@ impl Scenario {
             board = Some(b);
             drive = cfg;
         }
+        drive.estimation.observer = match d.observer {
+            ObserverKind::Flux => acim::ObserverChoice::Flux,
+            ObserverKind::Reduced | ObserverKind::FullOrder => acim::ObserverChoice::Reduced,
+        };
+        if d.observer == ObserverKind::Flux && d.arithmetic == Arithmetic::Fixed {
+            return err(
+                "drive.observer",
+                "\"flux\" runs in f32 only (drive.arithmetic = \"f32\")",
+            );
+        }
         acim::Drive::new(drive).map_err(|e| config_error(e, self.nameplate.is_some()))?;
         if d.observer == ObserverKind::FullOrder {
             if d.arithmetic == Arithmetic::Fixed {
@@ -1775,24 +1785,6 @@ impl Scenario {
                     allowed: format!("a valid full-order design ({e:?})"),
                 },
             )?;
-        }
-        if d.observer == ObserverKind::Flux {
-            if d.arithmetic == Arithmetic::Fixed {
-                return err(
-                    "drive.observer",
-                    "\"flux\" runs in f32 only (drive.arithmetic = \"f32\")",
-                );
-            }
-            acim::flux_observer::FluxObserver::new(
-                &drive.machine,
-                drive.loops.control_period,
-                drive.limits.max_speed,
-                drive.loops.flux_current,
-            )
-            .map_err(|e| ScenarioError {
-                field: "drive.observer".into(),
-                allowed: format!("a valid flux-observer design ({e:?})"),
-            })?;
         }
         if d.modulation == ModulationKind::Overmodulation && d.arithmetic == Arithmetic::Fixed {
             return err(

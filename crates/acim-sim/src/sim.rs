@@ -11,7 +11,6 @@ use crate::scenario::{
     Arithmetic, ControlMode, ModulationKind, ObserverKind, Scenario, ScenarioError, Validated,
 };
 use acim::fixed::FixedDrive;
-use acim::flux_observer::FluxObserver;
 use acim::frames::FastSinCos;
 use acim::full_order::FullOrder;
 use acim::math::RAD_S_TO_RPM;
@@ -416,7 +415,9 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
                 .map_err(bad("drive"))?;
             Box::new(d)
         }
-        (Arithmetic::F32, ObserverKind::Reduced) => {
+        // the drive the board runs: the observer chosen by the configuration
+        // (`estimation.observer`, set from `drive.observer` at validation)
+        (Arithmetic::F32, ObserverKind::Reduced | ObserverKind::Flux) => {
             Box::new(Drive::new(v.drive).map_err(bad("drive"))?)
         }
         (Arithmetic::F32, ObserverKind::FullOrder) => {
@@ -434,22 +435,6 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
         }
         (Arithmetic::Fixed, ObserverKind::Reduced) => {
             Box::new(FixedDrive::with_bases(v.drive, v.bases).map_err(bad("drive.arithmetic"))?)
-        }
-        (Arithmetic::F32, ObserverKind::Flux) => {
-            let design = DriveDesign::new(v.drive).map_err(bad("drive"))?;
-            let observer = FluxObserver::new(
-                &v.drive.machine,
-                v.drive.loops.control_period,
-                v.drive.limits.max_speed,
-                v.drive.loops.flux_current,
-            )
-            .map_err(|e| ScenarioError {
-                field: "drive.observer".into(),
-                allowed: format!("a valid flux-observer design ({e:?})"),
-            })?;
-            let d: Drive<FastSinCos, f32, FluxObserver> =
-                Drive::with_parts(design, (), FastSinCos, observer, Svpwm).map_err(bad("drive"))?;
-            Box::new(d)
         }
         (Arithmetic::Fixed, ObserverKind::FullOrder) => {
             return Err(ScenarioError {

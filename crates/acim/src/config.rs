@@ -176,10 +176,28 @@ pub struct LoopSettings {
     pub regen_min_frequency: f32,
 }
 
+/// Which speed observer the f32 drive runs ([`EstimationSettings::observer`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ObserverChoice {
+    /// The paper's reduced-order observer of i_sq, speed and load torque (eq. 12), with
+    /// the orientation correction, the far-side mode and the regeneration limit around it.
+    #[default]
+    Reduced,
+    /// The reduced-order flux observer with speed adaptation and a gain stable while
+    /// regenerating ([`crate::flux_observer`]): no regeneration limit, the running Rs law
+    /// at low stator frequency only, the drive's frame locked onto its flux angle.
+    Flux,
+}
+
 /// The estimators: the observer, the stator-resistance estimator, the orientation correction and the far-side mode.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EstimationSettings {
+    /// The speed observer of the f32 drive ([`crate::speed_observer::DriveObserver`]): the
+    /// paper's reduced-order observer, or the flux observer with speed adaptation
+    /// ([`crate::flux_observer`]). The fixed-point drive runs the paper's.
+    pub observer: ObserverChoice,
     /// Observer poles (rates, rad/s).
     pub observer_poles: ObserverPoles,
     /// Whether the stator-resistance estimator adapts (default on; the paper's figs. 6-8
@@ -386,6 +404,7 @@ impl DriveConfig {
                 regen_min_frequency: 2.0 * core::f32::consts::PI * 1.5,
             },
             estimation: EstimationSettings {
+                observer: ObserverChoice::Reduced,
                 observer_poles: ObserverPoles::DEFAULT,
                 rs_estimation: true,
                 rs_estimation_mode: RsEstimationMode::Running,

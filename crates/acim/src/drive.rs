@@ -86,15 +86,14 @@ use crate::gain_calibration::GainCalibration;
 use crate::inverter_test::{InverterTest, InverterTestOutcome};
 use crate::inverter_tracker::{sign_vector, InverterTracker, InverterTrackerInputs};
 use crate::num::Arithmetic;
-use crate::observer::{
-    ObserverConfig, ReducedOrderObserver, SpeedEstimate, SpeedObserver, SpeedObserverInputs,
-};
+use crate::observer::{ObserverConfig, SpeedEstimate, SpeedObserver, SpeedObserverInputs};
 use crate::offset_tracker::{OffsetTracker, OffsetTrackerInputs};
 use crate::orientation;
 use crate::rr_estimator::{RrEstimator, RrInputs};
 use crate::rs_estimator::{RsEstimator, RsEstimatorInputs, RsRunningInputs};
 use crate::sensor_check::{SensorCheck, SensorCheckInputs};
 use crate::speed_loop::{SpeedLoop, SpeedLoopInputs};
+use crate::speed_observer::DriveObserver;
 use crate::start_sequence::{StartInputs, StartSequence, StartSequenceConfig};
 use crate::supervisor::ControlMonitorInputs;
 pub use crate::supervisor::{
@@ -525,10 +524,11 @@ struct OpenLoop<N: Arithmetic> {
 
 /// The sensorless IFOC drive, one cascade for both arithmetics. `S` supplies sin/cos
 /// (software by default, CORDIC on the G4, a table in fixed point), `N` is the arithmetic
-/// (f32 SI by default, [`crate::fixed::Q24`] per unit), `O` estimates the speed (the
-/// paper's reduced-order observer by default), `M` modulates (SVPWM by default).
+/// (f32 SI by default, [`crate::fixed::Q24`] per unit), `O` estimates the speed (in f32 by
+/// default the observer the configuration chooses, [`DriveObserver`]; the fixed-point
+/// drive names the paper's), `M` modulates (SVPWM by default).
 #[derive(Clone, Debug)]
-pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = ReducedOrderObserver<N>, M = Svpwm> {
+pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = DriveObserver, M = Svpwm> {
     /// The design, its coefficients in `N` and the per-unit bases: fixed once built.
     cfg: DriveParts<N>,
     /// The state machine and the monitors that judge the running control.
@@ -554,15 +554,12 @@ impl Drive<FastSinCos> {
 }
 
 impl<S: SinCos> Drive<S> {
-    /// Validates `cfg`, builds its [`DriveDesign`] and returns an idle f32 drive.
+    /// Validates `cfg`, builds its [`DriveDesign`] and the observer it chooses
+    /// (`cfg.estimation.observer`) and returns an idle f32 drive.
     pub fn with_sincos(cfg: DriveConfig, sincos: S) -> Result<Self, ConfigError> {
-        Self::with_parts(
-            DriveDesign::new(cfg)?,
-            (),
-            sincos,
-            ReducedOrderObserver::new(),
-            Svpwm,
-        )
+        let design = DriveDesign::new(cfg)?;
+        let observer = DriveObserver::new(&design.config)?;
+        Self::with_parts(design, (), sincos, observer, Svpwm)
     }
 }
 
@@ -1486,7 +1483,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         probe.begin(StepRegion::ObserverReduced);
         // an observer with its own flux angle: the pull of the model's frame onto it,
         // from the two frames at this sample (before the observer's update)
-        let frame_pull = if O::FRAME_LOCK && !frame_held {
+        let frame_pull = if self.est.observer.frame_lock() && !frame_held {
             self.est.observer.frame_pull(&m.sc)
         } else {
             N::ZERO
@@ -1600,7 +1597,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 rotor_flux: est.flux.rotor_flux,
                 frame_held,
                 i_sq_ref: self.prev.i_sq_ref,
-                low_frequency_only: !O::RS_RUNNING_AT_SPEED,
+                low_frequency_only: !est.observer.rs_running_at_speed(),
             };
             est.rs
                 .update_running(&c.rs, &c.rs_running, &inputs, &running);
@@ -1638,9 +1635,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let weakened = self.prev.fw_active;
         // (also while a flying start magnetizes in the turning frame: the residual of a
         // speed error locks the frame onto the rotor as the flux builds)
-        let correction = if O::FRAME_LOCK {
+        let correction = if est.observer.frame_lock() {
             frame_pull
-        } else if !O::ORIENTATION_CORRECTION {
+        } else if !est.observer.orientation_correction() {
             N::ZERO
         } else if !frame_held && (flux_settled || magnetizing) {
             orientation::correction(&c.orientation, ws_prev, rs, est.rs.current_error, i.q)
@@ -1863,13 +1860,13 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 flux_reference: c.fw.flux_reference,
                 inv_rotor_flux: self.est.flux.inv_rotor_flux,
                 voltage_limit,
-                inverter_error_known: O::FAR_SIDE_TERM
+                inverter_error_known: self.est.observer.far_side_term()
                     && (r.start.inverter.outcome == InverterTestOutcome::Identified
                         || self
                             .loops
                             .inverter_tracker
                             .trusted(&c.inverter_tracker, r.start.inverter.correction_duty)),
-                regeneration_limit: O::REGENERATION_LIMIT,
+                regeneration_limit: self.est.observer.regeneration_limit(),
                 rating,
                 q_saturated: self.prev.q_saturated,
             },

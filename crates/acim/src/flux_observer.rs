@@ -76,7 +76,7 @@
 //!   spurious speed swing that grows with `s`, and the speed loop closes it into a limit
 //!   cycle);
 //! - the drive's rotor-flux model frame is locked onto this observer's angle from
-//!   [`FRAME_LOCK_FROM`] Rs/L_M of stator frequency on ([`crate::observer::SpeedObserver::FRAME_LOCK`]).
+//!   [`FRAME_LOCK_FROM`] Rs/L_M of stator frequency on ([`crate::observer::SpeedObserver::frame_lock`]).
 //!
 //! With both, and the currents taken at the period's middle (Discretisation, below), every
 //! field-weakening scenario of the paper's and the 2.2 kW machine holds to twice base
@@ -395,7 +395,10 @@ impl FluxObserverState {
     /// it for the next step, and uses the one before, which acted over the past period)
     /// and `i` the current sampled now, both stationary alpha-beta (V, A), `rs` the
     /// stator resistance the observer assumes (ohm; the running estimate).
-    #[inline(always)]
+    /// Out of line (`inline(never)`): the drive's step reaches it from several places
+    /// (one rate, the fast step, the commissioning's), and one copy keeps the control
+    /// interrupt's code within CCM SRAM.
+    #[inline(never)]
     pub fn update(&mut self, cfg: &FluxObserverConfig, u: (f32, f32), i: (f32, f32), rs: f32) {
         let (c, s) = (self.cos, self.sin);
         // into the estimated rotor-flux frame: x e^{-j theta}
@@ -542,15 +545,30 @@ impl FluxObserver {
 
 impl crate::observer::SpeedObserver for FluxObserver {
     /// No far-side term: the gain keeps the regenerating region stable by itself.
-    const FAR_SIDE_TERM: bool = false;
+    #[inline(always)]
+    fn far_side_term(&self) -> bool {
+        false
+    }
     /// The observer estimates the flux and the speed in its own frame.
-    const ORIENTATION_CORRECTION: bool = false;
+    #[inline(always)]
+    fn orientation_correction(&self) -> bool {
+        false
+    }
     /// The gain is stable while regenerating (module docs).
-    const REGENERATION_LIMIT: bool = false;
+    #[inline(always)]
+    fn regeneration_limit(&self) -> bool {
+        false
+    }
     /// Rs adapts at low stator frequency only, where it is observable.
-    const RS_RUNNING_AT_SPEED: bool = false;
+    #[inline(always)]
+    fn rs_running_at_speed(&self) -> bool {
+        false
+    }
     /// The drive's frame follows this observer's flux angle.
-    const FRAME_LOCK: bool = true;
+    #[inline(always)]
+    fn frame_lock(&self) -> bool {
+        true
+    }
     /// `frame_bandwidth` times sin(theta_observer - theta_model) (rad/s electrical): a
     /// phase-locked loop that holds the model's frame on the observer's where the
     /// observer's angle is the voltage model's ([`FRAME_LOCK_FROM`]); none before the

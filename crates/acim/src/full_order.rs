@@ -473,7 +473,10 @@ impl FullOrder {
 impl crate::observer::SpeedObserver for FullOrder {
     /// The full-order observer has no far-side term (nor a load-torque estimate), so the
     /// drive keeps the regeneration limit with it.
-    const FAR_SIDE_TERM: bool = false;
+    #[inline(always)]
+    fn far_side_term(&self) -> bool {
+        false
+    }
     #[inline(always)]
     fn update(
         &mut self,

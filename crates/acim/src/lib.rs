@@ -82,12 +82,14 @@ pub mod supervisor;
 pub mod fixed;
 pub mod flux_observer;
 pub mod full_order;
+pub mod speed_observer;
 
 pub use controller::Controller;
 pub use design::{
     ConfigError, CurrentSensing, DriveCoeffs, DriveConfig, DriveDesign, EstimationSettings,
-    FieldWeakeningSettings, InverterSettings, LimitSettings, LoopSettings, RsEstimationMode,
-    StartSettings, TrackerSettings, VfSettings, ZeroSpeedPolicy, ZeroSpeedSettings,
+    FieldWeakeningSettings, InverterSettings, LimitSettings, LoopSettings, ObserverChoice,
+    RsEstimationMode, StartSettings, TrackerSettings, VfSettings, ZeroSpeedPolicy,
+    ZeroSpeedSettings,
 };
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
@@ -96,5 +98,6 @@ pub use drive::{
 pub use num::{Arithmetic, DivSqrt, FineIntegrator, Num, Units};
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
 pub use params::{InverseGamma, MachineData, MachineParams, ParamError};
+pub use speed_observer::DriveObserver;
 pub use supervisor::{CommandError, DriveState, FaultReason, Supervisor};
 pub use svpwm::{Modulator, Overmodulation, Svpwm};

@@ -381,28 +381,40 @@ pub trait SpeedObserver<N: Num = f32> {
     /// The drive enters the far-side mode, which releases the regeneration limit, only
     /// with an observer that does: without the term nothing would hold the point beyond
     /// the unobservable line.
-    const FAR_SIDE_TERM: bool;
+    fn far_side_term(&self) -> bool;
     /// Whether the drive corrects the rotor-flux model's frame with the d-axis residual
     /// (the orientation correction, [`crate::orientation`]): the paper's observer needs
     /// it; an observer that estimates the flux itself gives a speed that does not depend
     /// on the frame, and the correction would be a second, competing speed path.
-    const ORIENTATION_CORRECTION: bool = true;
+    #[inline(always)]
+    fn orientation_correction(&self) -> bool {
+        true
+    }
     /// Whether the drive applies its low-frequency regeneration limit
     /// ([`LoopSettings::regen_min_frequency`](crate::LoopSettings::regen_min_frequency)) with this observer: off for an
     /// observer whose gain is designed stable while regenerating near zero stator
     /// frequency.
-    const REGENERATION_LIMIT: bool = true;
+    #[inline(always)]
+    fn regeneration_limit(&self) -> bool {
+        true
+    }
     /// Whether the running Rs law adapts at any stator frequency above its low gate (the
     /// paper's observer, eq. 19-20), or only below
     /// [`crate::rs_estimator::RsRunningConfig::max_frequency`], where the resistive drop
     /// is observable against inductance errors (Rs/L_M).
-    const RS_RUNNING_AT_SPEED: bool = true;
+    #[inline(always)]
+    fn rs_running_at_speed(&self) -> bool {
+        true
+    }
     /// Whether the observer estimates the rotor-flux angle itself and the drive's frame
     /// follows it ([`SpeedObserver::frame_pull`]): the rotor-flux model's angle is then
     /// locked to the observer's, so that the model's own orientation errors (a speed
     /// estimate's lag through 1/tau_r, an R_R error) do not reach the field orientation.
-    const FRAME_LOCK: bool = false;
-    /// With [`SpeedObserver::FRAME_LOCK`]: the frequency (rad/s electrical) to add to the
+    #[inline(always)]
+    fn frame_lock(&self) -> bool {
+        false
+    }
+    /// With [`SpeedObserver::frame_lock`]: the frequency (rad/s electrical) to add to the
     /// rotor-flux model's frame frequency so that it follows the observer's angle, given
     /// the model's frame at this sample (`model`), before this step's update.
     #[inline(always)]
@@ -431,7 +443,10 @@ pub trait SpeedObserver<N: Num = f32> {
 }
 
 impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
-    const FAR_SIDE_TERM: bool = true;
+    #[inline(always)]
+    fn far_side_term(&self) -> bool {
+        true
+    }
     /// Eq. (12); skipped while magnetizing (the observer assumes a settled flux, paper
     /// section 4).
     #[inline(always)]

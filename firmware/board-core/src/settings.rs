@@ -25,7 +25,10 @@
 
 use crate::board::{self, POWER_STAGE};
 use acim::math::{sqrt, RAD_S_TO_RPM, RPM_TO_RAD_S};
-use acim::{ConfigError, DriveConfig, DriveDesign, MachineData, MachineParams, ParamError};
+use acim::{
+    ConfigError, DriveConfig, DriveDesign, DriveObserver, MachineData, MachineParams,
+    ObserverChoice, ParamError,
+};
 
 /// Start of the two flash pages reserved for the settings (A, then B): the last 4 KiB of
 /// the STM32G474RE's 512 KiB (bank 2, pages 126 and 127, in the factory dual-bank mode).
@@ -39,13 +42,15 @@ pub const SETTINGS_PAGES: u32 = 2;
 /// next one.
 pub const SETTINGS_PAGE_NUMBER: u8 = 126;
 /// Version of the record layout; a record of another version is refused.
-pub const SETTINGS_VERSION: u16 = 3;
+pub const SETTINGS_VERSION: u16 = 4;
+/// The format before the observer's choice: its 15 values are read, the paper's observer.
+const VERSION_WITHOUT_OBSERVER: u16 = 3;
 /// The format before the slow period: its 14 values are read, the slow task off.
 const VERSION_WITHOUT_SLOW_PERIOD: u16 = 2;
 /// First bytes of a record.
 pub const MAGIC: [u8; 4] = *b"ACIM";
 /// Number of settable values.
-pub const FIELD_COUNT: usize = 15;
+pub const FIELD_COUNT: usize = 16;
 /// Length of the record, bytes (a multiple of 8: whole flash double words).
 pub const RECORD_LEN: usize = (VALUES + 4 * FIELD_COUNT + 4).div_ceil(8) * 8;
 /// Offset of the sequence number in a record.
@@ -86,6 +91,7 @@ pub const FIELDS: [Field; FIELD_COUNT] = [
     f("machine.inertia", "kg m^2"),
     f("machine.viscous_friction", "N m s/rad"),
     f("loops.slow_period", "ms"),
+    f("estimation.observer", ""),
 ];
 
 // indices in FIELDS
@@ -104,6 +110,7 @@ const POLE_PAIRS: usize = 11;
 const INERTIA: usize = 12;
 const VISCOUS_FRICTION: usize = 13;
 const SLOW_PERIOD: usize = 14;
+const OBSERVER: usize = 15;
 
 /// The index in [`FIELDS`] of a name: its path in [`DriveConfig`]'s groups
 /// (`limits.current_limit`), or the name without its group (`current_limit`, the earlier
@@ -239,6 +246,10 @@ impl Settings {
                 m.inertia(),
                 m.viscous_friction(),
                 c.loops.slow_period * 1000.0,
+                match c.estimation.observer {
+                    ObserverChoice::Reduced => 0.0,
+                    ObserverChoice::Flux => 1.0,
+                },
             ],
         }
     }
@@ -309,11 +320,22 @@ impl Settings {
         cfg.loops.flux_current = v[4];
         cfg.limits.max_speed = v[5] * RPM_TO_RAD_S;
         cfg.loops.slow_period = v[SLOW_PERIOD] / 1000.0;
+        cfg.estimation.observer = match v[OBSERVER] {
+            0.0 => ObserverChoice::Reduced,
+            1.0 => ObserverChoice::Flux,
+            _ => {
+                return Err(SettingError {
+                    field: "estimation.observer",
+                    rule: "0 (the paper's reduced-order observer) or 1 (the flux observer)",
+                })
+            }
+        };
         // bounds the library would report under a field `set` does not know (`machine`,
         // `regen_min_frequency`, `flying_start`), or does not have
         machine_bounds(&cfg, changed)?;
         speed_bounds(&cfg, changed)?;
         DriveDesign::new(cfg)?;
+        DriveObserver::new(&cfg)?;
         // all finite and positive from here: DriveDesign::new has refused anything else
         if cfg.limits.overcurrent_trip > TRIP_FULL_SCALE_FRACTION * POWER_STAGE.current_full_scale()
         {
@@ -365,10 +387,11 @@ impl Settings {
         let u16_at = |o: usize| u16::from_le_bytes([r[o], r[o + 1]]);
         let u32_at = |o: usize| u32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]);
         let version = u16_at(4);
-        // a record of the format before the slow period holds its first values (a board
-        // keeps its settings across the update, the slow task off)
+        // a record of an earlier format holds the first values (a board keeps its settings
+        // across the update: the slow task off, the paper's observer)
         let count = match version {
             SETTINGS_VERSION => FIELD_COUNT,
+            VERSION_WITHOUT_OBSERVER => OBSERVER,
             VERSION_WITHOUT_SLOW_PERIOD => SLOW_PERIOD,
             _ => return Err(LoadError::Version(version)),
         };
@@ -796,7 +819,7 @@ mod tests {
         for (i, f) in FIELDS.iter().enumerate() {
             let (group, name) = f.name.split_once('.').unwrap();
             assert!(
-                ["machine", "limits", "loops"].contains(&group),
+                ["machine", "limits", "loops", "estimation"].contains(&group),
                 "{}",
                 f.name
             );
@@ -900,14 +923,51 @@ mod tests {
         assert_eq!(Settings::decode_record(&rec), Ok((old, 9)));
     }
 
+    /// The observer is a setting: 0 the paper's (the default), 1 the flux observer, any
+    /// other value refused with the field named; a record of the format before it loads
+    /// with the paper's observer.
+    #[test]
+    fn the_observer_is_a_setting_and_old_records_load_with_the_papers() {
+        let d = Settings::defaults();
+        assert_eq!(d.get(idx("estimation.observer")), 0.0);
+        let s = d.set(idx("estimation.observer"), 1.0).unwrap();
+        assert_eq!(
+            s.drive_config().unwrap().estimation.observer,
+            ObserverChoice::Flux
+        );
+        assert_eq!(Settings::decode(&s.encode(3)).unwrap(), s);
+        for bad in [0.5, 2.0, -1.0, f32::NAN] {
+            assert_eq!(
+                d.set(idx("estimation.observer"), bad).unwrap_err().field,
+                "estimation.observer",
+                "{bad}"
+            );
+        }
+        // the version-3 record: magic, version, 15 values, CRC after them
+        let old = d.set(idx("limits.current_limit"), 4.0).unwrap();
+        let mut rec = [0u8; RECORD_LEN];
+        rec[0..4].copy_from_slice(&MAGIC);
+        rec[4..6].copy_from_slice(&3u16.to_le_bytes());
+        rec[6..8].copy_from_slice(&15u16.to_le_bytes());
+        rec[SEQ..SEQ + 4].copy_from_slice(&9u32.to_le_bytes());
+        for i in 0..15 {
+            let at = VALUES + 4 * i;
+            rec[at..at + 4].copy_from_slice(&old.get(i).to_le_bytes());
+        }
+        let crc = crc32(&rec[..VALUES + 60]);
+        rec[VALUES + 60..VALUES + 64].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(Settings::decode_record(&rec), Ok((old, 9)));
+    }
+
     #[test]
     fn blank_short_wrong_version() {
         assert_eq!(Settings::decode(&[0xFF; 80]), Err(LoadError::Blank));
         assert_eq!(Settings::decode(&[0xFF; 8]), Err(LoadError::Short));
         assert_eq!(Settings::decode(&[0u8; 80]), Err(LoadError::BadMagic));
         // another version, with a CRC that matches it: still refused (version 1, the
-        // single-page record without a sequence number, included; version 2 is read)
-        for other in [1u16, 4] {
+        // single-page record without a sequence number, included; versions 2 and 3 are
+        // read)
+        for other in [1u16, 5] {
             let mut rec = Settings::defaults().encode(7);
             rec[4..6].copy_from_slice(&other.to_le_bytes());
             let crc = crc32(&rec[..CRC]);

@@ -96,6 +96,12 @@ impl FixedDrive {
 
     /// Converts the f32 design with `bases`; an idle drive.
     pub fn from_design(design: DriveDesign, bases: PerUnitBases) -> Result<Self, ConfigError> {
+        if design.config.estimation.observer != crate::config::ObserverChoice::Reduced {
+            return Err(ConfigError::Invalid {
+                field: "estimation.observer",
+                rule: "the paper's observer (\"reduced\"): the flux observer runs in f32 only",
+            });
+        }
         Self::with_parts(
             design,
             bases,
