@@ -383,6 +383,13 @@ class Machine:
         self.iwdg_started = False
         self.nvic_enabled = set()
         self.nvic_pending = set()     # set by software through NVIC_ISPR
+        self.measure_masked = False      # measure the main program's masked sections
+        self.masked_longest = 0          # the longest run of main-program instructions
+        self.masked_longest_at = None    #   with PRIMASK set, and the address it began at
+        self._masked_run = 0
+        self._masked_from = None
+        self._masked_hook = None
+        self._in_main = False
         self.slow_isr_runs = 0           # slow-task interrupts taken
         self.slow_isr_instructions = []  # their instructions, while counting
         self.break_active = False
@@ -910,6 +917,32 @@ class Machine:
             self.conversion_after = None
             self.regs[(0x5000_0000, 0)] = self.reg(0x5000_0000, 0) | (1 << 6) | (1 << 5)
 
+    def _masked_block(self, uc, address, size, _data):
+        if not self._in_main:
+            return
+        # the main program's instructions executed with PRIMASK set, counted by basic
+        # block (PRIMASK read at each block's start: a `cpsid`/`cpsie` inside a block
+        # moves the count by at most that block's length)
+        if uc.reg_read(UC_ARM_REG_PRIMASK) & 1:
+            if self._masked_run == 0:
+                self._masked_from = address
+            key = (address, size)
+            n = self._block_counts.get(key)
+            if n is None:
+                code = bytes(uc.mem_read(address, size))
+                n, i = 0, 0
+                while i < len(code):
+                    hw = code[i] | (code[i + 1] << 8) if i + 1 < len(code) else 0
+                    i += 4 if (hw >> 11) in (0b11101, 0b11110, 0b11111) else 2
+                    n += 1
+                self._block_counts[key] = n
+            self._masked_run += n
+            if self._masked_run > self.masked_longest:
+                self.masked_longest = self._masked_run
+                self.masked_longest_at = self._masked_from
+        else:
+            self._masked_run = 0
+
     def _flush(self):
         # drop translated code (flash and CCM) so that a hook added or removed applies
         for lo, hi in ((0x0800_0000, 0x0808_0000), (0x1000_0000, 0x1000_8000)):
@@ -1005,11 +1038,18 @@ class Machine:
         next_period = (self.instret // INSTRUCTIONS_PER_PERIOD + 1) * INSTRUCTIONS_PER_PERIOD
         while self.periods < end and self.halted is None:
             n = min(chunk, next_period - self.instret)
+            if self.measure_masked and self._masked_hook is None:
+                # once: the callback counts only while the main program runs
+                self._masked_hook = self.uc.hook_add(UC_HOOK_BLOCK, self._masked_block)
+                self._flush()
+            self._in_main = True
             try:
                 self.uc.emu_start(self.pc | 1, 0xFFFF_FFFF, count=n)
             except UcError as e:
                 self.halted = f"main: {e} at 0x{self.uc.reg_read(UC_ARM_REG_PC):08x}"
                 break
+            finally:
+                self._in_main = False
             self.pc = self.uc.reg_read(UC_ARM_REG_PC)
             self.instret += n
             if self.halted is not None:

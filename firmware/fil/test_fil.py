@@ -1128,6 +1128,44 @@ class Uart(unittest.TestCase):
         self.assertFalse(bad, bad[:5])
 
 
+class MaskedSections(unittest.TestCase):
+    """The main program's sections with interrupts masked (PRIMASK set), measured in
+    executed instructions: the control interrupt waits for them, so each one delays a
+    period's computation (the ADC samples on its trigger regardless). Commands of a
+    session after boot: idle, `stream on`, a `set` (the drive rebuilt and swapped in), `start`,
+    `status`, `get`, `stop`, `save`. The logger (defmt over RTT masks interrupts while
+    it encodes a frame) stays within LOG_BOUND; the drive's swap, a move of the whole
+    drive (about 4.4 KB) while the interrupt must not run it, within SWAP_BOUND."""
+
+    # instructions (about 1 per cycle on the M4 for these moves and the encoder:
+    # 1000 instructions are about 6 us at 170 MHz)
+    LOG_BOUND = 1000
+    SWAP_BOUND = 3000
+
+    def test_the_main_loop_masks_interrupts_briefly(self):
+        m = fil.Machine(fil.default_elf("power-stage"), load=fil.InductionMotorLoad())
+        m.measure_masked = True
+        m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
+        # from here on the control interrupt runs (the boot's logs come before it is
+        # unmasked: the offsets, the clock report)
+        self.assertTrue(m.nvic_enabled)
+        m.masked_longest = 0
+        m.run(200)
+        longest = {"idle": m.masked_longest}
+        for cmd, periods in [("stream on", 50), ("set limits.current_limit 4", 700),
+                             ("speed 300", 5), ("start", 3000), ("status", 20),
+                             ("get", 100), ("stop", 200), ("save", 400)]:
+            m.masked_longest = 0
+            command(m, cmd, periods)
+            longest[cmd] = m.masked_longest
+        print("\nlongest masked section per step (instructions): " +
+              ", ".join(f"{k} {v}" for k, v in longest.items()), file=sys.stderr)
+        swap = longest.pop("set limits.current_limit 4")
+        self.assertLessEqual(swap, self.SWAP_BOUND)
+        for what, n in longest.items():
+            self.assertLessEqual(n, self.LOG_BOUND, what)
+
+
 class BootReport(unittest.TestCase):
     """N8: boot failures were reported on RTT only; a user on the virtual COM port saw
     nothing."""

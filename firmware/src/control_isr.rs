@@ -103,9 +103,10 @@ pub fn install(state: IsrState) {
 }
 
 /// Swaps in a drive rebuilt from new settings if the running one is Idle; otherwise the
-/// state that refused it. The check and the swap run with interrupts masked (a few
-/// microseconds: two moves of the drive), so the control interrupt cannot start the
-/// drive between them; it runs late, not never.
+/// state that refused it. The check and the swap run with interrupts masked (the move of
+/// the whole drive, about 4.4 KB: 2800 instructions, about 16 us at 170 MHz, measured by
+/// the emulator, `fil/test_fil.py` `MaskedSections`), so the control interrupt cannot
+/// start the drive between them; it runs late, not never.
 pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveState> {
     cortex_m::interrupt::free(|_| match state() {
         Some(st) => st.ctl.replace_drive(drive),
