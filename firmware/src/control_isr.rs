@@ -102,16 +102,34 @@ pub fn install(state: IsrState) {
     READY.store(true, Ordering::Release);
 }
 
+/// Set while the main loop moves a rebuilt drive in: the interrupts then leave the state
+/// alone (no reference to it) and keep the outputs off.
+static SWAPPING: AtomicBool = AtomicBool::new(false);
+
 /// Swaps in a drive rebuilt from new settings if the running one is Idle; otherwise the
-/// state that refused it. The check and the swap run with interrupts masked (the move of
-/// the whole drive, about 4.4 KB: 2800 instructions, about 16 us at 170 MHz, measured by
-/// the emulator, `fil/test_fil.py` `MaskedSections`), so the control interrupt cannot
-/// start the drive between them; it runs late, not never.
+/// state that refused it. The check and the claim ([`SWAPPING`]) run with interrupts
+/// masked (a few loads: the control interrupt cannot start the drive between them); the
+/// move of the whole drive (about 4.4 KB, 2800 instructions: it had held the interrupts
+/// off for about 16 us) runs with them enabled, while the control interrupt, seeing the
+/// claim, keeps the outputs off and returns (a period or two of the idle drive's offset
+/// measurement skipped; the rebuilt drive measures its own).
 pub fn replace_drive_if_idle(drive: acim::Drive<Sc>) -> Result<(), acim::DriveState> {
     cortex_m::interrupt::free(|_| match state() {
+        Some(st) => st.ctl.can_replace_drive().map(|()| {
+            SWAPPING.store(true, Ordering::SeqCst);
+        }),
+        None => Err(acim::DriveState::Fault),
+    })?;
+    // SWAPPING is set: no interrupt takes a reference to the state until it is cleared
+    // (each checks it before `state()`), and none was running when it was set (the
+    // claim ran with interrupts masked, and both interrupts preempt this loop and
+    // finish before it resumes)
+    let result = match state() {
         Some(st) => st.ctl.replace_drive(drive),
         None => Err(acim::DriveState::Fault),
-    })
+    };
+    SWAPPING.store(false, Ordering::Release);
+    result
 }
 
 /// Hands the commissioning the main loop built (`commission::build`, from flash; `None`
@@ -155,7 +173,8 @@ fn state() -> Option<&'static mut IsrState> {
     // `install` only the control interrupt takes this reference (it does not preempt
     // itself), the slow task's interrupt between `SLOW_GATE.enter` and `exit` (the control
     // interrupt, which preempts it, takes none then: `SlowTaskGate::control_entry`; the
-    // slow interrupt never preempts the control one), and `replace_drive_if_idle` and the
+    // slow interrupt never preempts the control one), `replace_drive_if_idle` (its check
+    // with all interrupts masked, its move while SWAPPING keeps both interrupts out), and the
     // three commissioning accessors with all interrupts masked: the &mut is unique
     // for the duration of one invocation.
     Some(unsafe { (*core::ptr::addr_of_mut!(STATE)).assume_init_mut() })
@@ -255,6 +274,13 @@ fn ADC1_2() {
         io_ack(&mut io);
         return;
     }
+    if SWAPPING.load(Ordering::Acquire) {
+        // the main loop is moving a rebuilt drive in (the running one was Idle, outputs
+        // off): keep them off, leave the state alone
+        io.switch_off();
+        io_ack(&mut io);
+        return;
+    }
     let Some(st) = state() else {
         // not installed yet: only acknowledge
         io_ack(&mut io);
@@ -283,8 +309,10 @@ fn ADC1_2() {
 #[interrupt]
 fn FMAC() {
     SLOW_GATE.enter();
-    if let Some(st) = state() {
-        slow_period(&mut st.ctl);
+    if !SWAPPING.load(Ordering::Acquire) {
+        if let Some(st) = state() {
+            slow_period(&mut st.ctl);
+        }
     }
     SLOW_GATE.exit();
 }
@@ -301,6 +329,11 @@ fn io_ack(io: &mut hw::Tim1Adc) {
 fn TIM6_DACUNDER() {
     let t0 = DWT::cycle_count();
     crate::hw::tim6_ack();
+    if SWAPPING.load(Ordering::Acquire) {
+        // a rebuilt drive is being moved in (replace_drive_if_idle): the simulated stage
+        // is idle with the outputs off; leave the state alone
+        return;
+    }
     let Some(st) = state() else { return };
     let cmd = commands(st);
     let raw = st.sim.sample();

@@ -180,7 +180,10 @@ impl<S: SinCos> ControlLoop<S> {
     /// The fast part of one control step ([`acim::Drive::step_fast`]): with a slow task,
     /// a slow tick leaves its work for [`ControlLoop::run_slow`]. A saturated current
     /// channel trips the drive; every fault returns [`PwmOutput::OFF`] in this same step.
-    #[inline]
+    // always inlined: the control interrupt is its one caller on the board, and an
+    // out-of-line copy (LLVM's choice once the interrupt grew by a check) cost 4 KB of
+    // CCM SRAM
+    #[inline(always)]
     pub fn step_fast(&mut self, raw: &RawSample) -> PwmOutput {
         let c = self.conv.convert(raw);
         self.inputs = c.inputs;
@@ -293,16 +296,25 @@ impl<S: SinCos> ControlLoop<S> {
         }
     }
 
+    /// Whether [`ControlLoop::replace_drive`] would accept a drive now: the running one
+    /// Idle, not commissioning and no start waiting for the offset measurement (a start
+    /// waiting is not dropped under the user); else the state that refuses it. The
+    /// firmware checks this with interrupts masked, then moves the drive in with them
+    /// enabled while the control interrupt leaves the drive alone.
+    pub fn can_replace_drive(&self) -> Result<(), DriveState> {
+        let state = self.drive.state();
+        if state != DriveState::Idle || self.commissioning.is_some() || self.drive.start_pending() {
+            return Err(state);
+        }
+        Ok(())
+    }
+
     /// Swaps in a drive rebuilt from new settings ([`crate::settings`]), only while Idle
     /// with no start waiting and not commissioning: otherwise the state that refused it (the machine model of a
     /// running drive never changes under it). The new drive starts Idle, with fresh
     /// estimator state.
     pub fn replace_drive(&mut self, drive: Drive<S>) -> Result<(), DriveState> {
-        let state = self.drive.state();
-        // a start waiting for the offset measurement is not dropped under the user
-        if state != DriveState::Idle || self.commissioning.is_some() || self.drive.start_pending() {
-            return Err(state);
-        }
+        self.can_replace_drive()?;
         self.drive = drive;
         self.fw_fault = None;
         Ok(())
