@@ -395,3 +395,16 @@ fn rs_running_law_matches_f32() {
         assert!((f.stator_resistance_estimate - rs).abs() < 0.03 * rs);
     }
 }
+
+/// The flux observer runs in f32 only: a configuration that chooses it is refused by the
+/// fixed-point drive, the field named; the paper's observer is accepted.
+#[test]
+fn the_fixed_drive_refuses_the_flux_observer() {
+    let mut cfg = crate::DriveConfig::paper_defaults();
+    assert!(crate::fixed::FixedDrive::with_bases(cfg, B).is_ok());
+    cfg.estimation.observer = crate::ObserverChoice::Flux;
+    let e = crate::fixed::FixedDrive::with_bases(cfg, B).unwrap_err();
+    assert_eq!(e.field(), "estimation.observer");
+    // the f32 drive builds it
+    assert!(crate::Drive::new(cfg).is_ok());
+}
