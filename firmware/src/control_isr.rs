@@ -240,7 +240,7 @@ fn commands(st: &mut IsrState) -> Option<ControlCommand> {
     Some(cmd)
 }
 
-#[inline(always)]
+#[inline(never)]
 fn publish(st: &mut IsrState, cycles: u32, plant_speed_rpm: f32) {
     if let Some(s) = st.ctl.finish_period(cycles, plant_speed_rpm) {
         if st.tel.enqueue(s).is_err() {

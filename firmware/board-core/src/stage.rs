@@ -160,6 +160,10 @@ impl Outputs {
 /// start arms the [`Outputs`] latch (if no break is pending, else the drive trips; MOE
 /// itself is set by the period that switches on), an accepted reset clears the break
 /// flags (a refused one leaves them).
+///
+/// Out of line: a command arrives in few periods, and inlined into the control interrupt
+/// it lengthened every period's code path (register pressure) and CCM SRAM.
+#[inline(never)]
 pub fn apply_command<S: SinCos, P: PowerStageIo>(
     ctl: &mut ControlLoop<S>,
     io: &mut P,
