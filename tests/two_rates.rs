@@ -75,35 +75,43 @@ fn paper_scenarios_at_10_20_and_40_khz_with_a_1_khz_slow_task() {
     }
 }
 
+/// Every `fault-*` scenario with the `--set` overrides `sets`.
+fn fault_runs(
+    sets: &[String],
+) -> Vec<(
+    acim_sim::scenario::Scenario,
+    Option<f32>,
+    acim_sim::metrics::Metrics,
+)> {
+    acim_sim::faults::run_all_with(sets, &mut |sc| {
+        acim_sim::run_with_metrics(sc)
+            .map(|r| r.1)
+            .map_err(|e| e.to_string())
+    })
+    .unwrap()
+}
+
+/// A switch that fails short is found by whichever estimate-independent detector crosses
+/// first, which depends on the instant (`phase_short_trips_at_any_instant_of_the_period`
+/// in tests/fault_scenarios.rs).
+const SHORT: [&str; 4] = [
+    "OverCurrent",
+    "HardwareBreak",
+    "LossOfControl",
+    "CurrentRegulation",
+];
+
 /// Every `fault-*` scenario: the same reason with the slow task as without it, found at
 /// most one slow period later (the protections of the fast path find it in the same
 /// period; the slow ones judge once per slow period, with their times unchanged).
 #[test]
 fn fault_scenarios_keep_their_reason_and_time_with_a_1_khz_slow_task() {
-    let single = acim_sim::faults::run_all_with(&[], &mut |sc| {
-        acim_sim::run_with_metrics(sc)
-            .map(|r| r.1)
-            .map_err(|e| e.to_string())
-    })
-    .unwrap();
-    let two = acim_sim::faults::run_all_with(&[SLOW.to_string()], &mut |sc| {
-        acim_sim::run_with_metrics(sc)
-            .map(|r| r.1)
-            .map_err(|e| e.to_string())
-    })
-    .unwrap();
+    let single = fault_runs(&[]);
+    let two = fault_runs(&[SLOW.to_string()]);
     assert_eq!(single.len(), two.len());
     assert!(single.len() >= 15, "{} fault scenarios", single.len());
-    // a switch that fails short is found by whichever estimate-independent detector
-    // crosses first, which depends on the instant (`phase_short_trips_at_any_instant_of_
-    // the_period` in tests/fault_scenarios.rs): the slow task's one-period shift of the
-    // references can move the first crossing from one to another
-    const SHORT: [&str; 4] = [
-        "OverCurrent",
-        "HardwareBreak",
-        "LossOfControl",
-        "CurrentRegulation",
-    ];
+    // a switch that fails short: SHORT (the slow task's one-period shift of the references
+    // can move the first crossing from one detector to another)
     for ((sc, _, a), (_, _, b)) in single.iter().zip(&two) {
         let name = &sc.name;
         if name == "fault-short" {
@@ -135,21 +143,7 @@ fn fault_scenarios_keep_their_reason_and_time_with_a_1_khz_slow_task() {
 /// (`acim::sensor_check`, "The decision").
 #[test]
 fn fault_scenarios_keep_their_reason_at_10_20_and_40_khz() {
-    let run = |sets: &[String]| {
-        acim_sim::faults::run_all_with(sets, &mut |sc| {
-            acim_sim::run_with_metrics(sc)
-                .map(|r| r.1)
-                .map_err(|e| e.to_string())
-        })
-        .unwrap()
-    };
-    let base = run(&[]);
-    const SHORT: [&str; 4] = [
-        "OverCurrent",
-        "HardwareBreak",
-        "LossOfControl",
-        "CurrentRegulation",
-    ];
+    let base = fault_runs(&[]);
     // the bounds of the faults whose detection time depends on the fault's instant, s
     let own_bound = |name: &str| match name {
         "fault-sensor-stuck" => Some(0.024),
@@ -157,7 +151,7 @@ fn fault_scenarios_keep_their_reason_at_10_20_and_40_khz() {
         _ => None,
     };
     for period in ["100e-6", "50e-6", "25e-6"] {
-        let rows = run(&[
+        let rows = fault_runs(&[
             format!("drive.loops.control_period_s={period}"),
             SLOW.to_string(),
         ]);

@@ -896,7 +896,9 @@ class Machine:
         # program's (a Python write per register took a quarter of an emulated period)
         self.uc.context_restore(ctx)
 
-    def _count_block(self, uc, address, size, _data):
+    def _block_instructions(self, uc, address, size):
+        # Thumb-2: a halfword whose top five bits are 0b11101/0b11110/0b11111 starts a
+        # 32-bit instruction; counted once per translated block
         key = (address, size)
         n = self._block_counts.get(key)
         if n is None:
@@ -907,6 +909,10 @@ class Machine:
                 i += 4 if (hw >> 11) in (0b11101, 0b11110, 0b11111) else 2
                 n += 1
             self._block_counts[key] = n
+        return n
+
+    def _count_block(self, uc, address, size, _data):
+        n = self._block_instructions(uc, address, size)
         self._isr_count += n
         if self.break_after is not None and self._isr_count >= self.break_after:
             self.break_after = None
@@ -926,17 +932,7 @@ class Machine:
         if uc.reg_read(UC_ARM_REG_PRIMASK) & 1:
             if self._masked_run == 0:
                 self._masked_from = address
-            key = (address, size)
-            n = self._block_counts.get(key)
-            if n is None:
-                code = bytes(uc.mem_read(address, size))
-                n, i = 0, 0
-                while i < len(code):
-                    hw = code[i] | (code[i + 1] << 8) if i + 1 < len(code) else 0
-                    i += 4 if (hw >> 11) in (0b11101, 0b11110, 0b11111) else 2
-                    n += 1
-                self._block_counts[key] = n
-            self._masked_run += n
+            self._masked_run += self._block_instructions(uc, address, size)
             if self._masked_run > self.masked_longest:
                 self.masked_longest = self._masked_run
                 self.masked_longest_at = self._masked_from

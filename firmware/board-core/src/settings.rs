@@ -814,6 +814,24 @@ mod tests {
         field_index(name.as_bytes()).unwrap()
     }
 
+    /// A record of an earlier format `version`: magic, version, the first `count` values
+    /// of `s`, sequence number 9, the CRC after the values.
+    fn old_record(version: u16, count: usize, s: &Settings) -> [u8; RECORD_LEN] {
+        let mut rec = [0u8; RECORD_LEN];
+        rec[0..4].copy_from_slice(&MAGIC);
+        rec[4..6].copy_from_slice(&version.to_le_bytes());
+        rec[6..8].copy_from_slice(&(count as u16).to_le_bytes());
+        rec[SEQ..SEQ + 4].copy_from_slice(&9u32.to_le_bytes());
+        for i in 0..count {
+            let at = VALUES + 4 * i;
+            rec[at..at + 4].copy_from_slice(&s.get(i).to_le_bytes());
+        }
+        let crc_at = VALUES + 4 * count;
+        let crc = crc32(&rec[..crc_at]);
+        rec[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
+        rec
+    }
+
     #[test]
     fn names_are_the_configs_paths_and_the_flat_names_still_resolve() {
         for (i, f) in FIELDS.iter().enumerate() {
@@ -909,18 +927,10 @@ mod tests {
         }
         // the version-2 record: magic, version, 14 values, CRC after them
         let old = d.set(idx("limits.current_limit"), 4.0).unwrap();
-        let mut rec = [0u8; RECORD_LEN];
-        rec[0..4].copy_from_slice(&MAGIC);
-        rec[4..6].copy_from_slice(&2u16.to_le_bytes());
-        rec[6..8].copy_from_slice(&14u16.to_le_bytes());
-        rec[SEQ..SEQ + 4].copy_from_slice(&9u32.to_le_bytes());
-        for i in 0..14 {
-            let at = VALUES + 4 * i;
-            rec[at..at + 4].copy_from_slice(&old.get(i).to_le_bytes());
-        }
-        let crc = crc32(&rec[..VALUES + 56]);
-        rec[VALUES + 56..VALUES + 60].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(Settings::decode_record(&rec), Ok((old, 9)));
+        assert_eq!(
+            Settings::decode_record(&old_record(2, 14, &old)),
+            Ok((old, 9))
+        );
     }
 
     /// The observer is a setting: 0 the paper's (the default), 1 the flux observer, any
@@ -945,18 +955,10 @@ mod tests {
         }
         // the version-3 record: magic, version, 15 values, CRC after them
         let old = d.set(idx("limits.current_limit"), 4.0).unwrap();
-        let mut rec = [0u8; RECORD_LEN];
-        rec[0..4].copy_from_slice(&MAGIC);
-        rec[4..6].copy_from_slice(&3u16.to_le_bytes());
-        rec[6..8].copy_from_slice(&15u16.to_le_bytes());
-        rec[SEQ..SEQ + 4].copy_from_slice(&9u32.to_le_bytes());
-        for i in 0..15 {
-            let at = VALUES + 4 * i;
-            rec[at..at + 4].copy_from_slice(&old.get(i).to_le_bytes());
-        }
-        let crc = crc32(&rec[..VALUES + 60]);
-        rec[VALUES + 60..VALUES + 64].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(Settings::decode_record(&rec), Ok((old, 9)));
+        assert_eq!(
+            Settings::decode_record(&old_record(3, 15, &old)),
+            Ok((old, 9))
+        );
     }
 
     #[test]
