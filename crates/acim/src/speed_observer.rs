@@ -28,12 +28,6 @@ pub enum DriveObserver {
     Flux(FluxObserver),
 }
 
-impl Default for DriveObserver {
-    fn default() -> Self {
-        DriveObserver::Reduced(ReducedOrderObserver::new())
-    }
-}
-
 impl DriveObserver {
     /// The observer `cfg.estimation.observer` names, designed for `cfg` (its machine
     /// model, control period, speed limit and flux current; design time). The
