@@ -194,7 +194,27 @@ pub struct FluxObserverDesign {
     pub sensitivity_limit: f32,
     /// Bandwidth of the lock of the drive's frame onto the observer's flux angle, rad/s.
     pub frame_bandwidth: f32,
+    /// The fastest the adapted speed may move, rad/s^2 mechanical (0: unbounded): a
+    /// bound on what the rotor can do ([`MAX_ACCELERATION_OVER_TORQUE`]), so that a
+    /// current sample the applied voltage cannot explain (a sensor failing) does not
+    /// kick the speed estimate, and the speed loop with it, faster than the rotor moves.
+    pub max_acceleration: f32,
 }
+
+/// The adapted speed's rate bound is this multiple of the drive's largest torque
+/// (`1.5 p L_M i_sd* I_limit`, the flux current against the whole current limit) over
+/// the controller's J: the rotor's acceleration with a load as large as that torque
+/// opposing or driving it, times two for a controller J up to twice the rotor's.
+///
+/// Why: the voltage model takes the current's derivative, `L_sigma di/dt`. A current
+/// channel that fails (reading 0 A, or stuck) steps the measured current by up to the
+/// whole load current in one period with no voltage to drive it: on the 37 kW machine at
+/// 500 rpm, all channels dead at 28 A of flux current, the frame frequency took a
+/// 100 rad/s kick and the adapted speed jumped 30 rpm in the one step; the speed loop
+/// answered with a 96 A torque-current reference, and the control monitor named the
+/// failed sensing `CurrentRegulation` 1 ms later, before the sensor check could name the
+/// channel. The rotor of that machine moves at most 1 rpm in a period.
+pub const MAX_ACCELERATION_OVER_TORQUE: f32 = 4.0;
 
 impl FluxObserverDesign {
     /// The defaults: alpha_o = 2 pi 40 rad/s, g0 = 0.5, g1 = 0.2 (motulator's sensorless
@@ -203,6 +223,7 @@ impl FluxObserverDesign {
     /// `nominal_flux` (Wb) and the adaptation's schedule from [`SENSITIVITY_LIMIT`].
     pub fn defaults(max_speed: f32, nominal_flux: f32) -> Self {
         let alpha_o = 2.0 * core::f32::consts::PI * 40.0;
+        // bound set by the drive (`FluxObserver::new`), which knows the current limit
         Self {
             speed_bandwidth: alpha_o,
             gain_standstill: 0.5,
@@ -212,6 +233,7 @@ impl FluxObserverDesign {
             nominal_flux,
             sensitivity_limit: SENSITIVITY_LIMIT,
             frame_bandwidth: FRAME_BANDWIDTH,
+            max_acceleration: 0.0,
         }
     }
 }
@@ -279,6 +301,8 @@ pub struct FluxObserverConfig {
     pub ts_j_l2: f32,
     /// Speed clamp, rad/s electrical.
     pub max_speed_elec: f32,
+    /// The adapted speed's largest change per step, rad/s electrical (infinite: none).
+    pub max_speed_step_elec: f32,
     /// The design it was built from.
     pub design: FluxObserverDesign,
 }
@@ -306,7 +330,9 @@ impl FluxObserverConfig {
             && is_finite(d.sensitivity_limit)
             && d.sensitivity_limit >= 0.0
             && is_finite(d.frame_bandwidth)
-            && d.frame_bandwidth >= 0.0)
+            && d.frame_bandwidth >= 0.0
+            && is_finite(d.max_acceleration)
+            && d.max_acceleration >= 0.0)
         {
             return Err(FluxObserverDesignError::BadGain);
         }
@@ -346,6 +372,11 @@ impl FluxObserverConfig {
             ts_l1: ts * 2.0 * a,
             ts_j_l2: ts * j * a * a,
             max_speed_elec: d.max_speed * pp,
+            max_speed_step_elec: if d.max_acceleration > 0.0 {
+                d.max_acceleration * pp * ts
+            } else {
+                f32::INFINITY
+            },
             design,
         })
     }
@@ -477,8 +508,9 @@ impl FluxObserverState {
         } else {
             cfg.ts_alpha_o
         };
+        let step = cfg.max_speed_step_elec;
         let new_w = clamp(
-            w + ts_alpha * (ws - slip - w),
+            w + clamp(ts_alpha * (ws - slip - w), -step, step),
             -cfg.max_speed_elec,
             cfg.max_speed_elec,
         );
@@ -534,15 +566,21 @@ impl FluxObserver {
     /// Designs the observer for the controller's machine `m` at period `ts` (s) with
     /// [`FluxObserverDesign::defaults`], the speed clamp `max_speed` (rad/s mechanical) and
     /// the drive's flux current `flux_current` (A peak, i_sd*: the rated flux is L_M
-    /// i_sd*).
+    /// i_sd*) and the adapted speed's rate bound from the current limit `current_limit`
+    /// (A peak, [`MAX_ACCELERATION_OVER_TORQUE`]).
     pub fn new(
         m: &MachineParams,
         ts: f32,
         max_speed: f32,
         flux_current: f32,
+        current_limit: f32,
     ) -> Result<Self, FluxObserverDesignError> {
         let nominal_flux = m.magnetizing_inductance() * flux_current;
-        Self::with_design(m, FluxObserverDesign::defaults(max_speed, nominal_flux), ts)
+        let mut design = FluxObserverDesign::defaults(max_speed, nominal_flux);
+        // the drive's largest torque, 1.5 p psi_n I_limit, over J (J > 0: MachineParams)
+        let torque = 1.5 * m.pole_pairs_f32() * nominal_flux * current_limit;
+        design.max_acceleration = MAX_ACCELERATION_OVER_TORQUE * torque / m.inertia();
+        Self::with_design(m, design, ts)
     }
     /// Designs the observer with `design`.
     pub fn with_design(
@@ -1022,5 +1060,39 @@ mod tests {
         assert_eq!(s.flux, before.flux);
         assert_eq!(s.speed_elec, before.speed_elec);
         assert!(s.cos.is_finite() && s.sin.is_finite() && s.load_torque.is_finite());
+    }
+
+    /// A current sample the voltage cannot have driven (every channel failing to 0 A at
+    /// a running point) moves the adapted speed by at most the rotor's bound per step
+    /// ([`MAX_ACCELERATION_OVER_TORQUE`]); without the bound the one step kicks it by
+    /// several times that (the voltage model's L_sigma di/dt).
+    #[test]
+    fn a_current_step_without_voltage_moves_the_speed_at_most_as_the_rotor_can() {
+        let (m, psi, i_q) = machines()[0];
+        let w_m = 2.0 * 78.5; // 750 rpm, rad/s electrical
+        let (i_d, ws, u_d, u_q) = steady(&m, psi, i_q, w_m);
+        let step_after_fault = |max_acceleration: f32| {
+            let mut design = FluxObserverDesign::defaults(400.0, psi);
+            design.max_acceleration = max_acceleration;
+            let cfg = FluxObserverConfig::new(&m, design, TS).unwrap();
+            let mut s = FluxObserverState::new();
+            (s.flux, s.speed_elec, s.stator_frequency) = (psi, w_m, ws);
+            s.last_current = (i_d, i_q);
+            s.last_voltage = (u_d, u_q);
+            s.update(&cfg, (u_d, u_q), (i_d, i_q), m.stator_resistance());
+            let before = s.speed_elec;
+            s.update(&cfg, (u_d, u_q), (0.0, 0.0), m.stator_resistance());
+            ((s.speed_elec - before).abs(), cfg.max_speed_step_elec)
+        };
+        // the drive's bound: 4 x (1.5 p psi_n I_limit) / J with a 10.6 A limit
+        let bound = MAX_ACCELERATION_OVER_TORQUE * 1.5 * 2.0 * psi * 10.6 / m.inertia();
+        let (kick, step) = step_after_fault(bound);
+        assert!((step - bound * 2.0 * TS).abs() < 1e-4, "{step}");
+        assert!(kick <= step + 1e-4, "{kick} > {step}");
+        let (free, _) = step_after_fault(0.0);
+        assert!(
+            free > 3.0 * step,
+            "unbounded kick {free} against the bound {step}"
+        );
     }
 }

@@ -42,6 +42,7 @@ impl DriveObserver {
                     cfg.loops.control_period,
                     cfg.limits.max_speed,
                     cfg.loops.flux_current,
+                    cfg.limits.current_limit,
                 )
                 .map_err(|_| ConfigError::Invalid {
                     field: "estimation.observer",
