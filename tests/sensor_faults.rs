@@ -14,17 +14,20 @@
 //! check within its bound ([`max_detection_periods`]).
 //!
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
-//! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case): at
-//! most 1.5 us above the trip in every case (the comparator's delay); the sensor check
-//! first in 73 of the 92 reached cases (dead channels after at most 16 periods, a stuck
-//! one after at most 99 at 500 rpm and above, 612 at 60 rpm), the comparator first in
-//! the other 19 (dead channels under load, where the loops drive the current to the trip
-//! within 2 ms, and the 7.5 kW machine's stuck channel in field weakening with two
-//! shunts). Without the comparator (the second test) 17 cases stay above the trip for
-//! more than a period while switching (longest: TI's motor at 60 rpm with channel b
-//! stuck, two shunts, 8.8 A for 5.48 ms against 7.4 A); without the sensor check as well,
-//! 56 (longest: TI's motor at 60 rpm with channel b stuck, two shunts, 9.2 A for
-//! 6.88 ms against 7.4 A).
+//! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
+//! the machines configured from their nameplates (the flux observer): at most 1.5 us
+//! above the trip in every case (the comparator's delay); the sensor check first in 74
+//! of the 92 reached cases (dead channels after at most 16 periods, a stuck one after at
+//! most 148 at 500 rpm and above, 652 at 60 rpm), the comparator first in 13 (dead
+//! channels under load, where the loops drive the current to the trip within 2 ms, and
+//! the 37 kW and 7.5 kW machines' stuck channel at speed with two shunts), the control
+//! monitor in 5 (every channel dead on the 37 kW and 7.5 kW machines: `NoCurrentResponse`
+//! at 60 rpm, `CurrentRegulation` at 1500 rpm, after 11-14 periods). Without the
+//! comparator (the second test) 13 cases stay above the trip for more than a period
+//! while switching (longest: the 7.5 kW machine in field weakening with channel b stuck,
+//! two shunts, 62.9 A for 2.29 ms against 33.7 A); without the sensor check as well, 47
+//! (longest: TI's motor at 1500 rpm, every channel dead, two shunts, 18.6 A for 3.64 ms
+//! against 7.4 A).
 
 use acim_sim::faults::{run_sensor_cases, SensorCase};
 use acim_sim::metrics::Metrics;
@@ -34,22 +37,30 @@ use acim_sim::metrics::Metrics;
 /// file's model trips `CurrentRegulation` at about 1570 rpm while accelerating at its
 /// current limit towards its field-weakening point (the voltage saturates before the
 /// flux is weakened): a drive limitation of its own, listed in `docs/faults.md`.
-/// The sensor check's bound, in PWM periods after the injection, for a case: two of its
-/// 8-period windows for dead channels at any speed; for one stuck channel, found once the
-/// phase's true current has left the stuck reading (the current's rotation, then the
-/// loops acting on the wrong reading, move the prediction by 0.15 I_max within a window),
-/// which the electrical frequency sets: 120 periods (24 ms) at 500 rpm and above, 650
-/// (130 ms) at 60 rpm (measured: at most 12-16 periods dead, 99 and 612 stuck). Until then the reading
-/// is near the true current: the drive controls it, and the comparator bounds it.
+/// The bound, in PWM periods after the injection, for a case. Every channel dead: two
+/// of the sensor check's 8-period windows at any speed (the current loops wind up
+/// against the missing current at once). One channel stuck at its last reading: it
+/// reads the true current until the phase current leaves that reading, which it has
+/// done by at least the check's threshold within half an electrical period at the
+/// point (the phase current sweeps from one peak to the other), then two windows.
+/// Measured: dead channels within 16 periods; stuck ones within 148 at 500 rpm and above
+/// (the 37 kW machine, whose stuck reading first drives a torque-current transient the
+/// check holds its decision through) and 652 at 60 rpm, against 166 and 1266 for that
+/// machine (with the paper's observer: 99 and 612).
 fn max_detection_periods(c: &SensorCase) -> f32 {
+    const WINDOWS: f32 = 2.0 * 8.0;
     if c.fault.contains("stuck") {
-        if c.point.starts_with("60 ") {
-            650.0
-        } else {
-            120.0
-        }
+        let rpm: f32 = c
+            .point
+            .trim_end_matches(" rpm")
+            .rsplit(' ')
+            .next()
+            .and_then(|x| x.parse().ok())
+            .expect("the point's speed");
+        let electrical_hz = rpm / 60.0 * c.scenario.plant.pole_pairs as f32;
+        0.5 / electrical_hz / c.scenario.drive.loops.control_period_s + WINDOWS
     } else {
-        17.0
+        WINDOWS + 1.0
     }
 }
 
@@ -75,6 +86,7 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     let mut failures = Vec::new();
     let mut software = Vec::new();
     let mut hardware = 0;
+    let mut monitor = 0;
     let mut worst = std::collections::BTreeMap::new();
     for (c, m) in &rows {
         let ts = c.scenario.drive.loops.control_period_s;
@@ -103,11 +115,23 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
                 if m.fault_time_s.is_none_or(|t| t < at) {
                     failures.push(format!("no trip, or a trip before the fault: {line}"));
                 }
-                // found by one of the two current-path protections: the sensor check
-                // (software) or the comparator (hardware), whichever comes first
+                // found by one of the current-path protections: the sensor check
+                // (software) or the comparator (hardware), whichever comes first; every
+                // channel dead, also the control monitor's checks on the measured
+                // current against the voltage (NoCurrentResponse: "current sensing dead
+                // or motor disconnected") or against its reference (CurrentRegulation),
+                // within the sensor check's bound
+                let periods = (m.fault_time_s.unwrap_or(at) - at) / ts;
                 match m.fault.as_deref() {
+                    Some("NoCurrentResponse" | "CurrentRegulation")
+                        if !c.fault.contains("stuck") =>
+                    {
+                        monitor += 1;
+                        if periods > max_detection_periods(c) {
+                            failures.push(format!("found after {periods:.0} periods: {line}"));
+                        }
+                    }
                     Some("CurrentSensor") => {
-                        let periods = (m.fault_time_s.unwrap_or(at) - at) / ts;
                         software.push(periods);
                         worst
                             .entry((c.fault, c.point.starts_with("60 ")))
@@ -130,7 +154,8 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     software.sort_by(f32::total_cmp);
     println!(
         "sensor check first in {} cases (periods after the injection: median {:.0}, max {:.0}), \
-         the comparator first in {hardware}",
+         the comparator first in {hardware}, the control monitor (every channel dead) in \
+         {monitor}",
         software.len(),
         software.get(software.len() / 2).copied().unwrap_or(0.0),
         software.last().copied().unwrap_or(0.0),

@@ -299,7 +299,10 @@ pub fn sensor_markdown(rows: &[(SensorCase, Metrics)]) -> String {
          equation says the applied voltage moved it, judged every 1.6 ms, `acim::sensor_check`) \
          and the plant's hardware comparator (`HardwareBreak`: at the software trip level, \
          1.5 us delay, `acim::hardware_trip`), which opens the switches where the current loops \
-         drive the true current to the trip sooner. The peak true current and the \
+         drive the true current to the trip sooner. With every channel dead the control monitor's \
+         checks on the measured current can come first: against the voltage (`NoCurrentResponse`, \
+         current sensing dead or the motor disconnected) or against its reference \
+         (`CurrentRegulation`). The peak true current and the \
          time above the trip are taken at every integration sub-step with the gates on, not only at \
          the samples; acceptance: above the trip for at most one PWM period \
          ({:.0} us, the longest period of the rows) while switching.\n\n\

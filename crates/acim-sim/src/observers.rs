@@ -72,10 +72,10 @@ pub fn compare_with(
             .with_overrides(sets)
             .map_err(|e| format!("{name}: {e}"))?;
         let mut full = base.clone();
-        full.drive.observer = ObserverKind::FullOrder;
+        full.drive.observer = Some(ObserverKind::FullOrder);
         full.name = format!("{name}-full-order");
         let mut flux = base.clone();
-        flux.drive.observer = ObserverKind::Flux;
+        flux.drive.observer = Some(ObserverKind::Flux);
         flux.name = format!("{name}-flux");
         let reduced = run(&base)?;
         let full_order = run(&full)?;

@@ -266,8 +266,11 @@ pub struct DriveSpec {
     /// "f32" or "fixed".
     pub arithmetic: Arithmetic,
     /// "reduced" (the paper's observer), "full-order" (the baseline, f32 only) or "flux"
-    /// (the reduced-order flux observer, f32 only).
-    pub observer: ObserverKind,
+    /// (the reduced-order flux observer, f32 only). Unset: the configuration's own
+    /// choice, the flux observer for a drive configured from `[nameplate]` in f32
+    /// (`acim::nameplate::drive_config`), the paper's observer otherwise (the paper's
+    /// settings, and the fixed-point drive, which runs only the paper's).
+    pub observer: Option<ObserverKind>,
     /// "linear" (the default) or "overmodulation" (through to six-step, f32 only).
     pub modulation: ModulationKind,
     /// The inverter as the drive compensates it (`acim::InverterSettings`).
@@ -1762,17 +1765,19 @@ impl Scenario {
             drive = cfg;
         }
         drive.estimation.observer = match d.observer {
-            ObserverKind::Flux => acim::ObserverChoice::Flux,
-            ObserverKind::Reduced | ObserverKind::FullOrder => acim::ObserverChoice::Reduced,
+            Some(ObserverKind::Flux) => acim::ObserverChoice::Flux,
+            Some(ObserverKind::Reduced | ObserverKind::FullOrder) => acim::ObserverChoice::Reduced,
+            None if d.arithmetic == Arithmetic::Fixed => acim::ObserverChoice::Reduced,
+            None => drive.estimation.observer,
         };
-        if d.observer == ObserverKind::Flux && d.arithmetic == Arithmetic::Fixed {
+        if d.observer == Some(ObserverKind::Flux) && d.arithmetic == Arithmetic::Fixed {
             return err(
                 "drive.observer",
                 "\"flux\" runs in f32 only (drive.arithmetic = \"f32\")",
             );
         }
         acim::Drive::new(drive).map_err(|e| config_error(e, self.nameplate.is_some()))?;
-        if d.observer == ObserverKind::FullOrder {
+        if d.observer == Some(ObserverKind::FullOrder) {
             if d.arithmetic == Arithmetic::Fixed {
                 return err(
                     "drive.observer",

@@ -399,7 +399,15 @@ pub fn build_drive(sc: &Scenario, v: &Validated) -> Result<Box<dyn Controller>, 
             allowed: format!("{e}"),
         }
     };
-    Ok(match (sc.drive.arithmetic, sc.drive.observer) {
+    // unset: the configuration's choice (`estimation.observer`, resolved at validation)
+    let observer = sc
+        .drive
+        .observer
+        .unwrap_or(match v.drive.estimation.observer {
+            acim::ObserverChoice::Reduced => ObserverKind::Reduced,
+            acim::ObserverChoice::Flux => ObserverKind::Flux,
+        });
+    Ok(match (sc.drive.arithmetic, observer) {
         (Arithmetic::F32, ObserverKind::Reduced)
             if sc.drive.modulation == ModulationKind::Overmodulation =>
         {

@@ -195,8 +195,10 @@ pub enum ObserverChoice {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EstimationSettings {
     /// The speed observer of the f32 drive ([`crate::speed_observer::DriveObserver`]): the
-    /// paper's reduced-order observer, or the flux observer with speed adaptation
-    /// ([`crate::flux_observer`]). The fixed-point drive runs the paper's.
+    /// paper's reduced-order observer (the paper's settings, [`DriveConfig::paper_defaults`]),
+    /// or the flux observer with speed adaptation ([`crate::flux_observer`]; the
+    /// configuration from a nameplate, [`crate::nameplate::drive_config`]). The
+    /// fixed-point drive runs the paper's only.
     pub observer: ObserverChoice,
     /// Observer poles (rates, rad/s).
     pub observer_poles: ObserverPoles,

@@ -33,6 +33,15 @@
 //!   models, as the paper's 120/160/200 rad/s against 466 rad/s) or
 //!   [`OBSERVER_OVER_SPEED_LOOP`] times the speed loop if that is faster, and below
 //!   0.04 / Ts;
+//! - **speed observer**: the flux observer with speed adaptation
+//!   ([`crate::flux_observer`], [`crate::config::ObserverChoice::Flux`]): it holds rated
+//!   load through zero speed and regenerating near zero stator frequency with no
+//!   regeneration limit, where the paper's observer needs one (`docs/peer-benchmark.md`,
+//!   `docs/load-steps.md`). The paper's observer stays a setting
+//!   ([`crate::config::EstimationSettings::observer`]); the fixed-point drive runs only
+//!   the paper's, so a configuration for it sets `estimation.observer` to
+//!   [`crate::config::ObserverChoice::Reduced`] ([`crate::fixed::FixedDrive`] refuses the
+//!   flux observer with that field named);
 //! - **estimator limits**: plausible load torque [`LOAD_ESTIMATE_OVER_RATED`] times the
 //!   rated torque; the initial Rs estimate is the machine's Rs (by construction);
 //! - **V/f**: rated phase voltage per rated frequency, boost `Rs i_sd`;
@@ -40,6 +49,7 @@
 //!
 //! Inconsistent data get a [`NameplateError`] naming the field and the rule.
 
+use crate::config::ObserverChoice;
 use crate::design::{ConfigError, CurrentSensing, DriveConfig, DriveDesign, VfSettings};
 use crate::fixed::PerUnitBases;
 use crate::math::{is_finite, sqrt, RAD_S_TO_RPM, RPM_TO_RAD_S};
@@ -403,6 +413,7 @@ pub fn drive_config(
     cfg.limits.current_limit = OVERLOAD_CURRENT * i_max;
     cfg.limits.continuous_current = i_max;
     cfg.loops.load_torque_feedforward = true;
+    cfg.estimation.observer = ObserverChoice::Flux;
     cfg.limits.overload_time = crate::design::OVERLOAD_SPEED_LOOP_CONSTANTS / w_speed;
     cfg.limits.overcurrent_trip = trip;
     cfg.limits.dc_bus_min = BUS_MIN_FRACTION * bus;
@@ -570,8 +581,13 @@ mod tests {
             // nothing of the paper's machine left: the initial Rs is this machine's
             assert_eq!(cfg.estimation.rs_initial, m.stator_resistance(), "{name}");
             assert!(cfg.loops.flux_current < cfg.limits.current_limit, "{name}");
+            // the flux observer in f32 (the default), the paper's in fixed point
+            assert_eq!(cfg.estimation.observer, ObserverChoice::Flux, "{name}");
+            crate::Drive::new(cfg).unwrap_or_else(|e| panic!("{name}: {e}"));
             let bases = per_unit_bases(&cfg, &b);
-            crate::fixed::FixedDrive::with_bases(cfg, bases)
+            let mut fixed = cfg;
+            fixed.estimation.observer = ObserverChoice::Reduced;
+            crate::fixed::FixedDrive::with_bases(fixed, bases)
                 .unwrap_or_else(|e| panic!("{name} fixed point: {e}"));
         }
     }
