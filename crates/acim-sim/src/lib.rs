@@ -6,6 +6,7 @@ pub mod capability;
 pub mod commission;
 pub mod faults;
 pub mod linear;
+pub mod load_steps;
 pub mod machines;
 pub mod metrics;
 pub mod observers;

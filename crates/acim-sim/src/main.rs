@@ -9,6 +9,7 @@
 //! acim-sim observers [FILE] [OPTIONS]      reduced- vs full-order observer table
 //! acim-sim faults [FILE] [OPTIONS]         fault table
 //! acim-sim overhauling [FILE] [OPTIONS]    overhauling-load sweep
+//! acim-sim load-steps [FILE]               rated load applied and removed, every machine
 //! acim-sim robustness [FILE]               the robustness matrix
 //! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! acim-sim linear-stability [FILE]         eigenvalues of the linearised closed loop
@@ -37,6 +38,10 @@ const USAGE: &str = "usage:
   acim-sim observers [FILE] [OPTIONS]       reduced- vs full-order observer, closed loop (table
                                             to FILE, default docs/observers.md; with --set:
                                             <out>/observers.md)
+  acim-sim load-steps [FILE] [OPTIONS]      rated load applied and removed at 10, 50 and 100 %
+                                            of rated speed on every machine of the set,
+                                            commissioned first (table to FILE, default
+                                            docs/load-steps.md; --set is not supported)
   acim-sim capability [FILE]                steady torque held per speed vs the envelope of the
                                             machine equations (table to FILE, default
                                             docs/capability.md, plot next to it; --set is
@@ -895,6 +900,56 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 .map_or_else(|| PathBuf::from("any-motor"), |d| d.join("any-motor"));
             let md = any_motor(&out, &figs, &o)?;
             write_table(&file, &md, &out)?;
+        }
+        Some("load-steps") => {
+            o.at_most_positional("load-steps", 1, "at most one table file")?;
+            o.reject(
+                "load-steps",
+                Some("it runs the machine files as they are"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "load-steps.md");
+            let quiet = o.quiet;
+            let mut run = |sc: &Scenario| {
+                let (r, m) =
+                    acim_sim::run_with_metrics(sc).map_err(|e| format!("{}: {e}", sc.name))?;
+                Ok((r.rows, m))
+            };
+            // the default drive (the nameplate's: the flux observer) and the paper's observer
+            let (mut default, mut paper) = (Vec::new(), Vec::new());
+            for m in &acim_sim::load_steps::MACHINES {
+                let p = acim_sim::load_steps::prepare(m)?;
+                for (observer, sets, cases) in [
+                    ("default", vec![], &mut default),
+                    (
+                        "paper's",
+                        vec!["drive.observer=\"reduced\"".to_string()],
+                        &mut paper,
+                    ),
+                ] {
+                    let c = acim_sim::load_steps::cases(&p, &sets, &mut run)?;
+                    if !quiet {
+                        for c in &c {
+                            eprintln!(
+                                "{} ({observer} observer) {:.0} rpm {:+.1} N m: {}",
+                                m.name,
+                                c.rpm,
+                                c.load_nm,
+                                c.failure().unwrap_or_else(|| "pass".into())
+                            );
+                        }
+                    }
+                    cases.extend(c);
+                }
+            }
+            let md = acim_sim::load_steps::markdown(&default, &paper);
+            write_table(&file, &md, &o.out())?;
+            let bad = default.iter().filter(|c| c.failure().is_some()).count();
+            if bad > 0 {
+                return Err(format!(
+                    "{bad} case(s) of the default drive outside their bounds"
+                ));
+            }
         }
         Some("capability") => {
             o.at_most_positional("capability", 1, "at most one table file")?;
