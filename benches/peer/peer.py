@@ -55,10 +55,10 @@ CURRENT_LIMIT = 1.5 * math.sqrt(2.0) * NP["current_a"]
 T_REF = 1.2
 HOLD_TOL_MOTORING = 5.0  # rpm: the project's drift threshold
 # our --set overrides for every case (environment PEER_SETS, space-separated), e.g.
-# PEER_SETS="drive.observer=flux" to benchmark another observer
+# PEER_SETS="drive.loops.control_period_s=1e-4" to benchmark another setting
 EXTRA_SETS = os.environ.get("PEER_SETS", "").split()
-# our runs with the reduced-order flux observer
-FLUX_SETS = ["drive.observer=flux"]
+# our runs with the paper's observer (the default from the nameplate is the flux observer)
+PAPER_SETS = ["drive.observer=reduced"]
 HOLD_TOL = 30.0  # rpm: regenerating loads and parameter errors
 
 
@@ -290,7 +290,7 @@ def rated_step(rpm, t_step, duration, limit=True):
     return Case(
         name=f"step-{rpm}" + ("" if limit else "-nolimit"),
         group="step",
-        label=f"{rpm} rpm" + ("" if limit else ", our regeneration limit off"),
+        label=f"{rpm} rpm" + ("" if limit else ", the paper's observer's regeneration limit off"),
         duration=duration,
         speed=[(T_REF, float(rpm))],
         load=[(t_step, RATED_TORQUE)],
@@ -633,17 +633,17 @@ def write_page(results, times, versions, ref_checks):
     errs_off = [c.name for c in cases_param_errors() if c.group == "errors-rsoff"]
     add("## Overview")
     add("")
-    add("| cases | motulator | this drive (the paper's observer, the default) | this drive, flux observer |")
+    add("| cases | motulator | this drive (the flux observer, the default from the nameplate) | this drive, the paper's observer |")
     add("|---|---|---|---|")
     add(f"| rated-load steps at 750, 75, 30 rpm (back in control: within 1 % of the reference at the end) | {count(results, steps, 0)} | {count(results, steps, 1)} | {count(results, steps, 2)} |")
     add(f"| rated motoring load ramped in at 45, 30, 15, 0 rpm (within +/-{HOLD_TOL_MOTORING:.0f} rpm) | {count(results, motoring, 0)} | {count(results, motoring, 1)} | {count(results, motoring, 2)} |")
-    add(f"| overhauling 25/50/100 % load at 15-75 rpm (within +/-{HOLD_TOL:.0f} rpm) | {count(results, regen, 0)} | regeneration limit on: {count(results, regen, 1)}; off: {count(results, regen_off, 1)} | {count(results, regen, 2)} (no limit) |")
+    add(f"| overhauling 25/50/100 % load at 15-75 rpm (within +/-{HOLD_TOL:.0f} rpm) | {count(results, regen, 0)} | {count(results, regen, 1)} (no regeneration limit) | regeneration limit on: {count(results, regen, 2)}; off: {count(results, regen_off, 2)} |")
     add(f"| controller parameter errors (within +/-{HOLD_TOL:.0f} rpm) | {count(results, errs, 0)} | {count(results, errs, 1)}; Rs estimation off: {count(results, errs_off, 1)} | {count(results, errs, 2)}; Rs estimation off: {count(results, errs_off, 2)} |")
     add("")
     add(
         "The step rows count a run as held when it is back within 1 % of the reference by the end. "
-        "Details, definitions and every number follow; the flux observer's runs are in the section "
-        "[with the flux observer](#this-drive-with-the-flux-observer)."
+        "Details, definitions and every number follow; the paper's observer's runs are in the section "
+        "[with the paper's observer](#this-drive-with-the-papers-observer)."
     )
     add("")
 
@@ -656,8 +656,8 @@ def write_page(results, times, versions, ref_checks):
         "outside 1 % of the reference (\"not back\": still outside at the end or switched off); "
         "estimation error: the largest |estimated - true speed| after the step. At 75 and 30 rpm the "
         "dip is larger than the speed: the load drives the rotor backwards before the speed loop answers, "
-        "and the drive must recover through zero speed. Our drive is also run there with its regeneration "
-        "limit off (motulator's run is the same)."
+        "and the drive must recover through zero speed. The paper's observer is also run there with its "
+        "regeneration limit off (its section below; the default drive has no such limit)."
     )
     add("")
     add(
@@ -666,7 +666,8 @@ def write_page(results, times, versions, ref_checks):
     )
     add("|---|---|---|---|---|---|---|---|---|")
     for c in cases_steps():
-        if c.name not in results:
+        # the limit-off runs differ only with the paper's observer (its section below)
+        if c.name not in results or c.sets:
             continue
         mo, ou = results[c.name][:2]
 
@@ -683,7 +684,7 @@ def write_page(results, times, versions, ref_checks):
     add("")
     if any(results[c.name][1]["limited_before"] for c in cases_steps() if c.name in results):
         add(
-            "\"Target limited\" before a step: our regeneration limit allows no braking current below "
+            "\"Target limited\" before a step: the regeneration limit allows no braking current below "
             "1.5 Hz stator frequency (45 rpm at no load); with no friction in the plant, a small residual "
             "torque carried the rotor above the target to where braking is allowed, and the drive held "
             "that speed and reported its target limited. With the limit off it runs at the target."
@@ -714,32 +715,34 @@ def write_page(results, times, versions, ref_checks):
     add(
         "An active load driving the rotor forwards, ramped in over 4 s (from 2.0 s), at a target of "
         f"{', '.join(str(r) for r in REGEN_SPEEDS)} rpm. Held: in control and the true speed within "
-        f"+/-{HOLD_TOL:.0f} rpm of the target over the last second (7-8 s). Our drive's regeneration "
-        "limit (on by default, `drive.loops.regen_min_frequency_hz` = 1.5) keeps braking operating points 1.5 Hz "
-        "away from zero stator frequency: it holds the speed it can reach there and reports the target "
+        f"+/-{HOLD_TOL:.0f} rpm of the target over the last second (7-8 s). Our default drive (the flux "
+        "observer) has no regeneration limit, nor has motulator. With the paper's observer the drive keeps "
+        "one (on by default, `drive.loops.regen_min_frequency_hz` = 1.5): braking operating points stay 1.5 Hz "
+        "away from zero stator frequency, the drive holds the speed it can reach there and reports the target "
         "limited (\"target limited\" below: the drive ran above its target, inside the 30 rpm band or not); "
-        "off: `--set drive.loops.regen_min_frequency_hz=0`. motulator has no such limit."
+        "off: `--set drive.loops.regen_min_frequency_hz=0`."
     )
     add("")
     have = all(f"regen-{int(f * 100)}-{r}{x}" in results for f in REGEN_FRACTIONS for r in REGEN_SPEEDS for x in ("", "-nolimit"))
     if have:
-        add("| load | motulator: lowest target held | this drive, limit on | this drive, limit off |")
-        add("|---|---|---|---|")
+        add("| load | motulator: lowest target held | this drive | paper's observer, limit on | paper's observer, limit off |")
+        add("|---|---|---|---|---|")
         for frac in REGEN_FRACTIONS:
             add(
                 f"| {int(frac * 100)} % ({frac * RATED_TORQUE:.2f} N m) | {held_targets(results, frac, '', 0)} "
-                f"| {held_targets(results, frac, '', 1)} | {held_targets(results, frac, '-nolimit', 1)} |"
+                f"| {held_targets(results, frac, '', 1)} | {held_targets(results, frac, '', 2)} "
+                f"| {held_targets(results, frac, '-nolimit', 2)} |"
             )
         add("")
         add("Each run: held or not, and the mean / peak-to-peak true speed over the last second (rpm), or how it ended:")
         add("")
-        add("| load | target (rpm) | motulator | this drive, limit on | this drive, limit off |")
-        add("|---|---|---|---|---|")
+        add("| load | target (rpm) | motulator | this drive | paper's observer, limit on | paper's observer, limit off |")
+        add("|---|---|---|---|---|---|")
         for frac in REGEN_FRACTIONS:
             for rpm in REGEN_SPEEDS:
                 a = results[f"regen-{int(frac * 100)}-{rpm}"]
                 b = results[f"regen-{int(frac * 100)}-{rpm}-nolimit"]
-                add(f"| {int(frac * 100)} % | {rpm} | {cell_hold(a[0])} | {cell_hold(a[1])} | {cell_hold(b[1])} |")
+                add(f"| {int(frac * 100)} % | {rpm} | {cell_hold(a[0])} | {cell_hold(a[1])} | {cell_hold(a[2])} | {cell_hold(b[2])} |")
         add("")
 
     # -- reversal and ramp
@@ -793,20 +796,23 @@ def write_page(results, times, versions, ref_checks):
         if (FIGURES / f"{name}.png").exists():
             add(f"![{title}](figures/peer/{name}.png)")
             add("")
-    # -- the flux observer
-    add("## This drive with the flux observer")
+    # -- the paper's observer
+    add("## This drive with the paper's observer")
     add("")
     add(
-        "Every case again with our other speed observer, `--set drive.observer=flux` "
-        "(`acim::flux_observer`): a reduced-order flux observer with speed adaptation of the same "
-        "structure and gain as motulator's, giving the speed to our indirect field orientation; with it "
-        "the drive has no regeneration limit and no orientation correction, and the running Rs law adapts "
-        "only at low stator frequency (below Rs/L_M), where Rs is observable against inductance errors. "
+        "Every case again with the paper's reduced-order observer of speed and load torque, "
+        "`--set drive.observer=reduced` (`acim::observer`, the drive's default before the flux observer; "
+        "the paper's figures are reproduced with it), with the orientation correction, the far-side mode "
+        "and the regeneration limit it needs near zero stator frequency while regenerating, and the running "
+        "Rs law adapting at every speed. The default drive runs the flux observer (`acim::flux_observer`): "
+        "motulator's structure and gain, giving the speed to our indirect field orientation, no "
+        "regeneration limit and no orientation correction, the running Rs law only at low stator "
+        "frequency (below Rs/L_M), where Rs is observable against inductance errors. "
         "Cells: steps, peak dip / back within 1 % (s); holds, held or not with the last second's mean / "
         "peak-to-peak speed (rpm); the reversal and the ramp, the largest tracking error (rpm)."
     )
     add("")
-    add("| case | motulator | this drive, paper's observer | this drive, flux observer |")
+    add("| case | motulator | this drive | this drive, paper's observer |")
     add("|---|---|---|---|")
 
     def cell_any(m):
@@ -824,8 +830,8 @@ def write_page(results, times, versions, ref_checks):
     for c in all_cases():
         if c.name not in results or c.name.endswith("-nolimit"):
             continue
-        mo, ou, fl = results[c.name]
-        add(f"| {c.name} | {cell_any(mo)} | {cell_any(ou)} | {cell_any(fl)} |")
+        mo, ou, pa = results[c.name]
+        add(f"| {c.name} | {cell_any(mo)} | {cell_any(ou)} | {cell_any(pa)} |")
     add("")
 
     add("## Where the two are not alike")
@@ -853,12 +859,13 @@ NOT_ALIKE = [
     "- **Observer and orientation.** motulator: a reduced-order flux observer in estimated rotor-flux "
     "coordinates with speed adaptation, gain k_o = (0.5 alpha + 0.2 |w_m|)/(alpha - j w_m) with "
     "alpha = R_R/L_M, speed-adaptation bandwidth 2 pi 40 rad/s; its gain leans on the voltage model as "
-    "the speed rises. Ours: indirect field orientation (the slip from the current model with R_R and L_M) "
-    "with the paper's reduced-order observer of speed and load torque, an orientation correction from the "
-    "d-axis residual and, past the regeneration limit, a far-side mode. The L_M rows above show the "
-    "difference most. Our flux observer (`drive.observer = \"flux\"`, its own section above) has motulator's "
-    "structure and gain, with a load-torque observer added and the voltage taken over the period it acted "
-    "in; it gives the speed to our indirect field orientation (motulator orients on its observer's flux).",
+    "the speed rises; motulator orients on its observer's flux. Ours: indirect field orientation (the slip "
+    "from the current model with R_R and L_M) with the speed of a flux observer of motulator's structure "
+    "and gain (`acim::flux_observer`), with a load-torque observer added, the voltage taken over the period "
+    "it acted in, the adapted speed bounded by what the rotor can do, and the frame locked onto the "
+    "observer's flux angle at higher stator frequency. The paper's reduced-order observer of speed and load "
+    "torque (its own section above) adds an orientation correction from the d-axis residual and, past its "
+    "regeneration limit, a far-side mode.",
     "- **Rs adaptation.** motulator 0.5.0 has none; ours identifies Rs at standstill at each start and "
     "adapts it while running (default). Our start also identifies the inverter's voltage error (here "
     "zero) and calibrates the current sensors' gains; motulator starts at once.",
@@ -898,14 +905,14 @@ def figure(case, series, path, title, zoom_s):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    mo, ou, fl = series
+    mo, ou, pa = series
     fig, ax = plt.subplots(2, 1, figsize=(8, 6.5))
     t0 = max(0.0, min(s for s, _ in case.speed) - 0.2)
     spans = ((t0, case.duration), (case.event - 0.2, min(case.duration, case.event + zoom_s)))
     for a, (lo, hi) in zip(ax, spans):
         tr = [x for x in ou.t if lo <= x <= hi]
         a.plot(tr, [case.ref_rpm(x) for x in tr], "k--", lw=1, label="reference")
-        for s, lab, col in ((mo, "motulator 0.5.0", "tab:orange"), (ou, "this drive", "tab:blue"), (fl, "this drive, flux observer", "tab:green")):
+        for s, lab, col in ((mo, "motulator 0.5.0", "tab:orange"), (ou, "this drive", "tab:blue"), (pa, "this drive, paper's observer", "tab:green")):
             end = s.stop_t if s.stop_t is not None else math.inf
             idx = [i for i, x in enumerate(s.t) if lo <= x <= hi and x <= end]
             a.plot([s.t[i] for i in idx], [s.w[i] for i in idx], color=col, lw=1.4, label=f"{lab}: speed")
@@ -959,7 +966,7 @@ def main():
     cache = json.loads(cache_path.read_text()) if (args.reuse and cache_path.exists()) else {}
     counted = set()
     with tempfile.TemporaryDirectory(prefix="acim-peer-") as tmp:
-        # our runs (each case with the default observer and with the flux observer) are
+        # our runs (each case with the default observer and with the paper's) are
         # independent processes: they run as many at once as the machine has cores, each in
         # its own directory, and are read back in the cases' order
         def ours_timed(c, kind, extra):
@@ -970,9 +977,9 @@ def main():
             return series, wall, time.perf_counter() - t0
 
         pool = concurrent.futures.ThreadPoolExecutor(max_workers=os.cpu_count() or 1)
-        runs = [(pool.submit(ours_timed, c, "ours", ()), pool.submit(ours_timed, c, "flux", FLUX_SETS))
+        runs = [(pool.submit(ours_timed, c, "ours", ()), pool.submit(ours_timed, c, "paper", PAPER_SETS))
                 for c in cases]
-        for c, (ours_run, flux_run) in zip(cases, runs):
+        for c, (ours_run, paper_run) in zip(cases, runs):
             try:
                 ours, wall, total = ours_run.result()
             except RuntimeError as e:
@@ -1000,24 +1007,24 @@ def main():
                     times["n_motulator"] += 1
                 mo_m = analyse(c, mo)
             ou_m = analyse(c, ours)
-            # the same case with our other speed observer, the reduced-order flux observer
-            # (`drive.observer = "flux"`, which has no regeneration limit)
+            # the same case with the paper's observer (`drive.observer = "reduced"`, with its
+            # regeneration limit)
             try:
-                flux = flux_run.result()[0]
+                paper = paper_run.result()[0]
             except RuntimeError as e:
                 problems.append(str(e))
-                print(f"{c.name}: our run with the flux observer failed", file=sys.stderr)
+                print(f"{c.name}: our run with the paper's observer failed", file=sys.stderr)
                 continue
-            fl_m = analyse(c, flux)
+            pa_m = analyse(c, paper)
             chk = check_reference(c, ours)
             if chk is not None:
                 ref_checks[c.name] = chk
                 if chk > 1.0:
                     problems.append(f"{c.name}: our drive's reference is {chk:.2f} rpm off the benchmark's ramp")
-            results[c.name] = (mo_m, ou_m, fl_m)
+            results[c.name] = (mo_m, ou_m, pa_m)
             if c.name in FIGURE_CASES:
-                series[c.name] = (mo, ours, flux)
-            print(f"{c.name:28} ours: {summary(ou_m)}   flux observer: {summary(fl_m)}" + ("" if mo_m is None else f"   motulator: {summary(mo_m)}"), flush=True)
+                series[c.name] = (mo, ours, paper)
+            print(f"{c.name:28} ours: {summary(ou_m)}   paper's observer: {summary(pa_m)}" + ("" if mo_m is None else f"   motulator: {summary(mo_m)}"), flush=True)
         pool.shutdown(wait=True, cancel_futures=True)
     print(
         f"our side: {times['n']} runs, {times['sim_s']:.0f} s simulated in {times['ours_sim']:.1f} s "
