@@ -16,18 +16,18 @@
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
 //! the machines configured from their nameplates (the flux observer): at most 1.5 us
-//! above the trip in every case (the comparator's delay); the sensor check first in 74
-//! of the 92 reached cases (dead channels after at most 16 periods, a stuck one after at
-//! most 148 at 500 rpm and above, 652 at 60 rpm), the comparator first in 13 (dead
-//! channels under load, where the loops drive the current to the trip within 2 ms, and
-//! the 37 kW and 7.5 kW machines' stuck channel at speed with two shunts), the control
-//! monitor in 5 (every channel dead on the 37 kW and 7.5 kW machines: `NoCurrentResponse`
-//! at 60 rpm, `CurrentRegulation` at 1500 rpm, after 11-14 periods). Without the
-//! comparator (the second test) 13 cases stay above the trip for more than a period
-//! while switching (longest: the 7.5 kW machine in field weakening with channel b stuck,
-//! two shunts, 62.9 A for 2.29 ms against 33.7 A); without the sensor check as well, 47
-//! (longest: TI's motor at 1500 rpm, every channel dead, two shunts, 18.6 A for 3.64 ms
-//! against 7.4 A).
+//! above the trip in every case (the comparator's delay); the sensor check first in 83
+//! of the 108 reached cases (dead channels after at most 16 periods, a stuck one after
+//! at most 148 at 500 rpm and above, 652 at 60 rpm), the comparator first in 20 (dead
+//! channels under load, where the loops drive the current to the trip within 2 ms, the
+//! 0.18 kW machine's dead channels up to 1500 rpm, and the 37 kW and 7.5 kW machines'
+//! stuck channel at speed with two shunts), the control monitor in 5 (every channel dead
+//! on the 37 kW and 7.5 kW machines: `NoCurrentResponse` at 60 rpm, `CurrentRegulation`
+//! at 1500 rpm, after 11-14 periods). Without the comparator (the second test) 20 cases
+//! stay above the trip for more than a period while switching (longest: the 0.18 kW
+//! machine in field weakening with channel b stuck, two shunts, 3.56 A for 3.70 ms
+//! against 1.68 A); without the sensor check as well, 59 (longest: the 0.18 kW machine at
+//! 1500 rpm, every channel dead, three shunts, 3.83 A for 6.68 ms against 1.68 A).
 
 use acim_sim::faults::{run_sensor_cases, SensorCase};
 use acim_sim::metrics::Metrics;
@@ -80,7 +80,7 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     let rows = run_all();
     assert_eq!(
         rows.len(),
-        6 * 4 * 4,
+        7 * 4 * 4,
         "every machine, point, fault and sensing"
     );
     let mut failures = Vec::new();

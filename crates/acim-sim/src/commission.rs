@@ -371,7 +371,10 @@ pub fn run(sc: &Scenario) -> Result<Run, String> {
             Stage::ImpedanceHigh => 3,
             _ => 4,
         };
-        if com.stage() == Stage::NoLoad {
+        // the no-load hold (its frequency at the test's end value; the ramp down after it
+        // leaves the test's flux)
+        let w_hold = acim::commissioning::NO_LOAD_FREQUENCY * rated.frequency;
+        if com.stage() == Stage::NoLoad && com.frequency() >= 0.999 * w_hold {
             at_rated_flux = plant.machine().effective_params();
         }
         let [a, b, _] = m.phase_currents;

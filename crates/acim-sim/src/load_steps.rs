@@ -1,5 +1,6 @@
 //! Rated load applied and removed across the machines: each machine of the set with a
-//! catalogue inertia for its power ([`catalogue_inertia`]), commissioned from its
+//! catalogue inertia for its rating (`acim::commissioning::catalogue_inertia`, the line
+//! commissioning judges an identified J against), commissioned from its
 //! nameplate against its plant, then driven with the identified model at 10, 50 and 100 %
 //! of its rated speed while its rated torque is applied as an active load (opposing the
 //! rotation: motoring; driving it: regenerating) at [`APPLIED_AT_S`] and removed at
@@ -19,7 +20,8 @@ pub type RunFn<'a> = dyn FnMut(&Scenario) -> Result<(Vec<Row>, Metrics), String>
 
 /// The machines of the load-step set: the acceptance machines and a 4 kW motor of a
 /// class a user tried.
-pub const MACHINES: [MachineFile; 7] = [
+pub const MACHINES: [MachineFile; 8] = [
+    machines::MACHINES[6],
     machines::MACHINES[0],
     machines::MACHINES[1],
     machines::MACHINES[2],
@@ -42,14 +44,6 @@ pub const REMOVED_AT_S: f32 = 5.0;
 pub const DURATION_S: f32 = 7.0;
 /// The band "back" means: 1 % of the rated speed.
 pub const BAND: f32 = 0.01;
-
-/// Rotor inertia of a 4-pole catalogue motor of `power_w`, kg m^2: J = 0.0032 P_kW^1.3,
-/// a fit through IE2/IE3 4-pole catalogue data (0.0022 at 0.75 kW, 0.0194 at 4 kW, 0.042
-/// at 7.5 kW, 0.35 at 37 kW; e.g. ABB M3BP/M2BAX, Siemens 1LE1 tables). Real rotors of one
-/// rating spread about +-40 % around it.
-pub fn catalogue_inertia(power_w: f32) -> f32 {
-    0.0032 * (power_w / 1000.0).powf(1.3)
-}
 
 /// The bounds one case is judged against, from the speed loop's design.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,8 +122,8 @@ impl Case {
 /// ([`machines::base`]).
 pub fn base(m: &MachineFile) -> Result<Scenario, String> {
     let mut sc = machines::base(m)?;
-    let power = sc.nameplate.ok_or("no [nameplate]")?.power_w;
-    sc.plant.inertia_kgm2 = catalogue_inertia(power);
+    let (_, rated_nm) = machines::rated(&sc)?;
+    sc.plant.inertia_kgm2 = acim::commissioning::catalogue_inertia(rated_nm);
     Ok(sc)
 }
 
@@ -223,11 +217,7 @@ pub fn prepare(m: &MachineFile) -> Result<Prepared, String> {
 
 /// Runs the six cases of `p` with the `--set`-style overrides `sets` (e.g. the
 /// observer); `run` runs one scenario.
-pub fn cases(
-    p: &Prepared,
-    sets: &[String],
-    run: &mut RunFn,
-) -> Result<Vec<Case>, String> {
+pub fn cases(p: &Prepared, sets: &[String], run: &mut RunFn) -> Result<Vec<Case>, String> {
     let identified = p
         .identified
         .with_overrides(sets)
@@ -266,8 +256,9 @@ pub fn markdown(default: &[Case], paper: &[Case]) -> String {
     let _ = writeln!(
         md,
         "# Rated load applied and removed\n\n\
-         Each machine with the rotor inertia of a catalogue motor of its power \
-         (J = 0.0032 P_kW^1.3 kg m^2, 4 poles: `acim_sim::load_steps::catalogue_inertia`), \
+         Each machine with the rotor inertia of a catalogue 4-pole motor of its rated torque \
+         (J = 0.0035 kg m^2 (P / 1 kW)^1.3 with P = T_rated x 157 rad/s: \
+         `acim::commissioning::catalogue_inertia`, the line commissioning judges J against), \
          commissioned from its nameplate against its plant (`acim-sim commission`), then \
          driven with the identified model, realistic sensors (0.1 % noise, 0.3 % gain and \
          0.05 % offset errors) and the default inverter, at 5 kHz. The machine's rated \

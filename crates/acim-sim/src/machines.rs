@@ -18,7 +18,7 @@ pub struct MachineFile {
 }
 
 /// The acceptance machines.
-pub const MACHINES: [MachineFile; 6] = [
+pub const MACHINES: [MachineFile; 7] = [
     MachineFile {
         name: "paper-750w",
         text: include_str!("../machines/paper-750w.toml"),
@@ -42,6 +42,10 @@ pub const MACHINES: [MachineFile; 6] = [
     MachineFile {
         name: "simscape-7k5",
         text: include_str!("../machines/simscape-7k5.toml"),
+    },
+    MachineFile {
+        name: "emwb-180w",
+        text: include_str!("../machines/emwb-180w.toml"),
     },
 ];
 
