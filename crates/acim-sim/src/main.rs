@@ -237,7 +237,16 @@ fn load_plain(spec: &str) -> Result<Scenario, String> {
         let text =
             acim_sim::output::read_text_file(Path::new(spec), acim_sim::output::MAX_INPUT_BYTES)
                 .map_err(|e| format!("{spec}: {e}"))?;
-        return Scenario::from_file_text(&text).map_err(|e| format!("{spec}: {e}"));
+        let mut sc = Scenario::from_file_text(&text).map_err(|e| format!("{spec}: {e}"))?;
+        // a file that names no scenario (a machine file) is called after itself, so
+        // that its outputs and plot titles say which machine they are
+        let named = text
+            .parse::<toml::Table>()
+            .is_ok_and(|t| t.contains_key("name"));
+        if let (false, Some(stem)) = (named, Path::new(spec).file_stem()) {
+            sc.name = stem.to_string_lossy().into_owned();
+        }
+        return Ok(sc);
     }
     Err(format!(
         "no built-in scenario or file named `{spec}` (see `acim-sim list`)"
