@@ -232,12 +232,28 @@ impl Report {
         s
     }
 
+    /// Each quantity with its name, display unit and scale (each in a unit that shows
+    /// its digits: a dead time of 1.5e-6 s printed with six decimals read as 0.000001
+    /// against a true 0.000002).
+    fn quantities(&self) -> Vec<(&'static str, &'static str, f32, &Pair)> {
+        let mut q = vec![
+            ("Rs", "ohm", 1.0, &self.rs_ohm),
+            ("R_R", "ohm", 1.0, &self.rr_ohm),
+            ("L_sigma", "mH", 1e3, &self.l_sigma_h),
+            ("L_M", "mH", 1e3, &self.l_m_h),
+        ];
+        if let Some(j) = &self.inertia_kgm2 {
+            q.push(("J", "g m^2", 1e3, j));
+        }
+        q.push(("B", "mN m s", 1e3, &self.friction_nms));
+        q.push(("dead time", "us", 1e6, &self.dead_time_s));
+        q
+    }
+
     /// One line per quantity: identified, confidence, true, error.
     pub fn summary(&self) -> String {
         let mut s = String::new();
-        // each quantity in a unit that shows its digits (a dead time of 1.5e-6 s printed
-        // with six decimals read as 0.000001 against a true 0.000002)
-        let mut line = |k: &str, unit: &str, scale: f32, x: &Pair| {
+        for (k, unit, scale, x) in self.quantities() {
             s += &format!(
                 "{k:<10} {:>11.4} {unit:<6} +-{:>6} %   true {:>11.4}  error {:>+7.2} %{}\n",
                 x.identified * scale,
@@ -246,16 +262,32 @@ impl Report {
                 x.error_pct,
                 if x.bounded() { "" } else { "  (outside)" }
             );
-        };
-        line("Rs", "ohm", 1.0, &self.rs_ohm);
-        line("R_R", "ohm", 1.0, &self.rr_ohm);
-        line("L_sigma", "mH", 1e3, &self.l_sigma_h);
-        line("L_M", "mH", 1e3, &self.l_m_h);
-        if let Some(j) = &self.inertia_kgm2 {
-            line("J", "g m^2", 1e3, j);
         }
-        line("B", "mN m s", 1e3, &self.friction_nms);
-        line("dead time", "us", 1e6, &self.dead_time_s);
+        s
+    }
+
+    /// The same as a Markdown table, with the rated flux current (no true value: the
+    /// plant's no-load current is not computed) and the sequence's time.
+    pub fn markdown_table(&self) -> String {
+        let mut s = String::from(
+            "| quantity | identified | bound (+-%) | true | error (%) |\n|---|---|---|---|---|\n",
+        );
+        for (k, unit, scale, x) in self.quantities() {
+            s += &format!(
+                "| {k} ({unit}) | {:.4} | {} | {:.4} | {:+.2}{} |\n",
+                x.identified * scale,
+                pct(x.confidence_pct),
+                x.true_value * scale,
+                x.error_pct,
+                if x.bounded() { "" } else { " (outside)" }
+            );
+        }
+        s += &format!(
+            "| rated flux current (A peak) | {:.4} | {} | | |\n\nIdentified in {:.1} s.\n",
+            self.rated_flux_current_a,
+            pct(self.rated_flux_current_confidence_pct),
+            self.total_s
+        );
         s
     }
 }

@@ -3,7 +3,7 @@
 //! model only through the acceptance scenarios. Shared by `acim-sim any-motor` (the
 //! README table and `docs/any-motor/`) and `tests/any_motor.rs`.
 
-use crate::commission::{commission, Report};
+use crate::commission::{Report, Run};
 use crate::scenario::{
     machine_file_as_scenario, LoadKind, LoadPoint, MachineSpec, Scenario, SpeedPoint, Window,
 };
@@ -171,12 +171,16 @@ pub fn scenarios(sc: &Scenario, n: f32, t: f32) -> [Scenario; 3] {
     [a, b, c]
 }
 
-/// Commissions machine `m` and returns its report and its acceptance scenarios with the
-/// identified model.
-pub fn prepare(m: &MachineFile) -> Result<(Report, [Scenario; 3], f32), String> {
+/// Commissions machine `m` and returns its run (the report, the trace the figures are
+/// drawn from), its acceptance scenarios with the identified model and its rated speed
+/// (rpm). A refused result is an error with the refusal.
+pub fn prepare(m: &MachineFile) -> Result<(Run, [Scenario; 3], f32), String> {
     let sc = base(m)?;
-    let report = commission(&sc)?;
+    let run = crate::commission::run(&sc)?;
+    if let Some(e) = &run.report.refusal {
+        return Err(format!("{}: {e}", m.name));
+    }
     let (n, t) = rated(&sc)?;
-    let run = identified(&sc, &report);
-    Ok((report, scenarios(&run, n, t), n))
+    let identified = identified(&sc, &run.report);
+    Ok((run, scenarios(&identified, n, t), n))
 }
