@@ -1420,8 +1420,8 @@ impl Commissioning {
     /// branch's admittance Y = 1 / (Z - Rs - R_inv - j w L_sigma) = s / R_R - j / (w L_M)
     /// (R_inv = (4/pi) V_e / |I|, the inverter error's fundamental, in phase with the
     /// current): its imaginary part gives L_M whatever the slip, so friction or a load
-    /// does not bias it; the flux current is the magnetizing branch's,
-    /// |Z - Rs - R_inv - j w L_sigma| |I| / (w L_M).
+    /// does not bias it; the rated flux current is the no-load current at rated voltage
+    /// and frequency with that L_M, V / |Rs + j w_r (L_sigma + L_M)|.
     fn no_load_fit(
         &self,
         nl: &Fourier,
