@@ -103,7 +103,7 @@ impl Case {
         for (e, what) in self.events.iter().zip(["applied", "removed"]) {
             if e.dip_rpm > self.bounds.dip_rpm {
                 return Some(format!(
-                    "{what}: dip {:.0} rpm > {:.0}",
+                    "{what}: dip {:.1} rpm > {:.1}",
                     e.dip_rpm, self.bounds.dip_rpm
                 ));
             }
@@ -316,9 +316,14 @@ pub fn markdown(default: &[Case], paper: &[Case]) -> String {
                 };
                 let _ = writeln!(
                     md,
-                    "| {:.0} | {:+.1} | {obs} | {} | {} | {verdict} |",
+                    "| {:.0} | {} | {obs} | {} | {} | {verdict} |",
                     case.rpm,
-                    case.load_nm,
+                    // three significant digits: a 0.18 kW machine's 1.25 N m, not 1.2
+                    if case.load_nm.abs() < 10.0 {
+                        format!("{:+.2}", case.load_nm)
+                    } else {
+                        format!("{:+.1}", case.load_nm)
+                    },
                     cell(&case.events[0]),
                     cell(&case.events[1])
                 );
