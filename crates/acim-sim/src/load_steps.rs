@@ -8,7 +8,7 @@
 //! ([`Bounds`]). `acim-sim load-steps` writes the table to `docs/load-steps.md`;
 //! `tests/any_motor.rs` asserts it.
 
-use crate::commission::{commission, Report};
+use crate::commission::commission;
 use crate::machines::{self, MachineFile};
 use crate::metrics::Metrics;
 use crate::scenario::{LoadKind, LoadPoint, Scenario, SpeedPoint};
@@ -191,8 +191,6 @@ pub fn event(rows: &[Row], t0: f32, band_rpm: f32) -> Event {
 pub struct Prepared {
     /// Machine name.
     pub name: &'static str,
-    /// The commissioning report.
-    pub report: Report,
     /// The machine driven with the identified model.
     pub identified: Scenario,
     /// Rated speed, rpm.
@@ -209,7 +207,6 @@ pub fn prepare(m: &MachineFile) -> Result<Prepared, String> {
     Ok(Prepared {
         name: m.name,
         identified: machines::identified(&sc, &report),
-        report,
         rated_rpm,
         rated_nm,
     })
