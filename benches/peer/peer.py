@@ -807,7 +807,8 @@ def write_page(results, times, versions, ref_checks):
         "Rs law adapting at every speed. The default drive runs the flux observer (`acim::flux_observer`): "
         "motulator's structure and gain, giving the speed to our indirect field orientation, no "
         "regeneration limit and no orientation correction, the running Rs law only at low stator "
-        "frequency (below Rs/L_M), where Rs is observable against inductance errors. "
+        "frequency (below Rs/L_M) and with a torque current of at least 1.5 w_s lambda / Rs, where an "
+        "inductance error of 15 % cannot pull it by more than 5 % (`acim::rs_estimator`). "
         "Cells: steps, peak dip / back within 1 % (s); holds, held or not with the last second's mean / "
         "peak-to-peak speed (rpm); the reversal and the ramp, the largest tracking error (rpm)."
     )

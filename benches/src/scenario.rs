@@ -250,6 +250,8 @@ pub struct Passenger {
     pub flux: FluxObserverState,
     /// The stator resistance the flux observer assumes (the machine's), ohm.
     rs: f32,
+    /// The flux of the drive's torque constant (its reference), Wb.
+    torque_flux: f32,
     /// alpha-beta voltage applied over the coming period (the previous command), V.
     applied: (f32, f32),
     /// The drive's modulator configuration, for the overmodulation region.
@@ -278,6 +280,7 @@ impl Passenger {
             .ok()?,
             flux: FluxObserverState::new(),
             rs: m.stator_resistance(),
+            torque_flux: m.magnetizing_inductance() * cfg.loops.flux_current,
             applied: (0.0, 0.0),
             pwm: SvpwmConfig::new(
                 cfg.inverter.dead_time,
@@ -322,8 +325,13 @@ pub fn bench_regions_step(
     bench_end_observer_full_order();
     let p = black_box(&mut *passenger);
     bench_begin_observer_flux();
-    p.flux
-        .update(&p.flux_cfg, p.applied, (i_ab.alpha, i_ab.beta), p.rs);
+    p.flux.update(
+        &p.flux_cfg,
+        p.applied,
+        (i_ab.alpha, i_ab.beta),
+        p.rs,
+        p.torque_flux,
+    );
     bench_end_observer_flux();
 
     // the overmodulating modulator alone (not in the drive's default step): this
@@ -552,8 +560,13 @@ pub fn run() -> Summary {
             let p = &mut passenger;
             p.full
                 .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
-            p.flux
-                .update(&p.flux_cfg, p.applied, (i_ab.alpha, i_ab.beta), p.rs);
+            p.flux.update(
+                &p.flux_cfg,
+                p.applied,
+                (i_ab.alpha, i_ab.beta),
+                p.rs,
+                p.torque_flux,
+            );
             None
         };
         let out = bench_region_drive_step(drive, &inp, on);

@@ -63,8 +63,20 @@
 //! The cascade's load-torque feed-forward wants `T_L_hat`: a second-order mechanical
 //! observer `J dOmega_hat/dt = T_e - T_L_hat - B Omega_hat + J l1 (Omega_a - Omega_hat)`,
 //! `dT_L_hat/dt = -J l2 (Omega_a - Omega_hat)` runs on the adapted speed `Omega_a =
-//! w_m_hat/p` and the observer's torque `T_e = 1.5 p psi_R_hat i_q`, its error poles a
+//! w_m_hat/p` and the cascade's torque `T_e = 1.5 p lambda_r i_q`, its error poles a
 //! double pole at `load_bandwidth` (l1 = 2 a, l2 = a^2).
+//!
+//! `lambda_r` is the drive's rotor-flux model (eq. 13), the flux the speed loop's torque
+//! constant and its load feed-forward `T_L_hat / (1.5 p lambda_r)` use, not this
+//! observer's `psi_R_hat`: the speed loop has no integral of its own (the load estimate
+//! is its integral action, `crate::speed_loop`), so in steady state the feed-forward must
+//! give back exactly the torque current the load observer saw. With `psi_R_hat` there, a
+//! controller L_M 15 % high (the model flux at the reference, the machine's 13 % below:
+//! the observer sees the true one) left 13 % of the torque current to the proportional
+//! gain, a steady speed error of 23 rpm at 750 rpm and rated load on motulator's 2.2 kW
+//! machine with the estimate right on the rotor. The load estimate is then the torque
+//! the model's flux would give: the true load with exact parameters, off by the flux's
+//! ratio with an L_M error (as the paper's observer's).
 //!
 //! ## High stator frequency
 //!
@@ -448,12 +460,21 @@ impl FluxObserverState {
     /// timing, applied over the period from this sample to the next: the observer keeps
     /// it for the next step, and uses the one before, which acted over the past period)
     /// and `i` the current sampled now, both stationary alpha-beta (V, A), `rs` the
-    /// stator resistance the observer assumes (ohm; the running estimate).
+    /// stator resistance the observer assumes (ohm; the running estimate), `torque_flux`
+    /// the flux of the cascade's torque constant (Wb; the drive's rotor-flux model, which
+    /// the speed loop's load feed-forward divides by: see "Load torque").
     /// Out of line (`inline(never)`): inlined into the drive's step it added 4.5 KB to
     /// the firmware's CCM SRAM code (27976 -> 32440 B of 32768; the self-test build
     /// overflowed it), out of line 0.35 KB.
     #[inline(never)]
-    pub fn update(&mut self, cfg: &FluxObserverConfig, u: (f32, f32), i: (f32, f32), rs: f32) {
+    pub fn update(
+        &mut self,
+        cfg: &FluxObserverConfig,
+        u: (f32, f32),
+        i: (f32, f32),
+        rs: f32,
+        torque_flux: f32,
+    ) {
         let (c, s) = (self.cos, self.sin);
         // into the estimated rotor-flux frame: x e^{-j theta}
         let i_d = c * i.0 + s * i.1;
@@ -527,7 +548,7 @@ impl FluxObserverState {
         // the load observer on the adapted speed
         let speed_a = new_w * cfg.inv_pole_pairs;
         let e = speed_a - self.model_speed;
-        let model_speed = self.model_speed + cfg.ts_torque_per_inertia * psi * i_q
+        let model_speed = self.model_speed + cfg.ts_torque_per_inertia * torque_flux * i_q
             - cfg.ts_inv_inertia * self.load_torque
             - cfg.ts_friction_rate * self.model_speed
             + cfg.ts_l1 * e;
@@ -659,6 +680,7 @@ impl crate::observer::SpeedObserver for FluxObserver {
             (x.v_ab.alpha, x.v_ab.beta),
             (x.i_ab.alpha, x.i_ab.beta),
             rs,
+            x.rotor_flux,
         );
         if x.magnetizing {
             // the rotor speed is known while the flux builds: adaptation starts with
@@ -778,7 +800,7 @@ mod tests {
         for k in 0..n {
             let u = rotate((shrink * u_d, shrink * u_q), theta + 0.5 * ws * TS);
             let i = rotate((i_d, i_q), theta);
-            s.update(&cfg, u, i, m.stator_resistance());
+            s.update(&cfg, u, i, m.stator_resistance(), psi);
             let e = (s.speed_elec - w_m).abs();
             let slot = (10 * k / n).min(9);
             worst[slot] = worst[slot].max(if e.is_finite() { e } else { f32::MAX });
@@ -937,6 +959,7 @@ mod tests {
                 (u.0 as f32, u.1 as f32),
                 (i0.0 as f32, i0.1 as f32),
                 rs as f32,
+                psi,
             );
             if t > 1.0 {
                 let e = st.speed_elec as f64 - wm;
@@ -1056,7 +1079,7 @@ mod tests {
         s.flux = psi;
         s.speed_elec = 100.0;
         let before = s;
-        s.update(&cfg, (10.0, 0.0), (f32::NAN, 1.0), 3.7);
+        s.update(&cfg, (10.0, 0.0), (f32::NAN, 1.0), 3.7, 1.0);
         assert_eq!(s.flux, before.flux);
         assert_eq!(s.speed_elec, before.speed_elec);
         assert!(s.cos.is_finite() && s.sin.is_finite() && s.load_torque.is_finite());
@@ -1079,9 +1102,9 @@ mod tests {
             (s.flux, s.speed_elec, s.stator_frequency) = (psi, w_m, ws);
             s.last_current = (i_d, i_q);
             s.last_voltage = (u_d, u_q);
-            s.update(&cfg, (u_d, u_q), (i_d, i_q), m.stator_resistance());
+            s.update(&cfg, (u_d, u_q), (i_d, i_q), m.stator_resistance(), psi);
             let before = s.speed_elec;
-            s.update(&cfg, (u_d, u_q), (0.0, 0.0), m.stator_resistance());
+            s.update(&cfg, (u_d, u_q), (0.0, 0.0), m.stator_resistance(), psi);
             ((s.speed_elec - before).abs(), cfg.max_speed_step_elec)
         };
         // the drive's bound: 4 x (1.5 p psi_n I_limit) / J with a 10.6 A limit
