@@ -84,3 +84,45 @@ fn rated_load_applied_and_removed_on_every_machine() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Low speed under rated load on every machine of the load-step set, commissioned from
+/// its nameplate and driven with the identified model (the default drive: the flux
+/// observer; `acim_sim::low_speed`, `docs/low-speed.md`): rated motoring load at 3, 2, 1
+/// and 0 % of the synchronous speed n_s held within 0.33 % of n_s; 25, 50 and 100 %
+/// rated overhauling load at 1 % of n_s held within 2 % of n_s with the regeneration limit
+/// not acting; the controller's L_M -/+15 %, R_R -/+30 % (plus the slip's error it
+/// implies) and Rs -/+20 % at rated load, motoring at 5 and 50 % of n_s and regenerating
+/// at 50 %, held within 2 % of n_s or ended by a clean fault (or refused at
+/// configuration). Measured: 200 of 200; the regenerating parameter errors at 5 % of n_s,
+/// shown on the page and not asserted, 43 of 48.
+#[test]
+fn low_speed_under_rated_load_on_every_machine() {
+    use acim_sim::load_steps::{prepare, MACHINES};
+    use acim_sim::low_speed::cases;
+    let mut run = |sc: &acim_sim::scenario::Scenario| {
+        let (r, m) = acim_sim::run_with_metrics(sc).map_err(|e| format!("{}: {e}", sc.name))?;
+        Ok((r.rows, m))
+    };
+    let mut failures = Vec::new();
+    let mut asserted = 0;
+    for m in &MACHINES {
+        let p = prepare(m).unwrap_or_else(|e| panic!("{e}"));
+        for c in cases(&p, &mut run).unwrap() {
+            if !c.asserted {
+                continue;
+            }
+            asserted += 1;
+            if let Some(why) = c.failure() {
+                failures.push(format!(
+                    "{} {} at {:.1} rpm, {:+.2} N m: {why}",
+                    c.machine,
+                    c.error.label(),
+                    c.rpm,
+                    c.load_nm
+                ));
+            }
+        }
+    }
+    assert_eq!(asserted, 200);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

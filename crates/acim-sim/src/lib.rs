@@ -7,6 +7,7 @@ pub mod commission;
 pub mod faults;
 pub mod linear;
 pub mod load_steps;
+pub mod low_speed;
 pub mod machines;
 pub mod metrics;
 pub mod observers;

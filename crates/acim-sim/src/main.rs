@@ -10,6 +10,7 @@
 //! acim-sim faults [FILE] [OPTIONS]         fault table
 //! acim-sim overhauling [FILE] [OPTIONS]    overhauling-load sweep
 //! acim-sim load-steps [FILE]               rated load applied and removed, every machine
+//! acim-sim low-speed [FILE]                low speed under rated load, every machine
 //! acim-sim robustness [FILE]               the robustness matrix
 //! acim-sim robust-stability [FILE]         growth rates with parameter errors
 //! acim-sim linear-stability [FILE]         eigenvalues of the linearised closed loop
@@ -42,6 +43,11 @@ const USAGE: &str = "usage:
                                             of rated speed on every machine of the set,
                                             commissioned first (table to FILE, default
                                             docs/load-steps.md; --set is not supported)
+  acim-sim low-speed [FILE] [OPTIONS]       rated motoring load at 0-3 % of synchronous speed,
+                                            overhauling load at 1 %, parameter errors at 5
+                                            and 50 %, on every machine of the load-step set,
+                                            commissioned first (table to FILE, default
+                                            docs/low-speed.md; --set is not supported)
   acim-sim capability [FILE]                steady torque held per speed vs the envelope of the
                                             machine equations (table to FILE, default
                                             docs/capability.md, plot next to it; --set is
@@ -958,6 +964,49 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 return Err(format!(
                     "{bad} case(s) of the default drive outside their bounds"
                 ));
+            }
+        }
+        Some("low-speed") => {
+            o.at_most_positional("low-speed", 1, "at most one table file")?;
+            o.reject(
+                "low-speed",
+                Some("it runs the machine files as they are"),
+                Some("it writes no CSV"),
+            )?;
+            let file = table_file(&o, "low-speed.md");
+            let quiet = o.quiet;
+            let mut run = |sc: &Scenario| {
+                let (r, m) =
+                    acim_sim::run_with_metrics(sc).map_err(|e| format!("{}: {e}", sc.name))?;
+                Ok((r.rows, m))
+            };
+            let mut all = Vec::new();
+            for m in &acim_sim::load_steps::MACHINES {
+                let p = acim_sim::load_steps::prepare(m)?;
+                let c = acim_sim::low_speed::cases(&p, &mut run)?;
+                if !quiet {
+                    for c in &c {
+                        eprintln!(
+                            "{} {} {:.1} rpm {:+.2} N m: {} {}",
+                            m.name,
+                            c.error.label(),
+                            c.rpm,
+                            c.load_nm,
+                            c.cell(),
+                            c.failure().unwrap_or_else(|| "pass".into())
+                        );
+                    }
+                }
+                all.extend(c);
+            }
+            let md = acim_sim::low_speed::markdown(&all);
+            write_table(&file, &md, &o.out())?;
+            let bad = all
+                .iter()
+                .filter(|c| c.asserted && c.failure().is_some())
+                .count();
+            if bad > 0 {
+                return Err(format!("{bad} asserted low-speed case(s) fail"));
             }
         }
         Some("capability") => {
