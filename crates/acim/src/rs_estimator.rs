@@ -851,7 +851,10 @@ mod tests {
         assert!(light >= run.min_torque_current);
         let (pulled, _) = settle(light, 0.0);
         // (twice the tolerance at half the gate's current)
-        assert!(pulled.abs() > 1.9 * RUNNING_RESISTANCE_TOLERANCE, "{pulled}");
+        assert!(
+            pulled.abs() > 1.9 * RUNNING_RESISTANCE_TOLERANCE,
+            "{pulled}"
+        );
         let (held, adapting) = settle(light, gate);
         assert_eq!((held, adapting), (0.0, false));
         // at the gate's current it adapts, and the pull is within the tolerance
