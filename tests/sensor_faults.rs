@@ -18,16 +18,14 @@
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
 //! the machines configured from their nameplates (the flux observer): at most 1.5 us
-//! above the trip in every case (the comparator's delay); the sensor check first in 84
+//! above the trip in every case (the comparator's delay); the sensor check first in 86
 //! of the 108 reached cases (dead channels after at most 16 periods, a stuck one after
-//! at most 153 at 500 rpm and above, 655 at 60 rpm), the comparator first in 19 (dead
+//! at most 153 at 500 rpm and above, 655 at 60 rpm), the comparator first in 18 (dead
 //! channels under load, where the loops drive the current to the trip within 2 ms, the
-//! 0.18 kW machine's dead channels up to 1500 rpm, and the 7.5 kW machine's stuck
-//! channel at speed with two shunts), the control monitor in 5: every channel dead on
-//! the 37 kW and 7.5 kW machines at 60 rpm (`NoCurrentResponse` after 11-14 periods) and
-//! the 37 kW machine's stuck channel at 1500 rpm with two shunts (`CurrentRegulation`
-//! after 37 periods, with the current still below the trip, where the comparator had
-//! opened the switches before the load estimate's feed-forward took the model's flux). Without the comparator (the second test) 20 cases
+//! 0.18 kW machine's dead channels up to 1500 rpm, and the 7.5 kW and 0.18 kW machines'
+//! stuck channel in field weakening with two shunts), the control monitor in 4: every
+//! channel dead on the 37 kW and 7.5 kW machines at 60 rpm (`NoCurrentResponse` after
+//! 11-14 periods). Without the comparator (the second test) 18 cases
 //! stay above the trip for more than a period while switching (longest: the 0.18 kW
 //! machine in field weakening with channel b stuck, two shunts, 3.56 A for 3.70 ms
 //! against 1.68 A); without the sensor check as well, 59 (longest: the 0.18 kW machine at
