@@ -259,6 +259,19 @@ pub struct Passenger {
 }
 
 impl Passenger {
+    /// The flux observer's step on the measured alpha-beta current (A), the voltage
+    /// applied over the coming period and the machine's Rs and flux.
+    #[inline(always)]
+    fn observe_flux(&mut self, i_alpha: f32, i_beta: f32) {
+        self.flux.update(
+            &self.flux_cfg,
+            self.applied,
+            (i_alpha, i_beta),
+            self.rs,
+            self.torque_flux,
+        );
+    }
+
     fn new(cfg: &DriveConfig) -> Option<Self> {
         let m = cfg.machine;
         Some(Self {
@@ -325,13 +338,7 @@ pub fn bench_regions_step(
     bench_end_observer_full_order();
     let p = black_box(&mut *passenger);
     bench_begin_observer_flux();
-    p.flux.update(
-        &p.flux_cfg,
-        p.applied,
-        (i_ab.alpha, i_ab.beta),
-        p.rs,
-        p.torque_flux,
-    );
+    p.observe_flux(i_ab.alpha, i_ab.beta);
     bench_end_observer_flux();
 
     // the overmodulating modulator alone (not in the drive's default step): this
@@ -560,13 +567,7 @@ pub fn run() -> Summary {
             let p = &mut passenger;
             p.full
                 .update(&p.cfg, p.applied.0, p.applied.1, i_ab.alpha, i_ab.beta);
-            p.flux.update(
-                &p.flux_cfg,
-                p.applied,
-                (i_ab.alpha, i_ab.beta),
-                p.rs,
-                p.torque_flux,
-            );
+            p.observe_flux(i_ab.alpha, i_ab.beta);
             None
         };
         let out = bench_region_drive_step(drive, &inp, on);

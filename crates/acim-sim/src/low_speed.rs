@@ -301,26 +301,17 @@ pub fn cases(p: &Prepared, run: &mut RunFn) -> Result<Vec<Case>, String> {
                 _ => 0.0,
             };
         // a controller model the nameplate does not fit is refused at configuration
-        if let (Group::ParameterError, Err(e)) = (group, sc.validate()) {
-            out.push(Case {
-                machine: p.name.to_string(),
-                group,
-                error,
-                rpm,
-                load_nm,
-                tolerance_rpm,
-                fault: Some(format!("refused: {e}")),
-                mean_rpm: f32::NAN,
-                deviation_rpm: f32::INFINITY,
-                peak_to_peak_rpm: f32::NAN,
-                limited: false,
-                asserted,
-            });
-            return Ok(());
-        }
-        let (rows, metrics) = run(&sc)?;
-        let (mean_rpm, deviation_rpm, peak_to_peak_rpm, limited) =
-            last_second(&rows, sc.duration_s, rpm);
+        let (fault, (mean_rpm, deviation_rpm, peak_to_peak_rpm, limited)) =
+            match (group, sc.validate()) {
+                (Group::ParameterError, Err(e)) => (
+                    Some(format!("refused: {e}")),
+                    (f32::NAN, f32::INFINITY, f32::NAN, false),
+                ),
+                _ => {
+                    let (rows, metrics) = run(&sc)?;
+                    (metrics.fault, last_second(&rows, sc.duration_s, rpm))
+                }
+            };
         out.push(Case {
             machine: p.name.to_string(),
             group,
@@ -328,7 +319,7 @@ pub fn cases(p: &Prepared, run: &mut RunFn) -> Result<Vec<Case>, String> {
             rpm,
             load_nm,
             tolerance_rpm,
-            fault: metrics.fault.clone(),
+            fault,
             mean_rpm,
             deviation_rpm,
             peak_to_peak_rpm,
