@@ -18,18 +18,18 @@
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
 //! the machines configured from their nameplates (the flux observer): at most 1.5 us
-//! above the trip in every case (the comparator's delay); the sensor check first in 86
+//! above the trip in every case (the comparator's delay); the sensor check first in 85
 //! of the 108 reached cases (dead channels after at most 16 periods, a stuck one after
-//! at most 153 at 500 rpm and above, 655 at 60 rpm), the comparator first in 18 (dead
+//! at most 142 at 500 rpm and above, 655 at 60 rpm), the comparator first in 19 (dead
 //! channels under load, where the loops drive the current to the trip within 2 ms, the
 //! 0.18 kW machine's dead channels up to 1500 rpm, and the 7.5 kW and 0.18 kW machines'
-//! stuck channel in field weakening with two shunts), the control monitor in 4: every
+//! stuck channel at 1500 rpm and above with two shunts), the control monitor in 4: every
 //! channel dead on the 37 kW and 7.5 kW machines at 60 rpm (`NoCurrentResponse` after
-//! 11-14 periods). Without the comparator (the second test) 18 cases
-//! stay above the trip for more than a period while switching (longest: the 0.18 kW
-//! machine in field weakening with channel b stuck, two shunts, 3.56 A for 3.70 ms
-//! against 1.68 A); without the sensor check as well, 59 (longest: the 0.18 kW machine at
-//! 1500 rpm, every channel dead, three shunts, 3.83 A for 6.68 ms against 1.68 A).
+//! 11-14 periods). Without the comparator (the second test) 19 cases stay above the trip
+//! for more than a period while switching (longest: the 0.18 kW machine at 1500 rpm with
+//! channel b stuck, two shunts, 3.63 A for 3.92 ms against 1.68 A); without the sensor
+//! check as well, 58 (longest: the 0.18 kW machine at 1500 rpm, every channel dead, three
+//! shunts, 3.96 A for 6.61 ms against 1.68 A).
 
 use acim_sim::faults::{run_sensor_cases, SensorCase};
 use acim_sim::metrics::Metrics;
@@ -45,7 +45,7 @@ use acim_sim::metrics::Metrics;
 /// reads the true current until the phase current leaves that reading, which it has
 /// done by at least the check's threshold within half an electrical period at the
 /// point (the phase current sweeps from one peak to the other), then two windows.
-/// Measured: dead channels within 16 periods; stuck ones within 153 at 500 rpm and above
+/// Measured: dead channels within 16 periods; stuck ones within 142 at 500 rpm and above
 /// (the 37 kW machine, whose stuck reading first drives a torque-current transient the
 /// check holds its decision through) and 655 at 60 rpm, against 166 and 1266 for that
 /// machine (with the paper's observer: 99 and 612).

@@ -145,10 +145,11 @@ pub fn markdown(rows: &[Row], cycles: Option<(f64, f64, f64)>) -> String {
         "\nEstimation errors are the worst steady-state window of each scenario (maxima of 10 ms \
          averages of estimated minus true speed); raw maxima are unfiltered. The full-order \
          observer has no load model (no load-torque estimate). Outcomes are the simulator's \
-         verdicts: drifting = the rotor crept above 5 rpm with the reference held at 0. The \
-         flux observer's voltage model needs Rs from the start: paper-fig9 starts with Rs \
-         +50 % and no standstill identification (the paper's case for its observer), which \
-         the flux observer does not survive.\n",
+         verdicts: drifting = the rotor crept above 5 rpm with the reference held at 0. \
+         paper-fig9 starts with Rs +50 % and no standstill identification (the paper's case \
+         for its observer): the flux observer's estimate is held on the drive's flux model \
+         while the frame is held at rest, so the resistance error does not corrupt it before \
+         the running law corrects Rs.\n",
     );
     if let Some((red, full, flux)) = cycles {
         let _ = write!(

@@ -1555,6 +1555,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 equivalent_resistance: est.rs.stator_resistance_estimate
                     + est.rr.referred_resistance,
                 magnetizing,
+                frame_held,
+                frame: m.sc,
                 far_side_error,
             },
         )

@@ -570,8 +570,10 @@ impl FluxObserverState {
 
 /// The flux observer as the cascade's speed observer ([`crate::observer::SpeedObserver`]):
 /// design and state together, so that `Drive<_, f32, FluxObserver>` runs it in the closed
-/// loop. It runs from the first magnetizing step (it builds its own flux estimate) on the
-/// measured alpha-beta current and the alpha-beta voltage commanded for the past period;
+/// loop. It runs from the first magnetizing step on the measured alpha-beta current and
+/// the alpha-beta voltage commanded for the past period (with the frame held at rest its
+/// flux estimate is the drive's flux model in that frame; on a flying start it builds its
+/// own);
 /// its speed is held while magnetizing at the speed the rotor turns at (0 at rest, the
 /// speed search's on a flying start). It follows the running Rs estimate (from
 /// `equivalent_resistance - R_R`).
@@ -688,6 +690,22 @@ impl crate::observer::SpeedObserver for FluxObserver {
             self.state.speed_elec = self.preset_elec;
             self.state.model_speed = self.preset_elec * self.cfg.inv_pole_pairs;
             self.state.load_torque = 0.0;
+        }
+        if x.frame_held {
+            // at rest with the frame held the rotor flux builds along the frame, at the
+            // rate of the current model (no rotation: the voltage model adds nothing but
+            // its Rs error): the estimate is the drive's flux model in that frame. Left
+            // to the voltage model while Rs was still being identified, the estimate was
+            // drained by the resistance error (Rs +20 % on the 0.18 kW machine: 7.7 V
+            // against the flux) and turned away from the frame, and at the handover the
+            // adapted speed ran off at its rate bound (-460 rpm in 10 ms, the rotor
+            // driven to +270 rpm, LossOfControl)
+            self.state.flux = x.rotor_flux.max(0.0);
+            self.state.cos = x.frame.cos;
+            self.state.sin = x.frame.sin;
+            self.state.stator_frequency = 0.0;
+            // the current in that frame, for the next step's difference
+            self.state.last_current = (x.i_dq.d, x.i_dq.q);
         }
         crate::observer::SpeedEstimate {
             speed: self.state.speed(&self.cfg),

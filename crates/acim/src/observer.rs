@@ -357,6 +357,11 @@ pub struct SpeedObserverInputs<N = f32> {
     pub equivalent_resistance: N,
     /// True while the drive builds the flux at standstill (frame held).
     pub magnetizing: bool,
+    /// The frame is held at rest (magnetizing, no flying start), at the angle of
+    /// `frame`: the rotor flux builds along it.
+    pub frame_held: bool,
+    /// sin/cos of the frame's angle at this sample.
+    pub frame: crate::frames::SinCosValue<N>,
     /// Added to the q-axis error in the speed and load updates, A (far side).
     pub far_side_error: N,
 }

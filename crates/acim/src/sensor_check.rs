@@ -111,7 +111,7 @@
 //!
 //! In the closed loop (`tests/sensor_faults.rs`, the seven acceptance machines at 60, 500,
 //! 1500 rpm and in field weakening, two and three shunts, the nameplate's drive): dead
-//! channels found after at most 16 periods, a stuck one after at most 153 at 500 rpm and
+//! channels found after at most 16 periods, a stuck one after at most 142 at 500 rpm and
 //! above and 655 at 60 rpm
 //! (where the reading stays near the true current for longer); where the current loops
 //! drive the true current to the trip level sooner, the hardware comparator is first.
