@@ -11,9 +11,9 @@
 //! trip level for at most one PWM period while switching (measured at every integration
 //! sub-step, not only at the samples), every case ends with the switches off, the drive
 //! trips after the fault, not before, and with one of these two reasons, the sensor
-//! check within its bound ([`max_detection_periods`]); or, within the same bound, with
-//! the control monitor's reasons whose documented scope includes failed sensing
-//! (`CurrentRegulation`; `NoCurrentResponse` with every channel dead).
+//! check within its bound ([`max_detection_periods`]); or, every channel dead, within the
+//! same bound, with the control monitor's reasons whose documented scope includes dead
+//! sensing (`NoCurrentResponse`, `CurrentRegulation`).
 //!
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
@@ -118,21 +118,16 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
                     failures.push(format!("no trip, or a trip before the fault: {line}"));
                 }
                 // found by one of the current-path protections: the sensor check
-                // (software) or the comparator (hardware), whichever comes first; or by
-                // the control monitor's checks on the measured current, whose documented
-                // scope includes failed sensing, within the sensor check's bound: against
-                // its reference (CurrentRegulation: "open phase, dead or stuck current
-                // sensor") and, every channel dead, against the voltage
-                // (NoCurrentResponse: "current sensing dead or motor disconnected")
+                // (software) or the comparator (hardware), whichever comes first; every
+                // channel dead, also the control monitor's checks on the measured
+                // current against the voltage (NoCurrentResponse: "current sensing dead
+                // or motor disconnected") or against its reference (CurrentRegulation),
+                // within the sensor check's bound
                 let periods = (m.fault_time_s.unwrap_or(at) - at) / ts;
                 match m.fault.as_deref() {
-                    Some("CurrentRegulation") => {
-                        monitor += 1;
-                        if periods > max_detection_periods(c) {
-                            failures.push(format!("found after {periods:.0} periods: {line}"));
-                        }
-                    }
-                    Some("NoCurrentResponse") if !c.fault.contains("stuck") => {
+                    Some("NoCurrentResponse" | "CurrentRegulation")
+                        if !c.fault.contains("stuck") =>
+                    {
                         monitor += 1;
                         if periods > max_detection_periods(c) {
                             failures.push(format!("found after {periods:.0} periods: {line}"));
@@ -161,7 +156,8 @@ fn the_true_current_exceeds_the_trip_for_at_most_one_period_while_switching() {
     software.sort_by(f32::total_cmp);
     println!(
         "sensor check first in {} cases (periods after the injection: median {:.0}, max {:.0}), \
-         the comparator first in {hardware}, the control monitor in {monitor}",
+         the comparator first in {hardware}, the control monitor (every channel dead) in \
+         {monitor}",
         software.len(),
         software.get(software.len() / 2).copied().unwrap_or(0.0),
         software.last().copied().unwrap_or(0.0),

@@ -183,23 +183,20 @@ impl Case {
     /// The outcome as the table shows it.
     pub fn cell(&self) -> String {
         match &self.fault {
-            Some(f) if f.starts_with("refused") => {
-                "refused: the nameplate's rated torque needs more than the rated current at \
-                 this L_M"
-                    .into()
+            // the configuration's own reason, without the field's name in backticks
+            Some(f) if f.starts_with("refused: ") => {
+                let why = f.trim_start_matches("refused: ");
+                let why = why.split_once("`: ").map_or(why, |(_, reason)| reason);
+                format!("refused: {why}")
             }
             Some(f) => format!("fault `{f}`"),
             None => format!(
                 "{:+.1} / {:.1}{}",
-                self.mean_rpm - self.target_rpm(),
+                self.mean_rpm - self.rpm,
                 self.peak_to_peak_rpm,
                 if self.limited { " (limited)" } else { "" }
             ),
         }
-    }
-
-    fn target_rpm(&self) -> f32 {
-        self.rpm
     }
 }
 

@@ -530,8 +530,7 @@ impl DriveDesign {
         rs_running.max_frequency = crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
             * m.stator_resistance()
             / m.magnetizing_inductance();
-        rs_running.inductance_gate = crate::rs_estimator::RUNNING_INDUCTANCE_ERROR
-            / (2.0 * crate::rs_estimator::RUNNING_RESISTANCE_TOLERANCE * m.stator_resistance());
+        rs_running.inductance_gate = crate::rs_estimator::inductance_gate(m.stator_resistance());
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
         // sequence (frame held, Rs identification) applies

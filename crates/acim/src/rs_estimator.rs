@@ -253,6 +253,12 @@ pub const RUNNING_INDUCTANCE_ERROR: f32 = 0.15;
 /// ... and how far such an error may pull the estimate, a fraction of Rs: 5 %.
 pub const RUNNING_RESISTANCE_TOLERANCE: f32 = 0.05;
 
+/// [`RsRunningConfig::inductance_gate`] for the nominal stator resistance `rs` (ohm):
+/// [`RUNNING_INDUCTANCE_ERROR`] / (2 [`RUNNING_RESISTANCE_TOLERANCE`] Rs), A per V.
+pub fn inductance_gate(rs: f32) -> f32 {
+    RUNNING_INDUCTANCE_ERROR / (2.0 * RUNNING_RESISTANCE_TOLERANCE * rs)
+}
+
 /// The estimate's lower clamp, a fraction of the nominal Rs.
 pub const RS_MIN_FACTOR: f32 = 0.5;
 /// The estimate's upper clamp, a multiple of the nominal Rs.
@@ -830,6 +836,7 @@ mod tests {
         run.max_frequency = rs / m.magnetizing_inductance();
         let ws = 0.5 * run.max_frequency;
         let lambda = m.rotor_flux_for(1.5);
+        // where the pull w_s eps lambda / (2 i_sq) equals the tolerance
         let gate_current =
             RUNNING_INDUCTANCE_ERROR * ws * lambda / (2.0 * RUNNING_RESISTANCE_TOLERANCE * rs);
         let settle = |i_sq: f32, gate: f32| {
@@ -845,7 +852,7 @@ mod tests {
             }
             (est.stator_resistance_estimate / rs - 1.0, est.adapting)
         };
-        let gate = RUNNING_INDUCTANCE_ERROR / (2.0 * RUNNING_RESISTANCE_TOLERANCE * rs);
+        let gate = inductance_gate(rs);
         // light load, below the gate's current: the law alone is pulled far, the gate holds
         let light = 0.5 * gate_current;
         assert!(light >= run.min_torque_current);

@@ -758,7 +758,7 @@ mod tests {
             }
             self.v_acting = self.v_next;
             self.v_next = vn;
-            let _ = (w_s, v);
+            let _ = w_s;
             SensorCheckInputs {
                 current_ab: ab,
                 current_sum: if three {
