@@ -107,6 +107,7 @@ fn main() {
     let mut keep_trace: Option<PathBuf> = None;
     let mut allow_panic_paths = false;
     let mut weigh_isr: Option<(PathBuf, PathBuf)> = None;
+    let mut profile_region: &'static str = "drive_step";
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -115,9 +116,23 @@ fn main() {
             "--allow-panic-paths" => allow_panic_paths = true,
             "--help" | "-h" => {
                 println!(
-                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the probed step diverged from the real one\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE\n  --weigh-isr ELF DIR  weigh the firmware-in-the-loop traces DIR/fil-isr-trace-<phase>.txt\n                   (executed addresses of the control interrupt of ELF) with the\n                   Cortex-M4 model; with --check hold them to firmware/fil/isr-budget.json,\n                   with --update-budget write the measured maxima there"
+                    "acim-bench [--check] [--update-budget]\n  --check          fail (exit 1) when a region's max instruction count exceeds\n                   benches/budget.json by more than 5 %, or the drive step calls a\n                   panic or f64 routine, or the probed step diverged from the real one\n  --update-budget  write the measured max instruction counts to benches/budget.json\n  --allow-panic-paths  report panic/f64 paths in the drive step without failing\n  --profile REGION     keep the per-instruction profile of REGION (default drive_step)\n                   in results/profile_REGION.txt\n  --keep-trace FILE    also write the (filtered) QEMU execution log to FILE\n  --weigh-isr ELF DIR  weigh the firmware-in-the-loop traces DIR/fil-isr-trace-<phase>.txt\n                   (executed addresses of the control interrupt of ELF) with the\n                   Cortex-M4 model; with --check hold them to firmware/fil/isr-budget.json,\n                   with --update-budget write the measured maxima there"
                 );
                 return;
+            }
+            "--profile" => {
+                i += 1;
+                let Some(name) = args
+                    .get(i)
+                    .and_then(|r| REPORT_REGIONS.iter().find(|x| **x == r.as_str()))
+                else {
+                    eprintln!(
+                        "--profile needs one of the regions: {}",
+                        REPORT_REGIONS.join(", ")
+                    );
+                    std::process::exit(2);
+                };
+                profile_region = name;
             }
             "--keep-trace" => {
                 i += 1;
@@ -140,7 +155,13 @@ fn main() {
     }
     let result = match weigh_isr {
         Some((elf, dir)) => weigh_isr_traces(&elf, &dir, check, update_budget),
-        None => run(check, update_budget, allow_panic_paths, keep_trace),
+        None => run(
+            check,
+            update_budget,
+            allow_panic_paths,
+            keep_trace,
+            profile_region,
+        ),
     };
     match result {
         Ok(true) => {}
@@ -166,6 +187,7 @@ fn run(
     update_budget: bool,
     allow_panic_paths: bool,
     keep_trace: Option<PathBuf>,
+    profile_region: &'static str,
 ) -> Res<bool> {
     let t0 = Instant::now();
     let elf = build_firmware()?;
@@ -219,9 +241,13 @@ fn run(
                 sc.spawn(move || run_fixed(qemu, tools, fc))
             })
             .collect();
+        let spec = RunSpec {
+            profile_region,
+            ..M4F_RUN
+        };
         let f32_run = trace_regions(
             &qemu,
-            &M4F_RUN,
+            &spec,
             &elf,
             &dis,
             &measured_graph,
@@ -431,16 +457,16 @@ fn run(
     }
 
     // ---- profile of the drive step
-    let prof_path = results.join("profile_drive_step.txt");
+    let prof_path = results.join(format!("profile_{profile_region}.txt"));
     let prof_text = profile.render(
         &dis,
         rows.iter()
-            .find(|r| r.0 == "drive_step")
+            .find(|r| r.0 == profile_region)
             .map(|r| r.1)
             .unwrap_or(1),
     );
     std::fs::write(&prof_path, &prof_text).map_err(|e| e.to_string())?;
-    println!("drive-step profile: {}", prof_path.display());
+    println!("{profile_region} profile: {}", prof_path.display());
 
     // ---- panic / f64 scan
     let mut ok = true;
@@ -1934,7 +1960,7 @@ impl Profile {
         }
         let mut s = String::new();
         s.push_str(&format!(
-            "Drive step profile (acim-bench): per step, averaged over {steps} steps; total {:.1} instructions, {:.1} est. cycles (marker overhead not subtracted)\n\n",
+            "Region profile (acim-bench): per call, averaged over {steps} calls; total {:.1} instructions, {:.1} est. cycles (marker overhead not subtracted)\n\n",
             ti as f64 / steps,
             tc as f64 / steps
         ));
