@@ -125,11 +125,15 @@ pub fn markdown(
          scenario with the speed loop, field weakening and the slow supervision in a 1 kHz slow \
          task (`drive.loops.slow_period_s = 0.001`; the drive's default runs every stage every \
          period), run after each tick's output as a board's slow interrupt runs it: the fast \
-         path's protections (over-current, non-finite samples, the bus window, the control \
-         monitor, the sensor check) judge every period as before, the slow ones once per slow \
-         period with their times unchanged, switching off from the period after the tick. The \
-         phase short is found by the model residual (`LossOfControl`) there, one of the \
-         detectors that find it at one rate too, depending on the instant.\n",
+         path's protections (over-current, non-finite samples, the bus window, the estimates' \
+         finiteness) judge every period as before; the slow ones judge once per slow period, \
+         switching off from the period after the tick: stall, overload, plausibility and the \
+         limit cycle with their times unchanged, the control monitor on the slow period's \
+         means (its leaky means' time constant unchanged), the sensor check on the windows \
+         the fast path summed (the same verdicts, each up to a slow period later: dead and \
+         stuck channels 0.4-0.8 ms later here). The phase short is found by the model residual \
+         (`LossOfControl`) there, one of the detectors that find it at one rate too, depending \
+         on the instant.\n",
     );
     s
 }

@@ -531,6 +531,7 @@ impl DriveDesign {
             * m.stator_resistance()
             / m.magnetizing_inductance();
         rs_running.inductance_gate = crate::rs_estimator::inductance_gate(m.stator_resistance());
+        let rs_running = rs_running.on_slow_ticks(slow_divider, ts, m.rotor_time_constant());
         let pp = m.pole_pairs_f32();
         // below the Rs gate's frequency the rotor counts as at rest: there the standstill
         // sequence (frame held, Rs identification) applies
@@ -714,6 +715,10 @@ impl DriveDesign {
                 rs_bound_faults: cfg.estimation.rs_estimation,
                 monitor_filter: (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
                     .min(1.0),
+                slow_monitor_filter: per_slow_period(
+                    (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS).min(1.0),
+                    slow_divider,
+                ),
                 current_error_limit: CURRENT_ERROR_FRACTION * i_d,
                 current_sum_limit: CURRENT_SUM_FRACTION * cfg.limits.overcurrent_trip,
                 model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
@@ -729,6 +734,10 @@ impl DriveDesign {
                 oscillation_swing: OSCILLATION_FRACTION * cfg.limits.max_speed,
                 offset_limit: OFFSET_FRACTION * cfg.limits.overcurrent_trip,
                 running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
+                slow_running_offset_filter: per_slow_period(
+                    (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
+                    slow_divider,
+                ),
                 running_offset_min_frequency: 4.0 * i_max
                     / (OFFSET_FRACTION * cfg.limits.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
                 impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance()
@@ -878,6 +887,16 @@ impl<N: Arithmetic> DriveCoeffs<N> {
             inverter_test: d.inverter_test.convert(b).map_err(named)?,
         })
     }
+}
+
+/// A first-order low-pass's gain `g` per control period as its gain over `periods` of
+/// them: 1 - (1 - g)^periods (the same time constant sampled once per slow period).
+pub fn per_slow_period(g: f32, periods: u32) -> f32 {
+    let mut keep = 1.0f32;
+    for _ in 0..periods {
+        keep *= 1.0 - g;
+    }
+    1.0 - keep
 }
 
 #[cfg(test)]

@@ -1063,6 +1063,42 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             limit,
             magnetizing,
         } = *job;
+        // the running Rs law on the slow period's means, gathered by the fast path
+        let c = &self.cfg.coeffs;
+        if c.rs_running.enabled {
+            let running = RsRunningInputs {
+                v_sq: m.applied.v_dq.q,
+                rotor_flux: self.est.flux.rotor_flux,
+                frame_held: magnetizing && !self.refs.start.flying(),
+                i_sq_ref: self.prev.i_sq_ref,
+                low_frequency_only: !self.est.observer.rs_running_at_speed(),
+            };
+            self.est
+                .rs
+                .adapt_running(&c.rs, &c.rs_running, &running, e.flux_settled);
+        }
+        // the control monitor on the slow period's means, and the running offset check
+        let residual = Dq {
+            d: self.loops.cur.d().integral(),
+            q: self.loops.cur.q().integral(),
+        };
+        let limits = &self.cfg.coeffs.limits;
+        if let Some(reason) = self
+            .supervision
+            .control
+            .judge(limits, residual, e.stator_frequency)
+        {
+            return Err(reason);
+        }
+        // the sensor check's windows that ended since the last tick, summed and kept by
+        // the fast path
+        if let Some(reason) = self
+            .supervision
+            .sensors
+            .judge_pending(&self.cfg.coeffs.sensor_check)
+        {
+            return Err(reason);
+        }
         if !magnetizing {
             let u_ab = self.sensing.tracker.take_mean();
             self.update_offset_tracker(u_ab, true);
@@ -1274,20 +1310,25 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             q: self.loops.cur.q().integral(),
         };
         let voltage_limited = self.loops.cur.d().saturated() || self.loops.cur.q().saturated();
-        let found = self.supervision.control.check(
-            &self.cfg.coeffs.limits,
-            &ControlMonitorInputs {
-                i_ref,
-                i: m.i_dq,
-                v,
-                residual,
-                current_sum: m.current_sum,
-                stator_frequency: e.stator_frequency,
-                voltage_limited,
-            },
-        );
-        if found.is_some() {
-            return found;
+        let inputs = ControlMonitorInputs {
+            i_ref,
+            i: m.i_dq,
+            v,
+            residual,
+            current_sum: m.current_sum,
+            stator_frequency: e.stator_frequency,
+            voltage_limited,
+        };
+        let limits = &self.cfg.coeffs.limits;
+        let two_rates = self.cfg.coeffs.cascade.slow_divider > 1;
+        if two_rates {
+            // the slow task judges the slow period's means (`ControlMonitor::judge`)
+            let weight = self.cfg.coeffs.cascade.inv_slow_divider;
+            self.supervision
+                .control
+                .gather(limits, &inputs, m.i_ab, weight);
+        } else if let Some(reason) = self.supervision.control.check(limits, &inputs) {
+            return Some(reason);
         }
         // the tracked drift at offset_limit: as beyond it at the start
         if self.sensing.tracker.at_bound {
@@ -1304,6 +1345,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             if let Some(reason) = self.speed_oscillation(e, magnetizing) {
                 return Some(reason);
             }
+        }
+        if two_rates {
+            return None;
         }
         self.supervision.control.check_offset_drift(
             &self.cfg.coeffs.limits,
@@ -1339,22 +1383,29 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if !cfg.enabled {
             return None;
         }
-        self.supervision.sensors.update(
-            cfg,
-            &SensorCheckInputs {
-                current_ab: m.i_ab,
-                current_sum: m.current_sum,
-                three_channels: self.cfg.coeffs.limits.current_sensing
-                    == CurrentSensing::ThreePhase,
-                current: m.i_dq,
-                voltage: m.applied.v_dq,
-                stator_frequency: self.prev.stator_frequency,
-                rotor_speed: e.observer.speed,
-                rotor_flux: e.rotor_flux,
-                angle: m.sc,
-                switching,
-            },
-        )
+        let three_channels = self.cfg.coeffs.limits.current_sensing == CurrentSensing::ThreePhase;
+        let inputs = || SensorCheckInputs {
+            current_ab: m.i_ab,
+            current_sum: m.current_sum,
+            three_channels,
+            current: m.i_dq,
+            voltage: m.applied.v_dq,
+            stator_frequency: self.prev.stator_frequency,
+            rotor_speed: e.observer.speed,
+            rotor_flux: e.rotor_flux,
+            angle: m.sc,
+            switching,
+        };
+        if self.cfg.coeffs.cascade.slow_divider > 1 {
+            // the slow task judges the windows that ended (`SensorCheck::judge_pending`)
+            let (i, v) = (m.i_dq, m.applied.v_dq);
+            let check = &mut self.supervision.sensors;
+            check.gather(cfg, i, v, switching, inputs);
+            None
+        } else {
+            let inputs = inputs();
+            self.supervision.sensors.update(cfg, &inputs)
+        }
     }
 
     /// Sense stage: Clarke (two or three phases), the tracked offset drift subtracted
@@ -1601,8 +1652,15 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 i_sq_ref: self.prev.i_sq_ref,
                 low_frequency_only: !est.observer.rs_running_at_speed(),
             };
-            est.rs
-                .update_running(&c.rs, &c.rs_running, &inputs, &running);
+            if c.cascade.slow_divider > 1 {
+                // the law adapts in the slow task on the slow period's means
+                let weight = c.cascade.inv_slow_divider;
+                est.rs
+                    .gather_running(&c.rs, &c.rs_running, &inputs, &running, weight);
+            } else {
+                est.rs
+                    .update_running(&c.rs, &c.rs_running, &inputs, &running);
+            }
         } else {
             est.rs.update(&c.rs, &inputs);
         }

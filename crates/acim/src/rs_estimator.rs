@@ -210,9 +210,24 @@ pub struct RsRunningConfig<N: Num = f32> {
     /// the torque current against which an inductance error cannot pull the estimate
     /// further than the tolerance (module docs, "Inductance errors").
     pub inductance_gate: N::Gain,
+    /// With a slow task (the drive's `slow_divider` D > 1: the running law adapts once
+    /// per slow period on the period's means, [`RsEstimator::adapt_running`]):
+    /// `alpha_ts` times D, ohm per V per slow period.
+    pub slow_alpha_ts: N::Gain,
+    /// ... and `steady_filter` for the slow period, D Ts / tau_r (at most 1).
+    pub slow_steady_filter: N::Gain,
 }
 
 impl RsRunningConfig<f32> {
+    /// This law adapting once every `slow_divider` periods of `ts` (s) with the
+    /// controller's rotor time constant `tau_r` (s) ([`RsRunningConfig::slow_alpha_ts`]).
+    pub fn on_slow_ticks(mut self, slow_divider: u32, ts: f32, tau_r: f32) -> Self {
+        let d = slow_divider.max(1) as f32;
+        self.slow_alpha_ts = self.alpha_ts * d;
+        self.slow_steady_filter = (d * ts / tau_r.max(ts)).min(1.0);
+        self
+    }
+
     /// Period `ts` (s), convergence time constant `tau` (s) at flux current
     /// `flux_current` (A), the controller's rotor time constant `tau_r` (s): alpha_r =
     /// 1/(2 tau |i_sd*|); gates at [`RUNNING_MIN_FREQUENCY_HZ`],
@@ -230,6 +245,8 @@ impl RsRunningConfig<f32> {
             steady_band: RUNNING_STEADY_TORQUE_FRACTION * flux_current.abs(),
             max_frequency: 2.0 * core::f32::consts::PI * 1000.0,
             inductance_gate: 0.0,
+            slow_alpha_ts: ts / (2.0 * tau.max(ts) * flux_current.abs().max(1e-3)),
+            slow_steady_filter: (ts / tau_r.max(ts)).min(1.0),
         }
     }
 }
@@ -326,6 +343,35 @@ pub struct RsRunningInputs<N = f32> {
     pub low_frequency_only: bool,
 }
 
+/// What the fast path gathers for the running law over a slow period
+/// ([`RsEstimator::gather_running`]): each period's value times 1/D, summed (D the
+/// drive's `slow_divider`), so the slow task reads the period's means.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RsRunningMeans<N = f32> {
+    /// Mean of i_sq e_d + i_sd e_q (the law's combination of the two current models'
+    /// errors, without the factor Rs_hat), A^2.
+    pub residual: N,
+    /// Mean i_sd, A.
+    pub i_sd: N,
+    /// Mean i_sq, A.
+    pub i_sq: N,
+    /// Mean w_s, rad/s electrical.
+    pub stator_frequency: N,
+}
+
+impl<N: Num> RsRunningMeans<N> {
+    /// Nothing gathered.
+    pub fn zero() -> Self {
+        Self {
+            residual: N::ZERO,
+            i_sd: N::ZERO,
+            i_sq: N::ZERO,
+            stator_frequency: N::ZERO,
+        }
+    }
+}
+
 /// State of the stator-resistance estimator.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -350,6 +396,8 @@ pub struct RsEstimator<N: Num + FineIntegrator = f32> {
     /// The low-pass image of the torque-current reference over tau_r, A (the running
     /// law's steadiness gate).
     pub torque_reference_slow: N,
+    /// The running law's means gathered since the last slow tick (with a slow task).
+    pub means: RsRunningMeans<N>,
 }
 
 impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N> {
@@ -366,6 +414,7 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
             q_current_estimate: N::ZERO,
             q_current_error: N::ZERO,
             torque_reference_slow: N::ZERO,
+            means: RsRunningMeans::zero(),
         }
     }
 
@@ -443,49 +492,175 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
         x: &RsRunningInputs<N>,
     ) -> N {
         let rs = self.stator_resistance_estimate;
-        let e = self.current_estimate - u.i_sd;
-        self.current_error = e.finite_or(N::ZERO);
-        let eq = self.q_current_estimate - u.i_sq;
-        self.q_current_error = eq.finite_or(N::ZERO);
+        let (e, eq) = self.model_errors(u);
         let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
-        let standstill = flux_ok
-            && run.standstill
-            && x.frame_held
-            && u.i_sq.abs() <= cfg.max_torque_current
-            && u.stator_frequency.abs() <= cfg.max_stator_frequency;
+        let standstill = self.standstill_gate(cfg, run, u, x.frame_held, flux_ok);
         // the torque current steady over the rotor time constant (module docs, "Only in
         // steady state")
-        let slow = self.torque_reference_slow
-            + N::gain(run.steady_filter, x.i_sq_ref - self.torque_reference_slow);
-        self.torque_reference_slow = slow.finite_or(N::ZERO);
-        let steady = (x.i_sq_ref - self.torque_reference_slow).abs() <= run.steady_band;
+        let steady = self.steady(run.steady_filter, run.steady_band, x.i_sq_ref);
         let turning = flux_ok
             && !x.frame_held
             && steady
-            && u.stator_frequency.abs() >= run.min_frequency
-            && (!x.low_frequency_only
-                || (u.stator_frequency.abs() <= run.max_frequency
-                    && u.i_sq.abs()
-                        >= N::gain_mul(
-                            run.inductance_gate,
-                            u.stator_frequency.abs(),
-                            x.rotor_flux.abs(),
-                        )))
-            && u.i_sq.abs() >= run.min_torque_current;
+            && Self::turning_gate(run, u.stator_frequency, u.i_sq, x);
         self.adapting = cfg.adapt && (standstill || turning);
         if cfg.adapt && standstill && e.is_finite() {
             self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
         } else if cfg.adapt && turning {
-            // (i_sq r_d + i_sd r_q) / i_sq with r = Rs_hat e: 2 dR i_sd on the slow
-            // manifold; |i_sq| >= i_min > 0 (the gate), as sign(i_sq) sigma / |i_sq| (the
-            // fixed-point ratio takes a positive divisor)
-            let sigma = rs * (u.i_sq * e + u.i_sd * eq);
-            let v = N::ratio(sigma, u.i_sq.abs());
-            if v.is_finite() {
-                let positive = (u.i_sd >= N::ZERO) == (u.i_sq >= N::ZERO);
-                self.adapt_step(cfg, run.alpha_ts, v, positive);
-            }
+            self.turning_step(
+                cfg,
+                run.alpha_ts,
+                rs * (u.i_sq * e + u.i_sd * eq),
+                u.i_sd,
+                u.i_sq,
+            );
         }
+        self.models_step(cfg, run, u, x, rs);
+        self.stator_resistance_estimate
+    }
+
+    /// The fast path's half of [`RsEstimator::update_running`] in a drive with a slow
+    /// task: the current models and, with the frame held, the eq. (19) law every period;
+    /// turning, the running law's inputs gathered into [`RsEstimator::means`] with the
+    /// weight `weight` = 1/D. The law itself adapts in the slow task
+    /// ([`RsEstimator::adapt_running`]).
+    #[inline(always)]
+    pub fn gather_running(
+        &mut self,
+        cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
+        u: &RsEstimatorInputs<N>,
+        x: &RsRunningInputs<N>,
+        weight: N::Gain,
+    ) -> N {
+        let rs = self.stator_resistance_estimate;
+        let (e, eq) = self.model_errors(u);
+        if x.frame_held {
+            let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
+            let standstill = self.standstill_gate(cfg, run, u, true, flux_ok);
+            self.adapting = cfg.adapt && standstill;
+            if self.adapting && e.is_finite() {
+                self.adapt_step(cfg, cfg.alpha_ts, e, u.i_sd >= N::ZERO);
+            }
+        } else {
+            let m = &mut self.means;
+            m.residual = m.residual + N::gain(weight, u.i_sq * e + u.i_sd * eq);
+            m.i_sd = m.i_sd + N::gain(weight, u.i_sd);
+            m.i_sq = m.i_sq + N::gain(weight, u.i_sq);
+            m.stator_frequency = m.stator_frequency + N::gain(weight, u.stator_frequency);
+        }
+        self.models_step(cfg, run, u, x, rs);
+        self.stator_resistance_estimate
+    }
+
+    /// The slow task's half ([`RsEstimator::gather_running`]): the running law once, on
+    /// the slow period's means, with the gates of [`RsEstimator::update_running`] judged
+    /// on them, `x` and `flux_settled` at the tick; the means start again. With the
+    /// frame held the eq. (19) law ran in the fast path and this does nothing.
+    pub fn adapt_running(
+        &mut self,
+        cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
+        x: &RsRunningInputs<N>,
+        flux_settled: bool,
+    ) {
+        let m = self.means;
+        self.means = RsRunningMeans::zero();
+        if x.frame_held {
+            return;
+        }
+        let flux_ok = flux_settled && m.i_sd.abs() >= cfg.min_flux_current;
+        let steady = self.steady(run.slow_steady_filter, run.steady_band, x.i_sq_ref);
+        let turning = flux_ok && steady && Self::turning_gate(run, m.stator_frequency, m.i_sq, x);
+        self.adapting = cfg.adapt && turning;
+        if self.adapting {
+            let rs = self.stator_resistance_estimate;
+            self.turning_step(cfg, run.slow_alpha_ts, rs * m.residual, m.i_sd, m.i_sq);
+        }
+    }
+
+    /// The current models' errors at this sample, e_d and e_q (A; kept, zero if not
+    /// finite).
+    #[inline(always)]
+    fn model_errors(&mut self, u: &RsEstimatorInputs<N>) -> (N, N) {
+        let e = self.current_estimate - u.i_sd;
+        self.current_error = e.finite_or(N::ZERO);
+        let eq = self.q_current_estimate - u.i_sq;
+        self.q_current_error = eq.finite_or(N::ZERO);
+        (e, eq)
+    }
+
+    /// The eq. (19) law's gate (the frame held, standstill identification on).
+    #[inline(always)]
+    fn standstill_gate(
+        &self,
+        cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
+        u: &RsEstimatorInputs<N>,
+        frame_held: bool,
+        flux_ok: bool,
+    ) -> bool {
+        flux_ok
+            && run.standstill
+            && frame_held
+            && u.i_sq.abs() <= cfg.max_torque_current
+            && u.stator_frequency.abs() <= cfg.max_stator_frequency
+    }
+
+    /// The steadiness gate: the low-pass image of the torque-current reference `i_sq_ref`
+    /// moved by `filter`, and whether the reference is within `band` of it.
+    #[inline(always)]
+    fn steady(&mut self, filter: N::Gain, band: N, i_sq_ref: N) -> bool {
+        let slow =
+            self.torque_reference_slow + N::gain(filter, i_sq_ref - self.torque_reference_slow);
+        self.torque_reference_slow = slow.finite_or(N::ZERO);
+        (i_sq_ref - self.torque_reference_slow).abs() <= band
+    }
+
+    /// The running law's frequency and torque-current gates (module docs, "While
+    /// running", "Inductance errors") at stator frequency `w_s` and torque current
+    /// `i_sq`.
+    #[inline(always)]
+    fn turning_gate(run: &RsRunningConfig<N>, w_s: N, i_sq: N, x: &RsRunningInputs<N>) -> bool {
+        w_s.abs() >= run.min_frequency
+            && (!x.low_frequency_only
+                || (w_s.abs() <= run.max_frequency
+                    && i_sq.abs()
+                        >= N::gain_mul(run.inductance_gate, w_s.abs(), x.rotor_flux.abs())))
+            && i_sq.abs() >= run.min_torque_current
+    }
+
+    /// One step of the running law with gain `alpha_ts` on sigma = Rs_hat (i_sq e_d +
+    /// i_sd e_q).
+    #[inline(always)]
+    fn turning_step(
+        &mut self,
+        cfg: &RsEstimatorConfig<N>,
+        alpha_ts: N::Gain,
+        sigma: N,
+        i_sd: N,
+        i_sq: N,
+    ) {
+        // (i_sq r_d + i_sd r_q) / i_sq with r = Rs_hat e: 2 dR i_sd on the slow
+        // manifold; |i_sq| >= i_min > 0 (the gate), as sign(i_sq) sigma / |i_sq| (the
+        // fixed-point ratio takes a positive divisor)
+        let v = N::ratio(sigma, i_sq.abs());
+        if v.is_finite() {
+            let positive = (i_sd >= N::ZERO) == (i_sq >= N::ZERO);
+            self.adapt_step(cfg, alpha_ts, v, positive);
+        }
+    }
+
+    /// The q-axis and d-axis current models' Euler steps with the estimate `rs` of the
+    /// step's start.
+    #[inline(always)]
+    fn models_step(
+        &mut self,
+        cfg: &RsEstimatorConfig<N>,
+        run: &RsRunningConfig<N>,
+        u: &RsEstimatorInputs<N>,
+        x: &RsRunningInputs<N>,
+        rs: N,
+    ) {
         // sigma Ls di_q_hat/dt = -Rs_hat i_q_hat - sigma Ls w_s i_sd - w_s lambda_hat + v_sq
         let emf = N::gain_mul(run.flux_voltage, u.stator_frequency, x.rotor_flux);
         let di = N::gain(
@@ -495,7 +670,6 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
         let next = self.q_current_estimate + di;
         self.q_current_estimate = next.finite_or(u.i_sq.finite_or(N::ZERO));
         self.d_model_step(cfg, u, rs);
-        self.stator_resistance_estimate
     }
 }
 
@@ -543,6 +717,10 @@ impl RsRunningConfig<f32> {
             inductance_gate: N::gain_from_f32(
                 self.inductance_gate * b.frequency * b.flux / b.current,
             )?,
+            slow_alpha_ts: N::gain_from_f32(
+                self.slow_alpha_ts * b.voltage / b.resistance() * N::FINE_SCALE,
+            )?,
+            slow_steady_filter: N::gain_from_f32(self.slow_steady_filter)?,
         })
     }
 }
@@ -733,6 +911,56 @@ mod tests {
                 );
                 assert!(est.adapting);
             }
+        }
+    }
+
+    /// With a slow task of 5 and 10 periods the law adapts once per slow period on the
+    /// means the fast path gathered: it converges to the same resistance on the same
+    /// time constant (within 1 % of the per-period law's path every 0.1 s for 1 s),
+    /// and its gates are judged on the means (a load below i_min holds the estimate).
+    #[test]
+    fn on_slow_ticks_the_law_follows_the_per_period_law() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5, m.rotor_time_constant());
+        run.enabled = true;
+        for divider in [5u32, 10] {
+            let slow = run.on_slow_ticks(divider, ts, m.rotor_time_constant());
+            for (i_sq, ws, y) in [(0.64, 60.0, 0.02), (-1.9, -60.0, -0.03), (1.9, -20.0, 0.0)] {
+                let (u, x) = running_inputs(13.65, 1.5, i_sq, ws, y);
+                let (mut every, mut ticks) = (RsEstimator::new(10.5), RsEstimator::new(10.5));
+                for k in 1..=(1.0 / ts) as usize {
+                    every.update_running(&cfg, &run, &u, &x);
+                    ticks.gather_running(&cfg, &slow, &u, &x, 1.0 / divider as f32);
+                    if k % divider as usize == 0 {
+                        ticks.adapt_running(&cfg, &slow, &x, true);
+                    }
+                    if k % 500 == 0 {
+                        let (a, b) = (
+                            every.stator_resistance_estimate,
+                            ticks.stator_resistance_estimate,
+                        );
+                        assert!(
+                            (a - b).abs() < 0.01 * a,
+                            "{divider} {i_sq} {ws} at {k}: {a} {b}"
+                        );
+                    }
+                }
+                assert!((ticks.stator_resistance_estimate - 13.65).abs() < 0.03 * 13.65);
+                assert!(ticks.adapting);
+            }
+            // below i_min on the means: held
+            let (u, x) = running_inputs(13.65, 1.5, 0.2, 60.0, 0.0);
+            let mut est = RsEstimator::new(10.5);
+            for k in 1..=2000usize {
+                est.gather_running(&cfg, &slow, &u, &x, 1.0 / divider as f32);
+                if k % divider as usize == 0 {
+                    est.adapt_running(&cfg, &slow, &x, true);
+                }
+            }
+            assert_eq!(est.stator_resistance_estimate, 10.5);
+            assert!(!est.adapting);
         }
     }
 

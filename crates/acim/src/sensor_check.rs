@@ -116,6 +116,12 @@
 //! (where the reading stays near the true current for longer); where the current loops
 //! drive the true current to the trip level sooner, the hardware comparator is first.
 //!
+//! With a slow task the fast path only sums and keeps each window that ends, with its
+//! end sample ([`SensorCheck::gather`]); the slow task judges them at its next tick
+//! ([`SensorCheck::judge_pending`]): the same verdicts, each at most one slow period
+//! later (a window's end costs the fast path a copy instead of the judgement's
+//! inverse Park, Clarke and decision).
+//!
 //! # Limits
 //!
 //! The prediction uses the drive's estimates (the frame, its frequency, the speed and
@@ -360,10 +366,21 @@ pub struct SensorCheck<N: Num = f32> {
     /// previous update was given (a command acts over the period after the sample that
     /// computed it; `SensorCheckInputs::voltage` is the one acting from this sample on).
     acting: Dq<N>,
-    /// The model's steady error over a window (the increment it misses), filtered, A.
-    bias: Dq<N>,
     /// The running window.
     window: Window<N>,
+    /// What the judgements carry from window to window.
+    judgement: Judgement<N>,
+    /// Windows that ended in the fast path and wait for the slow task's judgement, oldest
+    /// first ([`SensorCheck::accumulate`], [`SensorCheck::judge_pending`]).
+    pending: [Option<Ended<N>>; PENDING_WINDOWS],
+}
+
+/// What the judgements carry from one window to the next: the bias filter and the
+/// astray history.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+struct Judgement<N: Num> {
+    /// The model's steady error over a window (the increment it misses), filtered, A.
+    bias: Dq<N>,
     /// The measured current, low-pass filtered like the bias (once per window), A.
     filtered: Dq<N>,
     /// Windows left before a standing channel may be judged a failed sensor again, after
@@ -377,6 +394,40 @@ pub struct SensorCheck<N: Num = f32> {
     astray_recent: u32,
 }
 
+/// A judgement's outcome.
+enum Judged {
+    /// The verdict on the window.
+    Verdict(Option<FaultReason>),
+    /// A non-finite value reached the state: the check starts over.
+    Reset,
+}
+
+/// The most windows that can end within one slow period: a window lasts at least
+/// 1.4 ms ([`WINDOW_TIME`] in whole periods, at least [`MIN_WINDOW`]) and a slow period
+/// at most 2.2 ms (2 ms in whole control periods, of at most 0.4 ms where a window is
+/// shorter than 1.6 ms).
+pub const PENDING_WINDOWS: usize = 2;
+
+/// What one period's sums found ([`SensorCheck::accumulate`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Period {
+    /// Off or not switching: the window restarted.
+    Off,
+    /// The first switching sample: a window starts at it.
+    Primed,
+    /// Summed; the window goes on.
+    Summed,
+    /// Summed; the window ends at this sample.
+    WindowEnd,
+}
+
+/// A window that ended, with the sample at its end, waiting to be judged.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Ended<N: Num> {
+    window: Window<N>,
+    end: SensorCheckInputs<N>,
+}
+
 impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
     /// A check with no history.
     pub fn new() -> Self {
@@ -386,17 +437,18 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
     /// Forgets the history (the next switching sample starts a window); keeps the bias.
     pub fn restart(&mut self) {
         self.primed = false;
-        self.astray_hold = 0;
-        self.astray_last = false;
-        self.astray_recent = 0;
+        self.judgement.astray_hold = 0;
+        self.judgement.astray_last = false;
+        self.judgement.astray_recent = 0;
         self.window.count = 0;
         self.window.voltage_sum = Dq::default();
         self.window.current_sum = Dq::default();
+        self.pending = [None; PENDING_WINDOWS];
     }
 
     /// The model's steady error per window (the bias filter), A, for telemetry.
     pub fn bias(&self) -> Dq<N> {
-        self.bias
+        self.judgement.bias
     }
 
     /// A window starts at this sample, whose channels are `phases`.
@@ -418,19 +470,122 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         cfg: &SensorCheckConfig<N>,
         inp: &SensorCheckInputs<N>,
     ) -> Option<FaultReason> {
-        if !cfg.enabled || !inp.switching {
+        match self.accumulate(cfg, inp.current, inp.voltage, inp.switching) {
+            Period::Primed => {
+                self.start_window(inp, channels(inp));
+                None
+            }
+            Period::WindowEnd => {
+                let window = self.window;
+                self.start_window(inp, channels(inp));
+                self.judge(cfg, &window, inp)
+            }
+            Period::Off | Period::Summed => None,
+        }
+    }
+
+    /// The fast path's half of the check in a drive with a slow task: the period's sums
+    /// (the sample's `current` and the `voltage` commanded for the next period, as in
+    /// [`SensorCheckInputs`]; `switching` as there), and a window that ends at this
+    /// sample kept, with the sample's inputs (`inputs`, called only at a window's end or
+    /// start), for [`SensorCheck::judge_pending`] (the slow task's half). The judgements
+    /// are [`SensorCheck::update`]'s, each made up to one slow period later.
+    #[inline(always)]
+    pub fn gather(
+        &mut self,
+        cfg: &SensorCheckConfig<N>,
+        current: Dq<N>,
+        voltage: Dq<N>,
+        switching: bool,
+        inputs: impl FnOnce() -> SensorCheckInputs<N>,
+    ) {
+        match self.accumulate(cfg, current, voltage, switching) {
+            Period::Primed => {
+                let inp = inputs();
+                self.start_window(&inp, channels(&inp));
+            }
+            Period::WindowEnd => {
+                let inp = inputs();
+                let ended = Ended {
+                    window: self.window,
+                    end: inp,
+                };
+                // two slots suffice (`PENDING_WINDOWS`); were both full, the oldest
+                // would go
+                match &mut self.pending {
+                    [None, _] => self.pending[0] = Some(ended),
+                    [Some(_), None] => self.pending[1] = Some(ended),
+                    [first, second] => {
+                        *first = *second;
+                        *second = Some(ended);
+                    }
+                }
+                self.start_window(&inp, channels(&inp));
+            }
+            Period::Off | Period::Summed => {}
+        }
+    }
+
+    /// The slow task's half of the check ([`SensorCheck::gather`]): judges the windows
+    /// that ended since the last call, oldest first; the first fault found.
+    pub fn judge_pending(&mut self, cfg: &SensorCheckConfig<N>) -> Option<FaultReason> {
+        for k in 0..PENDING_WINDOWS {
+            let Some(ended) = &self.pending[k] else {
+                break;
+            };
+            match self.judgement.judge(cfg, &ended.window, &ended.end) {
+                Judged::Verdict(None) => self.pending[k] = None,
+                Judged::Verdict(fault) => {
+                    self.pending = [None; PENDING_WINDOWS];
+                    return fault;
+                }
+                Judged::Reset => {
+                    *self = Self::default();
+                    return None;
+                }
+            }
+        }
+        None
+    }
+
+    /// The judgement of the window `w` that ended at the sample `inp`.
+    fn judge(
+        &mut self,
+        cfg: &SensorCheckConfig<N>,
+        w: &Window<N>,
+        inp: &SensorCheckInputs<N>,
+    ) -> Option<FaultReason> {
+        match self.judgement.judge(cfg, w, inp) {
+            Judged::Verdict(fault) => fault,
+            Judged::Reset => {
+                *self = Self::default();
+                None
+            }
+        }
+    }
+
+    /// One period's sums with the sample's `current` and the `voltage` commanded at it.
+    /// Off or not switching, it restarts the window.
+    #[inline(always)]
+    fn accumulate(
+        &mut self,
+        cfg: &SensorCheckConfig<N>,
+        current: Dq<N>,
+        voltage: Dq<N>,
+        switching: bool,
+    ) -> Period {
+        if !cfg.enabled || !switching {
             self.restart();
-            return None;
+            return Period::Off;
         }
         if !self.primed {
             self.primed = true;
-            self.previous = inp.current;
-            self.acting = inp.voltage;
-            if self.filtered == Dq::default() {
-                self.filtered = inp.current;
+            self.previous = current;
+            self.acting = voltage;
+            if self.judgement.filtered == Dq::default() {
+                self.judgement.filtered = current;
             }
-            self.start_window(inp, channels(inp));
-            return None;
+            return Period::Primed;
         }
         // the stator equation's terms that change within a window, summed; the frame
         // frequency, the flux and the speed are taken at the window's end (they move
@@ -442,20 +597,37 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         // change, and a healthy channel was judged standing still)
         let i0 = self.previous;
         let v0 = self.acting;
-        self.acting = inp.voltage;
+        self.acting = voltage;
         self.window.voltage_sum.d = self.window.voltage_sum.d + v0.d;
         self.window.voltage_sum.q = self.window.voltage_sum.q + v0.q;
         self.window.current_sum.d = self.window.current_sum.d + i0.d;
         self.window.current_sum.q = self.window.current_sum.q + i0.q;
-        self.previous = inp.current;
+        self.previous = current;
         self.window.count = self.window.count.saturating_add(1);
-        if self.window.count < cfg.window {
-            return None;
+        if self.window.count >= cfg.window {
+            Period::WindowEnd
+        } else {
+            Period::Summed
         }
+    }
+}
+
+impl<N: Num + DivSqrt + ThreePhase> Judgement<N> {
+    /// The judgement of the window `w` that ended at the sample `inp` (module docs, "The
+    /// decision") and the bias filter's update. Inlined: into [`SensorCheck::update`]
+    /// (one rate) and into [`SensorCheck::judge_pending`] (the slow task's, which the
+    /// firmware runs from flash).
+    #[inline(always)]
+    fn judge(
+        &mut self,
+        cfg: &SensorCheckConfig<N>,
+        w: &Window<N>,
+        inp: &SensorCheckInputs<N>,
+    ) -> Judged {
         // the window's end: sigma Ls di/dt summed over it (forward Euler from each
         // period's start), the increment the model predicts, the measured one, and the
         // prediction (the model's increment corrected by the bias of the windows before)
-        let (v, i) = (self.window.voltage_sum, self.window.current_sum);
+        let (v, i) = (w.voltage_sum, w.current_sum);
         let drive_d = v.d - N::gain(cfg.r_sigma, i.d)
             + N::gain_mul(cfg.sigma_ls, inp.stator_frequency, i.q)
             + N::gain(cfg.rr_over_lm, inp.rotor_flux);
@@ -468,12 +640,12 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
             q: N::gain(cfg.ts_over_sigma_ls, drive_q),
         };
         let end = Dq {
-            d: self.window.start_current.d + model.d + self.bias.d,
-            q: self.window.start_current.q + model.q + self.bias.q,
+            d: w.start_current.d + model.d + self.bias.d,
+            q: w.start_current.q + model.q + self.bias.q,
         };
         let eps = Dq {
-            d: (inp.current.d - self.window.start_current.d) - model.d,
-            q: (inp.current.q - self.window.start_current.q) - model.q,
+            d: (inp.current.d - w.start_current.d) - model.d,
+            q: (inp.current.q - w.start_current.q) - model.q,
         };
         if !(end.d.is_finite()
             && end.q.is_finite()
@@ -483,8 +655,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
             && self.filtered.q.is_finite())
         {
             // a non-finite input reached the state: start over
-            *self = Self::default();
-            return None;
+            return Judged::Reset;
         }
         let phases = inverse_clarke(inverse_park(end, inp.angle));
         let measured = channels(inp);
@@ -504,7 +675,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         let mut all_zero = true;
         for ((&p, &start), &meas) in phases
             .iter()
-            .zip(self.window.start_phases.iter())
+            .zip(w.start_phases.iter())
             .zip(measured.iter())
             .take(judged)
         {
@@ -544,8 +715,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         self.bias.q = self.bias.q + N::gain(cfg.bias_gain, eps.q - self.bias.q);
         self.filtered.d = self.filtered.d + N::gain(cfg.bias_gain, inp.current.d - self.filtered.d);
         self.filtered.q = self.filtered.q + N::gain(cfg.bias_gain, inp.current.q - self.filtered.q);
-        self.start_window(inp, measured);
-        fault
+        Judged::Verdict(fault)
     }
 }
 
@@ -803,6 +973,46 @@ mod tests {
 
     fn cfg() -> SensorCheckConfig {
         SensorCheckConfig::new(&MachineParams::paper_table1(), TS, 4.67).unwrap()
+    }
+
+    /// With a slow task the fast path gathers and the slow task judges: the same verdicts
+    /// as [`SensorCheck::update`]'s, each at the slow tick after the window's end (a
+    /// slow period of 7 control periods against windows of 8: sometimes none, sometimes
+    /// one window judged per tick; of 12 periods: up to two).
+    #[test]
+    fn gathered_windows_are_judged_as_at_once_one_slow_period_later() {
+        let cfg = cfg();
+        for divider in [5usize, 7, 12] {
+            for fault in [Fault::Dead, Fault::Stuck(1)] {
+                let mut s = Synth::new(500.0, MachineParams::paper_table1());
+                let (mut at_once, mut split) = (SensorCheck::new(), SensorCheck::new());
+                let (mut found_at_once, mut found_split) = (None, None);
+                for k in 0..600 {
+                    let f = if k >= 200 { fault } else { Fault::None };
+                    let inp = s.period(2.0, f, false);
+                    if found_at_once.is_none() && at_once.update(&cfg, &inp).is_some() {
+                        found_at_once = Some(k);
+                    }
+                    split.gather(&cfg, inp.current, inp.voltage, true, || inp);
+                    if found_split.is_none() && k % divider == 0 {
+                        if split.judge_pending(&cfg).is_some() {
+                            found_split = Some(k);
+                        } else if found_at_once.is_none() {
+                            // at a tick both have judged every window that ended
+                            assert_eq!(
+                                split.judgement.bias, at_once.judgement.bias,
+                                "{divider} {fault:?} {k}"
+                            );
+                        }
+                    }
+                }
+                let (a, b) = (found_at_once.unwrap(), found_split.unwrap());
+                assert!(
+                    a >= 200 && b >= a && b < a + divider,
+                    "{divider} {fault:?}: {a} {b}"
+                );
+            }
+        }
     }
 
     /// Runs `settle` healthy periods, then `n` periods with `fault` from the first;

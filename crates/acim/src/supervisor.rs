@@ -54,6 +54,10 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// The control monitor's leaky-mean gain Ts / T_f, T_f =
     /// [`MONITOR_FILTER_LOOP_CONSTANTS`](crate::design::MONITOR_FILTER_LOOP_CONSTANTS) / current_bandwidth.
     pub monitor_filter: N::Gain,
+    /// The same leaky mean's gain per slow period (with a slow task, which updates it
+    /// once per slow period on the period's means: [`ControlMonitor::judge`]),
+    /// 1 - (1 - `monitor_filter`)^D.
+    pub slow_monitor_filter: N::Gain,
     /// Largest mean |i* - i|, A: [`CURRENT_ERROR_FRACTION`](crate::design::CURRENT_ERROR_FRACTION) i_sd*.
     pub current_error_limit: N,
     /// Largest mean |a + b + c| with three shunts, A: [`CURRENT_SUM_FRACTION`](crate::design::CURRENT_SUM_FRACTION) of the trip.
@@ -91,6 +95,8 @@ pub struct SupervisionLimits<N: Num = f32> {
     pub offset_limit: N,
     /// The running offset check's leaky-mean gain Ts / [`RUNNING_OFFSET_FILTER_TIME`](crate::design::RUNNING_OFFSET_FILTER_TIME).
     pub running_offset_filter: N::Gain,
+    /// ... and per slow period, 1 - (1 - `running_offset_filter`)^D.
+    pub slow_running_offset_filter: N::Gain,
     /// The running offset check counts only above this |w_s|, rad/s electrical:
     /// 4 I_max / (offset_limit T), where the AC current's ripple through the mean plus the
     /// transient of a current that starts at that frequency, at most 2 I_max / (|w_s| T),
@@ -591,6 +597,45 @@ pub struct ControlMonitor<N: Num = f32> {
     /// Leaky mean of the measured alpha-beta current over about a second, counted only
     /// where the stator frequency makes the true current AC (running offset check), A.
     pub dc_current: AlphaBeta<N>,
+    /// With a slow task: the signals' means over the slow period so far.
+    pub means: MonitorMeans<N>,
+}
+
+/// What the fast path gathers for the control monitor over a slow period
+/// ([`ControlMonitor::gather`]): each period's signal times 1/D, summed (D the drive's
+/// `slow_divider`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MonitorMeans<N: Num = f32> {
+    /// Mean |i_sd* - i_sd| + |i_sq* - i_sq|, A.
+    pub current_error: N,
+    /// A period of the slow period had a current loop at the voltage limit (the
+    /// regulation error's mean then holds).
+    pub voltage_limited: bool,
+    /// Mean |a + b + c|, A.
+    pub current_sum: N,
+    /// Mean |v_d| + |v_q|, V.
+    pub voltage: N,
+    /// Mean (Rs_max + |w_s| Ls)(|i_d| + |i_q|), V.
+    pub explained_voltage: N,
+    /// Mean alpha-beta current, A.
+    pub current: AlphaBeta<N>,
+}
+
+impl<N: Num> MonitorMeans<N> {
+    /// Nothing gathered.
+    pub fn zero() -> Self {
+        Self {
+            current_error: N::ZERO,
+            voltage_limited: false,
+            current_sum: N::ZERO,
+            voltage: N::ZERO,
+            explained_voltage: N::ZERO,
+            current: AlphaBeta {
+                alpha: N::ZERO,
+                beta: N::ZERO,
+            },
+        }
+    }
 }
 
 impl<N: Num + DivSqrt> Default for ControlMonitor<N> {
@@ -612,6 +657,110 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
                 alpha: N::ZERO,
                 beta: N::ZERO,
             },
+            means: MonitorMeans::zero(),
+        }
+    }
+
+    /// The fast path's half of [`ControlMonitor::check`] and
+    /// [`ControlMonitor::check_offset_drift`] in a drive with a slow task: this period's
+    /// signals, weighted by `weight` = 1/D, added to [`ControlMonitor::means`]; `i_ab` the
+    /// measured alpha-beta current, A.
+    #[inline(always)]
+    pub fn gather(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        x: &ControlMonitorInputs<N>,
+        i_ab: AlphaBeta<N>,
+        weight: N::Gain,
+    ) {
+        let &ControlMonitorInputs {
+            i_ref,
+            i,
+            v,
+            current_sum,
+            stator_frequency,
+            voltage_limited,
+            ..
+        } = x;
+        let m = &mut self.means;
+        let add = |mean: N, x: N| mean + N::gain(weight, x);
+        let e = (i_ref.d - i.d).abs() + (i_ref.q - i.q).abs();
+        m.current_error = add(m.current_error, e);
+        m.voltage_limited |= voltage_limited;
+        m.current_sum = add(m.current_sum, current_sum.abs());
+        m.voltage = add(m.voltage, v.d.abs() + v.q.abs());
+        let i_mag = i.d.abs() + i.q.abs();
+        let explained = limits.impedance_resistance * i_mag
+            + N::gain_mul(limits.impedance_inductance, stator_frequency.abs(), i_mag);
+        m.explained_voltage = add(m.explained_voltage, explained);
+        m.current.alpha = add(m.current.alpha, i_ab.alpha);
+        m.current.beta = add(m.current.beta, i_ab.beta);
+    }
+
+    /// The slow task's half ([`ControlMonitor::gather`]): the leaky means moved once by
+    /// the slow period's means (with [`SupervisionLimits::slow_monitor_filter`]; the
+    /// regulation error holds if a current loop was at the voltage limit in the period,
+    /// the running offset check's mean counts if |w_s| at the tick, `stator_frequency`
+    /// (rad/s electrical), is above its threshold), `residual` the current loops'
+    /// integrals at the tick (V), then the checks of [`ControlMonitor::check`] and
+    /// [`ControlMonitor::check_offset_drift`], in that order. The means start again.
+    pub fn judge(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        residual: Dq<N>,
+        stator_frequency: N,
+    ) -> Option<FaultReason> {
+        let m = self.means;
+        self.means = MonitorMeans::zero();
+        let g = limits.slow_monitor_filter;
+        let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
+        if !m.voltage_limited {
+            self.current_error = lp(self.current_error, m.current_error);
+        }
+        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
+        self.current_sum = lp(self.current_sum, m.current_sum);
+        self.voltage = lp(self.voltage, m.voltage);
+        self.explained_voltage = lp(self.explained_voltage, m.explained_voltage);
+        if let Some(reason) = self.verdict(limits) {
+            return Some(reason);
+        }
+        if stator_frequency.abs() >= limits.running_offset_min_frequency {
+            let g = limits.slow_running_offset_filter;
+            let dc = &mut self.dc_current;
+            dc.alpha = dc.alpha + N::gain(g, m.current.alpha - dc.alpha);
+            dc.beta = dc.beta + N::gain(g, m.current.beta - dc.beta);
+        }
+        self.offset_verdict(limits)
+    }
+
+    /// The running offset check's verdict on its mean.
+    #[inline(always)]
+    fn offset_verdict(&self, limits: &SupervisionLimits<N>) -> Option<FaultReason> {
+        let dc = self.dc_current;
+        if dc.alpha.abs() > limits.offset_limit || dc.beta.abs() > limits.offset_limit {
+            Some(FaultReason::CurrentSensor)
+        } else {
+            None
+        }
+    }
+
+    /// The checks on the leaky means, in the order of the evidence's directness: the
+    /// current sum (a sensor fault), the current response to the voltage (dead sensing),
+    /// the current following its reference, then the voltage residual.
+    #[inline(always)]
+    fn verdict(&self, limits: &SupervisionLimits<N>) -> Option<FaultReason> {
+        if self.current_sum > limits.current_sum_limit {
+            Some(FaultReason::CurrentSensor)
+        } else if self.voltage > limits.impedance_voltage_floor
+            && self.explained_voltage < self.voltage.half()
+        {
+            Some(FaultReason::NoCurrentResponse)
+        } else if self.current_error > limits.current_error_limit {
+            Some(FaultReason::CurrentRegulation)
+        } else if self.model_residual > limits.model_residual_limit {
+            Some(FaultReason::LossOfControl)
+        } else {
+            None
         }
     }
 
@@ -634,12 +783,7 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
             dc.alpha = dc.alpha + N::gain(g, i_ab.alpha - dc.alpha);
             dc.beta = dc.beta + N::gain(g, i_ab.beta - dc.beta);
         }
-        let dc = self.dc_current;
-        if dc.alpha.abs() > limits.offset_limit || dc.beta.abs() > limits.offset_limit {
-            Some(FaultReason::CurrentSensor)
-        } else {
-            None
-        }
+        self.offset_verdict(limits)
     }
 
     /// One step of the checks on `x`, in the order of the evidence's directness: the
@@ -673,19 +817,7 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         let explained = limits.impedance_resistance * i_mag
             + N::gain_mul(limits.impedance_inductance, stator_frequency.abs(), i_mag);
         self.explained_voltage = lp(self.explained_voltage, explained);
-        if self.current_sum > limits.current_sum_limit {
-            Some(FaultReason::CurrentSensor)
-        } else if self.voltage > limits.impedance_voltage_floor
-            && self.explained_voltage < self.voltage.half()
-        {
-            Some(FaultReason::NoCurrentResponse)
-        } else if self.current_error > limits.current_error_limit {
-            Some(FaultReason::CurrentRegulation)
-        } else if self.model_residual > limits.model_residual_limit {
-            Some(FaultReason::LossOfControl)
-        } else {
-            None
-        }
+        self.verdict(limits)
     }
 }
 
@@ -862,6 +994,7 @@ impl SupervisionLimits<f32> {
             stall_fraction: N::from_f32(self.stall_fraction),
             rs_bound_faults: self.rs_bound_faults,
             monitor_filter: g(self.monitor_filter, "loops.current_bandwidth")?,
+            slow_monitor_filter: g(self.slow_monitor_filter, "loops.current_bandwidth")?,
             current_error_limit: pu(self.current_error_limit, b.current, "loops.flux_current")?,
             current_sum_limit: pu(self.current_sum_limit, b.current, "limits.overcurrent_trip")?,
             model_residual_limit: pu(self.model_residual_limit, b.voltage, "limits.dc_bus_max")?,
@@ -876,6 +1009,7 @@ impl SupervisionLimits<f32> {
             oscillation_swing: pu(self.oscillation_swing, b.speed, "limits.max_speed")?,
             offset_limit: pu(self.offset_limit, b.current, "limits.overcurrent_trip")?,
             running_offset_filter: g(self.running_offset_filter, "loops.control_period")?,
+            slow_running_offset_filter: g(self.slow_running_offset_filter, "loops.slow_period")?,
             running_offset_min_frequency: pu(
                 self.running_offset_min_frequency,
                 b.frequency,
@@ -1244,6 +1378,131 @@ mod tests {
         )
         .unwrap();
         assert_eq!(reason, FaultReason::CurrentSensor);
+    }
+
+    /// With a slow task of D = 5 periods the fast path gathers and the slow task judges
+    /// the slow period's means: every case of the tests above gets the same verdict, at
+    /// most a slow period after the per-period monitor's (and a healthy drive none).
+    #[test]
+    fn the_slow_task_judges_the_means_as_the_monitor_judges_each_period() {
+        let mut cfg = DriveConfig::paper_defaults();
+        cfg.loops.slow_period = 1e-3;
+        let l = DriveDesign::new(cfg).unwrap().limits;
+        const D: u32 = 5;
+        let big = l.model_residual_limit;
+        let cases = [
+            (
+                dq(1.5, 2.0),
+                dq(1.49, 2.02),
+                dq(20.0, 90.0),
+                dq(1.0, 3.0),
+                0.01,
+                false,
+            ),
+            (
+                dq(1.5, 0.0),
+                dq(0.0, 0.0),
+                dq(150.0, 20.0),
+                dq(100.0, 20.0),
+                0.0,
+                true,
+            ),
+            (
+                dq(1.5, 3.0),
+                dq(0.5, 2.0),
+                dq(20.0, 60.0),
+                dq(2.0, 2.0),
+                0.0,
+                false,
+            ),
+            (
+                dq(1.5, 3.0),
+                dq(0.5, 2.0),
+                dq(20.0, 60.0),
+                dq(2.0, 2.0),
+                0.0,
+                true,
+            ),
+            (
+                dq(1.5, 3.0),
+                dq(1.5, 3.0),
+                dq(20.0, 150.0),
+                dq(0.0, 1.5 * big),
+                0.0,
+                false,
+            ),
+            (
+                dq(1.5, 3.0),
+                dq(1.5, 3.0),
+                dq(20.0, 90.0),
+                dq(1.0, 1.0),
+                2.0 * l.current_sum_limit,
+                false,
+            ),
+        ];
+        for (i_ref, i, v, residual, sum, limited) in cases {
+            let once = monitor_run(10_000, i_ref, i, v, residual, sum, limited);
+            let mut m = ControlMonitor::new();
+            let x = ControlMonitorInputs {
+                i_ref,
+                i,
+                v,
+                residual,
+                current_sum: sum,
+                stator_frequency: 60.0,
+                voltage_limited: limited,
+            };
+            let ab = AlphaBeta {
+                alpha: 0.0,
+                beta: 0.0,
+            };
+            let slow = (1..=10_000u32).find_map(|k| {
+                m.gather(&l, &x, ab, 1.0 / D as f32);
+                if k % D == 0 {
+                    m.judge(&l, residual, 60.0).map(|r| (k - 1, r))
+                } else {
+                    None
+                }
+            });
+            match (once, slow) {
+                (None, None) => {}
+                (Some((a, ra)), Some((b, rb))) => {
+                    assert_eq!(ra, rb, "{i_ref:?} {i:?}");
+                    assert!(b + 1 >= a && b <= a + D, "{ra:?}: {a} {b}");
+                }
+                other => panic!("{i_ref:?} {i:?}: {other:?}"),
+            }
+        }
+        // the running offset check on the means: an offset at twice the limit is found,
+        // none at the lowest counted frequency without one
+        let w = 2.0 * l.running_offset_min_frequency;
+        let run = |offset: f32| {
+            let mut m = ControlMonitor::new();
+            (1..=25_000u32).position(|k| {
+                let th = w * k as f32 * 200e-6;
+                let x = ControlMonitorInputs {
+                    i_ref: dq(1.5, 2.0),
+                    i: dq(1.5, 2.0),
+                    v: dq(20.0, 90.0),
+                    residual: dq(1.0, 1.0),
+                    current_sum: 0.0,
+                    stator_frequency: w,
+                    voltage_limited: false,
+                };
+                let ab = AlphaBeta {
+                    alpha: 4.67 * th.cos() + offset,
+                    beta: 4.67 * th.sin() + offset / 3f32.sqrt(),
+                };
+                m.gather(&l, &x, ab, 1.0 / D as f32);
+                k % D == 0 && m.judge(&l, x.residual, w).is_some()
+            })
+        };
+        assert_eq!(run(0.0), None);
+        let k = run(2.0 * l.offset_limit).expect("found");
+        assert!(
+            (k as f32) * 200e-6 < crate::design::RUNNING_OFFSET_FILTER_TIME,
+            "{k}"
+        );
     }
 
     #[test]
