@@ -19,13 +19,16 @@ fn main() {
     }
     // ccmram.x goes to OUT_DIR, which is added to the linker search path
     let out = PathBuf::from(env::var("OUT_DIR").unwrap());
-    // the self-test build runs the flux observer's step from flash (ccmram.x,
-    // SELFTEST_IN_FLASH): its CCM SRAM is full with the simulated stage's glue
+    // the self-test build runs the flux observer's step and the sensor check's window
+    // ends (one period in eight) from flash (ccmram.x, SELFTEST_IN_FLASH): its CCM SRAM
+    // is full with the simulated stage's glue
     let mut script = fs::read_to_string("ccmram.x").expect("read ccmram.x");
     if env::var_os("CARGO_FEATURE_SELFTEST").is_some() {
         script = script.replace(
             "/* SELFTEST_IN_FLASH:",
-            "*(.text._ZN4acim13flux_observer17FluxObserverState6update*)\n    /* SELFTEST_IN_FLASH:",
+            "*(.text._ZN4acim13flux_observer17FluxObserverState6update*)\n    \
+             *(.text._ZN4acim12sensor_check20SensorCheck$LT$N$GT$6update*)\n    \
+             /* SELFTEST_IN_FLASH:",
         );
     }
     fs::write(out.join("ccmram.x"), script).expect("write ccmram.x");

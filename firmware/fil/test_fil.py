@@ -988,11 +988,11 @@ class PowerStage(unittest.TestCase):
         m = booted(load=motor)
         if observer:
             self.assertIn("ok estimation.observer applied",
-                          command(m, f"set estimation.observer {observer}", 5))
+                          command(m, f"set estimation.observer {observer}"))
             m.run(600)
         if slow_period:
             self.assertIn("ok loops.slow_period applied",
-                          command(m, f"set loops.slow_period {slow_period}", 5))
+                          command(m, f"set loops.slow_period {slow_period}"))
             # the rebuilt drive measures its offsets again before it starts
             m.run(600)
         self.assertIn("ok", command(m, "speed 500", 5))
@@ -1032,7 +1032,7 @@ class Rearm(unittest.TestCase):
         motor = fil.InductionMotorLoad()
         m = booted(load=motor)
         self.assertIn("ok", command(m, "speed 300", 5))
-        self.assertIn("ok limits.max_speed applied", command(m, "set limits.max_speed 1900", 5))
+        self.assertIn("ok limits.max_speed applied", command(m, "set limits.max_speed 1900"))
         # at once: the rebuilt drive has not measured its offsets yet (start pending)
         self.assertIn("ok", command(m, "start", 5))
         self.assertFalse(m.moe(), "outputs stay off while the start waits")
