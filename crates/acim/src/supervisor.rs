@@ -601,6 +601,35 @@ pub struct ControlMonitor<N: Num = f32> {
     pub means: MonitorMeans<N>,
 }
 
+/// The control monitor's signals of one period (or their means over a slow period).
+#[derive(Clone, Copy, Debug)]
+struct Signals<N: Num> {
+    /// |i_sd* - i_sd| + |i_sq* - i_sq|, A.
+    current_error: N,
+    /// |a + b + c|, A.
+    current_sum: N,
+    /// |v_d| + |v_q|, V.
+    voltage: N,
+    /// (Rs_max + |w_s| Ls)(|i_d| + |i_q|), V.
+    explained_voltage: N,
+}
+
+impl<N: Num> Signals<N> {
+    /// This period's signals from the monitor's inputs `x`.
+    #[inline(always)]
+    fn of(limits: &SupervisionLimits<N>, x: &ControlMonitorInputs<N>) -> Self {
+        let (i_ref, i, v) = (x.i_ref, x.i, x.v);
+        let i_mag = i.d.abs() + i.q.abs();
+        Self {
+            current_error: (i_ref.d - i.d).abs() + (i_ref.q - i.q).abs(),
+            current_sum: x.current_sum.abs(),
+            voltage: v.d.abs() + v.q.abs(),
+            explained_voltage: limits.impedance_resistance * i_mag
+                + N::gain_mul(limits.impedance_inductance, x.stator_frequency.abs(), i_mag),
+        }
+    }
+}
+
 /// What the fast path gathers for the control monitor over a slow period
 /// ([`ControlMonitor::gather`]): each period's signal times 1/D, summed (D the drive's
 /// `slow_divider`).
@@ -673,26 +702,14 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         i_ab: AlphaBeta<N>,
         weight: N::Gain,
     ) {
-        let &ControlMonitorInputs {
-            i_ref,
-            i,
-            v,
-            current_sum,
-            stator_frequency,
-            voltage_limited,
-            ..
-        } = x;
+        let sig = Signals::of(limits, x);
         let m = &mut self.means;
         let add = |mean: N, x: N| mean + N::gain(weight, x);
-        let e = (i_ref.d - i.d).abs() + (i_ref.q - i.q).abs();
-        m.current_error = add(m.current_error, e);
-        m.voltage_limited |= voltage_limited;
-        m.current_sum = add(m.current_sum, current_sum.abs());
-        m.voltage = add(m.voltage, v.d.abs() + v.q.abs());
-        let i_mag = i.d.abs() + i.q.abs();
-        let explained = limits.impedance_resistance * i_mag
-            + N::gain_mul(limits.impedance_inductance, stator_frequency.abs(), i_mag);
-        m.explained_voltage = add(m.explained_voltage, explained);
+        m.current_error = add(m.current_error, sig.current_error);
+        m.voltage_limited |= x.voltage_limited;
+        m.current_sum = add(m.current_sum, sig.current_sum);
+        m.voltage = add(m.voltage, sig.voltage);
+        m.explained_voltage = add(m.explained_voltage, sig.explained_voltage);
         m.current.alpha = add(m.current.alpha, i_ab.alpha);
         m.current.beta = add(m.current.beta, i_ab.beta);
     }
@@ -712,25 +729,55 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
     ) -> Option<FaultReason> {
         let m = self.means;
         self.means = MonitorMeans::zero();
-        let g = limits.slow_monitor_filter;
-        let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
-        if !m.voltage_limited {
-            self.current_error = lp(self.current_error, m.current_error);
-        }
-        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
-        self.current_sum = lp(self.current_sum, m.current_sum);
-        self.voltage = lp(self.voltage, m.voltage);
-        self.explained_voltage = lp(self.explained_voltage, m.explained_voltage);
+        let sig = Signals {
+            current_error: m.current_error,
+            current_sum: m.current_sum,
+            voltage: m.voltage,
+            explained_voltage: m.explained_voltage,
+        };
+        self.filter(
+            limits.slow_monitor_filter,
+            &sig,
+            residual,
+            m.voltage_limited,
+        );
         if let Some(reason) = self.verdict(limits) {
             return Some(reason);
         }
-        if stator_frequency.abs() >= limits.running_offset_min_frequency {
-            let g = limits.slow_running_offset_filter;
-            let dc = &mut self.dc_current;
-            dc.alpha = dc.alpha + N::gain(g, m.current.alpha - dc.alpha);
-            dc.beta = dc.beta + N::gain(g, m.current.beta - dc.beta);
-        }
+        let g = limits.slow_running_offset_filter;
+        self.move_dc(limits, g, m.current, stator_frequency);
         self.offset_verdict(limits)
+    }
+
+    /// The leaky means moved by `sig` with gain `g`, the regulation error held while
+    /// `voltage_limited`; `residual` the current loops' integrals, V.
+    #[inline(always)]
+    fn filter(&mut self, g: N::Gain, sig: &Signals<N>, residual: Dq<N>, voltage_limited: bool) {
+        let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
+        if !voltage_limited {
+            self.current_error = lp(self.current_error, sig.current_error);
+        }
+        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
+        self.current_sum = lp(self.current_sum, sig.current_sum);
+        self.voltage = lp(self.voltage, sig.voltage);
+        self.explained_voltage = lp(self.explained_voltage, sig.explained_voltage);
+    }
+
+    /// The running offset check's mean moved by `i_ab` (A) with gain `g` where
+    /// |`stator_frequency`| makes the true current AC.
+    #[inline(always)]
+    fn move_dc(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        g: N::Gain,
+        i_ab: AlphaBeta<N>,
+        stator_frequency: N,
+    ) {
+        if stator_frequency.abs() >= limits.running_offset_min_frequency {
+            let dc = &mut self.dc_current;
+            dc.alpha = dc.alpha + N::gain(g, i_ab.alpha - dc.alpha);
+            dc.beta = dc.beta + N::gain(g, i_ab.beta - dc.beta);
+        }
     }
 
     /// The running offset check's verdict on its mean.
@@ -777,12 +824,7 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         i_ab: AlphaBeta<N>,
         stator_frequency: N,
     ) -> Option<FaultReason> {
-        if stator_frequency.abs() >= limits.running_offset_min_frequency {
-            let g = limits.running_offset_filter;
-            let dc = &mut self.dc_current;
-            dc.alpha = dc.alpha + N::gain(g, i_ab.alpha - dc.alpha);
-            dc.beta = dc.beta + N::gain(g, i_ab.beta - dc.beta);
-        }
+        self.move_dc(limits, limits.running_offset_filter, i_ab, stator_frequency);
         self.offset_verdict(limits)
     }
 
@@ -795,28 +837,8 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         limits: &SupervisionLimits<N>,
         x: &ControlMonitorInputs<N>,
     ) -> Option<FaultReason> {
-        let &ControlMonitorInputs {
-            i_ref,
-            i,
-            v,
-            residual,
-            current_sum,
-            stator_frequency,
-            voltage_limited,
-        } = x;
-        let g = limits.monitor_filter;
-        let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
-        if !voltage_limited {
-            let e = (i_ref.d - i.d).abs() + (i_ref.q - i.q).abs();
-            self.current_error = lp(self.current_error, e);
-        }
-        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
-        self.current_sum = lp(self.current_sum, current_sum.abs());
-        let i_mag = i.d.abs() + i.q.abs();
-        self.voltage = lp(self.voltage, v.d.abs() + v.q.abs());
-        let explained = limits.impedance_resistance * i_mag
-            + N::gain_mul(limits.impedance_inductance, stator_frequency.abs(), i_mag);
-        self.explained_voltage = lp(self.explained_voltage, explained);
+        let sig = Signals::of(limits, x);
+        self.filter(limits.monitor_filter, &sig, x.residual, x.voltage_limited);
         self.verdict(limits)
     }
 }
