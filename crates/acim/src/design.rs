@@ -562,6 +562,11 @@ impl DriveDesign {
         } else {
             0.0
         };
+        // the control monitor's and the running offset check's leaky means, per control
+        // period (their slow task's gains per slow period)
+        let monitor_filter =
+            (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS).min(1.0);
+        let running_offset_filter = (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0);
         Ok(Self {
             config: cfg,
             ts,
@@ -713,12 +718,8 @@ impl DriveDesign {
                 blind_steps: (m.rotor_time_constant() / slow_ts) as u32,
                 stall_fraction: STALL_SPEED_FRACTION,
                 rs_bound_faults: cfg.estimation.rs_estimation,
-                monitor_filter: (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS)
-                    .min(1.0),
-                slow_monitor_filter: per_slow_period(
-                    (ts * cfg.loops.current_bandwidth / MONITOR_FILTER_LOOP_CONSTANTS).min(1.0),
-                    slow_divider,
-                ),
+                monitor_filter,
+                slow_monitor_filter: per_slow_period(monitor_filter, slow_divider),
                 current_error_limit: CURRENT_ERROR_FRACTION * i_d,
                 current_sum_limit: CURRENT_SUM_FRACTION * cfg.limits.overcurrent_trip,
                 model_residual_limit: RESIDUAL_RS_TOLERANCE * m.stator_resistance() * i_max
@@ -733,11 +734,8 @@ impl DriveDesign {
                 oscillation_check: cfg.limits.speed_oscillation_check,
                 oscillation_swing: OSCILLATION_FRACTION * cfg.limits.max_speed,
                 offset_limit: OFFSET_FRACTION * cfg.limits.overcurrent_trip,
-                running_offset_filter: (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
-                slow_running_offset_filter: per_slow_period(
-                    (ts / RUNNING_OFFSET_FILTER_TIME).min(1.0),
-                    slow_divider,
-                ),
+                running_offset_filter,
+                slow_running_offset_filter: per_slow_period(running_offset_filter, slow_divider),
                 running_offset_min_frequency: 4.0 * i_max
                     / (OFFSET_FRACTION * cfg.limits.overcurrent_trip * RUNNING_OFFSET_FILTER_TIME),
                 impedance_resistance: (1.0 + RESIDUAL_RS_TOLERANCE) * m.stator_resistance()

@@ -40,11 +40,16 @@
 //! take effect from the next period.
 //!
 //! - **Every period (fast)**: the gate (non-finite samples, over-current, bus window), sense,
-//!   the observer, the Rs estimator, flux and angle, the estimates finite
-//!   ([`Supervisor::estimates_valid`]), the magnetizing sequence, current control, the
-//!   control monitor and the current-sensor check, modulation, the inverter tracker, and
-//!   the offset drift subtracted from the samples.
-//! - **Each slow tick** (the slow task): the offset tracker's model on the slow period's mean of its
+//!   the observer, the Rs estimator's current models (and its standstill law), flux and
+//!   angle, the estimates finite ([`Supervisor::estimates_valid`]), the magnetizing
+//!   sequence, current control, modulation, the inverter tracker, the offset drift
+//!   subtracted from the samples, and the sums of what the slow task judges: the running Rs
+//!   law's inputs, the control monitor's signals, the sensor check's windows (a window
+//!   that ends is kept with its end sample).
+//! - **Each slow tick** (the slow task): the running Rs law on the slow period's means,
+//!   the control monitor and the running offset check on theirs (the same time constants),
+//!   the sensor check's judgement of the windows that ended (the same verdicts, up to a
+//!   slow period later), the offset tracker's model on the slow period's mean of its
 //!   voltage signature (summed every period), field weakening, the speed loop (ramp,
 //!   hold, regeneration limit, far-side mode, PI, thermal fold-back), stall, overload and blind detection, the load
 //!   and speed ranges of [`Supervisor::plausibility`], the limit-cycle check and the
@@ -950,8 +955,10 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
 
     /// The fast part of [`Drive::step`]: with no slow task, the whole step; with one, a
-    /// slow tick leaves its work (the speed loop, field weakening, the offset tracker's
-    /// update, the slow supervision, the zero-speed policy) for [`Drive::run_slow`],
+    /// slow tick leaves its work (the running Rs law, the control monitor and the sensor
+    /// check's judgements on what this path gathered, the speed loop, field weakening,
+    /// the offset tracker's update, the slow supervision, the zero-speed policy) for
+    /// [`Drive::run_slow`],
     /// which must run before the next call ([`Drive::slow_pending`]).
     #[inline]
     pub fn step_fast(&mut self, inp: &DriveInputs<N>) -> PwmOutput<N> {
@@ -1031,7 +1038,11 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// The slow task ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)):
     /// the work of the last slow tick, on that period's samples and the estimates'
     /// means over the slow period; nothing if none is pending (no slow task, or the drive
-    /// stopped or faulted since). In order: the offset tracker's update, the load and
+    /// stopped or faulted since). In order: the running Rs law on the slow period's means
+    /// ([`crate::rs_estimator::RsEstimator::adapt_running`]), the control monitor and
+    /// the running offset check on theirs ([`ControlMonitor::judge`]), the sensor check's
+    /// windows that ended ([`crate::sensor_check::SensorCheck::judge_pending`]), the
+    /// offset tracker's update, the load and
     /// speed plausibility, field weakening and the speed loop (the new current reference,
     /// reached in equal steps over the next slow period), stall and blind operation, the
     /// zero-speed policy and the limit-cycle check. A fault it finds switches the drive

@@ -602,7 +602,7 @@ pub struct ControlMonitor<N: Num = f32> {
 }
 
 /// The control monitor's signals of one period (or their means over a slow period).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Signals<N: Num> {
     /// |i_sd* - i_sd| + |i_sq* - i_sq|, A.
     current_error: N,
@@ -635,17 +635,11 @@ impl<N: Num> Signals<N> {
 /// `slow_divider`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MonitorMeans<N: Num = f32> {
-    /// Mean |i_sd* - i_sd| + |i_sq* - i_sq|, A.
-    pub current_error: N,
+    /// The means of the monitor's signals.
+    signals: Signals<N>,
     /// A period of the slow period had a current loop at the voltage limit (the
     /// regulation error's mean then holds).
     pub voltage_limited: bool,
-    /// Mean |a + b + c|, A.
-    pub current_sum: N,
-    /// Mean |v_d| + |v_q|, V.
-    pub voltage: N,
-    /// Mean (Rs_max + |w_s| Ls)(|i_d| + |i_q|), V.
-    pub explained_voltage: N,
     /// Mean alpha-beta current, A.
     pub current: AlphaBeta<N>,
 }
@@ -654,11 +648,13 @@ impl<N: Num> MonitorMeans<N> {
     /// Nothing gathered.
     pub fn zero() -> Self {
         Self {
-            current_error: N::ZERO,
+            signals: Signals {
+                current_error: N::ZERO,
+                current_sum: N::ZERO,
+                voltage: N::ZERO,
+                explained_voltage: N::ZERO,
+            },
             voltage_limited: false,
-            current_sum: N::ZERO,
-            voltage: N::ZERO,
-            explained_voltage: N::ZERO,
             current: AlphaBeta {
                 alpha: N::ZERO,
                 beta: N::ZERO,
@@ -705,11 +701,12 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         let sig = Signals::of(limits, x);
         let m = &mut self.means;
         let add = |mean: N, x: N| mean + N::gain(weight, x);
-        m.current_error = add(m.current_error, sig.current_error);
+        let s = &mut m.signals;
+        s.current_error = add(s.current_error, sig.current_error);
+        s.current_sum = add(s.current_sum, sig.current_sum);
+        s.voltage = add(s.voltage, sig.voltage);
+        s.explained_voltage = add(s.explained_voltage, sig.explained_voltage);
         m.voltage_limited |= x.voltage_limited;
-        m.current_sum = add(m.current_sum, sig.current_sum);
-        m.voltage = add(m.voltage, sig.voltage);
-        m.explained_voltage = add(m.explained_voltage, sig.explained_voltage);
         m.current.alpha = add(m.current.alpha, i_ab.alpha);
         m.current.beta = add(m.current.beta, i_ab.beta);
     }
@@ -729,15 +726,9 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
     ) -> Option<FaultReason> {
         let m = self.means;
         self.means = MonitorMeans::zero();
-        let sig = Signals {
-            current_error: m.current_error,
-            current_sum: m.current_sum,
-            voltage: m.voltage,
-            explained_voltage: m.explained_voltage,
-        };
         self.filter(
             limits.slow_monitor_filter,
-            &sig,
+            &m.signals,
             residual,
             m.voltage_limited,
         );
