@@ -113,8 +113,11 @@
 //! 0.5's observer, the same structure and gain, on the same cases: +1.1 % and +5 % lost
 //! (the estimate 90-156 rpm off), -5 % diverged. No observer of this class holds these
 //! points without Rs known to a fraction of a per cent; with the drive's running Rs law
-//! (the default: it adapts in the regenerating mode as well) the peer benchmark's regenerating
-//! rows hold within its 30 rpm, up to 13 rpm off (half the rated load at 60 rpm). Holding Rs
+//! (the default: it adapts in the regenerating mode as well, down to zero stator
+//! frequency with this observer, `crate::rs_estimator`, "Down to zero stator frequency")
+//! the peer benchmark's regenerating rows hold within its 30 rpm, up to 9 rpm off (half
+//! the rated load at 30 rpm; 15.5 rpm at rated load and 45 rpm while the law stopped at
+//! 1 Hz). Holding Rs
 //! fixed while regenerating at low stator frequency (where Rs and the speed are not
 //! observable together) was tried: the limit cycles at 60-75 rpm went (9 rpm peak to
 //! peak -> 0.1-1.8), but the rated-load points moved further off (rated load at 45 rpm: 11.6 -> 14.8 rpm off)

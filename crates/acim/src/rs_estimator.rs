@@ -85,7 +85,8 @@
 //! law above, exponentially stable; for tau well above the fast modes' time constants
 //! (the orientation mode's slowest root, about 1/(k |w_s|) or tau_r) the pair is locally
 //! exponentially stable (Tikhonov; Khalil, Nonlinear Systems, thm. 11.4). It adapts only
-//! with settled flux, |w_s| >= `min_running_frequency` and |i_sq| >= `i_min`; the standstill
+//! with settled flux, |w_s| >= `min_running_frequency` (with the paper's observer; "Down
+//! to zero stator frequency" below for the flux observer) and |i_sq| >= `i_min`; the standstill
 //! identification (the eq. 19 law with the frame held) gives its initial value. What it
 //! assumes: the rotor model (R_R, L_M) right; an R_R error biases the estimate (the slip
 //! law's error enters eps and, through the flux, r_q), and so does an uncompensated
@@ -125,6 +126,31 @@
 //! drive holds 8 rpm off (`docs/peer-benchmark.md`). With the paper's observer the law
 //! keeps its other gates only (the paper's figures and the robustness matrix are
 //! measured with them).
+//!
+//! ## Down to zero stator frequency
+//!
+//! With an observer that estimates the flux itself the law has no low frequency gate:
+//! it adapts down to w_s = 0. There the resistance is observable (in steady state at
+//! zero stator frequency the stator voltage is the resistive drop alone, as at
+//! standstill; what is not observable there is the speed), the inductance error's pull
+//! w_s eps lambda / (2 i_sq) vanishes with w_s, and it is where the flux observer needs
+//! Rs most: while regenerating near zero stator frequency one per cent of Rs error
+//! moves its speed estimate by tens of rpm (`crate::flux_observer`, "Low-speed
+//! regeneration and the stator resistance"). Below the paper's 1 Hz
+//! ([`RUNNING_MIN_FREQUENCY_HZ`]) the inductance gate is taken at 1 Hz: the law adapts
+//! there only with the torque current it would need at 1 Hz.
+//!
+//! Measured (`docs/peer-benchmark.md`, `docs/low-speed.md`): with the 1 Hz gate the
+//! standstill value was kept through a regenerating load near zero stator frequency, and
+//! the standstill value carries the inverter test's error (its flux-rate correction uses
+//! the controller's rotor model): on motulator's 2.2 kW machine with L_M 15 % high it
+//! was 3.63 ohm (true 3.70), and rated overhauling load at 75 rpm (0.16 Hz) ran the
+//! rotor 63 rpm ahead of its estimate. Adapting down to zero it holds 6.7 rpm off; the
+//! 7.5 kW machine with L_M +15 % 40 -> 12 rpm, the 0.18 kW machine with R_R -30 % 65 ->
+//! 39 rpm (tolerance 56). Without the floor on the gate, the saturated 2.2 kW machine
+//! regenerating half its rated load at 15 rpm (0.15 Hz, |i_sq| 1 A against 4.9 A of
+//! flux current) lost the rotor: the law followed the estimate's drift (Rs_hat -2 %)
+//! with a torque current too small to separate the two.
 
 use crate::num::DivSqrt;
 use crate::num::FineIntegrator;
@@ -188,7 +214,9 @@ pub struct RsRunningConfig<N: Num = f32> {
     pub standstill: bool,
     /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
     pub alpha_ts: N::Gain,
-    /// Adapt with |w_s| at least this, rad/s electrical.
+    /// Adapt with |w_s| at least this, rad/s electrical ([`RUNNING_MIN_FREQUENCY_HZ`]);
+    /// with [`RsRunningInputs::low_frequency_only`] the frequency at which the inductance
+    /// gate is taken below it (module docs, "Down to zero stator frequency").
     pub min_frequency: N,
     /// Adapt with |i_sq| at least this (i_min, which keeps the divisor away from 0), A.
     pub min_torque_current: N,
@@ -337,9 +365,9 @@ pub struct RsRunningInputs<N = f32> {
     pub frame_held: bool,
     /// The torque-current reference i_sq* of the last step, A (the steadiness gate).
     pub i_sq_ref: N,
-    /// Adapt while turning only with |w_s| at most [`RsRunningConfig::max_frequency`]
-    /// (an observer that estimates the flux itself; the paper's observer adapts at any
-    /// frequency above the low gate).
+    /// Adapt while turning only with |w_s| at most [`RsRunningConfig::max_frequency`],
+    /// down to zero stator frequency (an observer that estimates the flux itself; the
+    /// paper's observer adapts at any frequency above the low gate).
     pub low_frequency_only: bool,
 }
 
@@ -621,12 +649,19 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
     /// `i_sq`.
     #[inline(always)]
     fn turning_gate(run: &RsRunningConfig<N>, w_s: N, i_sq: N, x: &RsRunningInputs<N>) -> bool {
-        w_s.abs() >= run.min_frequency
-            && (!x.low_frequency_only
-                || (w_s.abs() <= run.max_frequency
-                    && i_sq.abs()
-                        >= N::gain_mul(run.inductance_gate, w_s.abs(), x.rotor_flux.abs())))
-            && i_sq.abs() >= run.min_torque_current
+        let band = if x.low_frequency_only {
+            // down to zero stator frequency (module docs, "Down to zero stator frequency")
+            let w = if w_s.abs() > run.min_frequency {
+                w_s.abs()
+            } else {
+                run.min_frequency
+            };
+            w_s.abs() <= run.max_frequency
+                && i_sq.abs() >= N::gain_mul(run.inductance_gate, w, x.rotor_flux.abs())
+        } else {
+            w_s.abs() >= run.min_frequency
+        };
+        band && i_sq.abs() >= run.min_torque_current
     }
 
     /// One step of the running law with gain `alpha_ts` on sigma = Rs_hat (i_sq e_d +
@@ -1021,7 +1056,8 @@ mod tests {
         assert!((r - 13.65).abs() < 0.03 * 13.65, "{r}");
     }
 
-    /// At zero torque (no information) and below 1 Hz the running law holds the estimate;
+    /// At zero torque (no information) and, with the paper's observer, below 1 Hz the
+    /// running law holds the estimate;
     /// with the frame held (standstill identification) the eq. (19) law runs.
     #[test]
     fn running_law_gates() {
@@ -1096,5 +1132,47 @@ mod tests {
         let (at_gate, adapting) = settle(1.05 * gate_current, gate);
         assert!(adapting);
         assert!(at_gate.abs() <= RUNNING_RESISTANCE_TOLERANCE, "{at_gate}");
+    }
+
+    /// With an observer that estimates the flux itself the law adapts down to zero
+    /// stator frequency (module docs, "Down to zero stator frequency"): at 0.1 Hz and at
+    /// 0 Hz with an orientation error it converges to the true Rs with a torque current
+    /// above the inductance gate taken at the low gate's frequency, and holds with one
+    /// below it; the paper's observer keeps its 1 Hz gate.
+    #[test]
+    fn with_the_flux_observer_the_law_adapts_down_to_zero_stator_frequency() {
+        let m = MachineParams::paper_table1();
+        let ts = 200e-6;
+        let rs = 13.65;
+        let cfg = RsEstimatorConfig::new(&m, ts, 0.2, 1.5);
+        let mut run = RsRunningConfig::new(ts, 0.2, 1.5, m.rotor_time_constant());
+        run.enabled = true;
+        run.max_frequency = rs / m.magnetizing_inductance();
+        run.inductance_gate = inductance_gate(rs);
+        let lambda = m.rotor_flux_for(1.5);
+        // the torque current the gate asks for at the low gate's frequency
+        let floor = run.inductance_gate * run.min_frequency * lambda;
+        assert!(floor > run.min_torque_current);
+        let settle = |i_sq: f32, ws: f32, flux_observer: bool| {
+            let (u, mut x) = running_inputs(rs, 1.5, i_sq, ws, 0.02);
+            x.low_frequency_only = flux_observer;
+            let mut est = RsEstimator::new(0.9 * rs);
+            for _ in 0..(1.0 / ts) as usize {
+                est.update_running(&cfg, &run, &u, &x);
+            }
+            (est.stator_resistance_estimate, est.adapting)
+        };
+        let below_1_hz = 0.1 * run.min_frequency;
+        for ws in [below_1_hz, -below_1_hz, 0.0] {
+            for i_sq in [1.2 * floor, -1.2 * floor] {
+                let (r, adapting) = settle(i_sq, ws, true);
+                assert!(adapting, "i_sq {i_sq} w_s {ws}");
+                assert!((r - rs).abs() < 0.03 * rs, "i_sq {i_sq} w_s {ws}: {r}");
+                // the paper's observer: held below 1 Hz
+                assert_eq!(settle(i_sq, ws, false), (0.9 * rs, false));
+            }
+            // a torque current below the floor: held
+            assert_eq!(settle(0.8 * floor, ws, true), (0.9 * rs, false));
+        }
     }
 }
