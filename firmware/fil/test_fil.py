@@ -843,8 +843,8 @@ class SelfTest(unittest.TestCase):
         self-test ELF: state 5 while it runs, then the identified values with their
         bounds, nothing changed until `commission apply`, then the settings it wrote,
         within the required bounds of the model's inverse-Gamma values (Rs 10.5 ohm: 2 %;
-        the T-form settings are read back as Rs, R_R = Rr (Lm/Lr)^2: 5 %), then a start on
-        them."""
+        the T-form settings are read back as Rs, R_R = Rr (Lm/Lr)^2: 5 %) and the flux
+        observer, then a start on them."""
         m = fil.Machine(fil.default_elf("selftest"))
         m.run_until(lambda m: "ready" in m.output(), CALIBRATION_PERIODS + 200)
         before = command(m, "get")
@@ -877,6 +877,8 @@ class SelfTest(unittest.TestCase):
         self.assertLess(abs(rs - 10.5) / 10.5, 0.02)
         self.assertLess(abs(rr * (lm / lr) ** 2 - 7.810714) / 7.810714, 0.05)
         self.assertEqual(vals["machine.pole_pairs"], 2)
+        # the nameplate's observer, the flux observer (from the defaults' paper observer)
+        self.assertEqual(vals["estimation.observer"], 1)
         self.assertEqual(state_fault(m), (0, 0))
         m.run(5000 * 3)
         self.assertIn("ok", command(m, "speed 300"))

@@ -15,7 +15,12 @@
 //! the nameplate is tighter**: current limit at most the rated peak current, trip at most
 //! [`acim::nameplate::TRIP_OVER_LIMIT`] times it, speed limit at most
 //! [`acim::nameplate::SPEED_LIMIT_OVER_RATED`] times the synchronous speed. The bus window
-//! stays the user's.
+//! stays the user's. It selects the flux observer (`estimation.observer` 1,
+//! [`acim::flux_observer`]), as the library's nameplate configuration does
+//! ([`acim::nameplate`]): its gain is designed stable while regenerating near zero stator
+//! frequency, where the paper's observer needs the regeneration limit, and it is the
+//! observer the nameplate path is measured with (`docs/low-speed.md`,
+//! `docs/peer-benchmark.md`). `set estimation.observer 0` goes back to the paper's.
 //!
 //! A finished sequence becomes an [`Outcome`] ([`outcome`]): the identified values with
 //! the library's bound on each one's error ([`acim::commissioning::Confidence`]) and the
@@ -24,7 +29,7 @@
 //! and nothing is saved until `save`. A result that fails a check is never applied.
 
 use crate::board::{CONTROL_PERIOD_S, DEAD_TIME_NS, POWER_STAGE};
-use crate::settings::{SettingError, Settings, FIELD_COUNT};
+use crate::settings::{SettingError, Settings, FIELD_COUNT, OBSERVER};
 use acim::commissioning::{CommissioningError, Confidence, Identified, Stage};
 use acim::math::RAD_S_TO_RPM;
 use acim::nameplate::{
@@ -116,8 +121,12 @@ pub fn check(
     Ok(rated)
 }
 
+/// `estimation.observer`'s value for the flux observer.
+const OBSERVER_FLUX: f32 = 1.0;
+
 /// The settings after commissioning: `current` with the identified machine, the rated
-/// flux current and the nameplate's tighter limits (module docs), validated as a whole.
+/// flux current, the nameplate's tighter limits and the flux observer (module docs),
+/// validated as a whole.
 /// An unresolved inertia keeps the present value.
 pub fn settings_from(
     id: &Identified,
@@ -149,6 +158,8 @@ pub fn settings_from(
     v[11] = m.pole_pairs() as f32;
     v[12] = m.inertia();
     v[13] = m.viscous_friction();
+    // the flux observer, as the library's nameplate configuration chooses it (module docs)
+    v[OBSERVER] = OBSERVER_FLUX;
     Settings::from_values(v)
 }
 
@@ -325,6 +336,8 @@ mod tests {
         );
         assert!(n.get(2) <= s.get(2) && n.get(3) <= s.get(3) && n.get(5) <= s.get(5));
         assert_eq!((n.get(0), n.get(1)), (s.get(0), s.get(1)));
+        // the nameplate's observer: the flux observer, from the defaults' paper observer
+        assert_eq!((s.get(OBSERVER), n.get(OBSERVER)), (0.0, OBSERVER_FLUX));
         // the T-model carries the same inverse-Gamma model
         let m = MachineParams::new(acim::MachineData {
             stator_resistance: n.get(6),

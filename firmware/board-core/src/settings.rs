@@ -110,7 +110,7 @@ const POLE_PAIRS: usize = 11;
 const INERTIA: usize = 12;
 const VISCOUS_FRICTION: usize = 13;
 const SLOW_PERIOD: usize = 14;
-const OBSERVER: usize = 15;
+pub(crate) const OBSERVER: usize = 15;
 
 /// The index in [`FIELDS`] of a name: its path in [`DriveConfig`]'s groups
 /// (`limits.current_limit`), or the name without its group (`current_limit`, the earlier
