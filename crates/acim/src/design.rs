@@ -527,9 +527,10 @@ impl DriveDesign {
         );
         rs_running.enabled = cfg.estimation.rs_estimation_mode == RsEstimationMode::Running;
         rs_running.standstill = cfg.start.rs_standstill_identification;
-        rs_running.max_frequency = crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
+        rs_running.max_frequency = (crate::rs_estimator::RUNNING_MAX_FREQUENCY_FACTOR
             * m.stator_resistance()
-            / m.magnetizing_inductance();
+            / m.magnetizing_inductance())
+        .max(rs_running.min_frequency);
         rs_running.inductance_gate = crate::rs_estimator::inductance_gate(m.stator_resistance());
         let rs_running = rs_running.on_slow_ticks(slow_divider, ts, m.rotor_time_constant());
         let pp = m.pole_pairs_f32();
@@ -948,6 +949,26 @@ mod tests {
         assert_eq!(field(r), None);
         r.loops.regen_min_frequency = -1.0;
         assert_eq!(field(r), Some("loops.regen_min_frequency"));
+    }
+
+    /// The running Rs law's band with the flux observer reaches Rs/L_M, and at least its
+    /// low gate's 1 Hz (`acim::rs_estimator`, "Down to zero stator frequency"): the
+    /// paper's machine (Rs/L_M 3.2 Hz) keeps its own; with a tenth of its Rs (0.32 Hz)
+    /// the band reaches 1 Hz.
+    #[test]
+    fn the_running_rs_band_reaches_at_least_its_low_gate() {
+        let c = DriveConfig::paper_defaults();
+        let m = c.machine;
+        let d = DriveDesign::new(c).unwrap();
+        let own = m.stator_resistance() / m.magnetizing_inductance();
+        assert!(own > d.rs_running.min_frequency);
+        assert!((d.rs_running.max_frequency - own).abs() < 1e-3 * own);
+        let mut low = c;
+        let mut data = m.data();
+        data.stator_resistance *= 0.1;
+        low.machine = MachineParams::new(data).unwrap();
+        let d = DriveDesign::new(low).unwrap();
+        assert_eq!(d.rs_running.max_frequency, d.rs_running.min_frequency);
     }
 
     /// Protections cannot be switched off by configuration, and errors name the field
