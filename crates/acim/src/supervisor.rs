@@ -65,6 +65,11 @@ pub struct SupervisionLimits<N: Num = f32> {
     /// Largest mean current-loop integral |I_d| + |I_q|, V: [`RESIDUAL_RS_TOLERANCE`](crate::design::RESIDUAL_RS_TOLERANCE) Rs
     /// current_limit + [`RESIDUAL_VOLTAGE_FRACTION`](crate::design::RESIDUAL_VOLTAGE_FRACTION) of the linear limit at `dc_bus_max`.
     pub model_residual_limit: N,
+    /// What the q integral may carry per |w_s| before it counts, V per rad/s electrical:
+    /// [`RESIDUAL_FLUX_FRACTION`](crate::design::RESIDUAL_FLUX_FRACTION) of the rated
+    /// rotor flux, the back-EMF an inductance error of the designed class leaves
+    /// unexplained.
+    pub residual_per_frequency: N::Gain,
     /// Longest magnetizing, steps: the Rs identification timeout (when it runs) plus
     /// [`MAGNETIZING_TIMEOUT_TAU_R`](crate::design::MAGNETIZING_TIMEOUT_TAU_R) tau_r, plus the flying start's speed search (when
     /// it runs).
@@ -585,8 +590,11 @@ pub struct ControlMonitorInputs<N: Num = f32> {
 pub struct ControlMonitor<N: Num = f32> {
     /// Leaky mean of |i_sd* - i_sd| + |i_sq* - i_sq|, A.
     pub current_error: N,
-    /// Leaky mean of |I_d| + |I_q|, the current-loop integrals (model voltage residual), V.
+    /// Leaky mean of |I_d| + |I_q|, the current-loop integrals (model voltage residual),
+    /// the steady part of I_q less [`SupervisionLimits::residual_per_frequency`] |w_s|, V.
     pub model_residual: N,
+    /// Leaky mean of I_q (signed), the q integral's steady part, V.
+    pub q_residual: N,
     /// Leaky mean of |a + b + c| (three shunts; 0 with two), A.
     pub current_sum: N,
     /// Leaky mean of the commanded |v_d| + |v_q|, V.
@@ -675,6 +683,7 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         Self {
             current_error: N::ZERO,
             model_residual: N::ZERO,
+            q_residual: N::ZERO,
             current_sum: N::ZERO,
             voltage: N::ZERO,
             explained_voltage: N::ZERO,
@@ -727,9 +736,11 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         let m = self.means;
         self.means = MonitorMeans::zero();
         self.filter(
+            limits,
             limits.slow_monitor_filter,
             &m.signals,
             residual,
+            stator_frequency,
             m.voltage_limited,
         );
         if let Some(reason) = self.verdict(limits) {
@@ -741,14 +752,31 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
     }
 
     /// The leaky means moved by `sig` with gain `g`, the regulation error held while
-    /// `voltage_limited`; `residual` the current loops' integrals, V.
+    /// `voltage_limited`; `residual` the current loops' integrals, V, at the stator
+    /// frequency `stator_frequency` (rad/s electrical: the q integral's allowance).
     #[inline(always)]
-    fn filter(&mut self, g: N::Gain, sig: &Signals<N>, residual: Dq<N>, voltage_limited: bool) {
+    fn filter(
+        &mut self,
+        limits: &SupervisionLimits<N>,
+        g: N::Gain,
+        sig: &Signals<N>,
+        residual: Dq<N>,
+        stator_frequency: N,
+        voltage_limited: bool,
+    ) {
         let lp = |mean: N, x: N| mean + N::gain(g, x - mean);
         if !voltage_limited {
             self.current_error = lp(self.current_error, sig.current_error);
         }
-        self.model_residual = lp(self.model_residual, residual.d.abs() + residual.q.abs());
+        // the q integral's steady part less the back-EMF an inductance error leaves on it
+        // (its feed-forward holds w_s lambda_hat: [`SupervisionLimits::residual_per_frequency`]),
+        // and what moves around that steady part, in full
+        self.q_residual = lp(self.q_residual, residual.q);
+        let steady =
+            self.q_residual.abs() - N::gain(limits.residual_per_frequency, stator_frequency.abs());
+        let steady = if steady > N::ZERO { steady } else { N::ZERO };
+        let q = steady + (residual.q - self.q_residual).abs();
+        self.model_residual = lp(self.model_residual, residual.d.abs() + q);
         self.current_sum = lp(self.current_sum, sig.current_sum);
         self.voltage = lp(self.voltage, sig.voltage);
         self.explained_voltage = lp(self.explained_voltage, sig.explained_voltage);
@@ -829,7 +857,14 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
         x: &ControlMonitorInputs<N>,
     ) -> Option<FaultReason> {
         let sig = Signals::of(limits, x);
-        self.filter(limits.monitor_filter, &sig, x.residual, x.voltage_limited);
+        self.filter(
+            limits,
+            limits.monitor_filter,
+            &sig,
+            x.residual,
+            x.stator_frequency,
+            x.voltage_limited,
+        );
         self.verdict(limits)
     }
 }
@@ -1011,6 +1046,10 @@ impl SupervisionLimits<f32> {
             current_error_limit: pu(self.current_error_limit, b.current, "loops.flux_current")?,
             current_sum_limit: pu(self.current_sum_limit, b.current, "limits.overcurrent_trip")?,
             model_residual_limit: pu(self.model_residual_limit, b.voltage, "limits.dc_bus_max")?,
+            residual_per_frequency: g(
+                self.residual_per_frequency * b.frequency / b.voltage,
+                "loops.flux_current",
+            )?,
             magnetizing_timeout_steps: self.magnetizing_timeout_steps,
             demagnetize_steps: self.demagnetize_steps,
             offset_filter: g(self.offset_filter, "loops.control_period")?,
@@ -1375,6 +1414,39 @@ mod tests {
         )
         .unwrap();
         assert_eq!(reason, FaultReason::LossOfControl);
+    }
+
+    /// The back-EMF an inductance error leaves on the q integral (the feed-forward holds
+    /// w_s lambda_hat) is allowed up to `residual_per_frequency` |w_s| on top of the
+    /// limit; the same voltage on the d integral is lost control.
+    #[test]
+    fn an_inductance_errors_back_emf_on_the_q_integral_is_not_loss_of_control() {
+        let l = limits();
+        // monitor_run's stator frequency, 60 rad/s
+        let allowance = l.residual_per_frequency * 60.0;
+        assert!(allowance > 0.1 * l.model_residual_limit);
+        let r = l.model_residual_limit + 0.9 * allowance;
+        let run = |residual| {
+            monitor_run(
+                10_000,
+                dq(1.5, 3.0),
+                dq(1.5, 3.0),
+                dq(20.0, 150.0),
+                residual,
+                0.0,
+                false,
+            )
+        };
+        assert_eq!(run(dq(0.0, 0.9 * r)), None);
+        assert_eq!(run(dq(0.0, r)), None);
+        assert_eq!(
+            run(dq(r, 0.0)).map(|x| x.1),
+            Some(FaultReason::LossOfControl)
+        );
+        assert_eq!(
+            run(dq(0.0, r + 0.2 * allowance)).map(|x| x.1),
+            Some(FaultReason::LossOfControl)
+        );
     }
 
     #[test]
