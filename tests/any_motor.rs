@@ -93,8 +93,12 @@ fn rated_load_applied_and_removed_on_every_machine() {
 /// not acting; the controller's L_M -/+15 %, R_R -/+30 % (plus the slip's error it
 /// implies) and Rs -/+20 % at rated load, motoring at 5 and 50 % of n_s and regenerating
 /// at 50 %, held within 2 % of n_s or ended by a clean fault (or refused at
-/// configuration). Measured: 200 of 200; the regenerating parameter errors at 5 % of n_s,
-/// shown on the page and not asserted, 43 of 48.
+/// configuration). The regenerating parameter errors at 5 % of n_s, which the page shows
+/// and does not assert on every machine, are asserted on the machines of the project's
+/// shared acceptance set (`acim_sim::low_speed::SHARED_ACCEPTANCE`: the paper's, the TI benchmark's and
+/// motulator's 2.2 kW machine). Measured: 218 of 218; the page's other regenerating
+/// parameter errors 28 of 30 (the 0.18 kW machine with R_R -30 % and Rs -20 %:
+/// `acim::rs_estimator`, "Down to zero stator frequency").
 #[test]
 fn low_speed_under_rated_load_on_every_machine() {
     use acim_sim::load_steps::{prepare, MACHINES};
@@ -123,7 +127,7 @@ fn low_speed_under_rated_load_on_every_machine() {
             }
         }
     }
-    assert_eq!(asserted, 200);
+    assert_eq!(asserted, 218);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
