@@ -225,8 +225,8 @@ pub struct RsRunningConfig<N: Num = f32> {
     /// alpha_r Ts, ohm per V per step (tau = 1/(2 alpha_r |i_sd|)).
     pub alpha_ts: N::Gain,
     /// Adapt with |w_s| at least this, rad/s electrical ([`RUNNING_MIN_FREQUENCY_HZ`]);
-    /// with [`RsRunningInputs::low_frequency_only`] the frequency at which the inductance
-    /// gate is taken below it (module docs, "Down to zero stator frequency").
+    /// with [`RsRunningInputs::low_frequency_only`], below it only with a torque current
+    /// at least the flux current (module docs, "Down to zero stator frequency").
     pub min_frequency: N,
     /// Adapt with |i_sq| at least this (i_min, which keeps the divisor away from 0), A.
     pub min_torque_current: N,

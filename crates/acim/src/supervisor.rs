@@ -1437,7 +1437,6 @@ mod tests {
                 false,
             )
         };
-        assert_eq!(run(dq(0.0, 0.9 * r)), None);
         assert_eq!(run(dq(0.0, r)), None);
         assert_eq!(
             run(dq(r, 0.0)).map(|x| x.1),

@@ -29,7 +29,7 @@
 //! and nothing is saved until `save`. A result that fails a check is never applied.
 
 use crate::board::{CONTROL_PERIOD_S, DEAD_TIME_NS, POWER_STAGE};
-use crate::settings::{SettingError, Settings, FIELD_COUNT, OBSERVER};
+use crate::settings::{observer_value, SettingError, Settings, FIELD_COUNT, OBSERVER};
 use acim::commissioning::{CommissioningError, Confidence, Identified, Stage};
 use acim::math::RAD_S_TO_RPM;
 use acim::nameplate::{
@@ -121,9 +121,6 @@ pub fn check(
     Ok(rated)
 }
 
-/// `estimation.observer`'s value for the flux observer.
-const OBSERVER_FLUX: f32 = 1.0;
-
 /// The settings after commissioning: `current` with the identified machine, the rated
 /// flux current, the nameplate's tighter limits and the flux observer (module docs),
 /// validated as a whole.
@@ -159,7 +156,7 @@ pub fn settings_from(
     v[12] = m.inertia();
     v[13] = m.viscous_friction();
     // the flux observer, as the library's nameplate configuration chooses it (module docs)
-    v[OBSERVER] = OBSERVER_FLUX;
+    v[OBSERVER] = observer_value(acim::ObserverChoice::Flux);
     Settings::from_values(v)
 }
 
@@ -337,7 +334,13 @@ mod tests {
         assert!(n.get(2) <= s.get(2) && n.get(3) <= s.get(3) && n.get(5) <= s.get(5));
         assert_eq!((n.get(0), n.get(1)), (s.get(0), s.get(1)));
         // the nameplate's observer: the flux observer, from the defaults' paper observer
-        assert_eq!((s.get(OBSERVER), n.get(OBSERVER)), (0.0, OBSERVER_FLUX));
+        assert_eq!(
+            (s.get(OBSERVER), n.get(OBSERVER)),
+            (
+                observer_value(acim::ObserverChoice::Reduced),
+                observer_value(acim::ObserverChoice::Flux)
+            )
+        );
         // the T-model carries the same inverse-Gamma model
         let m = MachineParams::new(acim::MachineData {
             stator_resistance: n.get(6),

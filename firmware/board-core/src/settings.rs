@@ -112,6 +112,15 @@ const VISCOUS_FRICTION: usize = 13;
 const SLOW_PERIOD: usize = 14;
 pub(crate) const OBSERVER: usize = 15;
 
+/// `estimation.observer`'s value for `choice`: 0 the paper's reduced-order observer, 1
+/// the flux observer.
+pub(crate) fn observer_value(choice: ObserverChoice) -> f32 {
+    match choice {
+        ObserverChoice::Reduced => 0.0,
+        ObserverChoice::Flux => 1.0,
+    }
+}
+
 /// The index in [`FIELDS`] of a name: its path in [`DriveConfig`]'s groups
 /// (`limits.current_limit`), or the name without its group (`current_limit`, the earlier
 /// flat name, still accepted; the replies name the field by its path).
@@ -246,10 +255,7 @@ impl Settings {
                 m.inertia(),
                 m.viscous_friction(),
                 c.loops.slow_period * 1000.0,
-                match c.estimation.observer {
-                    ObserverChoice::Reduced => 0.0,
-                    ObserverChoice::Flux => 1.0,
-                },
+                observer_value(c.estimation.observer),
             ],
         }
     }
