@@ -102,7 +102,16 @@
 //!   opening at 3 V of excess would take 14 mA; measured in `regen-60`, the recovery
 //!   from the load step took 10 mA in 0.15 s and the speed estimate's largest error in
 //!   the window went from 0.61 to 1.86 rpm. With the floor it opens at a small excess
-//!   over the noise (0.9 V here), and regen-60 is as without the tracker.
+//!   over the noise (0.9 V here), and regen-60 is as without the tracker. The band is
+//!   half the floor and at least [`OFFSET_TRACKER_FLOOR_BAND`] `Rs offset_limit` (0.67 V
+//!   on the paper machine). Half the floor alone made the gate as fine as the noise: where
+//!   the noise is small against the sensorless loop's own wobble at f_s (with a slow task,
+//!   whose mean of `u` over the slow period takes the noise down by its square root) the
+//!   gate opened and shut with the wobble's phase, and what it let through was biased:
+//!   on the far side (60 rpm, 4.5 N m regenerating, 20 mA drifting in) the speed
+//!   estimate ended 2.9 rpm off with a 1 ms slow task and 4.5 rpm with 1.6 ms, against
+//!   1.4-1.6 rpm with the least band (0.9 rpm at the control rate either way), and with
+//!   the gate's floor test off, 1.5 rpm.
 //!
 //! **Why 1.5 Hz and not the running Rs law's 1 Hz.** The signature above is the open
 //! machine's. In the closed sensorless loop a DC current is also a torque ripple at f_s,
@@ -212,6 +221,11 @@ pub const OFFSET_TRACKER_RESIDUAL_FACTOR: f32 = 2.0;
 /// leaves) rises by `Rs offset_limit` in this time, s: a residual that stays above it
 /// (a large offset step) is accepted after about this time per `Rs offset_limit`.
 pub const OFFSET_TRACKER_FLOOR_RISE_TIME: f32 = 5.0;
+/// The floor gate's least band above the floor, in `Rs offset_limit` (module docs): a
+/// transient's excess within it leaves at most this times `offset_limit / (T |mu_f + j
+/// w_s|)` in the estimate (`T` = [`OFFSET_TRACKER_TIME`]), 3.5 % of the limit at the 1.5 Hz
+/// gate, a tenth of that on the far side.
+pub const OFFSET_TRACKER_FLOOR_BAND: f32 = 0.4;
 /// The model frequency's low-pass time constant, s: the stator frequency's wobble at
 /// f_s (the sensorless loop's own ripple) must not turn the model's phase.
 pub const OFFSET_TRACKER_FREQUENCY_FILTER: f32 = 0.1;
@@ -259,6 +273,9 @@ pub struct OffsetTrackerConfig<N: Num + FineIntegrator = f32> {
     /// offset, `Rs offset_limit` (a larger residual is the fundamental moving, or noise
     /// and harmonics the offset's signature does not stand above).
     pub residual_limit: N,
+    /// The floor gate's least band above the floor, V: [`OFFSET_TRACKER_FLOOR_BAND`]
+    /// times `Rs offset_limit`.
+    pub floor_band_min: N,
     /// The residual floor's rise per step, V: `Rs offset_limit Ts /
     /// OFFSET_TRACKER_FLOOR_RISE_TIME`.
     pub floor_rise: N,
@@ -297,6 +314,7 @@ impl OffsetTrackerConfig<f32> {
             steady_filter: (ts / tau_r).min(1.0),
             steady_band: crate::rs_estimator::RUNNING_STEADY_TORQUE_FRACTION * flux_current.abs(),
             residual_limit: OFFSET_TRACKER_RESIDUAL_FACTOR * rs * offset_limit,
+            floor_band_min: OFFSET_TRACKER_FLOOR_BAND * rs * offset_limit,
             floor_rise: rs * offset_limit * ts / OFFSET_TRACKER_FLOOR_RISE_TIME,
             bounds: (-offset_limit, offset_limit),
         }
@@ -428,6 +446,18 @@ impl<N: Num + FineIntegrator + Angles> OffsetTracker<N> {
         mean
     }
 
+    /// How far the residual may stand above its floor for the offset to adapt, V: half
+    /// the floor, and at least [`OffsetTrackerConfig::floor_band_min`] (module docs).
+    #[inline(always)]
+    fn floor_band(&self, cfg: &OffsetTrackerConfig<N>) -> N {
+        let half = self.residual_floor.half();
+        if half > cfg.floor_band_min {
+            half
+        } else {
+            cfg.floor_band_min
+        }
+    }
+
     /// One step on the inputs `x` (every control period, or once per slow period on the
     /// period's mean of `u`); `sincos` turns the model when `cfg.exact_turn`.
     #[inline(always)]
@@ -522,7 +552,7 @@ impl<N: Num + FineIntegrator + Angles> OffsetTracker<N> {
         if let Some(g) = gain.filter(|_| {
             self.steadiness.steady_steps >= cfg.holdoff_steps
                 && self.residual <= cfg.residual_limit
-                && self.residual <= self.residual_floor + self.residual_floor.half()
+                && self.residual <= self.residual_floor + self.floor_band(cfg)
         }) {
             let (lo, hi) = cfg.bounds;
             let (a, at_a) = N::fine_step(self.integrators.alpha, g, eps.alpha, false, lo, hi);
@@ -568,6 +598,7 @@ impl OffsetTrackerConfig<f32> {
             steady_filter: g(self.steady_filter)?,
             steady_band: N::from_f32(self.steady_band / b.current),
             residual_limit: N::from_f32(self.residual_limit / b.voltage),
+            floor_band_min: N::from_f32(self.floor_band_min / b.voltage),
             floor_rise: N::from_f32(self.floor_rise / b.voltage),
             bounds: (lower, limit),
         })
