@@ -203,8 +203,13 @@ fn inductance_errors_neither_lose_the_rotor_nor_pull_rs() {
 /// Field weakening to twice the base speed, the flux observer on the built-in scenarios
 /// of the paper's machine (325 V, 3000 rpm) and of the 2.2 kW machine (540 V, 3000 rpm):
 /// control kept, no fault, the speed estimate within 4 rpm of the rotor in every window
-/// (measured 0.6-2.5 rpm at speed, 3.5 rpm held at zero after `fw-braking-3000`; the
-/// paper's observer 4.5-17 at speed). Before the adaptation's
+/// at the control rate (measured 0.6-2.5 rpm at speed, 3.5 rpm held at zero after
+/// `fw-braking-3000`; the paper's observer 4.5-17 at speed) and 6 rpm with the 1 kHz
+/// slow task, whose hand-over delays the speed loop by about a slow period: on the
+/// 2.2 kW machine at 3000 rpm a 12 Hz wobble of the speed loop, 5.1 rpm (1.9 at the
+/// control rate; 3.7 with the reference stepped at the tick instead of ramped over the
+/// slow period, which made a locked rotor read as a current-sensor fault). Before the
+/// adaptation's
 /// schedule at high stator frequency (`flux_observer::SENSITIVITY_LIMIT`) and the frame
 /// lock (`flux_observer::FRAME_LOCK_FROM`) the 2.2 kW machine held a +-40 rpm limit
 /// cycle from 2300 rpm, and on the paper's machine `fw-reversal-3000` and
@@ -224,10 +229,13 @@ fn field_weakening_to_twice_base_speed() {
         "fw-2k2-reversal-3000",
         "fw-2k2-braking-3000",
     ] {
-        let m = acim_tests::run(name, &["drive.observer=\"flux\""]);
-        assert!(m.fault.is_none() && m.control_kept, "{name}: {:?}", m.fault);
-        for (w, r) in &m.windows {
-            assert!(r.speed_est_err_max_rpm <= 4.0, "{name} {w}: {r:?}");
+        for (slow, bound) in [("0.0", 4.0), ("0.001", 6.0)] {
+            let slow = format!("drive.loops.slow_period_s={slow}");
+            let m = acim_tests::run(name, &["drive.observer=\"flux\"", &slow]);
+            assert!(m.fault.is_none() && m.control_kept, "{name}: {:?}", m.fault);
+            for (w, r) in &m.windows {
+                assert!(r.speed_est_err_max_rpm <= bound, "{name} {slow} {w}: {r:?}");
+            }
         }
     }
 }

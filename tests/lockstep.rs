@@ -152,14 +152,19 @@ fn the_two_arithmetics_run_in_lockstep() {
         ("paper-fig6", 0.75, 0.5, 0.005),
         ("paper-fig7", 0.75, 0.5, 0.005),
         // the feed-forward passes the observer's load estimate straight into i_sq*
-        // (1 / k_t = 0.43 A per N m): the estimates' 0.02 N m between the arithmetics
-        // reach it undamped (8.7 mA measured, at the 1.5 N m step)
-        ("paper-fig7+ff", 0.75, 0.5, 0.012),
+        // (1 / k_t = 0.43 A per N m): the estimates' 0.02-0.03 N m between the
+        // arithmetics reach it undamped, and the slow task holds the tick's sample for its
+        // period (14.0 mA measured with the 1 kHz slow task, 8.7 at the control rate)
+        ("paper-fig7+ff", 0.75, 0.5, 0.016),
         // the magnetizing -> running transitions come 5 steps (fig 9) and a step (regen-120)
         // apart: the handovers differ (module docs; the offsets each run subtracts agree:
         // `acim::fixed` test `idle_offsets_are_compensated_alike_in_both_arithmetics`)
         ("paper-fig9", 0.75, 0.5, 0.005),
-        ("regen-120", 0.75, 0.5, 0.005),
+        // regenerating at 120 rpm (f_s near 1.5 Hz) the slow task's tick samples of the
+        // two estimates, held for a slow period, move the two runs further apart (0.99 rpm,
+        // 0.52 rpm and 10.9 mA measured with the 1 kHz slow task; within the other
+        // scenarios' bounds at the control rate)
+        ("regen-120", 1.25, 0.75, 0.012),
         ("paper-fig12", 4.0, 1.0, 0.05),
     ] {
         let w = lockstep(name);

@@ -782,8 +782,9 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
             let file = table_file(&o, "faults.md");
             let out = o.out();
             let rows = acim_sim::faults::run_all_with(&o.sets, &mut |sc| run_one(sc, &out, &o))?;
-            // the same scenarios with a 1 kHz slow task (unless the overrides choose one)
-            let slow = if o
+            // the same scenarios at one rate, with no slow task (unless the overrides choose
+            // the slow period)
+            let one_rate = if o
                 .sets
                 .iter()
                 .any(|s| s.starts_with("drive.loops.slow_period_s"))
@@ -791,14 +792,14 @@ fn real_main(args: Vec<String>) -> Result<(), String> {
                 Vec::new()
             } else {
                 let mut sets = o.sets.clone();
-                sets.push(acim_sim::faults::slow_task_override());
+                sets.push(acim_sim::faults::one_rate_override());
                 acim_sim::faults::run_all_with(&sets, &mut |sc| {
                     acim_sim::run_with_metrics(sc)
                         .map(|r| r.1)
                         .map_err(|e| format!("{}: {e}", sc.name))
                 })?
             };
-            let mut md = acim_sim::faults::markdown(&rows, &slow);
+            let mut md = acim_sim::faults::markdown(&rows, &one_rate);
             // the current-sensor matrix on every acceptance machine (its own machines and
             // settings: the --set overrides apply to the fault-* scenarios only)
             let sensor = acim_sim::faults::run_sensor_cases(&mut |sc| run_one(sc, &out, &o))?;

@@ -134,12 +134,12 @@ pub struct LimitSettings {
 pub struct LoopSettings {
     /// Control and PWM period, s.
     pub control_period: f32,
-    /// The slow task's period, s: 0 (the default) runs every stage every control period;
-    /// 0.5-2 ms runs the speed loop, field weakening and the slow supervision (stall,
-    /// overload, blind, estimate plausibility, limit cycle, zero-speed policy) once per
-    /// slow period, rounded to a whole number of control periods (at least one), and the
+    /// The slow task's period, s: 0.5-2 ms ([`TYPICAL_SLOW_PERIOD`], 1 ms, by default)
+    /// runs the speed loop, field weakening and the slow supervision (stall, overload,
+    /// blind, estimate plausibility, limit cycle, zero-speed policy) once per slow
+    /// period, rounded to a whole number of control periods (at least one), and the
     /// current loop, the estimators and the fast protections every control period
-    /// (`crate::drive`, "Two rates").
+    /// (`crate::drive`, "Two rates"); 0 runs every stage every control period.
     pub slow_period: f32,
     /// d-axis (flux) current reference i_sd*, A peak.
     pub flux_current: f32,
@@ -396,7 +396,7 @@ impl DriveConfig {
             },
             loops: LoopSettings {
                 control_period: params::DEFAULT_CONTROL_PERIOD,
-                slow_period: 0.0,
+                slow_period: TYPICAL_SLOW_PERIOD,
                 flux_current: params::DEFAULT_FLUX_CURRENT,
                 current_bandwidth: 1000.0,
                 speed_bandwidth: 12.5,
@@ -508,7 +508,7 @@ pub const MAX_CONTROL_PERIOD: f32 = 10e-3;
 /// Shortest control period, s (50 kHz: below it no step fits a Cortex-M4 and the dead
 /// time would eat the period).
 pub const MIN_CONTROL_PERIOD: f32 = 20e-6;
-/// The slow task's usual period, s (1 kHz, as production drives run their speed loop).
+/// The slow task's default period, s (1 kHz, as production drives run their speed loop).
 pub const TYPICAL_SLOW_PERIOD: f32 = 1e-3;
 /// Shortest slow-task period accepted, s (2 kHz).
 pub const MIN_SLOW_PERIOD: f32 = 0.5e-3;

@@ -914,15 +914,18 @@ mod tests {
         }
     }
 
-    /// The slow task is a setting in milliseconds: 0 (off, the default) or 0.5-2 ms, the
-    /// library's rule, named; a record of the format before it keeps its values with the
-    /// slow task off.
+    /// The slow task is a setting in milliseconds: 1 ms by default, 0 (off) or 0.5-2 ms,
+    /// the library's rule, named; a record of the format before it keeps its values with
+    /// the slow task off (the one rate those values were saved with).
     #[test]
     fn the_slow_period_is_a_setting_and_old_records_load_without_it() {
         let d = Settings::defaults();
-        assert_eq!(d.get(idx("loops.slow_period")), 0.0);
-        let s = d.set(idx("loops.slow_period"), 1.0).unwrap();
-        assert_eq!(s.drive_config().unwrap().loops.slow_period, 1e-3);
+        assert_eq!(d.get(idx("loops.slow_period")), 1.0);
+        assert_eq!(d.drive_config().unwrap().loops.slow_period, 1e-3);
+        let s = d.set(idx("loops.slow_period"), 2.0).unwrap();
+        assert_eq!(s.drive_config().unwrap().loops.slow_period, 2e-3);
+        let one_rate = d.set(idx("loops.slow_period"), 0.0).unwrap();
+        assert_eq!(one_rate.drive_config().unwrap().loops.slow_period, 0.0);
         assert_eq!(Settings::decode(&s.encode(3)).unwrap(), s);
         for bad in [0.2, 3.0, -1.0, f32::NAN] {
             assert_eq!(
@@ -933,9 +936,10 @@ mod tests {
         }
         // the version-2 record: magic, version, 14 values, CRC after them
         let old = d.set(idx("limits.current_limit"), 4.0).unwrap();
+        let loaded = old.set(idx("loops.slow_period"), 0.0).unwrap();
         assert_eq!(
             Settings::decode_record(&old_record(2, 14, &old)),
-            Ok((old, 9))
+            Ok((loaded, 9))
         );
     }
 
