@@ -950,18 +950,18 @@ class PowerStage(unittest.TestCase):
         currents come back through the board's shunt, amplifier and ADC model and the bus
         through its divider. `speed 500`, `start`: the motor reaches 500 rpm with the
         estimate tracking it; a 1.5 N m brake (the paper's fig 7 step): 1 s later the speed
-        is back within 5 rpm and the estimate within 3 rpm of the motor. Without a slow
-        task nothing pends the slow task's interrupt."""
-        m = self.drive_to_500_rpm_and_step("")
+        is back within 5 rpm and the estimate within 3 rpm of the motor. At one rate (`set
+        loops.slow_period 0`) nothing pends the slow task's interrupt."""
+        m = self.drive_to_500_rpm_and_step("0")
         self.assertEqual(m.slow_isr_runs, 0)
         trace_loaded_interrupts(m, "loaded")
 
     def test_power_stage_build_with_a_1_ms_slow_task(self):
-        """The same with `set loops.slow_period 1`: the speed loop, field weakening, the
+        """The same with the default 1 ms slow task: the speed loop, field weakening, the
         offset tracker's update and the slow supervision once per millisecond in the slow
         task's own interrupt (FMAC's vector, pended by the control interrupt at each slow
         tick and run after it returns), on the board's CORDIC; the same bounds."""
-        m = self.drive_to_500_rpm_and_step("1")
+        m = self.drive_to_500_rpm_and_step("")
         # one slow-task interrupt per slow tick (a fifth of the periods at 5 kHz) from the
         # start on
         self.assertGreater(m.slow_isr_runs, 14000 // 5 * 9 // 10)
