@@ -48,7 +48,7 @@ mod fw {
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hprintln};
 
-    const REGIONS: [&str; 11] = [
+    const REGIONS: [&str; 12] = [
         "empty",
         "fault_checks",
         "clarke_park",
@@ -60,6 +60,7 @@ mod fw {
         "svpwm",
         "drive_step",
         "observer_alone",
+        "fast_step",
     ];
     const MEASURED: u32 = 500;
 
@@ -113,6 +114,7 @@ mod fw {
         8 bench_begin_fx_svpwm bench_end_fx_svpwm,
         9 bench_begin_fx_drive_step bench_end_fx_drive_step,
         10 bench_begin_fx_observer_alone bench_end_fx_observer_alone,
+        11 bench_begin_fx_fast_step bench_end_fx_fast_step,
     );
 
     #[derive(Clone, Copy)]
@@ -281,6 +283,14 @@ mod fw {
         st.end(9);
     }
 
+    /// A control period between slow ticks: the fast path alone (`Drive::step_fast`).
+    #[inline(never)]
+    fn fixed_step_fast(d: &mut FixedDrive, inp: &FixedInputs, st: &mut Stats) {
+        st.begin(11);
+        black_box(d.step_fast(black_box(inp)));
+        st.end(11);
+    }
+
     #[inline(never)]
     fn fixed_step_probed(d: &mut FixedDrive, inp: &FixedInputs, st: &mut Stats) {
         black_box(d.step_probed(black_box(inp), st));
@@ -382,7 +392,13 @@ mod fw {
                 st32.begin(9);
                 black_box(f32_drive.step(black_box(&inp32)));
                 st32.end(9);
-                fixed_step(&mut fixed_drive, &inpq, &mut stq);
+                // the whole step (its slow tick's work inline) every fourth period, the
+                // fast path alone on the others between slow ticks
+                if steps % 4 == 0 || fixed_drive.slow_tick_due() {
+                    fixed_step(&mut fixed_drive, &inpq, &mut stq);
+                } else {
+                    fixed_step_fast(&mut fixed_drive, &inpq, &mut stq);
+                }
             } else if running {
                 black_box(f32_drive.step_probed(black_box(&inp32), &mut st32));
                 fixed_step_probed(&mut fixed_drive, &inpq, &mut stq);

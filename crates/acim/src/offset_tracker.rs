@@ -549,11 +549,12 @@ impl<N: Num + FineIntegrator + Angles> OffsetTracker<N> {
         } else {
             None
         };
-        if let Some(g) = gain.filter(|_| {
-            self.steadiness.steady_steps >= cfg.holdoff_steps
-                && self.residual <= cfg.residual_limit
-                && self.residual <= self.residual_floor + self.floor_band(cfg)
-        }) {
+        // (a plain condition, not a closure: LLVM kept the closure out of line, outside
+        // the interrupt's CCM SRAM)
+        let settled = self.steadiness.steady_steps >= cfg.holdoff_steps
+            && self.residual <= cfg.residual_limit
+            && self.residual <= self.residual_floor + self.floor_band(cfg);
+        if let (Some(g), true) = (gain, settled) {
             let (lo, hi) = cfg.bounds;
             let (a, at_a) = N::fine_step(self.integrators.alpha, g, eps.alpha, false, lo, hi);
             let (b, at_b) = N::fine_step(self.integrators.beta, g, eps.beta, false, lo, hi);
