@@ -379,7 +379,8 @@ pub fn markdown(cases: &[Case]) -> String {
          (as in `docs/load-steps.md`), commissioned from its nameplate against its plant \
          (`acim-sim commission`), then driven with the identified model, realistic sensors \
          (0.1 % noise, 0.3 % gain and 0.05 % offset errors) and the default inverter at \
-         5 kHz: the drive as configured from the nameplate (the flux observer). Speeds and \
+         5 kHz with its 1 kHz slow task: the drive as configured from the nameplate (the \
+         flux observer). Speeds and \
          tolerances scale with the synchronous speed n_s = 60 f / p (on a 1500 rpm machine: \
          the peer benchmark's 45, 30, 15, 0 rpm motoring, 15 rpm regenerating, 75 and 750 rpm \
          with parameter errors; 5 and 30 rpm tolerances).\n\n\
