@@ -1005,7 +1005,7 @@ class PowerStage(unittest.TestCase):
         self.assertGreater(len(frames), 10)
         f = frames[-1].split("*")[0].split(",")
         state, fault, est = int(f[2]), int(f[3]), int(f[5]) / 10
-        print(f"\npower stage closed loop (slow period {slow_period or 0} ms, observer "
+        print(f"\npower stage closed loop (slow period {slow_period or '1 (the default)'} ms, observer "
               f"{observer or 0}): motor "
               f"{motor.speed_rpm:.1f} rpm, estimate {est}", file=sys.stderr)
         self.assertEqual((state, fault), (2, 0), frames[-1])
