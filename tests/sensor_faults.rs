@@ -13,23 +13,24 @@
 //! trips after the fault, not before, and with one of these two reasons, the sensor
 //! check within its bound ([`max_detection_periods`]); or, every channel dead, within the
 //! same bound, with the control monitor's reasons whose documented scope includes dead
-//! sensing (`NoCurrentResponse`, `CurrentRegulation`).
+//! sensing (`NoCurrentResponse`, `CurrentRegulation`; a stuck channel also
+//! `CurrentRegulation`).
 //!
 //! Measured (`cargo run --release -p acim-sim -- faults`, the table in `docs/faults.md`;
 //! `cargo test -p acim-tests --test sensor_faults -- --nocapture` prints every case),
-//! the machines configured from their nameplates (the flux observer): at most 1.5 us
-//! above the trip in every case (the comparator's delay); the sensor check first in 85
-//! of the 108 reached cases (dead channels after at most 16 periods, a stuck one after
-//! at most 142 at 500 rpm and above, 655 at 60 rpm), the comparator first in 19 (dead
-//! channels under load, where the loops drive the current to the trip within 2 ms, the
-//! 0.18 kW machine's dead channels up to 1500 rpm, and the 7.5 kW and 0.18 kW machines'
-//! stuck channel at 1500 rpm and above with two shunts), the control monitor in 4: every
-//! channel dead on the 37 kW and 7.5 kW machines at 60 rpm (`NoCurrentResponse` after
-//! 11-14 periods). Without the comparator (the second test) 19 cases stay above the trip
-//! for more than a period while switching (longest: the 0.18 kW machine at 1500 rpm with
-//! channel b stuck, two shunts, 3.63 A for 3.92 ms against 1.68 A); without the sensor
-//! check as well, 58 (longest: the 0.18 kW machine at 1500 rpm, every channel dead, three
-//! shunts, 3.96 A for 6.61 ms against 1.68 A).
+//! the machines configured from their nameplates (the flux observer, the default 1 kHz
+//! slow task): at most 1.5 us above the trip in every case (the comparator's delay); the
+//! sensor check first in 77 of the 108 reached cases (dead channels after at most 16
+//! periods, a stuck one after at most 91 at 500 rpm and above, 273 at 60 rpm), the
+//! comparator first in 25, the control monitor in 6: every channel dead on the 37 kW and
+//! 7.5 kW machines at 60 rpm (`NoCurrentResponse` after 13-16 periods) and on the 37 kW
+//! machine at 500 rpm with two shunts (`CurrentRegulation`, 16 periods), and channel b
+//! stuck on the 2.2 kW machine at 500 rpm with two shunts (`CurrentRegulation` after 87
+//! periods, before the sensor check's judgement in the slow task). Without the comparator
+//! (the second test) 25 cases stay above the trip for more than a period while switching
+//! (longest: the 0.18 kW machine at 1500 rpm with channel b stuck, two shunts, 3.81 A for
+//! 4.76 ms); without the sensor check as well, 62 (longest: the 0.18 kW machine at
+//! 1500 rpm, every channel dead, three shunts, 4.00 A for 7.23 ms).
 
 use acim_sim::faults::{run_sensor_cases, SensorCase};
 use acim_sim::metrics::Metrics;

@@ -392,8 +392,8 @@ mod fw {
                 st32.begin(9);
                 black_box(f32_drive.step(black_box(&inp32)));
                 st32.end(9);
-                // the whole step (its slow tick's work inline) every fourth period, the
-                // fast path alone on the others between slow ticks
+                // the whole step (a tick's slow work inline) every fourth period and at every
+                // slow tick, the fast path alone (`fast_step`) on the others
                 if steps % 4 == 0 || fixed_drive.slow_tick_due() {
                     fixed_step(&mut fixed_drive, &inpq, &mut stq);
                 } else {

@@ -53,9 +53,9 @@ pub struct Bounds {
     /// estimate's feed-forward only makes it less). With the nameplate design this is
     /// `acim::nameplate::RATED_STEP_DIP` of the rated speed unless the loop is capped.
     /// With a slow task, plus the speed the rated torque gives the rotor in one slow
-    /// period, T_rated t_slow / J: the speed loop reads the estimate's mean over its
-    /// period and its new torque is reached over the next, so it meets the step up to
-    /// one slow period late.
+    /// period, T_rated t_slow / J: the speed loop reads the estimate at its tick and its
+    /// new torque is reached over the next slow period, so it meets the step up to one
+    /// slow period late.
     pub dip_rpm: f32,
     /// Back within [`BAND`] of the rated speed (the speed, and the estimate on the
     /// rotor), s: four time constants of the speed loop, 4 / alpha.
@@ -265,16 +265,16 @@ pub fn markdown(default: &[Case], paper: &[Case]) -> String {
          commissioned from its nameplate against its plant (`acim-sim commission`), then \
          driven with the identified model, realistic sensors (0.1 % noise, 0.3 % gain and \
          0.05 % offset errors) and the default inverter, at 5 kHz with the speed loop in \
-         a 1 kHz slow task. The machine's rated torque is applied as an active load at {APPLIED_AT_S} s (motoring: opposing the \
-         rotation; regenerating: driving it) and removed at {REMOVED_AT_S} s. The drive as \
+         a 1 kHz slow task. The machine's rated torque is applied as an active load at \
+         {APPLIED_AT_S} s (motoring: opposing the rotation; regenerating: driving it) and removed at {REMOVED_AT_S} s. The drive as \
          configured from the nameplate (the flux observer, the default), and again with the \
          paper's observer (`--set drive.observer=reduced`), which is not judged.\n\n\
          Bounds from the nameplate's speed-loop design (bandwidth alpha, the plant's J): \
          dip (applied) or overshoot (removed) at most T_rated / (2 alpha J), the rated \
          torque met by the speed PI's proportional torque alone, 10 % of rated speed unless \
          the loop is capped, plus T_rated t_slow / J for the slow task's period t_slow (the \
-         speed loop meets the step up to one slow period late); below rated speed, the speed and its estimate back within 1 % \
-         of rated speed in 4 / alpha. At rated speed the recovery time is reported, not \
+         speed loop meets the step up to one slow period late); below rated speed, the \
+         speed and its estimate back within 1 % of rated speed in 4 / alpha. At rated speed the recovery time is reported, not \
          bounded (the load takes the voltage's reserve). Each cell: dip (rpm) / back (s) / \
          largest estimation error (rpm) / estimate back (s) after the event; `-` where the \
          drive switched off.\n"
