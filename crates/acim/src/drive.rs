@@ -867,6 +867,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
+        self.loops.inverter_tracker.drop_pending();
         self.refs.start.reset();
         self.supervision.control = ControlMonitor::new();
         self.supervision.sensors = SensorCheck::new();
@@ -922,7 +923,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
 
     /// The fast part of [`Drive::step`]: with no slow task, the whole step; with one, a
-    /// slow tick leaves its work (the running Rs law, the control monitor and the sensor
+    /// slow tick leaves its work (the inverter tracker's and the running Rs law's
+    /// adaptation, the control monitor and the sensor
     /// check's judgements on what this path gathered, the speed loop, field weakening,
     /// the offset tracker's update, the slow supervision, the zero-speed policy) for
     /// [`Drive::run_slow`],
@@ -1005,7 +1007,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// The slow task ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)):
     /// the work of the last slow tick, on that period's samples and the estimates'
     /// means over the slow period; nothing if none is pending (no slow task, or the drive
-    /// stopped or faulted since). In order: the running Rs law on the slow period's means
+    /// stopped or faulted since). In order: the inverter tracker's correction on the slow
+    /// period's correlation ([`crate::inverter_tracker::InverterTracker::adapt`]), the
+    /// running Rs law on the slow period's means
     /// ([`crate::rs_estimator::RsEstimator::adapt_running`]), the control monitor and
     /// the running offset check on theirs ([`ControlMonitor::judge`]), the sensor check's
     /// windows that ended ([`crate::sensor_check::SensorCheck::judge_pending`]), the
@@ -1054,6 +1058,17 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             self.est
                 .rs
                 .adapt_running(&c.rs, &c.rs_running, &running, e.flux_settled);
+        }
+        // the inverter tracker's correction, moved by the slow period's correlation
+        // (nothing if no period adapted), in equal steps over the next slow period
+        if c.inverter_tracker.enabled {
+            self.loops.inverter_tracker.adapt(
+                &c.inverter_tracker,
+                self.refs.current.now,
+                self.refs.start.inverter.correction_duty,
+                c.cascade.slow_divider,
+                c.cascade.inv_slow_divider,
+            );
         }
         // the control monitor on the slow period's means, and the running offset check
         let residual = Dq {
@@ -1523,7 +1538,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         probe.begin(StepRegion::RsEstimator);
         let flux_settled = self.est.flux.rotor_flux >= self.cfg.coeffs.cascade.settled_flux;
         let ws_prev = self.est.flux.stator_frequency;
-        let rs = self.estimate_rs(m, frame_held, flux_settled, ws_prev);
+        let rs = self.estimate_rs(m, magnetizing, frame_held, flux_settled, ws_prev);
         probe.end(StepRegion::RsEstimator);
         probe.begin(StepRegion::FluxSlip);
         self.flux_and_angle(m, &observer, magnetizing, frame_held, rs, frame_pull);
@@ -1553,14 +1568,14 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // the far-side term: in the far-side mode (the reference
         // stage's, from the last step) and while w_s is against Omega_hat, the speed and
         // load updates see e - c(i_sq) w e_d (`DriveConfig.estimation.far_side_gain`)
-        let far_side_error = {
+        // (the mode's flag first: outside the far-side mode, the step's usual case, the
+        // term costs one test)
+        let far_side_error = if !far_side_mode {
+            N::ZERO
+        } else {
             let ws = est.flux.stator_frequency;
             let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
-            if far_side_mode
-                && against
-                && !frame_held
-                && est.flux.rotor_flux >= c.cascade.settled_flux
-            {
+            if against && !frame_held && est.flux.rotor_flux >= c.cascade.settled_flux {
                 let o = &c.orientation;
                 let w = crate::orientation::fade(o, ws);
                 let load = N::gain(o.far_side_load_factor, m.i_dq.q.abs());
@@ -1591,11 +1606,12 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
 
     /// The Rs estimator (eq. 19-20, the running law by default) and the standstill
-    /// identification's residual filter: Rs_hat after this step, ohm.
+    /// identification's residual filter (while `magnetizing`): Rs_hat after this step, ohm.
     #[inline(always)]
     fn estimate_rs(
         &mut self,
         m: &Measured<N>,
+        magnetizing: bool,
         frame_held: bool,
         flux_settled: bool,
         ws_prev: N,
@@ -1641,13 +1657,16 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         } else {
             est.rs.update(&c.rs, &inputs);
         }
-        let rs = est.rs.stator_resistance_estimate;
-        est.filtered_residual = est.filtered_residual
-            + N::gain(
-                c.magnetizing.residual_filter,
-                est.rs.current_error - est.filtered_residual,
-            );
-        rs
+        // the residual filter serves the magnetizing's settling test only (a start resets
+        // it): running, it is not moved
+        if magnetizing {
+            est.filtered_residual = est.filtered_residual
+                + N::gain(
+                    c.magnetizing.residual_filter,
+                    est.rs.current_error - est.filtered_residual,
+                );
+        }
+        est.rs.stator_resistance_estimate
     }
 
     /// Orientation correction, rotor-resistance adaptation, flux model, slip law and frame
@@ -1977,6 +1996,11 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // from the current reference at the same (advanced) angle, which is noise-free and
         // not 1.5 periods old like the samples
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
+        if c.inverter_tracker.enabled && c.cascade.slow_divider > 1 {
+            // the slow task's last adaptation, one step of its ramp per period
+            let correction = &mut self.refs.start.inverter.correction_duty;
+            *correction = self.loops.inverter_tracker.advance(*correction);
+        }
         // the inverter error the start test found beyond the configured compensation
         // is compensated with it, as more dead-time duty per leg with
         // the same current signs; the estimators keep the command v, which the two
@@ -1994,18 +2018,22 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // next step's modulation
         if c.inverter_tracker.enabled {
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
-            self.refs.start.inverter.correction_duty = self.loops.inverter_tracker.update(
-                &c.inverter_tracker,
-                &InverterTrackerInputs {
-                    v,
-                    i_ref,
-                    sigma,
-                    inv_dc_bus,
-                    stator_frequency: e.stator_frequency,
-                    gate: track && !out.saturated,
-                },
-                self.refs.start.inverter.correction_duty,
-            );
+            let inputs = InverterTrackerInputs {
+                v,
+                i_ref,
+                sigma,
+                inv_dc_bus,
+                stator_frequency: e.stator_frequency,
+                gate: track && !out.saturated,
+            };
+            let tracker = &mut self.loops.inverter_tracker;
+            if c.cascade.slow_divider > 1 {
+                // with a slow task: correlated here, the correction moved by `run_slow`
+                tracker.gather(&c.inverter_tracker, &inputs, c.cascade.inv_slow_divider);
+            } else {
+                let correction = &mut self.refs.start.inverter.correction_duty;
+                *correction = tracker.update(&c.inverter_tracker, &inputs, *correction);
+            }
         }
         if M::OVERMODULATES && out.saturated {
             // the estimators model the voltage of each period: the limited one (the
