@@ -41,7 +41,7 @@ RULES = [
     ("core: speed PI", ["::references+update_with_limits"]),
     ("core: speed ramp, hold, magnetizing bookkeeping", ["::references"]),
     ("core: current PIs and decoupling (eq. 9)", ["current_control"]),
-    ("core: SVPWM and dead-time compensation", ["Modulator", "modulate"]),
+    ("core: SVPWM and dead-time compensation", ["Modulator", "::modulate@"]),
     ("telemetry record", ["::record"]),
     ("core: voltage limit, 1/V_dc", ["voltage_limit", "recip", "transient_limit"]),
 ]

@@ -411,11 +411,11 @@ struct References<N: Arithmetic> {
     job: Option<SlowJob<N>>,
 }
 
-/// What a slow tick hands the slow task ([`Drive::run_slow`]): that period's samples,
-/// estimates and voltage limit, and whether it was magnetizing.
+/// What a slow tick hands the slow task ([`Drive::run_slow`]): what it reads of that
+/// period's samples, the estimates and voltage limit, and whether it was magnetizing.
 #[derive(Clone, Copy, Debug)]
 struct SlowJob<N: Arithmetic> {
-    m: Measured<N>,
+    m: SlowSample<N>,
     e: Estimate<N>,
     limit: VoltageLimit<N>,
     magnetizing: bool,
@@ -423,12 +423,35 @@ struct SlowJob<N: Arithmetic> {
 
 impl<N: Arithmetic> SlowJob<N> {
     #[inline(always)]
-    fn new(m: Measured<N>, e: Estimate<N>, limit: VoltageLimit<N>, magnetizing: bool) -> Self {
+    fn new(m: &Measured<N>, e: Estimate<N>, limit: VoltageLimit<N>, magnetizing: bool) -> Self {
         Self {
-            m,
+            m: SlowSample::of(m),
             e,
             limit,
             magnetizing,
+        }
+    }
+}
+
+/// The part of a period's [`Measured`] the slow task's references read (the tick period
+/// stores only this for it).
+#[derive(Clone, Copy, Debug)]
+struct SlowSample<N: Arithmetic> {
+    /// Measured stator current, rotor-flux frame, A.
+    i_dq: Dq<N>,
+    /// The voltage applied over the past period, rotor-flux frame, V.
+    v_dq: Dq<N>,
+    /// DC bus, V.
+    dc_bus: N,
+}
+
+impl<N: Arithmetic> SlowSample<N> {
+    #[inline(always)]
+    fn of(m: &Measured<N>) -> Self {
+        Self {
+            i_dq: m.i_dq,
+            v_dq: m.applied.v_dq,
+            dc_bus: m.dc_bus,
         }
     }
 }
@@ -972,7 +995,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if defer {
             // the slow task's inputs, taken while they are at hand (a fault or a stop
             // later in the period drops them)
-            self.refs.job = Some(SlowJob::new(m, e, limit, magnetizing));
+            self.refs.job = Some(SlowJob::new(&m, e, limit, magnetizing));
         }
         // 5. references, within the speed that voltage can reach
         probe.begin(StepRegion::SpeedPi);
@@ -1049,7 +1072,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let c = &self.cfg.coeffs;
         if c.rs_running.enabled {
             let running = RsRunningInputs {
-                v_sq: m.applied.v_dq.q,
+                v_sq: m.v_dq.q,
                 rotor_flux: self.est.flux.rotor_flux,
                 frame_held: magnetizing && !self.refs.start.flying(),
                 i_sq_ref: self.prev.i_sq_ref,
@@ -1809,7 +1832,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if periods > 1 {
             return Ok(self.refs.current.advance());
         }
-        self.slow_references(m, e, limit)
+        self.slow_references(&SlowSample::of(m), e, limit)
     }
 
     /// The slow task's references: field weakening, the speed loop and the stall and
@@ -1817,7 +1840,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     #[inline(always)]
     fn slow_references(
         &mut self,
-        m: &Measured<N>,
+        m: &SlowSample<N>,
         e: &Estimate<N>,
         limit: VoltageLimit<N>,
     ) -> Result<Dq<N>, FaultReason> {
@@ -1852,7 +1875,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     #[inline(always)]
     fn field_weakening(
         &mut self,
-        m: &Measured<N>,
+        m: &SlowSample<N>,
         e: &Estimate<N>,
         limit: VoltageLimit<N>,
     ) -> FieldWeakeningOutput<N> {
@@ -1870,7 +1893,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 speed: e.observer.speed,
                 dc_bus: m.dc_bus,
                 limit,
-                last_voltage: m.applied.v_dq,
+                last_voltage: m.v_dq,
                 last_torque_current: self.prev.i_sq_ref,
                 q_integral: self.prev.q_integral,
                 q_saturated: self.prev.q_saturated,
@@ -1884,7 +1907,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     #[inline(always)]
     fn speed_loop(
         &mut self,
-        m: &Measured<N>,
+        m: &SlowSample<N>,
         e: &Estimate<N>,
         fw: FieldWeakeningOutput<N>,
         voltage_limit: N,
