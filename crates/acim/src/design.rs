@@ -659,8 +659,7 @@ impl DriveDesign {
                 ts,
                 i_d,
                 cfg.loops.current_bandwidth,
-            )
-            .with_slow_divider(slow_divider),
+            ),
             gain_calibration: GainCalibrationConfig::new(
                 cfg.start.current_gain_calibration
                     && cfg.inverter.current_sensing == CurrentSensing::TwoPhase,

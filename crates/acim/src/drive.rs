@@ -890,7 +890,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         self.est.rs = RsEstimator::new(self.est.rs.stator_resistance_estimate);
         self.est.rr.restart();
         self.est.filtered_residual = N::ZERO;
-        self.loops.inverter_tracker.drop_pending();
         self.refs.start.reset();
         self.supervision.control = ControlMonitor::new();
         self.supervision.sensors = SensorCheck::new();
@@ -946,8 +945,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     }
 
     /// The fast part of [`Drive::step`]: with no slow task, the whole step; with one, a
-    /// slow tick leaves its work (the inverter tracker's and the running Rs law's
-    /// adaptation, the control monitor and the sensor
+    /// slow tick leaves its work (the running Rs law, the control monitor and the sensor
     /// check's judgements on what this path gathered, the speed loop, field weakening,
     /// the offset tracker's update, the slow supervision, the zero-speed policy) for
     /// [`Drive::run_slow`],
@@ -1030,9 +1028,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     /// The slow task ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period)):
     /// the work of the last slow tick, on that period's samples and the estimates'
     /// means over the slow period; nothing if none is pending (no slow task, or the drive
-    /// stopped or faulted since). In order: the inverter tracker's correction on the slow
-    /// period's correlation ([`crate::inverter_tracker::InverterTracker::adapt`]), the
-    /// running Rs law on the slow period's means
+    /// stopped or faulted since). In order: the running Rs law on the slow period's means
     /// ([`crate::rs_estimator::RsEstimator::adapt_running`]), the control monitor and
     /// the running offset check on theirs ([`ControlMonitor::judge`]), the sensor check's
     /// windows that ended ([`crate::sensor_check::SensorCheck::judge_pending`]), the
@@ -1081,17 +1077,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             self.est
                 .rs
                 .adapt_running(&c.rs, &c.rs_running, &running, e.flux_settled);
-        }
-        // the inverter tracker's correction, moved by the slow period's correlation
-        // (nothing if no period adapted), in equal steps over the next slow period
-        if c.inverter_tracker.enabled {
-            self.loops.inverter_tracker.adapt(
-                &c.inverter_tracker,
-                self.refs.current.now,
-                self.refs.start.inverter.correction_duty,
-                c.cascade.slow_divider,
-                c.cascade.inv_slow_divider,
-            );
         }
         // the control monitor on the slow period's means, and the running offset check
         let residual = Dq {
@@ -2019,11 +2004,6 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // from the current reference at the same (advanced) angle, which is noise-free and
         // not 1.5 periods old like the samples
         let i_ref_abc = inverse_clarke(inverse_park(i_ref, rot));
-        if c.inverter_tracker.enabled && c.cascade.slow_divider > 1 {
-            // the slow task's last adaptation, one step of its ramp per period
-            let correction = &mut self.refs.start.inverter.correction_duty;
-            *correction = self.loops.inverter_tracker.advance(*correction);
-        }
         // the inverter error the start test found beyond the configured compensation
         // is compensated with it, as more dead-time duty per leg with
         // the same current signs; the estimators keep the command v, which the two
@@ -2041,22 +2021,18 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // next step's modulation
         if c.inverter_tracker.enabled {
             let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
-            let inputs = InverterTrackerInputs {
-                v,
-                i_ref,
-                sigma,
-                inv_dc_bus,
-                stator_frequency: e.stator_frequency,
-                gate: track && !out.saturated,
-            };
-            let tracker = &mut self.loops.inverter_tracker;
-            if c.cascade.slow_divider > 1 {
-                // with a slow task: correlated here, the correction moved by `run_slow`
-                tracker.gather(&c.inverter_tracker, &inputs, c.cascade.inv_slow_divider);
-            } else {
-                let correction = &mut self.refs.start.inverter.correction_duty;
-                *correction = tracker.update(&c.inverter_tracker, &inputs, *correction);
-            }
+            self.refs.start.inverter.correction_duty = self.loops.inverter_tracker.update(
+                &c.inverter_tracker,
+                &InverterTrackerInputs {
+                    v,
+                    i_ref,
+                    sigma,
+                    inv_dc_bus,
+                    stator_frequency: e.stator_frequency,
+                    gate: track && !out.saturated,
+                },
+                self.refs.start.inverter.correction_duty,
+            );
         }
         if M::OVERMODULATES && out.saturated {
             // the estimators model the voltage of each period: the limited one (the

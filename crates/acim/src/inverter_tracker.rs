@@ -28,12 +28,6 @@
 //! (measured: a 1.7-2.2 s time constant for tau = 1 s). The floor (1 % of i_sd*^2) keeps
 //! the divisor from vanishing.
 //!
-//! With a slow task the correlation x (y - b) / V_dc is summed every period
-//! ([`InverterTracker::gather`]: the sixth harmonic needs every sample) and the
-//! correction moves once per slow period by the sum, normalised at the tick
-//! ([`InverterTracker::adapt`]): the per-period law's path with the division once per slow
-//! period (the correction's time constant is 2000 slow periods).
-//!
 //! Gates, each from a failure (docs/robustness.md, "Online: the sixth harmonic"): the
 //! running Rs law adapting this step (the resistance estimate carries the error the
 //! correction takes away; without the law, a tracker at no load left Rs_hat 7 % low and the
@@ -87,10 +81,6 @@ pub struct InverterTrackerConfig<N: Num = f32> {
     pub dc_filter: N::Gain,
     /// Ts / (tau 0.154) per step, applied to x (y - b) / (V_dc (|i_ref|^2 + floor)).
     pub rate: N::Gain,
-    /// `rate` times the control periods per slow period, applied once per slow period to
-    /// the period's mean of x (y - b) / V_dc ([`InverterTracker::adapt`]); `rate` at one
-    /// rate.
-    pub slow_rate: N::Gain,
     /// The floor added to |i_ref|^2 in the normalisation (0.01 i_sd*^2; the divisor
     /// cannot vanish), A^2.
     pub current_floor: N,
@@ -114,23 +104,12 @@ impl InverterTrackerConfig<f32> {
             enabled,
             dc_filter: (ts / INVERTER_TRACKER_DC_TIME).min(1.0),
             rate: ts / (INVERTER_TRACKER_TIME * CROSS_MEAN_SQUARE),
-            slow_rate: ts / (INVERTER_TRACKER_TIME * CROSS_MEAN_SQUARE),
             current_floor: (0.01 * flux_current * flux_current).max(1e-6),
             min_frequency: 2.0 * core::f32::consts::PI * INVERTER_TRACKER_MIN_FREQUENCY_HZ,
             max_frequency: current_bandwidth / 6.0,
             limit: crate::inverter_test::INVERTER_TEST_MAX_DUTY,
             holdoff_steps: (INVERTER_TRACKER_HOLDOFF / ts) as u32,
             trust_steps: (INVERTER_TRACKER_TRUST / ts) as u32,
-        }
-    }
-
-    /// This design with a slow task of `slow_divider` control periods
-    /// ([`InverterTracker::gather`] every period, [`InverterTracker::adapt`] once per slow
-    /// period).
-    pub fn with_slow_divider(self, slow_divider: u32) -> Self {
-        Self {
-            slow_rate: self.rate * slow_divider.max(1) as f32,
-            ..self
         }
     }
 }
@@ -163,24 +142,6 @@ pub struct InverterTracker<N: Num = f32> {
     adapted_steps: u32,
     /// Whether the last step adapted.
     pub active: bool,
-    /// With a slow task: the mean of x (y - b) / V_dc over this slow period's adapting
-    /// periods so far (each weighted by 1/D, D the periods per slow period), V A / V.
-    pending: N,
-    /// With a slow task: the periods it adapted in since the last [`InverterTracker::adapt`].
-    pending_steps: u32,
-    /// With a slow task: the last adaptation's ramp ([`InverterTracker::advance`]).
-    ramp: CorrectionRamp<N>,
-}
-
-/// The correction's path over a slow period after an adaptation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct CorrectionRamp<N: Num> {
-    /// The bounded correction the ramp ends on, duty.
-    target: N,
-    /// The step per control period, duty.
-    increment: N,
-    /// Control periods left.
-    left: u32,
 }
 
 /// What the tracker reads each step.
@@ -211,8 +172,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
         cfg.enabled && self.adapted_steps >= cfg.trust_steps && correction.abs() < cfg.limit
     }
 
-    /// One step on the inputs `x` (one rate). Returns the new correction from
-    /// `correction` (duty).
+    /// One step on the inputs `x`. Returns the new correction from `correction` (duty).
     #[inline(always)]
     pub fn update(
         &mut self,
@@ -220,100 +180,6 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
         x: &InverterTrackerInputs<N>,
         correction: N,
     ) -> N {
-        let Some(p) = self.period(cfg, x) else {
-            return correction;
-        };
-        self.adapted_steps = self.adapted_steps.saturating_add(1);
-        let step = N::gain(cfg.rate, N::ratio(p, Self::norm(cfg, x.i_ref)));
-        (correction + step).clamp(-cfg.limit, cfg.limit)
-    }
-
-    /// The fast path's half with a slow task: the gate, the DC filter and the correlation
-    /// of one period, its x (y - b) / V_dc added to the slow period's mean with `weight`
-    /// = 1/D (the correction is moved by [`InverterTracker::adapt`]).
-    #[inline(always)]
-    pub fn gather(
-        &mut self,
-        cfg: &InverterTrackerConfig<N>,
-        x: &InverterTrackerInputs<N>,
-        weight: N::Gain,
-    ) {
-        if let Some(p) = self.period(cfg, x) {
-            self.pending = self.pending + N::gain(weight, p);
-            self.pending_steps = self.pending_steps.saturating_add(1);
-        }
-    }
-
-    /// The slow task's half ([`InverterTracker::gather`]): the correction's step from the
-    /// slow period's correlation, normalised by the current reference `i_ref` at the tick
-    /// (A; it moves little within a slow period), bounded, and taken from `correction`
-    /// (duty) in equal parts over the next `periods` control periods (`inv_periods` =
-    /// 1/`periods`; [`InverterTracker::advance`]); the sums start again. Nothing if no
-    /// period adapted. (A step at once, a staircase at the slow rate in the dead-time
-    /// compensation, moved the offset tracker's hold at the regeneration limit from 0.39
-    /// to 0.46 rpm of speed-estimation error: `tests/robustness.rs`.)
-    #[inline(always)]
-    pub fn adapt(
-        &mut self,
-        cfg: &InverterTrackerConfig<N>,
-        i_ref: Dq<N>,
-        correction: N,
-        periods: u32,
-        inv_periods: N::Gain,
-    ) {
-        if self.pending_steps == 0 {
-            return;
-        }
-        self.adapted_steps = self.adapted_steps.saturating_add(self.pending_steps);
-        let mean = self.pending;
-        self.drop_pending();
-        let step = N::gain(cfg.slow_rate, N::ratio(mean, Self::norm(cfg, i_ref)));
-        let target = (correction + step).clamp(-cfg.limit, cfg.limit);
-        self.ramp = CorrectionRamp {
-            target,
-            increment: N::gain(inv_periods, target - correction),
-            left: periods,
-        };
-    }
-
-    /// With a slow task, the correction for this control period: `correction` (duty) one
-    /// step further along the last adaptation's ramp ([`InverterTracker::adapt`]; its last
-    /// step lands on the bounded target), or unchanged once it has arrived.
-    #[inline(always)]
-    pub fn advance(&mut self, correction: N) -> N {
-        let r = &mut self.ramp;
-        if r.left > 1 {
-            r.left -= 1;
-            correction + r.increment
-        } else if r.left == 1 {
-            r.left = 0;
-            r.target
-        } else {
-            correction
-        }
-    }
-
-    /// Drops what [`InverterTracker::gather`] summed since the last adaptation and the
-    /// ramp's remaining steps (a start: the correction keeps what was applied).
-    pub fn drop_pending(&mut self) {
-        self.pending = N::ZERO;
-        self.pending_steps = 0;
-        self.ramp.left = 0;
-    }
-
-    /// |i_ref|^2 + floor, A^2 (> 0).
-    #[inline(always)]
-    fn norm(cfg: &InverterTrackerConfig<N>, i_ref: Dq<N>) -> N {
-        i_ref.d * i_ref.d + i_ref.q * i_ref.q + cfg.current_floor
-    }
-
-    /// One period's gate and DC filter; x (y - b) / V_dc if the tracker adapts in it.
-    #[inline(always)]
-    fn period(
-        &mut self,
-        cfg: &InverterTrackerConfig<N>,
-        x: &InverterTrackerInputs<N>,
-    ) -> Option<N> {
         let &InverterTrackerInputs {
             v,
             i_ref,
@@ -329,16 +195,19 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
             self.dc = y;
             self.open_steps = 0;
             self.active = false;
-            return None;
+            return correction;
         }
         self.dc = self.dc + N::gain(cfg.dc_filter, y - self.dc);
         self.open_steps = self.open_steps.saturating_add(1);
         self.active = self.open_steps > cfg.holdoff_steps;
         if !self.active {
-            return None;
+            return correction;
         }
+        self.adapted_steps = self.adapted_steps.saturating_add(1);
         let x = sigma.q * i_ref.d - sigma.d * i_ref.q;
-        Some(x * (y - self.dc) * inv_dc_bus)
+        let i2 = i_ref.d * i_ref.d + i_ref.q * i_ref.q + cfg.current_floor;
+        let step = N::gain(cfg.rate, N::ratio(x * (y - self.dc) * inv_dc_bus, i2));
+        (correction + step).clamp(-cfg.limit, cfg.limit)
     }
 }
 
@@ -352,7 +221,6 @@ impl InverterTrackerConfig<f32> {
             enabled: self.enabled,
             dc_filter: N::gain_from_f32(self.dc_filter)?,
             rate: N::gain_from_f32(self.rate)?,
-            slow_rate: N::gain_from_f32(self.slow_rate)?,
             current_floor: N::from_f32(self.current_floor / (b.current * b.current)),
             min_frequency: N::from_f32(self.min_frequency / b.frequency),
             max_frequency: N::from_f32(self.max_frequency / b.frequency),
@@ -376,20 +244,7 @@ mod tests {
     /// the back-EMF `dc` (dq, constant) plus `E - c V_dc` times the sign vector, with the
     /// current reference `i_ref` turning at `f_s` Hz. Returns the correction after `secs`.
     fn run(e_true: f32, f_s: f32, i_ref: Dq, dc: Dq, secs: f32, gate: bool) -> f32 {
-        run_with(1, e_true, f_s, i_ref, dc, secs, gate)
-    }
-
-    /// [`run`] with a slow task of `slow_divider` periods (1: one rate, `update`).
-    fn run_with(
-        slow_divider: u32,
-        e_true: f32,
-        f_s: f32,
-        i_ref: Dq,
-        dc: Dq,
-        secs: f32,
-        gate: bool,
-    ) -> f32 {
-        let cfg = InverterTrackerConfig::new(true, TS, 1.4, 1000.0).with_slow_divider(slow_divider);
+        let cfg = InverterTrackerConfig::new(true, TS, 1.4, 1000.0);
         let mut t = InverterTracker::default();
         let mut c = 0.0f32;
         let w = core::f32::consts::TAU * f_s;
@@ -405,53 +260,20 @@ mod tests {
                 d: dc.d + e * sigma.d,
                 q: dc.q + e * sigma.q,
             };
-            let inputs = InverterTrackerInputs {
-                v,
-                i_ref,
-                sigma,
-                inv_dc_bus: 1.0 / VDC,
-                stator_frequency: w,
-                gate,
-            };
-            if slow_divider == 1 {
-                c = t.update(&cfg, &inputs, c);
-            } else {
-                t.gather(&cfg, &inputs, 1.0 / slow_divider as f32);
-                if (k + 1) % slow_divider as usize == 0 {
-                    t.adapt(&cfg, i_ref, c, slow_divider, 1.0 / slow_divider as f32);
-                }
-                c = t.advance(c);
-            }
+            c = t.update(
+                &cfg,
+                &InverterTrackerInputs {
+                    v,
+                    i_ref,
+                    sigma,
+                    inv_dc_bus: 1.0 / VDC,
+                    stator_frequency: w,
+                    gate,
+                },
+                c,
+            );
         }
         c
-    }
-
-    #[test]
-    fn a_slow_task_adapts_as_every_period_does() {
-        // the correction moved once per slow period (1 ms at 5 kHz, and 2 ms) by the
-        // period's correlation follows the per-period law's path
-        let i = Dq { d: 1.4, q: 2.0 };
-        let emf = Dq { d: -3.0, q: 60.0 };
-        for (e, f) in [(-0.8, 2.0), (1.1, 15.0), (1.1, -5.0)] {
-            for secs in [1.5, 3.0, 12.0] {
-                let one = run(e, f, i, emf, secs, true);
-                for d in [5, 10] {
-                    let slow = run_with(d, e, f, i, emf, secs, true);
-                    assert!(
-                        (slow - one).abs() * VDC < 0.01 * e.abs(),
-                        "{e} V at {f} Hz after {secs} s, D = {d}: {} V against {} V",
-                        slow * VDC,
-                        one * VDC
-                    );
-                }
-            }
-        }
-        // and holds outside its gate and before its holdoff
-        assert_eq!(run_with(5, 1.0, 5.0, i, emf, 3.0, false), 0.0);
-        assert_eq!(
-            run_with(5, 1.0, 5.0, i, emf, INVERTER_TRACKER_HOLDOFF - 0.01, true),
-            0.0
-        );
     }
 
     #[test]
