@@ -21,6 +21,7 @@
 //! - [`protocol`]: protocol version 1 (framed commands and replies, hello, rate, the
 //!   telemetry extension), shared with the host tools (docs/protocol.md);
 //! - [`timing`]: cycle-count statistics and the telemetry decimator;
+//! - [`rtt`]: the RTT log channel's ring arithmetic (where a non-blocking write goes);
 //! - [`settings`]: the serial-settable limits and machine parameters, their flash record
 //!   (version, sequence number, CRC) and validation by the library's constructors;
 //! - [`store`]: the settings' two flash pages written alternately (the newest valid record
@@ -48,6 +49,7 @@ pub mod convert;
 pub mod dispatch;
 pub mod profile;
 pub mod protocol;
+pub mod rtt;
 pub mod settings;
 pub mod sim;
 pub mod stage;
