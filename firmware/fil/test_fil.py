@@ -1167,7 +1167,7 @@ class MaskedSections(unittest.TestCase):
               ", ".join(f"{k} {v}" for k, v in longest.items()), file=sys.stderr)
         for what, n in longest.items():
             self.assertLessEqual(n, self.BOUND, what)
-        # the commands that only log (defmt frames) mask nothing
+        # the commands that log (defmt frames) mask nothing
         for what in ("speed 300", "start", "status", "stop", "save"):
             self.assertEqual(longest[what], 0, what)
         # the swap happened: the new limit is in force

@@ -55,7 +55,7 @@ unsafe impl Sync for Buffer {}
 
 static BUFFER: Buffer = Buffer(UnsafeCell::new([0; BUF_SIZE]));
 
-/// The channel's name, in RAM with the block.
+/// The channel's name (read-only data; the probe reads it once, by the pointer in the block).
 static NAME: [u8; 6] = *b"defmt\0";
 
 #[no_mangle]
@@ -79,9 +79,15 @@ impl Channel {
         let read = self.read.load(Ordering::Acquire);
         let write = self.write.load(Ordering::Relaxed);
         let p = plan_write(self.size, read, write, bytes.len());
-        // SAFETY: `plan_write` keeps both copies inside the `size`-byte buffer (offsets
-        // outside it write nothing) and before the probe's read offset; the logger's owner
-        // is the only writer (module docs).
+        if p.first + p.second == 0 {
+            // full, or offsets outside the ring (a corrupted block): nothing is written and
+            // no pointer is formed from them
+            return;
+        }
+        // SAFETY: with something to write, `plan_write` has checked `write < size` and keeps
+        // both copies inside the `size`-byte buffer and before the probe's read offset;
+        // `first + second <= bytes.len()`; the logger's owner is the only writer (module
+        // docs).
         unsafe {
             core::ptr::copy_nonoverlapping(bytes.as_ptr(), self.buffer.add(write), p.first);
             core::ptr::copy_nonoverlapping(bytes.as_ptr().add(p.first), self.buffer, p.second);
