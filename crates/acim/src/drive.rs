@@ -112,7 +112,9 @@ pub use crate::supervisor::{
     CommandError, ControlMonitor, DriveState, EstimatorHealth, FaultReason, Gate, OffsetMonitor,
     SpeedOscillation, Supervisor,
 };
-use crate::svpwm::{linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit};
+use crate::svpwm::{
+    current_signs, linear_limit, modulate, Modulation, Modulator, Svpwm, VoltageLimit,
+};
 use crate::thermal::ThermalModel;
 
 /// What the front of a running step hands its back end: the current reference, the
@@ -339,11 +341,15 @@ struct Supervision<N: Arithmetic> {
 }
 
 /// The drive's fixed part: the design, its coefficients in `N`, the per-unit bases.
+/// `repr(C)` with the coefficients first and the design (read only outside the step)
+/// last: placed after the drive's state (see [`Drive`]), the coefficients lie within one
+/// base register's load offset (1020 B for a Cortex-M4 `vldr`).
 #[derive(Clone, Debug)]
+#[repr(C)]
 struct DriveParts<N: Arithmetic> {
-    design: DriveDesign,
     coeffs: DriveCoeffs<N>,
     bases: N::Bases,
+    design: DriveDesign,
 }
 
 /// The output side of a step: the current loops, the modulator, sin/cos and the tracker
@@ -524,12 +530,14 @@ struct OpenLoop<N: Arithmetic> {
 /// (f32 SI by default, [`crate::fixed::Q24`] per unit), `O` estimates the speed (in f32 by
 /// default the observer the configuration chooses, [`DriveObserver`]; the fixed-point
 /// drive names the paper's), `M` modulates (SVPWM by default).
+///
+/// The layout is `repr(C)`: the state the step reads and writes first, then the
+/// coefficients, and the design (1.3 kB the step never reads) last. Left to the
+/// compiler the design sat between them, and every coefficient load of the step first
+/// formed its address (`vldr` reaches 1020 B from its base): about 50 cycles a period.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = DriveObserver, M = Svpwm> {
-    /// The design, its coefficients in `N` and the per-unit bases: fixed once built.
-    cfg: DriveParts<N>,
-    /// The state machine and the monitors that judge the running control.
-    supervision: Supervision<N>,
     /// Speed observer, Rs and R_R estimators, flux model.
     est: Estimator<N, O>,
     /// Speed loop, field weakening, the start sequence and open-loop V/f.
@@ -538,9 +546,13 @@ pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = DriveObserver, M = Svp
     loops: Loops<N, S, M>,
     /// z^-1 ([`Previous`]).
     prev: Previous<N>,
+    telemetry: DriveTelemetry<N>,
     /// The current channels' offsets: measured while off, compensated, tracked.
     sensing: Sensing<N>,
-    telemetry: DriveTelemetry<N>,
+    /// The state machine and the monitors that judge the running control.
+    supervision: Supervision<N>,
+    /// The design, its coefficients in `N` and the per-unit bases: fixed once built.
+    cfg: DriveParts<N>,
 }
 
 impl Drive<FastSinCos> {
@@ -2008,19 +2020,21 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // is compensated with it, as more dead-time duty per leg with
         // the same current signs; the estimators keep the command v, which the two
         // compensations make the machine see
+        // the compensation's current signs, shared by the modulator and the tracker
+        let signs = current_signs(c.pwm.inv_current_band, i_ref_abc);
         let out = self.loops.modulator.modulate(
             &c.pwm,
             v_ab,
             m.dc_bus,
             inv_dc_bus,
-            i_ref_abc,
+            signs,
             self.refs.start.inverter.correction_duty,
         );
         // the inverter error the correction still leaves, from the sixth-harmonic
         // pattern across the current in this step's command, for the
         // next step's modulation
         if c.inverter_tracker.enabled {
-            let sigma = sign_vector(i_ref_abc, c.pwm.inv_current_band, rot);
+            let sigma = sign_vector(signs, rot);
             self.refs.start.inverter.correction_duty = self.loops.inverter_tracker.update(
                 &c.inverter_tracker,
                 &InverterTrackerInputs {

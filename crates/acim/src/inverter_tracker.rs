@@ -52,7 +52,6 @@ use crate::num::Num;
 use crate::num::PerUnitBases;
 use crate::num::ThreePhase;
 use crate::num::Units;
-use crate::svpwm::current_sign;
 
 /// Below this stator frequency the tracker holds, Hz.
 pub const INVERTER_TRACKER_MIN_FREQUENCY_HZ: f32 = 1.0;
@@ -115,19 +114,14 @@ impl InverterTrackerConfig<f32> {
 }
 
 /// The sign vector sigma in the dq frame at `rot`: Clarke of the three phases'
-/// `sat(i_x / i_band)`, from the phase currents `i_abc` (A) the modulator compensates
-/// with, `inv_band` its 1/i_band (the modulator's own linearised sign).
+/// `sat(i_x / i_band)`, the linearised signs the modulator compensates with
+/// (`signs`, [`crate::svpwm::current_signs`] of the predicted phase currents).
 #[inline(always)]
 pub fn sign_vector<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
-    i_abc: [N; 3],
-    inv_band: N::Gain,
+    signs: [N; 3],
     rot: SinCosValue<N>,
 ) -> Dq<N> {
-    let sign = |i: N| current_sign(inv_band, i);
-    park(
-        clarke_three(sign(i_abc[0]), sign(i_abc[1]), sign(i_abc[2])),
-        rot,
-    )
+    park(clarke_three(signs[0], signs[1], signs[2]), rot)
 }
 
 /// The tracker's state.
@@ -235,6 +229,7 @@ impl InverterTrackerConfig<f32> {
 mod tests {
     use super::*;
     use crate::frames::{inverse_clarke, inverse_park};
+    use crate::svpwm::current_signs;
 
     const TS: f32 = 2e-4;
     const VDC: f32 = 325.0;
@@ -254,7 +249,10 @@ mod tests {
                 sin: th.sin(),
                 cos: th.cos(),
             };
-            let sigma = sign_vector(inverse_clarke(inverse_park(i_ref, rot)), 1.0 / BAND, rot);
+            let sigma = sign_vector(
+                current_signs(1.0 / BAND, inverse_clarke(inverse_park(i_ref, rot))),
+                rot,
+            );
             let e = e_true - c * VDC;
             let v = Dq {
                 d: dc.d + e * sigma.d,
@@ -365,7 +363,10 @@ mod tests {
                 sin: th.sin(),
                 cos: th.cos(),
             };
-            let sigma = sign_vector(inverse_clarke(inverse_park(i, rot)), 1.0 / BAND, rot);
+            let sigma = sign_vector(
+                current_signs(1.0 / BAND, inverse_clarke(inverse_park(i, rot))),
+                rot,
+            );
             // a resistance error that changes with time (a thermal ramp) along the current
             let dr = 2.0 * k as f32 * TS / 5.0;
             let v = Dq {

@@ -132,6 +132,22 @@ pub fn modulate_with_inverse<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhas
     phase_currents: [N; 3],
     dead_time_correction: N,
 ) -> Modulation<N> {
+    let signs = current_signs(cfg.inv_current_band, phase_currents);
+    modulate_signed(cfg, v, dc_bus, inv_dc_bus, signs, dead_time_correction)
+}
+
+/// [`modulate_with_inverse`] with the compensation's current signs given
+/// ([`current_signs`] of the predicted phase currents): the drive computes them once for
+/// the modulator and the running inverter tracker.
+#[inline(always)]
+pub fn modulate_signed<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    cfg: &SvpwmConfig<N>,
+    v: AlphaBeta<N>,
+    dc_bus: N,
+    inv_dc_bus: N,
+    current_signs: [N; 3],
+    dead_time_correction: N,
+) -> Modulation<N> {
     let vdc = dc_bus;
     let inv_vdc = inv_dc_bus;
     let [mut a, mut b, mut c] = inverse_clarke(v);
@@ -154,13 +170,13 @@ pub fn modulate_with_inverse<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhas
         saturated = true;
     }
     let dt = (cfg.dead_time_duty + dead_time_correction) + cfg.device_drop * inv_vdc;
-    let s = cfg.inv_current_band;
     let base = N::HALF + offset * inv_vdc;
+    let s = current_signs;
     Modulation {
         duties: [
-            phase_duty(base, a, inv_vdc, dt, s, phase_currents[0]),
-            phase_duty(base, b, inv_vdc, dt, s, phase_currents[1]),
-            phase_duty(base, c, inv_vdc, dt, s, phase_currents[2]),
+            phase_duty(base, a, inv_vdc, dt, s[0]),
+            phase_duty(base, b, inv_vdc, dt, s[1]),
+            phase_duty(base, c, inv_vdc, dt, s[2]),
         ],
         voltage: out,
         saturated,
@@ -178,18 +194,25 @@ pub fn current_sign<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     N::gain(inv_band, i).clamp(-N::ONE, N::ONE)
 }
 
+/// The three phases' [`current_sign`]s of `phase_currents` (A).
+#[inline(always)]
+pub fn current_signs<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
+    inv_band: N::Gain,
+    phase_currents: [N; 3],
+) -> [N; 3] {
+    phase_currents.map(|i| current_sign(inv_band, i))
+}
+
 /// One phase: base duty plus the phase voltage over the bus plus the dead-time and
-/// device-drop compensation times the linearised current sign, clamped to [0, 1].
+/// device-drop compensation times the linearised current sign `sign`, clamped to [0, 1].
 #[inline(always)]
 fn phase_duty<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     base: N,
     vx: N,
     inv_vdc: N,
     comp: N,
-    inv_band: N::Gain,
-    i: N,
+    sign: N,
 ) -> N {
-    let sign = current_sign(inv_band, i);
     (base + vx * inv_vdc + comp * sign).clamp(N::ZERO, N::ONE)
 }
 
@@ -232,16 +255,17 @@ pub trait Modulator<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase = f32> 
     /// with `inv_dc_bus` = 1/`dc_bus`.
     fn voltage_limit(&self, pwm: &SvpwmConfig<N>, dc_bus: N, inv_dc_bus: N) -> VoltageLimit<N>;
     /// Duties for `v` (V, stationary frame) at bus `dc_bus` (> 0, with its reciprocal),
-    /// with `phase_currents` (A) predicted for the dead-time compensation, whose duty
-    /// per leg is the configured one plus `dead_time_correction` (the inverter test's,
-    ///; 0 leaves the configured compensation bit for bit).
+    /// with `current_signs` the dead-time compensation's signs ([`current_signs`] of the
+    /// phase currents predicted for the period), whose duty per leg is the configured
+    /// one plus `dead_time_correction` (the inverter test's; 0 leaves the configured
+    /// compensation bit for bit).
     fn modulate(
         &self,
         pwm: &SvpwmConfig<N>,
         v: AlphaBeta<N>,
         dc_bus: N,
         inv_dc_bus: N,
-        phase_currents: [N; 3],
+        current_signs: [N; 3],
         dead_time_correction: N,
     ) -> Modulation<N>;
 }
@@ -272,15 +296,15 @@ impl Modulator<f32> for Svpwm {
         v: AlphaBeta,
         dc_bus: f32,
         inv_dc_bus: f32,
-        phase_currents: [f32; 3],
+        current_signs: [f32; 3],
         dead_time_correction: f32,
     ) -> Modulation {
-        modulate_with_inverse(
+        modulate_signed(
             pwm,
             v,
             dc_bus,
             inv_dc_bus,
-            phase_currents,
+            current_signs,
             dead_time_correction,
         )
     }
@@ -370,15 +394,15 @@ impl Modulator<f32> for Overmodulation {
         v: AlphaBeta,
         dc_bus: f32,
         inv_dc_bus: f32,
-        phase_currents: [f32; 3],
+        current_signs: [f32; 3],
         dead_time_correction: f32,
     ) -> Modulation {
-        overmodulate_corrected(
+        overmodulate_signed(
             pwm,
             v,
             dc_bus,
             inv_dc_bus,
-            phase_currents,
+            current_signs,
             dead_time_correction,
         )
     }
@@ -412,15 +436,30 @@ pub fn overmodulate_corrected(
     phase_currents: [f32; 3],
     dead_time_correction: f32,
 ) -> Modulation {
+    let signs = current_signs(cfg.inv_current_band, phase_currents);
+    overmodulate_signed(cfg, v, dc_bus, inv_dc_bus, signs, dead_time_correction)
+}
+
+/// [`overmodulate_corrected`] with the compensation's current signs given
+/// ([`current_signs`] of the predicted phase currents).
+#[inline(always)]
+pub fn overmodulate_signed(
+    cfg: &SvpwmConfig,
+    v: AlphaBeta,
+    dc_bus: f32,
+    inv_dc_bus: f32,
+    current_signs: [f32; 3],
+    dead_time_correction: f32,
+) -> Modulation {
     let m2 = (v.alpha * v.alpha + v.beta * v.beta) * (inv_dc_bus * inv_dc_bus);
     // (a NaN command takes the linear path, which keeps the duties in range)
     if m2.is_nan() || m2 <= INV_SQRT3 * INV_SQRT3 {
-        return modulate_with_inverse(
+        return modulate_signed(
             cfg,
             v,
             dc_bus,
             inv_dc_bus,
-            phase_currents,
+            current_signs,
             dead_time_correction,
         );
     }
@@ -444,20 +483,16 @@ pub fn overmodulate_corrected(
         beta: (d[1] - d[2]) * INV_SQRT3 * dc_bus,
     };
     let dt = (cfg.dead_time_duty + dead_time_correction) + cfg.device_drop * inv_dc_bus;
-    let comp = |d: f32, i: f32| {
+    let comp = |d: f32, sign: f32| {
         if d > 0.0 && d < 1.0 {
-            let sign = clamp(i * cfg.inv_current_band, -1.0, 1.0);
             clamp(d + dt * sign, 0.0, 1.0)
         } else {
             d
         }
     };
+    let s = current_signs;
     Modulation {
-        duties: [
-            comp(d[0], phase_currents[0]),
-            comp(d[1], phase_currents[1]),
-            comp(d[2], phase_currents[2]),
-        ],
+        duties: [comp(d[0], s[0]), comp(d[1], s[1]), comp(d[2], s[2])],
         voltage,
         saturated: true,
     }

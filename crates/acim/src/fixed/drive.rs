@@ -22,9 +22,7 @@ use crate::num::Angles;
 use crate::num::Num;
 use crate::observer::{ReducedOrderObserver, SpeedObserver};
 use crate::supervisor::{CommandError, DriveState, FaultReason};
-use crate::svpwm::{
-    modulate_with_inverse, Modulation, Modulator, Svpwm, SvpwmConfig, VoltageLimit,
-};
+use crate::svpwm::{modulate_signed, Modulation, Modulator, Svpwm, SvpwmConfig, VoltageLimit};
 
 /// The fixed-point sensorless IFOC drive (the paper's observer, SVPWM, table sin/cos).
 pub type FixedDrive = Drive<TableSinCos, Q24, ReducedOrderObserver<Q24>, Svpwm>;
@@ -65,15 +63,15 @@ impl Modulator<Q24> for Svpwm {
         v: AlphaBeta<Q24>,
         dc_bus: Q24,
         inv_dc_bus: Q24,
-        phase_currents: [Q24; 3],
+        current_signs: [Q24; 3],
         dead_time_correction: Q24,
     ) -> Modulation<Q24> {
-        modulate_with_inverse(
+        modulate_signed(
             pwm,
             v,
             dc_bus,
             inv_dc_bus,
-            phase_currents,
+            current_signs,
             dead_time_correction,
         )
     }
