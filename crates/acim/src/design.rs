@@ -639,7 +639,7 @@ impl DriveDesign {
             ),
             // with a slow task the tracker adapts once per slow period, on its mean
             offset_tracker: OffsetTrackerConfig {
-                exact_turn: slow_divider > 1,
+                large_turn: slow_divider > 1,
                 ..OffsetTrackerConfig::new(
                     cfg.trackers.offset_tracking,
                     slow_ts,

@@ -177,6 +177,11 @@ pub trait Angles: Num {
     fn angle_gain(rad_per_unit: f32) -> Option<Self::Gain>;
     /// The voltage lead of `delay` periods of `ts` (s) with the bases `b` (design time).
     fn lead(ts: f32, delay: f32, b: &PerUnitBases) -> Option<Self::Lead>;
+    /// Whether a large known turn (the offset tracker's per slow period) is cheaper as a
+    /// series of products ([`crate::offset_tracker::large_turn`]) than as the drive's
+    /// sin/cos: in f32, where a product is one instruction; not in fixed point, where
+    /// it is a 64-bit multiply and shift and the sin/cos a table.
+    const TURN_BY_PRODUCTS: bool;
 }
 
 /// The three-phase constants of Clarke, its inverse and the modulator in an arithmetic.
@@ -383,6 +388,7 @@ impl Units for f32 {
 }
 
 impl Angles for f32 {
+    const TURN_BY_PRODUCTS: bool = true;
     type Angle = f32;
     /// (Ts, delay in periods): the lead is w_s Ts delay.
     type Lead = (f32, f32);

@@ -514,6 +514,7 @@ impl crate::num::Units for Q24 {
 }
 
 impl crate::num::Angles for Q24 {
+    const TURN_BY_PRODUCTS: bool = false;
     type Angle = Angle;
     /// Angle counts of the voltage lead per frequency pu.
     type Lead = Gain;
