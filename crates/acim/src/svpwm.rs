@@ -200,7 +200,14 @@ pub fn current_signs<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     inv_band: N::Gain,
     phase_currents: [N; 3],
 ) -> [N; 3] {
-    phase_currents.map(|i| current_sign(inv_band, i))
+    // (indexed, not `map`: the array's map stays out of line, outside the interrupt's
+    // CCM SRAM)
+    let [a, b, c] = phase_currents;
+    [
+        current_sign(inv_band, a),
+        current_sign(inv_band, b),
+        current_sign(inv_band, c),
+    ]
 }
 
 /// One phase: base duty plus the phase voltage over the bus plus the dead-time and
