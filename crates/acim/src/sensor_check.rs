@@ -612,6 +612,42 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
     }
 }
 
+/// What a window's judgement found on its channels so far ([`Judgement::judge`]).
+struct Channels {
+    /// A channel stands still where it should have moved.
+    still: bool,
+    /// A channel that moved missed the model.
+    astray: bool,
+    /// A channel that should have moved is on the model: the evidence that the model
+    /// holds where the sensors do.
+    followed: bool,
+    /// Every channel reads about zero (dead sensing leaves none to follow).
+    all_zero: bool,
+}
+
+impl Channels {
+    /// One channel: `p` the model's prediction at the window's end, `start` the channel
+    /// at its start, `meas` as measured at its end (A); `allowance` the resistance
+    /// error's allowance (A).
+    #[inline(always)]
+    fn judge<N: Num>(&mut self, cfg: &SensorCheckConfig<N>, allowance: N, p: N, start: N, meas: N) {
+        self.all_zero &= meas.abs() < cfg.still_threshold;
+        let change = (p - start).abs();
+        let moved = (meas - start).abs();
+        let residual = (meas - p).abs();
+        if change <= cfg.change_threshold {
+            return;
+        }
+        let on_model = residual <= N::gain(cfg.astray_ratio, change) + allowance;
+        self.followed |= on_model;
+        if moved < cfg.still_threshold {
+            self.still |= residual > N::gain(cfg.response_ratio, change) + allowance;
+        } else {
+            self.astray |= !on_model;
+        }
+    }
+}
+
 impl<N: Num + DivSqrt + ThreePhase> Judgement<N> {
     /// The judgement of the window `w` that ended at the sample `inp` (module docs, "The
     /// decision") and the bias filter's update. Inlined: into [`SensorCheck::update`]
@@ -659,41 +695,32 @@ impl<N: Num + DivSqrt + ThreePhase> Judgement<N> {
         }
         let phases = inverse_clarke(inverse_park(end, inp.angle));
         let measured = channels(inp);
-        let judged = if inp.three_channels { 3 } else { 2 };
         // the current the bias has not followed: |sum(i) - window i_filtered|
         let unfollowed = (i.d - N::gain(cfg.window_gain, self.filtered.d)).abs()
             + (i.q - N::gain(cfg.window_gain, self.filtered.q)).abs();
         let allowance = N::gain(cfg.resistance_allowance, unfollowed);
         // a channel that stands still where it should have moved, while every channel
         // that moved followed the model: a failed sensor (a machine fault moves some
-        // channel away from the model, module docs)
-        let mut still = false;
-        let mut astray = false;
-        // the evidence that the model holds where the sensors do: a judged channel on the
-        // model, or every channel at its zero (dead sensing, which leaves none to follow)
-        let mut followed = false;
-        let mut all_zero = true;
-        for ((&p, &start), &meas) in phases
-            .iter()
-            .zip(w.start_phases.iter())
-            .zip(measured.iter())
-            .take(judged)
-        {
-            all_zero &= meas.abs() < cfg.still_threshold;
-            let change = (p - start).abs();
-            let moved = (meas - start).abs();
-            let residual = (meas - p).abs();
-            if change <= cfg.change_threshold {
-                continue;
-            }
-            let on_model = residual <= N::gain(cfg.astray_ratio, change) + allowance;
-            followed |= on_model;
-            if moved < cfg.still_threshold {
-                still |= residual > N::gain(cfg.response_ratio, change) + allowance;
-            } else {
-                astray |= !on_model;
-            }
+        // channel away from the model, module docs); the judged channels are a and b,
+        // and c with three shunts
+        let mut c = Channels {
+            still: false,
+            astray: false,
+            followed: false,
+            all_zero: true,
+        };
+        // the channels one by one (an iterator over them cost more than their judgement)
+        c.judge(cfg, allowance, phases[0], w.start_phases[0], measured[0]);
+        c.judge(cfg, allowance, phases[1], w.start_phases[1], measured[1]);
+        if inp.three_channels {
+            c.judge(cfg, allowance, phases[2], w.start_phases[2], measured[2]);
         }
+        let Channels {
+            still,
+            astray,
+            followed,
+            all_zero,
+        } = c;
         // a machine fault's current runs away for some windows: a channel missing while
         // moving in two windows running holds the verdict off for ASTRAY_HOLD windows (a
         // failing sensor's own jump to its stuck value misses in one window)
