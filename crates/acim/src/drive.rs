@@ -532,9 +532,10 @@ struct OpenLoop<N: Arithmetic> {
 /// drive names the paper's), `M` modulates (SVPWM by default).
 ///
 /// The layout is `repr(C)`: the state the step reads and writes first, then the
-/// coefficients, and the design (1.3 kB the step never reads) last. Left to the
-/// compiler the design sat between them, and every coefficient load of the step first
-/// formed its address (`vldr` reaches 1020 B from its base): about 50 cycles a period.
+/// coefficients, and the design (1.3 kB the step never reads) last, so that the step's
+/// loads stay within their base register's offset (`vldr` reaches 1020 B). With the
+/// design between the state and the coefficients most coefficient loads would first
+/// form their address: about 50 cycles a period.
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct Drive<S = FastSinCos, N: Arithmetic = f32, O = DriveObserver, M = Svpwm> {

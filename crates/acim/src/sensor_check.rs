@@ -709,7 +709,8 @@ impl<N: Num + DivSqrt + ThreePhase> Judgement<N> {
             followed: false,
             all_zero: true,
         };
-        // the channels one by one (an iterator over them cost more than their judgement)
+        // the channels one by one (an iterator over them costs about as much as their
+        // judgement)
         c.judge(cfg, allowance, phases[0], w.start_phases[0], measured[0]);
         c.judge(cfg, allowance, phases[1], w.start_phases[1], measured[1]);
         if inp.three_channels {
