@@ -53,9 +53,10 @@ pub const TEL_Q: usize = 16;
 pub const CMD_Q: usize = 4;
 
 /// Everything the interrupt owns.
+// `repr(C)`, the drive's loop last: its 4.7 kB put the queues' and the outputs' fields
+// beyond a load's offset reach (each access took an address computation of its own)
+#[repr(C)]
 pub struct IsrState {
-    /// Drive, conversion and statistics.
-    pub ctl: ControlLoop<Sc>,
     /// Telemetry out.
     pub tel: Producer<'static, TelemetrySample, TEL_Q>,
     /// Commands in.
@@ -69,6 +70,8 @@ pub struct IsrState {
     /// deliberate off-to-on transition: `acim_firmware_core::stage`).
     #[cfg(not(feature = "selftest"))]
     pub outputs: acim_firmware_core::stage::Outputs,
+    /// Drive, conversion and statistics.
+    pub ctl: ControlLoop<Sc>,
 }
 
 // In SRAM1, not CCM: the interrupt's code runs from CCM SRAM over the I-bus while its

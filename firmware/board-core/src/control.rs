@@ -133,17 +133,21 @@ pub fn refusal_text(e: CommandError) -> &'static [u8] {
 }
 
 /// Drive + conversion + statistics, owned by the control interrupt.
+// `repr(C)`, the interrupt's small state first: the drive is 4.7 kB, and placed after it
+// (the compiler's order) the conversion's and the statistics' fields lay beyond the reach
+// of a load's offset (1020 B for `vldr`), so each took an address computation of its own
+#[repr(C)]
 pub struct ControlLoop<S: SinCos> {
-    drive: Drive<S>,
     conv: Converter,
+    inputs: DriveInputs,
     stats: CycleStats,
-    last_summary: CycleSummary,
     decim: Decimator,
+    fw_fault: Option<FirmwareFault>,
     seq: u32,
     /// Periods closed by [`ControlLoop::finish_period`] since power-up (wraps).
     period: u32,
-    fw_fault: Option<FirmwareFault>,
-    inputs: DriveInputs,
+    last_summary: CycleSummary,
+    drive: Drive<S>,
     commissioning: Option<Commissioning>,
     /// The sequence the main loop built for the next `Commission` command.
     staged: Option<Commissioning>,

@@ -62,7 +62,9 @@ impl Converter {
     }
 
     /// Raw counts to amperes and volts. Never panics; an unused third channel reads 0 A.
-    #[inline]
+    // always inlined: the control interrupt is its caller (out of line, the call and the
+    // result's copy through memory cost more than its arithmetic)
+    #[inline(always)]
     pub fn convert(&self, raw: &RawSample) -> Converted {
         let k = self.amps_per_count;
         let [ra, rb, rc] = raw.currents;
@@ -74,8 +76,11 @@ impl Converter {
         } else {
             0.0
         };
-        let rail = |x: u16| x == 0 || x >= self.max_count;
-        let saturated = rail(ra) || rail(rb) || (three && rail(rc));
+        // x == 0 or x >= max_count in one unsigned comparison (0 wraps to the top);
+        // bitwise, not short-circuit: no branches
+        let span = self.max_count.saturating_sub(1);
+        let rail = |x: u16| x.wrapping_sub(1) >= span;
+        let saturated = rail(ra) | rail(rb) | (three & rail(rc));
         Converted {
             inputs: DriveInputs {
                 phase_currents: [a, b, c],
@@ -177,23 +182,28 @@ impl OffsetCalibrator {
 }
 
 /// High-side duty in [0, 1] to the TIM1 compare value for centre-aligned PWM mode 1
-/// (high side on while CNT < CCR): CCR = duty * ARR, duty clamped to [0, `max_duty`]
-/// (the low side must stay on long enough to sample the shunt), NaN -> 50 %.
+/// (high side on while CNT < CCR): CCR = duty * ARR rounded, duty clamped to
+/// [0, `max_duty`] (the low side must stay on long enough to sample the shunt),
+/// NaN -> 50 %.
 #[inline]
 pub fn duty_to_compare(duty: f32, arr: u16, max_duty: f32) -> u16 {
-    // comparisons, not clamp (f32::clamp asserts min <= max: a panic path) nor max/min
-    // (out-of-line fmaxf/fminf calls through flash thunks in the interrupt); NaN -> 0.5
-    let d = if duty > max_duty {
-        max_duty
-    } else if duty >= 0.0 {
-        duty
-    } else if duty < 0.0 {
-        0.0
+    // clamped on the count, not on the duty: the conversion to an unsigned integer
+    // saturates (a negative or -inf duty gives 0; one instruction on the FPU), and the
+    // count is monotonic in the duty, so min(count, count at max_duty) is the count of
+    // the clamped duty. Comparisons and `min` on integers: no f32 clamp (it asserts
+    // min <= max: a panic path) and no fmaxf/fminf calls. With the board's constants
+    // the largest count folds at compile time.
+    let scale = arr as f32;
+    let largest = (max_duty * scale + 0.5) as u32;
+    let x = duty * scale + 0.5;
+    #[allow(clippy::eq_op)] // the NaN test
+    let count = if x == x {
+        (x as u32).min(largest)
     } else {
-        0.5
+        (arr as u32).div_ceil(2)
     };
-    // d * arr <= arr fits u16; `as` saturates anyway
-    (d * arr as f32 + 0.5) as u16
+    // count <= largest <= arr: fits u16
+    count as u16
 }
 
 #[cfg(test)]
@@ -330,5 +340,63 @@ mod tests {
         assert_eq!(max, (MAX_DUTY * PWM_ARR as f32 + 0.5) as u16);
         assert!((16_400..16_600).contains(&max), "{max}");
         assert_eq!(duty_to_compare(-f32::INFINITY, PWM_ARR, MAX_DUTY), 0);
+    }
+
+    /// The count clamped equals the clamped duty's count, rounded: every duty of a fine
+    /// grid over [-0.1, 1.1], each duty next to the largest, at two periods.
+    #[test]
+    fn clamping_the_count_is_clamping_the_duty() {
+        let clamped_duty = |duty: f32, arr: u16, max_duty: f32| -> u16 {
+            let d = if duty > max_duty {
+                max_duty
+            } else {
+                duty.max(0.0)
+            };
+            (d * arr as f32 + 0.5) as u16
+        };
+        for arr in [PWM_ARR, 4250, 999] {
+            let check = |duty: f32| {
+                assert_eq!(
+                    duty_to_compare(duty, arr, MAX_DUTY),
+                    clamped_duty(duty, arr, MAX_DUTY),
+                    "{arr} {duty}"
+                );
+            };
+            (-1000..=11_000).for_each(|k| check(k as f32 * 1e-4));
+            let below = MAX_DUTY.to_bits() - 8;
+            (below..below + 16).for_each(|bits| check(f32::from_bits(bits)));
+        }
+    }
+
+    /// A count at either rail (0, or the top count and above) is saturated; every count
+    /// between is not; the third channel counts only with three shunts.
+    #[test]
+    fn rails_are_the_ends_of_the_range() {
+        let c = conv();
+        let top = c.max_count;
+        for (x, rail) in [
+            (0, true),
+            (1, false),
+            (2048, false),
+            (top - 1, false),
+            (top, true),
+            (u16::MAX, true),
+        ] {
+            let raw = RawSample {
+                currents: [x, 2048, 2048],
+                dc_bus: 1000,
+            };
+            assert_eq!(c.convert(&raw).saturated, rail, "{x}");
+            let raw = RawSample {
+                currents: [2048, x, 2048],
+                dc_bus: 1000,
+            };
+            assert_eq!(c.convert(&raw).saturated, rail, "{x}");
+            let raw = RawSample {
+                currents: [2048, 2048, x],
+                dc_bus: 1000,
+            };
+            assert_eq!(c.convert(&raw).saturated, rail && c.channels == 3, "{x}");
+        }
     }
 }
