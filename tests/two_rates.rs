@@ -43,7 +43,11 @@ fn paper_scenarios_keep_their_bounds_with_a_1_khz_slow_task() {
 /// against about 20 V of stator voltage at 60 rpm) and what its compensation leaves
 /// grows with it; with no dead time in the plant and none compensated the same run holds
 /// 1.9 rpm at 40 kHz. There the slow task must not add to it: within 0.5 rpm of the
-/// single-rate drive at the same rate.
+/// single-rate drive at the same rate. What the compensation leaves comes from the
+/// figure's sensors: the shunts' gains differ by 0.6 % and the paper's setup runs without
+/// the start-up gain calibration, so the true currents cross zero away from where the
+/// reference (on which the compensation switches) predicts; with the calibration on (the
+/// drive's default) the figure is within its 4 rpm at every rate (1.7, 1.1 and 1.3 rpm).
 #[test]
 fn paper_scenarios_at_10_20_and_40_khz_with_a_1_khz_slow_task() {
     for period in ["100e-6", "50e-6", "25e-6"] {
@@ -60,6 +64,12 @@ fn paper_scenarios_at_10_20_and_40_khz_with_a_1_khz_slow_task() {
         let t = m.rs.within_2pct_from_s.expect("Rs never within 2 %");
         assert!(t <= 1.0, "{period}: Rs within 2 % only from {t} s");
         check_windows(&m, 2.0, None);
+        let calibrated = [
+            rate.as_str(),
+            SLOW,
+            "drive.start.current_gain_calibration=true",
+        ];
+        check_windows(&run("paper-fig12", &calibrated), 4.0, None);
         let two = run("paper-fig12", &o);
         let single = run("paper-fig12", &[rate.as_str()]);
         assert!(two.control_kept && single.control_kept, "{period}");
