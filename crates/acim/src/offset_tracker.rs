@@ -524,7 +524,7 @@ impl<N: Num + FineIntegrator + Angles> OffsetTracker<N> {
             alpha: u_ab.alpha - x.alpha,
             beta: u_ab.beta - x.beta,
         };
-        if !(eps.alpha.is_finite() && eps.beta.is_finite()) {
+        if !N::all_finite([eps.alpha, eps.beta]) {
             self.model.fundamental = AlphaBeta {
                 alpha: N::ZERO,
                 beta: N::ZERO,

@@ -683,13 +683,14 @@ impl<N: Num + DivSqrt + ThreePhase> Judgement<N> {
             d: (inp.current.d - w.start_current.d) - model.d,
             q: (inp.current.q - w.start_current.q) - model.q,
         };
-        if !(end.d.is_finite()
-            && end.q.is_finite()
-            && self.bias.d.is_finite()
-            && self.bias.q.is_finite()
-            && self.filtered.d.is_finite()
-            && self.filtered.q.is_finite())
-        {
+        if !N::all_finite([
+            end.d,
+            end.q,
+            self.bias.d,
+            self.bias.q,
+            self.filtered.d,
+            self.filtered.q,
+        ]) {
             // a non-finite input reached the state: start over
             return Judged::Reset;
         }

@@ -422,7 +422,7 @@ impl Supervisor {
         limits: &SupervisionLimits<N>,
         h: &EstimatorHealth<N>,
     ) -> Option<FaultReason> {
-        if !(h.speed.is_finite() && h.load_torque.is_finite() && h.current.is_finite())
+        if !N::all_finite([h.speed, h.load_torque, h.current])
             || (limits.rs_bound_faults && h.rs_at_bound)
         {
             Some(FaultReason::EstimatorOutOfRange)

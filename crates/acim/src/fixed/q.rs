@@ -411,6 +411,10 @@ impl crate::num::Num for Q24 {
         true
     }
     #[inline(always)]
+    fn all_finite<const K: usize>(_: [Self; K]) -> bool {
+        true
+    }
+    #[inline(always)]
     fn is_nan(self) -> bool {
         false
     }
