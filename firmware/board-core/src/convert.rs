@@ -192,9 +192,10 @@ pub fn duty_to_compare(duty: f32, arr: u16, max_duty: f32) -> u16 {
     // count is monotonic in the duty, so min(count, count at max_duty) is the count of
     // the clamped duty. Comparisons and `min` on integers: no f32 clamp (it asserts
     // min <= max: a panic path) and no fmaxf/fminf calls. With the board's constants
-    // the largest count folds at compile time.
+    // the largest count folds at compile time (and is never above ARR, whatever
+    // `max_duty`: the cast below cannot wrap).
     let scale = arr as f32;
-    let largest = (max_duty * scale + 0.5) as u32;
+    let largest = ((max_duty * scale + 0.5) as u32).min(arr as u32);
     let x = duty * scale + 0.5;
     #[allow(clippy::eq_op)] // the NaN test
     let count = if x == x {
@@ -343,7 +344,8 @@ mod tests {
     }
 
     /// The count clamped equals the clamped duty's count, rounded: every duty of a fine
-    /// grid over [-0.1, 1.1], each duty next to the largest, at two periods.
+    /// grid over [-0.1, 1.1], each duty next to the largest, at three periods; a
+    /// largest duty above 1 (not a board's) still gives at most ARR.
     #[test]
     fn clamping_the_count_is_clamping_the_duty() {
         let clamped_duty = |duty: f32, arr: u16, max_duty: f32| -> u16 {
@@ -365,6 +367,7 @@ mod tests {
             (-1000..=11_000).for_each(|k| check(k as f32 * 1e-4));
             let below = MAX_DUTY.to_bits() - 8;
             (below..below + 16).for_each(|bits| check(f32::from_bits(bits)));
+            assert_eq!(duty_to_compare(3.0, arr, 4.0), arr, "{arr}");
         }
     }
 
