@@ -205,3 +205,58 @@ fn the_slow_period_is_a_checked_scenario_key() {
         assert!(err.contains("slow_period"), "{bad}: {err}");
     }
 }
+
+/// Telemetry recorded at the slow ticks only (`TelemetryRate::SlowTick`, the firmware's
+/// choice when it samples the telemetry less often than once per slow period) changes
+/// nothing the drive computes: two drives fed the same samples through a start and a
+/// loaded ramp give the same duties in every period, bit for bit, and the slow-tick
+/// drive's telemetry is the other's at each tick's period (after that period's slow task)
+/// and held between ticks.
+#[test]
+fn telemetry_at_the_slow_ticks_changes_no_output() {
+    use acim::math::RPM_TO_RAD_S;
+    use acim::{Drive, DriveConfig, DriveInputs, DriveState, TelemetryRate};
+    use acim_plant::{LoadTorque, Plant, PwmPreload};
+    let cfg = DriveConfig::paper_defaults();
+    let ts = cfg.loops.control_period;
+    let mut every = Drive::new(cfg.clone()).unwrap();
+    let mut ticks = Drive::new(cfg).unwrap();
+    ticks.set_telemetry_rate(TelemetryRate::SlowTick);
+    assert_eq!(ticks.telemetry_rate(), TelemetryRate::SlowTick);
+    assert_eq!(every.telemetry_rate(), TelemetryRate::EveryPeriod);
+    let mut plant = Plant::paper_default(3);
+    let mut pwm = PwmPreload::new();
+    for d in [&mut every, &mut ticks] {
+        d.start().unwrap();
+        d.set_speed_target(300.0 * RPM_TO_RAD_S).unwrap();
+    }
+    let (mut held, mut recorded) = (0usize, 0usize);
+    for k in 0..(1.5 / ts) as usize {
+        let t = k as f32 * ts;
+        let m = plant.sample();
+        let inp = DriveInputs {
+            phase_currents: m.phase_currents,
+            dc_bus: m.dc_bus,
+        };
+        let tick = ticks.slow_tick_due();
+        let before = *ticks.telemetry();
+        let a = every.step(&inp);
+        let b = ticks.step(&inp);
+        assert_eq!(a, b, "period {k}");
+        let running = ticks.state() == DriveState::Running;
+        if tick {
+            assert_eq!(every.telemetry(), ticks.telemetry(), "tick at period {k}");
+            recorded += running as usize;
+        } else if running {
+            assert_eq!(&before, ticks.telemetry(), "between ticks at period {k}");
+            held += 1;
+        }
+        let torque = if t >= 1.0 { 3.0 } else { 0.0 };
+        plant.run_pwm_period(pwm.advance(a), LoadTorque::Passive { torque });
+    }
+    assert_eq!(every.state(), DriveState::Running);
+    // running for about half a second at 5 kHz with a 1 kHz slow task: four periods held
+    // after each tick's, give or take the partial slow periods at the handover and the end
+    assert!(recorded >= 500, "{recorded} ticks running");
+    assert!(held.abs_diff(4 * recorded) <= 8, "{recorded} ticks, {held} held");
+}

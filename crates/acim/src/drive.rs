@@ -128,6 +128,9 @@ struct StepReferences<N: Arithmetic> {
     zero_held: bool,
     /// The slow task's work runs inline in this period (every period with no slow task).
     slow: bool,
+    /// The telemetry is recorded in this period (every period, or a slow tick's:
+    /// [`TelemetryRate`]).
+    record: bool,
 }
 
 /// Samples of one control step (A and V; pu in fixed point).
@@ -158,8 +161,24 @@ impl<N: Arithmetic> PwmOutput<N> {
     };
 }
 
+/// How often a running drive records its [`DriveTelemetry`] ([`Drive::set_telemetry_rate`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TelemetryRate {
+    /// Every control period (the default: the simulator's traces and the tests read every
+    /// period).
+    #[default]
+    EveryPeriod,
+    /// In the period of each slow tick only
+    /// ([`LoopSettings::slow_period`](crate::LoopSettings::slow_period); every period
+    /// with no slow task): the record stays as that period left it, with the slow task's
+    /// outcome, until the next tick. For a firmware that reads the telemetry less often
+    /// than once per slow period: the other periods skip the record's stores.
+    SlowTick,
+}
+
 /// What the last step computed, for telemetry and evaluation (SI in f32, pu in fixed
-/// point).
+/// point); with [`TelemetryRate::SlowTick`], what the last slow tick's period computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct DriveTelemetry<N: Arithmetic = f32> {
@@ -415,6 +434,9 @@ struct References<N: Arithmetic> {
     current: ReferenceRamp<N>,
     /// The last slow tick's samples and estimates, until [`Drive::run_slow`] takes them.
     job: Option<SlowJob<N>>,
+    /// Whether a running period records the telemetry between slow ticks too
+    /// ([`TelemetryRate::EveryPeriod`]).
+    record_every_period: bool,
 }
 
 /// What a slow tick hands the slow task ([`Drive::run_slow`]): what it reads of that
@@ -611,6 +633,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 slow_count: 0,
                 current: ReferenceRamp::default(),
                 job: None,
+                record_every_period: true,
             },
             loops: Loops {
                 cur: CurrentLoop::new(),
@@ -673,9 +696,23 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     pub fn fault(&self) -> Option<FaultReason> {
         self.supervision.sup.fault()
     }
-    /// Quantities computed by the last step.
+    /// Quantities computed by the last step (with [`TelemetryRate::SlowTick`], by the
+    /// last slow tick's period).
     pub fn telemetry(&self) -> &DriveTelemetry<N> {
         &self.telemetry
+    }
+    /// How often a running step records [`Drive::telemetry`] from now on (every control
+    /// period when built). Changes nothing the control computes.
+    pub fn set_telemetry_rate(&mut self, rate: TelemetryRate) {
+        self.refs.record_every_period = rate == TelemetryRate::EveryPeriod;
+    }
+    /// How often a running step records [`Drive::telemetry`].
+    pub fn telemetry_rate(&self) -> TelemetryRate {
+        if self.refs.record_every_period {
+            TelemetryRate::EveryPeriod
+        } else {
+            TelemetryRate::SlowTick
+        }
     }
 
     /// The current channels' gain ratio g_a / g_b as the last calibration at a start from
@@ -987,6 +1024,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // this period with no slow task; with one, after it on a slow tick (`run_slow`);
         // between ticks its last outputs hold
         let (slow, defer) = self.slow_tick();
+        let record = slow || defer || self.refs.record_every_period;
         // 2. sense
         probe.begin(StepRegion::ClarkePark);
         let m = self.sense(inp, !magnetizing);
@@ -1029,6 +1067,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
+            record,
         };
         self.control_and_modulate(&m, &e, &step, probe)
     }
@@ -1191,6 +1230,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             magnetizing,
             zero_held,
             slow,
+            record,
         } = *step;
         // 6. current control, within the voltage limit
         probe.begin(StepRegion::CurrentPi);
@@ -1214,7 +1254,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             dc_bus: m.dc_bus,
             inv_dc_bus,
         });
-        self.record(m, e, i_ref, v, modulation.saturated, zero_held);
+        if record {
+            self.record(m, e, i_ref, v, modulation.saturated, zero_held);
+        }
         PwmOutput {
             duties: modulation.duties,
             enabled: true,

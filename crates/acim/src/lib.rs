@@ -93,7 +93,7 @@ pub use design::{
 };
 pub use drive::{
     Applied, Drive, DriveInputs, DriveTelemetry, Estimate, Measured, NoProbe, PwmOutput, StepProbe,
-    StepRegion,
+    StepRegion, TelemetryRate,
 };
 pub use num::{Arithmetic, DivSqrt, FineIntegrator, Num, Units};
 pub use observer::{SpeedEstimate, SpeedObserver, SpeedObserverInputs};
