@@ -11,7 +11,7 @@ use crate::telemetry::TelemetrySample;
 use crate::timing::{CycleStats, CycleSummary, Decimator};
 use acim::frames::SinCos;
 use acim::math::{RAD_S_TO_RPM, RPM_TO_RAD_S};
-use acim::{CommandError, Drive, DriveInputs, DriveState, FaultReason, PwmOutput};
+use acim::{CommandError, Drive, DriveInputs, DriveState, FaultReason, PwmOutput, TelemetryRate};
 
 /// Faults detected by the firmware rather than by the drive library.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -156,7 +156,7 @@ pub struct ControlLoop<S: SinCos> {
 impl<S: SinCos> ControlLoop<S> {
     /// A loop around an idle drive; telemetry every `decimation` periods.
     pub fn new(drive: Drive<S>, conv: Converter, decimation: u16) -> Self {
-        Self {
+        let mut c = Self {
             drive,
             conv,
             stats: CycleStats::new(),
@@ -168,7 +168,23 @@ impl<S: SinCos> ControlLoop<S> {
             inputs: DriveInputs::default(),
             commissioning: None,
             staged: None,
-        }
+        };
+        c.match_telemetry_rate();
+        c
+    }
+
+    /// The drive records its telemetry as often as this loop samples it: at the slow
+    /// ticks only ([`TelemetryRate::SlowTick`]: the other periods skip the record) when
+    /// the samples are at least a slow period apart, so that each sample is at most one
+    /// slow period old; every period when they come faster.
+    fn match_telemetry_rate(&mut self) {
+        let divider = self.drive.coeffs().cascade.slow_divider;
+        let rate = if u32::from(self.decim.every()) >= divider {
+            TelemetryRate::SlowTick
+        } else {
+            TelemetryRate::EveryPeriod
+        };
+        self.drive.set_telemetry_rate(rate);
     }
 
     /// One control step on this period's raw sample, the slow task's work included
@@ -321,6 +337,7 @@ impl<S: SinCos> ControlLoop<S> {
         self.can_replace_drive()?;
         self.drive = drive;
         self.fw_fault = None;
+        self.match_telemetry_rate();
         Ok(())
     }
 
@@ -367,6 +384,7 @@ impl<S: SinCos> ControlLoop<S> {
     pub fn set_decimation(&mut self, every: u16) {
         self.decim = Decimator::new(every);
         self.stats = CycleStats::new();
+        self.match_telemetry_rate();
     }
 
     /// Whether the switches should be on: the drive magnetizing, running or in V/f, or
@@ -520,6 +538,27 @@ pub(crate) mod tests {
             }
         }
         assert_eq!(samples, 10);
+    }
+
+    /// The drive records its telemetry at the slow ticks only while the samples are a slow
+    /// period or more apart (the test loop's 10 periods against a slow divider of 5), every
+    /// period when `rate` asks for samples closer than that, and a rebuilt drive moved in
+    /// gets the loop's choice.
+    #[test]
+    fn the_telemetry_is_recorded_as_often_as_it_is_sampled() {
+        let mut l = looped();
+        let divider = l.drive().coeffs().cascade.slow_divider;
+        assert_eq!(divider, 5);
+        assert_eq!(l.drive().telemetry_rate(), TelemetryRate::SlowTick);
+        assert!(l.apply(ControlCommand::Rate(4)).result.is_ok());
+        assert_eq!(l.drive().telemetry_rate(), TelemetryRate::EveryPeriod);
+        assert!(l.apply(ControlCommand::Rate(5)).result.is_ok());
+        assert_eq!(l.drive().telemetry_rate(), TelemetryRate::SlowTick);
+        assert!(l.apply(ControlCommand::Rate(1)).result.is_ok());
+        let fresh = looped().drive;
+        assert_eq!(fresh.telemetry_rate(), TelemetryRate::SlowTick);
+        assert!(l.replace_drive(fresh).is_ok());
+        assert_eq!(l.drive().telemetry_rate(), TelemetryRate::EveryPeriod);
     }
 
     /// `rate` takes effect from the next period in any state; the sample carries the

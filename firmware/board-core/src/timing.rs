@@ -81,6 +81,11 @@ impl Decimator {
         }
     }
 
+    /// The periods between two firings (at least 1).
+    pub const fn every(&self) -> u16 {
+        self.every
+    }
+
     /// Counts one period; true on every `every`-th.
     #[inline]
     pub fn tick(&mut self) -> bool {
