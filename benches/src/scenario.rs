@@ -24,7 +24,9 @@
 use core::hint::black_box;
 use core::sync::atomic::AtomicU32;
 
-use acim::drive::{Drive, DriveConfig, DriveInputs, DriveState, PwmOutput, StepProbe, StepRegion};
+use acim::drive::{
+    Drive, DriveConfig, DriveInputs, DriveState, PwmOutput, StepProbe, StepRegion, TelemetryRate,
+};
 use acim::flux_observer::{FluxObserverConfig, FluxObserverDesign, FluxObserverState};
 use acim::frames::{clarke_two, inverse_park, AlphaBeta, FastSinCos};
 use acim::full_order::{FullOrderConfig, FullOrderDesign, FullOrderObserver};
@@ -654,12 +656,15 @@ pub fn run() -> Summary {
 
 /// The same scenario closed by the two-rate drive ([`bench_config_two_rates`]), with its
 /// own plant, on to the steady loaded point: (running steps measured on the ramp, at the
-/// loaded point, whether it faulted).
+/// loaded point, whether it faulted). The drive records its telemetry at the slow ticks
+/// (`TelemetryRate::SlowTick`), as the firmware's does while it samples the telemetry a
+/// slow period or more apart (10 Hz by default); this run reads none.
 fn run_two_rates() -> (u32, u32, bool) {
     let cfg = black_box(bench_config_two_rates());
     let Ok(mut drive) = Drive::new(cfg) else {
         return (0, 0, true);
     };
+    drive.set_telemetry_rate(TelemetryRate::SlowTick);
     let mut plant = Plant::paper_default(1);
     plant.set_substeps(PLANT_SUBSTEPS);
     let mut pwm = PwmPreload::new();
