@@ -258,5 +258,8 @@ fn telemetry_at_the_slow_ticks_changes_no_output() {
     // running for about half a second at 5 kHz with a 1 kHz slow task: four periods held
     // after each tick's, give or take the partial slow periods at the handover and the end
     assert!(recorded >= 500, "{recorded} ticks running");
-    assert!(held.abs_diff(4 * recorded) <= 8, "{recorded} ticks, {held} held");
+    assert!(
+        held.abs_diff(4 * recorded) <= 8,
+        "{recorded} ticks, {held} held"
+    );
 }
