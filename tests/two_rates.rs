@@ -1,8 +1,9 @@
 //! The two-rate schedule (`DriveConfig.loops.slow_period`): the speed loop, field
 //! weakening and the slow supervision once per slow period, the current loop, the
 //! estimators and the fast protections every control period. The paper's scenarios keep
-//! their acceptance bounds with a 1 kHz slow task at 5 kHz, and at 10, 20 and 40 kHz all
-//! but Fig. 12's 60 rpm bound, which the dead time breaks there whatever the schedule; every fault
+//! their acceptance bounds with a 1 kHz slow task at 5 kHz, and at 10, 20 and 40 kHz (Fig.
+//! 12 with the drive's default current-gain calibration: the paper's uncalibrated sensors
+//! miss its 60 rpm bound there whatever the schedule); every fault
 //! scenario keeps its reason (a switch short: one of the estimate-independent detectors
 //! that find it, as at one rate), found no later than one slow period after the
 //! single-rate drive finds it. The slow task runs after each tick's output
