@@ -220,7 +220,7 @@ fn telemetry_at_the_slow_ticks_changes_no_output() {
     use acim_plant::{LoadTorque, Plant, PwmPreload};
     let cfg = DriveConfig::paper_defaults();
     let ts = cfg.loops.control_period;
-    let mut every = Drive::new(cfg.clone()).unwrap();
+    let mut every = Drive::new(cfg).unwrap();
     let mut ticks = Drive::new(cfg).unwrap();
     ticks.set_telemetry_rate(TelemetryRate::SlowTick);
     assert_eq!(ticks.telemetry_rate(), TelemetryRate::SlowTick);
