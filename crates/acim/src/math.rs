@@ -50,13 +50,18 @@ pub fn wrap_angle_step(x: f32) -> f32 {
     // comparison false) gets past them unwrapped, and one self-comparison finds it (the
     // same results as checking the range of every outcome, one compare fewer on the
     // common path)
+    // (the wrapping arms are marked cold: an angle advanced by a period's increment
+    // wraps once per turn, and the in-range case falls through)
     let a = if x >= PI {
+        core::hint::cold_path();
         x - TAU
     } else if x < -PI {
+        core::hint::cold_path();
         x + TAU
     } else if !x.is_nan() {
         return x;
     } else {
+        core::hint::cold_path();
         return wrap_angle(x);
     };
     if (-PI..PI).contains(&a) {
@@ -99,14 +104,43 @@ pub fn wrap_angle(x: f32) -> f32 {
 
 /// Clamps to [lo, hi] (requires lo <= hi); a NaN input returns 0 clamped into range.
 /// Comparisons only: `f32::clamp` asserts `lo <= hi` and would link a panic path (and
-/// core's float formatting) into the control step.
+/// core's float formatting) into the control step. The limits' arms are marked cold: a
+/// value in range falls through ([`clamp_at_limits`] for values usually at a limit).
 #[inline(always)]
 pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
     if x > hi {
+        core::hint::cold_path();
         hi
     } else if x >= lo {
         x
+    } else {
+        core::hint::cold_path();
+        clamp_below(x, lo, hi)
+    }
+}
+
+/// [`clamp`] for a value usually at one of its limits (a saturated sign, a fade that is
+/// complete): the same result, with the in-range arm marked cold instead.
+#[inline(always)]
+pub fn clamp_at_limits(x: f32, lo: f32, hi: f32) -> f32 {
+    if x > hi {
+        hi
     } else if x < lo {
+        lo
+    } else if x >= lo {
+        core::hint::cold_path();
+        x
+    } else {
+        core::hint::cold_path();
+        clamp_below(x, lo, hi)
+    }
+}
+
+/// [`clamp`]'s arms for an `x` not above `hi` and not at or above `lo`: below `lo`, or
+/// NaN (0 clamped into range).
+#[inline(always)]
+fn clamp_below(x: f32, lo: f32, hi: f32) -> f32 {
+    if x < lo {
         lo
     } else if 0.0 > hi {
         // NaN
@@ -151,6 +185,36 @@ mod tests {
         assert_eq!(clamp(f32::NAN, 0.5, 1.0), 0.5);
     }
 
+    /// The two layouts of the clamp are one function: bit for bit on the edges (both
+    /// limits, both zeros, infinities, NaN) of three ranges, one of them below zero.
+    #[test]
+    fn clamp_at_limits_is_clamp() {
+        let xs = [
+            f32::NEG_INFINITY,
+            -2.0,
+            -1.0,
+            -0.5,
+            -0.0,
+            0.0,
+            f32::MIN_POSITIVE,
+            0.5,
+            1.0,
+            2.0,
+            f32::INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        for (lo, hi) in [(-1.0f32, 1.0f32), (0.0, 1.0), (-3.0, -2.0)] {
+            for x in xs {
+                assert_eq!(
+                    clamp_at_limits(x, lo, hi).to_bits(),
+                    clamp(x, lo, hi).to_bits(),
+                    "{x} in [{lo}, {hi}]"
+                );
+            }
+        }
+    }
+
     proptest! {
         #[test]
         fn wrap_stays_in_range_and_preserves_angle(x in -1e4f32..1e4) {
@@ -158,6 +222,12 @@ mod tests {
             prop_assert!((-PI..PI).contains(&w));
             let d = (x as f64 - w as f64) / core::f64::consts::TAU;
             prop_assert!((d - d.round()).abs() < 1e-3 * (1.0 + x.abs() as f64 / 1e3));
+        }
+
+        #[test]
+        fn clamp_at_limits_matches_clamp(x in -1e3f32..1e3, lo in -10f32..0.0, w in 0f32..20.0) {
+            let hi = lo + w;
+            prop_assert_eq!(clamp_at_limits(x, lo, hi).to_bits(), clamp(x, lo, hi).to_bits());
         }
 
         #[test]

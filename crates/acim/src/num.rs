@@ -71,6 +71,13 @@ pub trait Num:
     fn twice(self) -> Self;
     /// `self` limited to [lo, hi] (lo <= hi); NaN maps into the range.
     fn clamp(self, lo: Self, hi: Self) -> Self;
+    /// [`Num::clamp`] for a value usually at one of its limits (a saturated sign, a
+    /// completed fade): the same result; in f32 the code is laid out for the limits
+    /// ([`crate::math::clamp_at_limits`]).
+    #[inline(always)]
+    fn clamp_at_limits(self, lo: Self, hi: Self) -> Self {
+        self.clamp(lo, hi)
+    }
     /// `self` limited to [lo, hi] where only f32 can leave it (a NaN): the identity in
     /// fixed point, whose results are in range by construction.
     fn into_range(self, lo: Self, hi: Self) -> Self;
@@ -315,6 +322,10 @@ impl Num for f32 {
     #[inline(always)]
     fn clamp(self, lo: f32, hi: f32) -> f32 {
         crate::math::clamp(self, lo, hi)
+    }
+    #[inline(always)]
+    fn clamp_at_limits(self, lo: f32, hi: f32) -> f32 {
+        crate::math::clamp_at_limits(self, lo, hi)
     }
     #[inline(always)]
     fn into_range(self, lo: f32, hi: f32) -> f32 {
