@@ -176,6 +176,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> CurrentLoop<N> {
         let v_q_max = if ad <= v_max.half() {
             v_max - (v_d * v_d).half() * x.limit.inv_max
         } else {
+            core::hint::cold_path();
             N::SQRT3 * (v_max - ad)
         };
         let v_q =

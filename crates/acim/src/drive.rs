@@ -1035,6 +1035,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let e = self.estimate(&m, magnetizing, frame_held, probe);
         // 4. plausibility of the estimates
         if let Some(reason) = self.plausibility(&e, slow) {
+            core::hint::cold_path();
             return self.enter_fault(reason);
         }
         // the modulator's voltage limit at this bus (the bus was checked against
@@ -1042,6 +1043,9 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let inv_dc_bus = m.dc_bus.recip();
         let limit = self.voltage_limit(&m, inv_dc_bus);
         if defer {
+            // (a slow tick's period: one of `slow_divider`, marked cold so that the others
+            // fall through)
+            core::hint::cold_path();
             // the slow task's inputs, taken while they are at hand (a fault or a stop
             // later in the period drops them)
             self.refs.job = Some(SlowJob::new(&m, e, limit, magnetizing));
@@ -1050,13 +1054,17 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         probe.begin(StepRegion::SpeedPi);
         let i_ref = match self.references(&m, &e, magnetizing, limit) {
             Ok(i_ref) => i_ref,
-            Err(reason) => return self.enter_fault(reason),
+            Err(reason) => {
+                core::hint::cold_path();
+                return self.enter_fault(reason);
+            }
         };
         probe.end(StepRegion::SpeedPi);
         // 5b. zero-speed policy: a zero target and reference held for the dwell switch off
         // (`Stop`) or are reported (`Hold`)
         let zero_held = self.zero_speed_held(magnetizing, slow);
         if zero_held && self.cfg.coeffs.cascade.zero_speed_stop && self.refs.commanded {
+            core::hint::cold_path();
             return self.stop_at_zero_speed();
         }
         // 6-7. current control and modulation
@@ -1102,6 +1110,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             return;
         }
         if let Err(reason) = self.slow_task(&job) {
+            core::hint::cold_path();
             self.enter_fault(reason);
         }
     }
@@ -1172,6 +1181,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         t.speed_reference = self.refs.speed.speed_reference;
         t.speed_target_limited = self.refs.speed.target_limited;
         if zero_held && self.cfg.coeffs.cascade.zero_speed_stop && self.refs.commanded {
+            core::hint::cold_path();
             self.stop_at_zero_speed();
             return Ok(());
         }
@@ -1238,6 +1248,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         probe.end(StepRegion::CurrentPi);
         // 6b. consistency of the control, judged without trusting the estimates
         if let Some(reason) = self.monitor_control(m, e, i_ref, v, magnetizing, slow) {
+            core::hint::cold_path();
             return self.enter_fault(reason);
         }
         // 7. modulation at the angle the voltage will act at
@@ -1255,6 +1266,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
             inv_dc_bus,
         });
         if record {
+            // the firmware's periods between slow ticks skip it (TelemetryRate::SlowTick)
+            core::hint::cold_path();
             self.record(m, e, i_ref, v, modulation.saturated, zero_held);
         }
         PwmOutput {
@@ -1299,7 +1312,11 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if !slow {
             return r.zero_steps >= self.cfg.coeffs.cascade.zero_dwell_steps;
         }
+        // (a slow tick's: marked cold, the periods between ticks fall through)
+        core::hint::cold_path();
         if !magnetizing && r.speed.speed_target == N::ZERO && r.speed.speed_reference == N::ZERO {
+            // (held at zero: marked cold, the turning drive's ticks fall through)
+            core::hint::cold_path();
             r.zero_steps = r.zero_steps.saturating_add(1);
         } else {
             r.zero_steps = 0;
@@ -1395,8 +1412,10 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         if let Some(reason) = self.check_sensors(m, e, switching) {
             return Some(reason);
         }
-        // a limit cycle: the estimate swinging around a steady reference (slow)
+        // a limit cycle: the estimate swinging around a steady reference (slow; with a
+        // slow task it runs there: cold here)
         if slow {
+            core::hint::cold_path();
             if let Some(reason) = self.speed_oscillation(e, magnetizing) {
                 return Some(reason);
             }
@@ -1547,6 +1566,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
                 let inv_periods = self.cfg.coeffs.cascade.inv_slow_divider;
                 tracker.accumulate(u_ab, inv_periods);
             } else {
+                core::hint::cold_path();
                 tracker.take_mean();
             }
             return i_ab;
@@ -1590,6 +1610,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // an observer with its own flux angle: the pull of the model's frame onto it,
         // from the two frames at this sample (before the observer's update)
         let frame_pull = if self.est.observer.frame_lock() && !frame_held {
+            // (the flux observer's; cold for the default observer's periods to fall through)
+            core::hint::cold_path();
             self.est.observer.frame_pull(&m.sc)
         } else {
             N::ZERO
@@ -1636,6 +1658,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let far_side_error = if !far_side_mode {
             N::ZERO
         } else {
+            core::hint::cold_path();
             let ws = est.flux.stator_frequency;
             let against = (ws > N::ZERO) != (est.observer.estimate().speed > N::ZERO);
             if against && !frame_held && est.flux.rotor_flux >= c.cascade.settled_flux {
@@ -1723,6 +1746,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // the residual filter serves the magnetizing's settling test only (a start resets
         // it): running, it is not moved
         if magnetizing {
+            core::hint::cold_path();
             est.filtered_residual = est.filtered_residual
                 + N::gain(
                     c.magnetizing.residual_filter,
@@ -1776,6 +1800,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         // estimate adds dR i_sq / lambda_r to the slip of eq. (8) (skipped when off, so
         // the default step neither pays for it nor changes by a rounding)
         if c.rr.enabled {
+            // off by default: cold, so that the default's periods fall through
+            core::hint::cold_path();
             est.rr.update(
                 &c.rr,
                 &c.observer,
@@ -1861,6 +1887,7 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
     ) -> Result<Dq<N>, FaultReason> {
         let periods = self.cfg.coeffs.cascade.slow_divider;
         if magnetizing {
+            core::hint::cold_path();
             let i_ref = self.magnetize(m, e)?;
             if periods > 1 {
                 self.refs.current.set(i_ref);
@@ -1956,6 +1983,8 @@ impl<S: SinCos<N>, N: Arithmetic + LeadRotation, O: SpeedObserver<N>, M: Modulat
         let r = &mut self.refs;
         // the short-time overload rating (`thermal`), on the measured current
         let rating = if c.thermal.enabled {
+            // off by default: cold, so that the default falls through
+            core::hint::cold_path();
             Some(
                 self.supervision
                     .thermal

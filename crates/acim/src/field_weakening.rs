@@ -266,6 +266,8 @@ impl<N: Num + DivSqrt> FieldWeakening<N> {
     ) -> FieldWeakeningOutput<N> {
         let mut out = self.limits(cfg, x);
         if cfg.flux_optimisation {
+            // off by default: cold, so that the default falls through
+            core::hint::cold_path();
             out.i_sd_ref = self.flux_optimum(cfg, x.last_torque_current, out.i_sd_ref);
         }
         // latched from the first weakened step until the flux is back at its rated value
@@ -397,6 +399,8 @@ impl<N: Num + DivSqrt> FieldWeakening<N> {
             }
         }
         if fw.overvoltage_control && x.dc_bus > fw.regen_start {
+            // (braking with the bus high: marked cold)
+            core::hint::cold_path();
             // over-voltage control: the regenerative side (i_sq against the speed) falls
             // linearly to zero over the band above regen_start
             let k = (N::ONE - N::gain(fw.inv_regen_band, x.dc_bus - fw.regen_start))

@@ -186,6 +186,9 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
         let ws = stator_frequency.abs();
         let on = cfg.enabled && gate && ws >= cfg.min_frequency && ws <= cfg.max_frequency;
         if !on {
+            // (gated off: the cheap periods, marked cold so that the adapting ones fall
+            // through)
+            core::hint::cold_path();
             self.dc = y;
             self.open_steps = 0;
             self.active = false;
@@ -195,6 +198,7 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> InverterTracker<N> {
         self.open_steps = self.open_steps.saturating_add(1);
         self.active = self.open_steps > cfg.holdoff_steps;
         if !self.active {
+            core::hint::cold_path();
             return correction;
         }
         self.adapted_steps = self.adapted_steps.saturating_add(1);

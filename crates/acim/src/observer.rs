@@ -475,6 +475,9 @@ impl<N: Num> SpeedObserver<N> for ReducedOrderObserver<N> {
                     far_side_error: x.far_side_error,
                 },
             );
+        } else {
+            // magnetizing: marked cold, the running periods fall through
+            core::hint::cold_path();
         }
         SpeedObserver::estimate(self)
     }

@@ -43,7 +43,9 @@ pub struct OrientationDesign<N: Num = f32> {
 /// of the observer (`DriveConfig.estimation.far_side_gain`), so both fade in together.
 #[inline(always)]
 pub fn fade<N: Num>(d: &OrientationDesign<N>, stator_frequency: N) -> N {
-    N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start).clamp(N::ZERO, N::ONE)
+    // (complete above the band, where the drive runs most)
+    N::gain(d.inv_fade_width, stator_frequency.abs() - d.fade_start)
+        .clamp_at_limits(N::ZERO, N::ONE)
 }
 
 /// The correction dw (rad/s electrical) added to p Omega_hat before the slip law, from

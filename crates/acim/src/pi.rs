@@ -97,7 +97,9 @@ impl<N: Num> PiController<N> {
         let candidate = self.integral + N::gain(cfg.ki_ts, error);
         let unsat = feedforward + p + candidate;
         let out;
+        // (the limits' arms marked cold: the output in range falls through)
         if unsat > hi {
+            core::hint::cold_path();
             out = hi;
             // moving back toward the range: integrate; pushing further: the integral goes
             // no further than the value that puts the output on the limit (it stays if it
@@ -114,6 +116,7 @@ impl<N: Num> PiController<N> {
             };
             self.saturated = true;
         } else if unsat < lo {
+            core::hint::cold_path();
             out = lo;
             self.integral = if error > N::ZERO {
                 candidate
@@ -134,6 +137,7 @@ impl<N: Num> PiController<N> {
             // in range unless NaN (an infinity took a branch above): one self-comparison
             // instead of the two of a clamp; a NaN in f32 is mapped into range here
             out = if unsat.is_nan() {
+                core::hint::cold_path();
                 unsat.into_range(lo, hi)
             } else {
                 unsat

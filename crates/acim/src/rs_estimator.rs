@@ -573,6 +573,8 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
         let rs = self.stator_resistance_estimate;
         let (e, eq) = self.model_errors(u);
         if x.frame_held {
+            // magnetizing at rest only: marked cold, the running periods fall through
+            core::hint::cold_path();
             let flux_ok = u.flux_settled && u.i_sd.abs() >= cfg.min_flux_current;
             let standstill = self.standstill_gate(cfg, run, u, true, flux_ok);
             self.adapting = cfg.adapt && standstill;
@@ -604,6 +606,7 @@ impl<N: Num + DivSqrt + FineIntegrator + DivSqrt + FineIntegrator> RsEstimator<N
         let m = self.means;
         self.means = RsRunningMeans::zero();
         if x.frame_held {
+            core::hint::cold_path();
             return;
         }
         let flux_ok = flux_settled && m.i_sd.abs() >= cfg.min_flux_current;

@@ -575,10 +575,12 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         switching: bool,
     ) -> Period {
         if !cfg.enabled || !switching {
+            core::hint::cold_path();
             self.restart();
             return Period::Off;
         }
         if !self.primed {
+            core::hint::cold_path();
             self.primed = true;
             self.previous = current;
             self.acting = voltage;
@@ -605,6 +607,8 @@ impl<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase> SensorCheck<N> {
         self.previous = current;
         self.window.count = self.window.count.saturating_add(1);
         if self.window.count >= cfg.window {
+            // one period of a window's (8 at 5 kHz): the summing ones fall through
+            core::hint::cold_path();
             Period::WindowEnd
         } else {
             Period::Summed

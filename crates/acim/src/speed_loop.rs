@@ -367,6 +367,8 @@ impl<N: Num> SpeedLoop<N> {
         // rotor, is the stall detector's case, with the reference kept
         let braking = regen_limited && ((speed > N::ZERO) == (self.i_sq_ref < N::ZERO));
         if (fw.torque_limited || braking) && short {
+            // (at a limit: marked cold, the regulating loop falls through)
+            core::hint::cold_path();
             // the torque is at the voltage (or bus) limit, or at the low-frequency
             // regeneration limit: the speed the drive reaches there is the reachable
             // speed; hold the reference within a band of it (no growing speed error, no

@@ -250,6 +250,8 @@ impl<N: Num + DivSqrt> SpeedOscillation<N> {
         if self.steps < limits.oscillation_steps {
             return None;
         }
+        // (a block's end: one call of `oscillation_steps`, marked cold)
+        core::hint::cold_path();
         self.steps = 0;
         if self.high - self.low > limits.oscillation_swing {
             self.blocks += 1;
@@ -395,17 +397,26 @@ impl Supervisor {
         currents: [N; 3],
         dc_bus: N,
     ) -> Gate {
+        // (the switched-off and faulting arms are marked cold: the running period's path
+        // falls through, the others jump; the outcome is the same)
         match self.state {
-            DriveState::Fault => Gate::Off(None),
-            DriveState::Idle => match check_samples(limits, currents, dc_bus) {
-                Some(r @ (FaultReason::NonFiniteInput | FaultReason::OverCurrent)) => {
-                    self.trip(r);
-                    Gate::Off(Some(r))
+            DriveState::Fault => {
+                core::hint::cold_path();
+                Gate::Off(None)
+            }
+            DriveState::Idle => {
+                core::hint::cold_path();
+                match check_samples(limits, currents, dc_bus) {
+                    Some(r @ (FaultReason::NonFiniteInput | FaultReason::OverCurrent)) => {
+                        self.trip(r);
+                        Gate::Off(Some(r))
+                    }
+                    _ => Gate::Off(None),
                 }
-                _ => Gate::Off(None),
-            },
+            }
             state => match check_samples(limits, currents, dc_bus) {
                 Some(r) => {
+                    core::hint::cold_path();
                     self.trip(r);
                     Gate::Off(Some(r))
                 }
@@ -425,6 +436,7 @@ impl Supervisor {
         if !N::all_finite([h.speed, h.load_torque, h.current])
             || (limits.rs_bound_faults && h.rs_at_bound)
         {
+            core::hint::cold_path();
             Some(FaultReason::EstimatorOutOfRange)
         } else {
             None
@@ -447,11 +459,13 @@ impl Supervisor {
             return Some(reason);
         }
         self.implausible_steps = if h.load_torque.abs() > limits.max_load_torque {
+            core::hint::cold_path();
             self.implausible_steps.saturating_add(1)
         } else {
             0
         };
         if self.implausible_steps > limits.implausible_steps {
+            core::hint::cold_path();
             return Some(if speed_pi_saturated {
                 FaultReason::Stall
             } else {
@@ -459,6 +473,7 @@ impl Supervisor {
             });
         }
         if h.speed.abs() > limits.max_speed {
+            core::hint::cold_path();
             return Some(FaultReason::OverSpeed);
         }
         None
@@ -502,6 +517,7 @@ impl Supervisor {
             self.blind_steps.saturating_sub(1)
         };
         if self.blind_steps > limits.blind_steps {
+            core::hint::cold_path();
             Some(FaultReason::Overload)
         } else {
             None
@@ -815,15 +831,20 @@ impl<N: Num + DivSqrt> ControlMonitor<N> {
     /// the current following its reference, then the voltage residual.
     #[inline(always)]
     fn verdict(&self, limits: &SupervisionLimits<N>) -> Option<FaultReason> {
+        // (the faults' arms marked cold: a healthy drive's checks fall through)
         if self.current_sum > limits.current_sum_limit {
+            core::hint::cold_path();
             Some(FaultReason::CurrentSensor)
         } else if self.voltage > limits.impedance_voltage_floor
             && self.explained_voltage < self.voltage.half()
         {
+            core::hint::cold_path();
             Some(FaultReason::NoCurrentResponse)
         } else if self.current_error > limits.current_error_limit {
+            core::hint::cold_path();
             Some(FaultReason::CurrentRegulation)
         } else if self.model_residual > limits.model_residual_limit {
+            core::hint::cold_path();
             Some(FaultReason::LossOfControl)
         } else {
             None

@@ -159,7 +159,8 @@ pub fn modulate_signed<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     let mut saturated = false;
     let mut offset = N::neg_mean(max, min);
     if span > vdc {
-        // outside the hexagon: scale onto it, angle kept
+        // outside the hexagon: scale onto it, angle kept (rare: marked cold)
+        core::hint::cold_path();
         let k = N::ratio(vdc, span);
         a = a * k;
         b = b * k;
@@ -191,7 +192,8 @@ pub fn current_sign<N: Num + DivSqrt + ThreePhase + DivSqrt + ThreePhase>(
     inv_band: N::Gain,
     i: N,
 ) -> N {
-    N::gain(inv_band, i).clamp(-N::ONE, N::ONE)
+    // (saturated outside the band, where the current is most of the period)
+    N::gain(inv_band, i).clamp_at_limits(-N::ONE, N::ONE)
 }
 
 /// The three phases' [`current_sign`]s of `phase_currents` (A).
