@@ -158,7 +158,7 @@ pub fn inverse_park<N: Num>(v: Dq<N>, sc: SinCosValue<N>) -> AlphaBeta<N> {
 /// register moves, about 15 cycles of its 50).
 #[inline(always)]
 pub fn small_rotation(sc: SinCosValue, delta: f32) -> SinCosValue {
-    let d = crate::math::clamp(delta, -0.3, 0.3);
+    let d = crate::math::clamp_in_range(delta, -0.3, 0.3);
     let d2 = d * d;
     let sd = d * (1.0 - d2 * (1.0 / 6.0));
     let cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0));

@@ -104,10 +104,25 @@ pub fn wrap_angle(x: f32) -> f32 {
 
 /// Clamps to [lo, hi] (requires lo <= hi); a NaN input returns 0 clamped into range.
 /// Comparisons only: `f32::clamp` asserts `lo <= hi` and would link a panic path (and
-/// core's float formatting) into the control step. The limits' arms are marked cold: a
-/// value in range falls through ([`clamp_at_limits`] for values usually at a limit).
+/// core's float formatting) into the control step. The control step uses
+/// [`clamp_in_range`] or [`clamp_at_limits`], the same function laid out for its usual
+/// case.
 #[inline(always)]
 pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x > hi {
+        hi
+    } else if x >= lo {
+        x
+    } else {
+        clamp_below(x, lo, hi)
+    }
+}
+
+/// [`clamp`] for a value usually in range (a regulator's integral, a correction within
+/// its bound): the same result, with the limits' arms marked cold, so that a value in
+/// range falls through.
+#[inline(always)]
+pub fn clamp_in_range(x: f32, lo: f32, hi: f32) -> f32 {
     if x > hi {
         core::hint::cold_path();
         hi
@@ -185,10 +200,10 @@ mod tests {
         assert_eq!(clamp(f32::NAN, 0.5, 1.0), 0.5);
     }
 
-    /// The two layouts of the clamp are one function: bit for bit on the edges (both
+    /// The three layouts of the clamp are one function: bit for bit on the edges (both
     /// limits, both zeros, infinities, NaN) of three ranges, one of them below zero.
     #[test]
-    fn clamp_at_limits_is_clamp() {
+    fn clamp_layouts_are_clamp() {
         let xs = [
             f32::NEG_INFINITY,
             -2.0,
@@ -211,6 +226,11 @@ mod tests {
                     clamp(x, lo, hi).to_bits(),
                     "{x} in [{lo}, {hi}]"
                 );
+                assert_eq!(
+                    clamp_in_range(x, lo, hi).to_bits(),
+                    clamp(x, lo, hi).to_bits(),
+                    "{x} in [{lo}, {hi}]"
+                );
             }
         }
     }
@@ -225,9 +245,10 @@ mod tests {
         }
 
         #[test]
-        fn clamp_at_limits_matches_clamp(x in -1e3f32..1e3, lo in -10f32..0.0, w in 0f32..20.0) {
+        fn clamp_layouts_match_clamp(x in -1e3f32..1e3, lo in -10f32..0.0, w in 0f32..20.0) {
             let hi = lo + w;
             prop_assert_eq!(clamp_at_limits(x, lo, hi).to_bits(), clamp(x, lo, hi).to_bits());
+            prop_assert_eq!(clamp_in_range(x, lo, hi).to_bits(), clamp(x, lo, hi).to_bits());
         }
 
         #[test]

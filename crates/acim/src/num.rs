@@ -321,7 +321,7 @@ impl Num for f32 {
     }
     #[inline(always)]
     fn clamp(self, lo: f32, hi: f32) -> f32 {
-        crate::math::clamp(self, lo, hi)
+        crate::math::clamp_in_range(self, lo, hi)
     }
     #[inline(always)]
     fn clamp_at_limits(self, lo: f32, hi: f32) -> f32 {
@@ -329,7 +329,7 @@ impl Num for f32 {
     }
     #[inline(always)]
     fn into_range(self, lo: f32, hi: f32) -> f32 {
-        crate::math::clamp(self, lo, hi)
+        crate::math::clamp_in_range(self, lo, hi)
     }
     #[inline(always)]
     fn is_finite(self) -> bool {
@@ -383,7 +383,7 @@ impl FineIntegrator for f32 {
     fn fine_step(acc: f32, g: f32, e: f32, positive: bool, lo: f32, hi: f32) -> (f32, bool) {
         let step = g * e;
         let signed = if positive { step } else { -step };
-        let next = crate::math::clamp(acc + signed, lo, hi);
+        let next = crate::math::clamp_in_range(acc + signed, lo, hi);
         (next, next <= lo || next >= hi)
     }
 }
