@@ -19,15 +19,21 @@ fn main() {
     }
     // ccmram.x goes to OUT_DIR, which is added to the linker search path
     let out = PathBuf::from(env::var("OUT_DIR").unwrap());
-    // the self-test build runs the flux observer's step and the sensor check's window
-    // ends (one period in eight) from flash (ccmram.x, SELFTEST_IN_FLASH): its CCM SRAM
-    // is full with the simulated stage's glue
+    // the self-test build runs the flux observer's step, the sensor check's window ends
+    // (one period in eight) and the start's own steps (the start sequence's entry, the
+    // inverter test, the flying start's decision) and the generic modulator from flash
+    // (ccmram.x, SELFTEST_IN_FLASH): its CCM SRAM is full with the simulated stage's glue
+    // and, with `soft-sincos`, the software sin/cos
     let mut script = fs::read_to_string("ccmram.x").expect("read ccmram.x");
     if env::var_os("CARGO_FEATURE_SELFTEST").is_some() {
         script = script.replace(
             "/* SELFTEST_IN_FLASH:",
             "*(.text._ZN4acim13flux_observer17FluxObserverState6update*)\n    \
              *(.text._ZN4acim12sensor_check20SensorCheck$LT$N$GT$6update*)\n    \
+             *(.text._ZN4acim5drive*11begin_start17h*)\n    \
+             *(.text._ZN4acim13inverter_test*6update17h*)\n    \
+             *(.text._ZN4acim12speed_search*6decide17h*)\n    \
+             *(.text._ZN4acim5svpwm8modulate17h*)\n    \
              /* SELFTEST_IN_FLASH:",
         );
     }

@@ -25,10 +25,11 @@ for mode in power-stage selftest; do
   # the self-test's motor model (acim_plant, the simulated stage `sim` and the memclr of its state) runs from flash
   # by design (firmware/README.md), and so does the commission command's step (only while commissioning, in place
   # of the running cascade), and in the self-test, whose interrupt runs a slow tick's work inline, the slow task
-  # (`run_slow`, only with a slow task set; the power stage runs it in its own interrupt, FMAC, from flash);
+  # (`run_slow`, only with a slow task set; the power stage runs it in its own interrupt, FMAC, from flash), with
+  # the start's own steps and the generic modulator (build.rs: its CCM SRAM holds the simulated stage's glue);
   # nothing else reachable from an interrupt may
   if [ "$mode" = selftest ]; then
-    feat=(--features selftest); isr=TIM6_DACUNDER; allow=(--allow-flash='^_ZN10acim_plant|^_ZN18acim_firmware_core3sim|^__aeabi_mem|^_ZN4acim13commissioning|^_ZN4acim5drive.*8run_slow17h|^_ZN18acim_firmware_core7control.*8run_slow17h|^_ZN4acim13flux_observer17FluxObserverState6update|^_ZN4acim12sensor_check20SensorCheck.*6update')
+    feat=(--features selftest); isr=TIM6_DACUNDER; allow=(--allow-flash='^_ZN10acim_plant|^_ZN18acim_firmware_core3sim|^__aeabi_mem|^_ZN4acim13commissioning|^_ZN4acim5drive.*8run_slow17h|^_ZN18acim_firmware_core7control.*8run_slow17h|^_ZN4acim13flux_observer17FluxObserverState6update|^_ZN4acim12sensor_check20SensorCheck.*6update|^_ZN4acim5drive.*11begin_start17h|^_ZN4acim13inverter_test.*6update17h|^_ZN4acim12speed_search.*6decide17h|^_ZN4acim5svpwm8modulate17h')
   else
     feat=(); isr=ADC1_2; allow=(--allow-flash='^_ZN4acim13commissioning')
   fi
