@@ -70,7 +70,9 @@
 //!   which a mean would filter; measured, no scenario's verdict or reason moved with it.
 //!
 //! The first running period after magnetizing is a slow tick. Both arithmetics run the
-//! same schedule.
+//! same schedule. The telemetry record is every period's by default; with
+//! [`TelemetryRate::SlowTick`] (a firmware that samples it a slow period or more apart)
+//! only the ticks' periods record it.
 //!
 //! ## States
 //!
